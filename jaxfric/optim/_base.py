@@ -1,0 +1,218 @@
+"""Shared pieces of every jaxfric optimiser: the result pytree, the fixed-size
+history buffer, bounds validation and the NaN-safe objective wrapper.
+
+Conventions (DESIGN.md): objectives are ``fn(y, args) -> scalar``; solvers see a
+flat 1-D parameter vector ``x`` inside a box ``[lower, upper]``; NaN and inf
+fitness are mapped to ``+inf`` so they can never be reported as the best.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, Int
+
+RESULTS = optx.RESULTS
+"""Result codes, shared with optimistix (``RESULTS.successful``,
+``RESULTS.nonlinear_max_steps_reached``, ``RESULTS.nonfinite``, ...)."""
+
+
+# --------------------------------------------------------------------------- history
+class History(eqx.Module):
+    """Fixed-size record of the best objective value against evaluations spent.
+
+    ``evals[i]`` is the number of function evaluations used when ``f[i]`` was the
+    best value so far. Only the first ``length`` entries are valid; the rest hold
+    the last valid entry repeated, so the arrays can be plotted directly.
+    Swarm solvers write one entry per generation. Nelder–Mead's run length is
+    unknown in advance, so it keeps every ``stride``-th step and doubles the stride
+    (halving the buffer) whenever it fills: memory stays fixed, the record stays
+    evenly spread over the run.
+    """
+
+    evals: Int[Array, " H"]
+    f: Float[Array, " H"]
+    length: Int[Array, ""]
+    stride: Int[Array, ""]
+    counter: Int[Array, ""]
+
+    @classmethod
+    def empty(cls, size: int, dtype) -> "History":
+        return cls(
+            evals=jnp.zeros((size,), jnp.int32),
+            f=jnp.full((size,), jnp.inf, dtype),
+            length=jnp.array(0, jnp.int32),
+            stride=jnp.array(1, jnp.int32),
+            counter=jnp.array(0, jnp.int32),
+        )
+
+    @classmethod
+    def from_arrays(cls, evals, f) -> "History":
+        n = evals.shape[0]
+        return cls(
+            evals=evals.astype(jnp.int32),
+            f=f,
+            length=jnp.array(n, jnp.int32),
+            stride=jnp.array(1, jnp.int32),
+            counter=jnp.array(n, jnp.int32),
+        )
+
+    def record(self, num_evals, f_best) -> "History":
+        """Append ``(num_evals, f_best)`` under the stride-doubling rule (jit-safe)."""
+        size = self.f.shape[0]
+        take = (self.counter % self.stride) == 0
+        idx = jnp.minimum(self.length, size - 1)
+        evals = jnp.where(take, self.evals.at[idx].set(num_evals), self.evals)
+        f = jnp.where(take, self.f.at[idx].set(f_best), self.f)
+        length = self.length + take.astype(jnp.int32)
+        full = length >= size
+        # Compress: keep every other entry, so the buffer is half full again.
+        half_idx = jnp.arange(size) * 2
+        half_ok = half_idx < size
+        comp_evals = jnp.where(half_ok, evals[jnp.minimum(half_idx, size - 1)], 0)
+        comp_f = jnp.where(half_ok, f[jnp.minimum(half_idx, size - 1)], jnp.inf)
+        evals = jnp.where(full, comp_evals, evals)
+        f = jnp.where(full, comp_f.astype(f.dtype), f)
+        length = jnp.where(full, (size + 1) // 2, length)
+        stride = jnp.where(full, self.stride * 2, self.stride)
+        return History(evals, f, length, stride, self.counter + 1)
+
+    def filled(self) -> "History":
+        """Pad entries past ``length`` with the last valid entry."""
+        size = self.f.shape[0]
+        last = jnp.maximum(self.length - 1, 0)
+        valid = jnp.arange(size) < self.length
+        return eqx.tree_at(
+            lambda h: (h.evals, h.f),
+            self,
+            (
+                jnp.where(valid, self.evals, self.evals[last]),
+                jnp.where(valid, self.f, self.f[last]),
+            ),
+        )
+
+    def offset(self, num_evals) -> "History":
+        """Shift the evaluation axis by ``num_evals`` (a later phase of a hybrid)."""
+        return eqx.tree_at(lambda h: h.evals, self, self.evals + num_evals)
+
+
+def concat_histories(first: History, second: History) -> History:
+    """Join two histories (``second`` already offset), keeping fixed total size."""
+    first, second = first.filled(), second.filled()
+    return History(
+        evals=jnp.concatenate([first.evals, second.evals]),
+        f=jnp.concatenate([first.f, jnp.minimum(second.f, first.f[-1])]),
+        length=jnp.array(first.f.shape[0] + second.f.shape[0], jnp.int32),
+        stride=jnp.array(1, jnp.int32),
+        counter=first.counter + second.counter,
+    )
+
+
+# -------------------------------------------------------------------------- solution
+class Solution(eqx.Module):
+    """Result of :func:`jaxfric.minimise` (a pytree: works under ``jit``/``vmap``).
+
+    Attributes:
+        value: the best parameters found, with the structure of the bounds.
+        f: the objective at ``value`` (``+inf`` if no finite value was ever seen).
+        result: an ``optimistix.RESULTS`` code.
+        stats: ``{"num_steps": generations or NM steps, "num_evals": exact number
+            of objective evaluations}``.
+        history: :class:`History` of best ``f`` against evaluations.
+    """
+
+    value: Any
+    f: Float[Array, ""]
+    result: RESULTS
+    stats: dict[str, Array]
+    history: History
+
+    @property
+    def success(self):
+        return self.result == RESULTS.successful
+
+
+# ------------------------------------------------------------------------- utilities
+def safe_value(f):
+    """Map NaN and +/-inf to +inf: a non-finite value is the worst, never the best."""
+    f = jnp.asarray(f)
+    return jnp.where(jnp.isfinite(f), f, jnp.inf)
+
+
+def batch_objective(fn: Callable, args) -> Callable:
+    """``X (P, D) -> f (P,)``: vmapped, NaN-safe version of ``fn(x, args)``."""
+
+    def f_batch(X):
+        return safe_value(jax.vmap(lambda x: fn(x, args))(X))
+
+    return f_batch
+
+
+def scalar_objective(fn: Callable, args) -> Callable:
+    def f_one(x):
+        return safe_value(fn(x, args))
+
+    return f_one
+
+
+def linear_inertia(i, num, w_max, w_min):
+    """Inertia weight falling linearly from ``w_max`` to ``w_min`` (ALGORITHMS §3.3, §10):
+    ``w(i) = w_max - (w_max - w_min) * i / G``."""
+    return w_max - (w_max - w_min) * i / jnp.maximum(num, 1)
+
+
+def uniform_in_box(key, shape, lower, upper):
+    u = jax.random.uniform(key, shape, dtype=lower.dtype)
+    return lower + u * (upper - lower)
+
+
+def best_of(x, f):
+    i = jnp.argmin(f)
+    return x[i], f[i]
+
+
+def result_from_f(f_best):
+    return RESULTS.where(jnp.isfinite(f_best), RESULTS.successful, RESULTS.nonfinite)
+
+
+# -------------------------------------------------------------------- solver contract
+class AbstractSolver(eqx.Module):
+    """What :func:`jaxfric.minimise` needs from a solver.
+
+    ``run`` receives a NaN-safe objective on a flat parameter vector, the box
+    bounds as 1-D arrays of one floating dtype, and a PRNG key; it returns a
+    :class:`Solution` whose ``value`` is the flat vector. It must be pure and
+    traceable: ``minimise`` jits it, and ``minimise_many`` vmaps it over keys.
+    """
+
+    @abc.abstractmethod
+    def run(self, fn: Callable, lower, upper, args, key, x0=None) -> Solution: ...
+
+    def check(self) -> None:
+        """Raise ``ValueError`` on invalid hyperparameters (before any tracing)."""
+
+
+def check_positive_int(name: str, value, minimum: int = 1) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+
+
+def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=False):
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}, got {v}")
+    if hi is not None and (v > hi or (hi_open and v == hi)):
+        raise ValueError(f"{name} must be {'<' if hi_open else '<='} {hi}, got {v}")

@@ -1,0 +1,268 @@
+"""Multi-agent particle swarm optimisation (MAPSO, ALGORITHMS.md §3; Zhao et al. 2005).
+
+Agents sit on an ``L×L`` torus held as one ``(L·L, D)`` array. Each generation:
+
+1. neighbourhood competition (§3.2): an agent that is not strictly better than the
+   best of its four von Neumann neighbours is replaced by an agent built from that
+   neighbour, by strategy 1 (probability ``Po``) or strategy 2;
+2. the PSO operator (§3.3) with the linearly decreasing inertia;
+3. self-learning (§3.4): a small ``sL×sL`` MAPSO (competition + PSO) run for
+   ``sGen`` generations around the global best, which replaces it when beaten.
+
+Everything is vectorised: neighbours come from ``jnp.roll`` on the lattice, never
+from a Python loop over agents, and the generations run in ``lax.scan``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._base import check_positive_int, check_range, linear_inertia
+from .pso import AbstractSwarm, SwarmState, init_swarm, pso_move, update_bests
+
+
+def lattice_neighbours(values, side: int):
+    """Von Neumann neighbours on a torus (§3.1).
+
+    ``values`` has leading axis ``side²`` (row-major lattice). Returns an array with
+    a new leading axis of 4: up, down, left, right (wrapping around the edges).
+    """
+    grid = values.reshape((side, side) + values.shape[1:])
+    nb = jnp.stack(
+        [
+            jnp.roll(grid, 1, axis=0),
+            jnp.roll(grid, -1, axis=0),
+            jnp.roll(grid, 1, axis=1),
+            jnp.roll(grid, -1, axis=1),
+        ]
+    )
+    return nb.reshape((4, side * side) + values.shape[1:])
+
+
+def best_neighbour(x, f, side: int):
+    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``)."""
+    nx = lattice_neighbours(x, side)  # (4, P, D)
+    nf = lattice_neighbours(f, side)  # (4, P)
+    j = jnp.argmin(nf, axis=0)
+    m = jnp.take_along_axis(nx, j[None, :, None], axis=0)[0]
+    fm = jnp.take_along_axis(nf, j[None, :], axis=0)[0]
+    return m, fm
+
+
+def reverse_segment_index(key, num: int, dim: int, strict: bool):
+    """Gather indices that reverse a random segment ``[i1, i2]`` of each of ``num`` rows.
+
+    ``i1 < i2`` uniform over ``0..D-1`` [D]; with ``strict`` (MAGA's ``1 < i1 < i2 < D``,
+    1-based) the first and last coordinate stay put, which needs ``D >= 4``; for smaller
+    ``D`` the strict rule has no valid pair and the unrestricted rule is used.
+    """
+    lo, hi = (1, dim - 1) if (strict and dim >= 4) else (0, dim)
+    span = hi - lo
+    if span < 2:
+        return jnp.broadcast_to(jnp.arange(dim), (num, dim))
+    ka, kb = jax.random.split(key)
+    a = jax.random.randint(ka, (num,), 0, span)
+    b = jax.random.randint(kb, (num,), 0, span - 1)
+    b = b + (b >= a)
+    i1 = lo + jnp.minimum(a, b)
+    i2 = lo + jnp.maximum(a, b)
+    k = jnp.arange(dim)[None, :]
+    inside = (k >= i1[:, None]) & (k <= i2[:, None])
+    return jnp.where(inside, i1[:, None] + i2[:, None] - k, k)
+
+
+def competition(key, x, f, side, lower, upper, po, strict_segment=False):
+    """Neighbourhood competition and cooperation (§3.2, paper eq. (12)), synchronous.
+
+    Returns the new positions and a boolean mask of the agents that lost (were replaced).
+    Strategy 1 (``U < Po``): ``e = clip(m + U(−1, 1)⊙(m − l))``. Strategy 2: map the
+    winner ``m`` to the unit cube, reverse a random segment, map back.
+    """
+    num, dim = x.shape
+    m, fm = best_neighbour(x, f, side)
+    lose = ~(f < fm)
+    k1, k2 = jax.random.split(key)
+    u = jax.random.uniform(k1, (num, dim + 1), dtype=x.dtype)
+    use_first = u[:, 0] < po
+    e1 = jnp.clip(m + (2.0 * u[:, 1:] - 1.0) * (m - x), lower, upper)
+    width = upper - lower
+    unit = (m - lower) / width
+    idx = reverse_segment_index(k2, num, dim, strict_segment)
+    e2 = lower + jnp.take_along_axis(unit, idx, axis=1) * width
+    e = jnp.where(use_first[:, None], e1, e2)
+    return jnp.where(lose[:, None], e, x), lose
+
+
+class MAPSO(AbstractSwarm):
+    """Multi-agent PSO on an ``L×L`` torus (ALGORITHMS.md §3.5 defaults).
+
+    Args:
+        lattice_size: lattice side ``Lsize``; population ``Lsize²`` (5 → 25 agents).
+        num_generations: generations ``G``.
+        po: probability of competition strategy 1 (``Po`` = 0.2, MAGA).
+        sl_size: self-learning lattice side ``sLsize`` (3).
+        sl_radius: self-learning search radius ``sR ∈ [0, 1]`` (0.2).
+        sl_generations: self-learning generations ``sGen`` (10).
+        sl_mode: ``"multiplicative"`` (the paper's ``g_k·U(1−sR, 1+sR)``) or
+            ``"additive"`` (``g_k + U(−sR, sR)·(upper_k − lower_k)``, which can move a
+            coordinate that is exactly zero).
+        w_max, w_min, c1, c2, vmax_fraction: PSO operator, as in :class:`PSO`.
+        social: ``"gbest"`` (Zhao et al.) or ``"lbest"`` (best personal best of the
+            agent's von Neumann neighbourhood and itself).
+        strict_maga_segment: MAGA's rule leaving the first and last coordinate out of
+            strategy 2's reversed segment.
+        reset_velocity_on_replace: zero the velocity of a replaced agent (default keeps it).
+        evaluate_replaced: evaluate a replaced agent before its PSO move so its
+            personal best can improve (costs up to ``Lsize²`` more evaluations per
+            generation; by default the PSO move follows at once and is evaluated).
+
+    Evaluations per generation: ``Lsize² + (sLsize² − 1) + sLsize²·sGen`` (123 with
+    the defaults), plus ``Lsize²`` if ``evaluate_replaced``; see :meth:`evaluations`.
+    """
+
+    lattice_size: int = 5
+    num_generations: int = 500
+    po: float = 0.2
+    sl_size: int = 3
+    sl_radius: float = 0.2
+    sl_generations: int = 10
+    sl_mode: str = "multiplicative"
+    w_max: float = 0.9
+    w_min: float = 0.4
+    c1: float = 2.0
+    c2: float = 2.0
+    vmax_fraction: float = 0.2
+    social: str = "gbest"
+    strict_maga_segment: bool = False
+    reset_velocity_on_replace: bool = False
+    evaluate_replaced: bool = False
+    zero_velocity_at_bounds: bool = True
+
+    def check(self):
+        check_positive_int("lattice_size", self.lattice_size)
+        check_positive_int("num_generations", self.num_generations)
+        check_positive_int("sl_size", self.sl_size)
+        check_positive_int("sl_generations", self.sl_generations, minimum=0)
+        check_range("po", self.po, 0.0, 1.0)
+        check_range("sl_radius", self.sl_radius, 0.0, 1.0)
+        for name in ("w_max", "w_min", "c1", "c2"):
+            check_range(name, getattr(self, name), 0.0)
+        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
+        if self.sl_mode not in ("multiplicative", "additive"):
+            raise ValueError(
+                f"sl_mode must be 'multiplicative' or 'additive', got {self.sl_mode!r}"
+            )
+        if self.social not in ("gbest", "lbest"):
+            raise ValueError(f"social must be 'gbest' or 'lbest', got {self.social!r}")
+
+    @property
+    def num_agents(self) -> int:
+        return self.lattice_size**2
+
+    def evaluations(self) -> int:
+        """Exact number of objective evaluations of one run."""
+        p, s = self.num_agents, self.sl_size**2
+        per_gen = p * (2 if self.evaluate_replaced else 1)
+        if self.sl_generations > 0 or s > 1:
+            per_gen += (s - 1) + s * self.sl_generations
+        return p + self.num_generations * per_gen
+
+    # ------------------------------------------------------------------ operators
+    def _lattice_generation(self, state: SwarmState, f_batch, side, lower, upper, w,
+                            social_mode):
+        """Competition then PSO move on one lattice (main lattice or self-learning)."""
+        vmax = self.vmax_fraction * (upper - lower)
+        key, kc, kp = jax.random.split(state.key, 3)
+        x, lost = competition(
+            kc, state.x, state.f, side, lower, upper, self.po, self.strict_maga_segment
+        )
+        v = state.v
+        if self.reset_velocity_on_replace:
+            v = jnp.where(lost[:, None], jnp.zeros_like(v), v)
+        num = x.shape[0]
+        evals = state.num_evals
+        state = eqx.tree_at(lambda s: (s.v, s.key), state, (v, key))
+        if self.evaluate_replaced:
+            f_rep = jnp.where(lost, f_batch(x), state.f)
+            state = update_bests(state, x, f_rep)
+            evals = evals + num
+        if social_mode == "lbest":
+            nb_f = lattice_neighbours(state.pbest_f, side)
+            nb_x = lattice_neighbours(state.pbest, side)
+            all_f = jnp.concatenate([state.pbest_f[None], nb_f])
+            all_x = jnp.concatenate([state.pbest[None], nb_x])
+            j = jnp.argmin(all_f, axis=0)
+            social = jnp.take_along_axis(all_x, j[None, :, None], axis=0)[0]
+        else:
+            social = state.gbest[None, :]
+        x, v = pso_move(
+            kp, x, state.v, state.pbest, social, w, self.c1, self.c2, vmax,
+            lower, upper, self.zero_velocity_at_bounds,
+        )
+        f = f_batch(x)
+        state = eqx.tree_at(lambda s: (s.v, s.num_evals), state, (v, evals + num))
+        return update_bests(state, x, f)
+
+    def _self_learning(self, key, g, g_f, f_batch, lower, upper):
+        """Self-learning around gBest (§3.4): returns (best position, fitness, evals)."""
+        side = self.sl_size
+        s = side * side
+        k_init, k_run = jax.random.split(key)
+        u = jax.random.uniform(k_init, (s, g.shape[0]), dtype=g.dtype)
+        if self.sl_mode == "multiplicative":
+            cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u)
+        else:
+            cand = g + (2.0 * u - 1.0) * self.sl_radius * (upper - lower)
+        cand = jnp.clip(cand, lower, upper).at[0].set(g)
+        f = f_batch(cand[1:])
+        f = jnp.concatenate([g_f[None], f])
+        i = jnp.argmin(f)
+        inner = SwarmState(
+            x=cand, v=jnp.zeros_like(cand), f=f, pbest=cand, pbest_f=f,
+            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=k_run,
+        )
+
+        def body(st, j):
+            w = linear_inertia(j, self.sl_generations - 1, self.w_max, self.w_min)
+            return self._lattice_generation(st, f_batch, side, lower, upper, w, "gbest"), None
+
+        inner, _ = jax.lax.scan(body, inner, jnp.arange(self.sl_generations))
+        return inner.gbest, inner.gbest_f, inner.num_evals
+
+    # ------------------------------------------------------------- solver protocol
+    def init(self, f_batch, lower, upper, key, x0=None):
+        vmax = self.vmax_fraction * (upper - lower)
+        return init_swarm(key, f_batch, self.num_agents, lower, upper, vmax, x0)
+
+    def step(self, state, f_batch, lower, upper, i):
+        w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
+        state = self._lattice_generation(
+            state, f_batch, self.lattice_size, lower, upper, w, self.social
+        )
+        if self.sl_size * self.sl_size <= 1:
+            return state
+        key, k = jax.random.split(state.key)
+        g, g_f, evals = self._self_learning(k, state.gbest, state.gbest_f, f_batch, lower, upper)
+        better = g_f < state.gbest_f
+        # The agent whose memory is gBest takes the self-learned agent's place.
+        a = jnp.argmin(state.pbest_f)
+
+        def put(arr, val):
+            return jnp.where(better, arr.at[a].set(val), arr)
+
+        return eqx.tree_at(
+            lambda s: (s.x, s.f, s.pbest, s.pbest_f, s.gbest, s.gbest_f, s.num_evals, s.key),
+            state,
+            (
+                put(state.x, g),
+                put(state.f, g_f),
+                put(state.pbest, g),
+                put(state.pbest_f, g_f),
+                jnp.where(better, g, state.gbest),
+                jnp.where(better, g_f, state.gbest_f),
+                state.num_evals + evals,
+                key,
+            ),
+        )

@@ -1,0 +1,226 @@
+"""One-shot entry points: :func:`minimise` and :func:`minimise_many`.
+
+Both validate everything the user gave *before* tracing, flatten pytree bounds to
+one vector, and run the solver as a single jitted computation. Data travel in
+``args`` (never closures), so new data of the same shapes do not recompile.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from ._base import AbstractSolver, Solution
+
+
+class _Flat(eqx.Module):
+    """``fn`` seen through a flat parameter vector (hashable, so jit caches it)."""
+
+    fn: Callable = eqx.field(static=True)
+    treedef: Any = eqx.field(static=True)
+    shapes: tuple = eqx.field(static=True)
+
+    def unravel(self, x):
+        sizes = [int(np.prod(s)) for s in self.shapes]
+        parts = jnp.split(x, np.cumsum(sizes)[:-1]) if len(sizes) > 1 else [x]
+        leaves = [p.reshape(s) for p, s in zip(parts, self.shapes)]
+        return jtu.tree_unflatten(self.treedef, leaves)
+
+    def __call__(self, x, args):
+        return self.fn(self.unravel(x), args)
+
+
+def _as_float_leaves(tree, name, dtype=None):
+    leaves, treedef = jtu.tree_flatten(tree)
+    if not leaves:
+        raise ValueError(f"{name} is empty")
+    out = []
+    for leaf in leaves:
+        try:
+            a = np.asarray(leaf)
+        except Exception as e:  # pragma: no cover - exotic leaves
+            raise ValueError(f"{name} must contain arrays or numbers: {e}") from None
+        if a.dtype == object or not (
+            np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+        ):
+            raise ValueError(f"{name} must be numeric, got dtype {a.dtype}")
+        out.append(a)
+    return out, treedef
+
+
+def prepare_bounds(bounds, dtype=None):
+    """Validate ``bounds = (lower, upper)`` and flatten them.
+
+    Returns ``(lower_flat, upper_flat, treedef, shapes)``. Raises ``ValueError``
+    naming the problem: wrong shape of ``bounds``, mismatched structures or shapes,
+    non-finite values, ``lower >= upper``, or no parameters at all.
+    """
+    if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
+        raise ValueError("bounds must be a pair (lower, upper)")
+    lo_leaves, lo_def = _as_float_leaves(bounds[0], "lower bound")
+    hi_leaves, hi_def = _as_float_leaves(bounds[1], "upper bound")
+    if lo_def != hi_def:
+        raise ValueError(
+            f"lower and upper bounds have different structures: {lo_def} vs {hi_def}"
+        )
+    shapes = []
+    for i, (lo, hi) in enumerate(zip(lo_leaves, hi_leaves)):
+        if lo.shape != hi.shape:
+            raise ValueError(
+                f"lower and upper bounds have different shapes: {lo.shape} vs {hi.shape}"
+                + (f" (leaf {i})" if len(lo_leaves) > 1 else "")
+            )
+        shapes.append(lo.shape)
+    lower = np.concatenate([a.ravel() for a in lo_leaves])
+    upper = np.concatenate([a.ravel() for a in hi_leaves])
+    if lower.size == 0:
+        raise ValueError("bounds describe zero parameters")
+    if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+        raise ValueError("bounds must be finite (found NaN or inf)")
+    bad = np.nonzero(~(lower < upper))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"every lower bound must be < its upper bound; parameter {i} has "
+            f"lower={lower[i]!r} >= upper={upper[i]!r} ({bad.size} such parameter(s))"
+        )
+    if dtype is None:
+        dtype = jnp.result_type(*[a.dtype for a in lo_leaves + hi_leaves], float)
+        if not jnp.issubdtype(dtype, jnp.floating):
+            dtype = jnp.result_type(float)
+    dtype = jax.dtypes.canonicalize_dtype(dtype)
+    return (
+        jnp.asarray(lower, dtype),
+        jnp.asarray(upper, dtype),
+        lo_def,
+        tuple(shapes),
+    )
+
+
+def _prepare(fn, solver, bounds, args, y0, dtype):
+    if not callable(fn):
+        raise ValueError(f"fn must be callable fn(y, args), got {type(fn).__name__}")
+    if not isinstance(solver, AbstractSolver):
+        raise ValueError(
+            f"solver must be a jaxfric solver (PSO, MAPSO, NelderMead, MAPSONMDS, ...), "
+            f"got {type(solver).__name__}"
+        )
+    solver.check()
+    lower, upper, treedef, shapes = prepare_bounds(bounds, dtype)
+    flat = _Flat(fn, treedef, shapes)
+    try:
+        out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+    except Exception as e:
+        raise ValueError(f"calling fn(y, args) on the bounds' shape failed: {e}") from e
+    if not (
+        isinstance(out, jax.ShapeDtypeStruct)
+        and out.shape == ()
+        and jnp.issubdtype(out.dtype, jnp.floating)
+    ):
+        desc = getattr(out, "shape", type(out).__name__)
+        raise ValueError(
+            f"fn(y, args) must return a floating-point scalar, got {desc} "
+            f"{getattr(out, 'dtype', '')}".rstrip()
+        )
+    x0 = None
+    if y0 is not None:
+        y_leaves, y_def = _as_float_leaves(y0, "y0")
+        if y_def != treedef or [a.shape for a in y_leaves] != list(shapes):
+            raise ValueError("y0 must have the same structure and shapes as the bounds")
+        x0 = jnp.asarray(np.concatenate([a.ravel() for a in y_leaves]), lower.dtype)
+        if not bool(jnp.all(jnp.isfinite(x0))):
+            raise ValueError("y0 must be finite (found NaN or inf)")
+    return flat, lower, upper, x0
+
+
+def _check_key(key, name="key"):
+    if key is None:
+        raise ValueError(f"{name} is required: pass jax.random.key(seed)")
+    k = jnp.asarray(key)
+    if not (jnp.issubdtype(k.dtype, jax.dtypes.prng_key) or k.dtype == jnp.uint32):
+        raise ValueError(f"{name} must be a JAX PRNG key, got dtype {k.dtype}")
+    return key
+
+
+@eqx.filter_jit
+def _run(solver, flat, lower, upper, args, key, x0):
+    return solver.run(flat, lower, upper, args, key, x0)
+
+
+@eqx.filter_jit
+def _run_many(solver, flat, lower, upper, args, keys, x0):
+    return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0))(keys)
+
+
+def _unravel_solution(sol: Solution, flat: _Flat, batched: bool) -> Solution:
+    if batched:
+        value = jax.vmap(flat.unravel)(sol.value)
+    else:
+        value = flat.unravel(sol.value)
+    return eqx.tree_at(lambda s: s.value, sol, value)
+
+
+def minimise(
+    fn: Callable,
+    solver: AbstractSolver,
+    bounds,
+    *,
+    args: Any = None,
+    key=None,
+    y0=None,
+    dtype=None,
+) -> Solution:
+    """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
+
+    Args:
+        fn: objective ``fn(y, args) -> scalar``; ``y`` has the structure of the bounds.
+            NaN or inf values count as the worst possible value.
+        solver: a jaxfric solver (:class:`PSO`, :class:`MAPSO`, :class:`NelderMead`,
+            :class:`MAPSONMDS`).
+        bounds: ``(lower, upper)``, arrays or matching pytrees of arrays.
+        args: data passed to ``fn``; arrays here do not trigger recompilation.
+        key: a JAX PRNG key (``jax.random.key(0)``). Same key, same result.
+        y0: optional starting point (Nelder–Mead's start; for swarms, one agent).
+        dtype: floating dtype of the search (default: that of the bounds, or JAX's
+            default float).
+
+    Returns:
+        A :class:`Solution`.
+
+    Raises:
+        ValueError: before any tracing, for invalid bounds, hyperparameters, keys, or an
+            objective that does not return a floating scalar.
+    """
+    flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
+    key = _check_key(key)
+    sol = _run(solver, flat, lower, upper, args, key, x0)
+    return _unravel_solution(sol, flat, batched=False)
+
+
+def minimise_many(
+    fn: Callable,
+    solver: AbstractSolver,
+    bounds,
+    *,
+    keys,
+    args: Any = None,
+    y0=None,
+    dtype=None,
+) -> Solution:
+    """Independent runs of :func:`minimise`, one per key, in one vmapped jitted call.
+
+    ``keys`` is a batch of PRNG keys (``jax.random.split(key, n)``). Every field of
+    the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
+    equals ``minimise(..., key=keys[i])`` up to floating-point reassociation.
+    """
+    flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
+    keys = _check_key(keys, "keys")
+    if jnp.ndim(keys) < 1 or (jnp.asarray(keys).dtype == jnp.uint32 and jnp.ndim(keys) < 2):
+        raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+    sol = _run_many(solver, flat, lower, upper, args, keys, x0)
+    return _unravel_solution(sol, flat, batched=True)
