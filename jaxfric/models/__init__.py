@@ -1,0 +1,71 @@
+"""Friction models for jaxfric (ALGORITHMS.md §2 and §8).
+
+Every model implements :class:`AbstractFrictionModel`: a flat search vector
+``theta`` with :meth:`~AbstractFrictionModel.bounds`, named physical
+parameters via ``to_physical`` / ``from_physical``, and a pure-JAX free-run
+rollout ``simulate(theta, velocity, dt)`` / ``simulate_batch(thetas, velocity, dt)``.
+
+Black-box models (``needs_scaling = True``: :class:`Elman`, :class:`ElmanFull`)
+are fitted on data scaled with :class:`Scaler`; physical models (:class:`LuGre`,
+:class:`Dahl`, :class:`Coulomb`, :class:`Stribeck`) work in SI units.
+"""
+
+from __future__ import annotations
+
+from ._base import AbstractFrictionModel, check_theta, friction_scales
+from ._physical import AbstractPhysicalModel, DEFAULT_RANGES, data_ranges, stribeck_curve
+from ._scaling import Scaler
+from .elman import Elman, ElmanFull
+from .lugre import Dahl, LuGre, bristle_friction
+from .static import Coulomb, Stribeck
+
+__all__ = [
+    "AbstractFrictionModel",
+    "AbstractPhysicalModel",
+    "Coulomb",
+    "DEFAULT_RANGES",
+    "Dahl",
+    "Elman",
+    "ElmanFull",
+    "LuGre",
+    "Scaler",
+    "Stribeck",
+    "available",
+    "bristle_friction",
+    "check_theta",
+    "data_ranges",
+    "friction_scales",
+    "get",
+    "stribeck_curve",
+]
+
+_REGISTRY: dict[str, type[AbstractFrictionModel]] = {
+    "elman": Elman,
+    "elman_full": ElmanFull,
+    "lugre": LuGre,
+    "dahl": Dahl,
+    "coulomb": Coulomb,
+    "stribeck": Stribeck,
+}
+
+
+def available() -> tuple[str, ...]:
+    """Names accepted by :func:`get`."""
+    return tuple(_REGISTRY)
+
+
+def get(name: str, **kwargs) -> AbstractFrictionModel:
+    """Build a model by name, e.g. ``get("elman", neurons=20)`` or ``get("lugre")``.
+
+    Names are case-insensitive and ``-`` may stand for ``_``. Keyword arguments
+    go to the model's constructor. Unknown names raise ``ValueError`` listing
+    the valid ones.
+    """
+    if not isinstance(name, str):
+        raise ValueError(f"model name must be a string, one of {available()}, got {name!r}")
+    key = name.strip().lower().replace("-", "_")
+    try:
+        cls = _REGISTRY[key]
+    except KeyError:
+        raise ValueError(f"unknown friction model {name!r}; valid names: {', '.join(available())}") from None
+    return cls(**kwargs)

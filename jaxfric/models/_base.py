@@ -1,0 +1,210 @@
+"""The interface every jaxfric friction model implements.
+
+A friction model is a small immutable ``eqx.Module`` that holds only *static
+hyperparameters* (number of neurons, which parameters are free, search ranges).
+Measured data -- velocity, friction, sample time -- always arrive as function
+arguments, so a new data set never triggers recompilation and data sets can be
+vmapped (DESIGN.md, "Conventions").
+
+Every model maps a flat search vector ``theta`` (what the optimisers see, in
+*search coordinates*, e.g. log10 of a stiffness) to a friction prediction::
+
+    lower, upper = model.bounds()            # NumPy, search coordinates
+    params = model.to_physical(theta)        # {"sigma0": ..., "Fc": ...}
+    theta = model.from_physical(**params)    # the inverse
+    F_hat = model.simulate(theta, v, dt)     # free-run rollout, (T,)
+    F_hat = model.simulate_batch(thetas, v, dt)  # (P, n) -> (P, T)
+
+``simulate`` is the output-error (free-run) prediction of ALGORITHMS.md §2.4 /
+§11 step 4: the measured friction is never fed back.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = ["AbstractFrictionModel", "check_theta", "friction_scales"]
+
+
+def _as_float_dtype(*arrays) -> jnp.dtype:
+    """Common floating dtype of the inputs (ints and bools promote to float).
+
+    Constants inside the models are created in this dtype so float32 and float64
+    both work without the library touching ``jax_enable_x64``.
+    """
+    dtype = jnp.result_type(*arrays)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(dtype, jnp.float32)
+    return dtype
+
+
+def check_theta(theta: ArrayLike, num_params: int, *, name: str = "theta") -> np.ndarray:
+    """Validate a parameter vector (or a ``(P, n)`` batch) eagerly, outside jit.
+
+    Returns ``theta`` as a NumPy array. Raises ``ValueError`` when it is not
+    1-D/2-D, when its last axis is not ``num_params`` long, or when it holds NaN
+    or inf. Use it at API boundaries (user-supplied initial guesses, saved
+    fits); inside a jitted objective non-finite values are left to the
+    optimiser's NaN-is-worst rule instead.
+    """
+    arr = np.asarray(theta)
+    if arr.ndim not in (1, 2):
+        raise ValueError(
+            f"{name} must be a 1-D parameter vector or a 2-D (P, n) batch, got shape {arr.shape}"
+        )
+    if arr.shape[-1] != num_params:
+        raise ValueError(
+            f"{name} has {arr.shape[-1]} entries per candidate but the model has "
+            f"{num_params} parameters"
+        )
+    if not np.issubdtype(arr.dtype, np.number):
+        raise ValueError(f"{name} must be numeric, got dtype {arr.dtype}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))
+        raise ValueError(f"{name} holds non-finite values (NaN or inf) at index {bad[0].tolist()}")
+    return arr
+
+
+def friction_scales(velocity: ArrayLike, friction: ArrayLike) -> tuple[float, float]:
+    """Characteristic friction level and speed of a record, for data-centred bounds.
+
+    Returns ``(F_level, v_max)``: the 95th percentile of ``|friction|`` (robust
+    to filter spikes at reversals) and ``max |velocity|``. Raises
+    ``ValueError`` if either is zero or the data are not finite.
+    """
+    v = np.asarray(velocity, dtype=float).ravel()
+    f = np.asarray(friction, dtype=float).ravel()
+    if v.size == 0 or f.size == 0:
+        raise ValueError("velocity and friction must not be empty")
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
+        raise ValueError("velocity and friction must be finite (no NaN or inf)")
+    f_level = float(np.percentile(np.abs(f), 95.0))
+    v_max = float(np.max(np.abs(v)))
+    if f_level <= 0.0:
+        raise ValueError("friction is (almost) identically zero; cannot centre bounds on it")
+    if v_max <= 0.0:
+        raise ValueError("velocity is identically zero; cannot centre bounds on it")
+    return f_level, v_max
+
+
+class AbstractFrictionModel(eqx.Module):
+    """Base class of all friction models (Elman, LuGre, Dahl, static maps).
+
+    Subclasses are immutable and hold only static hyperparameters. They must
+    provide :attr:`param_names`, :meth:`bounds`, :meth:`to_physical`,
+    :meth:`from_physical` and ``_simulate_batch``; the rest has defaults.
+
+    Class attributes:
+
+    - ``needs_scaling``: ``True`` for black-box models fitted on data scaled
+      to [-1, 1] (the Elman network, ALGORITHMS.md §2.4). Physical models work
+      in SI units (velocity in m/s, friction in N) and leave it ``False``.
+    - ``uses_dt``: ``False`` for static maps, whose output ignores ``dt``.
+    """
+
+    needs_scaling: ClassVar[bool] = False
+    uses_dt: ClassVar[bool] = True
+
+    # ------------------------------------------------------------ description
+    @property
+    @abc.abstractmethod
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the search coordinates, in ``theta`` order."""
+
+    @property
+    def num_params(self) -> int:
+        """Length of the flat search vector ``theta``."""
+        return len(self.param_names)
+
+    @abc.abstractmethod
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Search box ``(lower, upper)`` in search coordinates (1-D float64 NumPy)."""
+
+    @abc.abstractmethod
+    def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
+        """Map search coordinates to named physical parameters (leading axes kept)."""
+
+    @abc.abstractmethod
+    def from_physical(self, **params) -> Array:
+        """Inverse of :meth:`to_physical`: named physical parameters -> ``theta``."""
+
+    # -------------------------------------------------------------- rollouts
+    @abc.abstractmethod
+    def _simulate_batch(self, thetas: Array, velocity: Array, dt) -> Array:
+        """Model-specific rollout; called traced, through :meth:`simulate_batch`."""
+
+    def simulate_batch(
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
+    ) -> Float[Array, "P T"]:
+        """Free-run friction of ``P`` candidates on one velocity record, ``(P, T)``.
+
+        The rollout is wrapped in ``jax.jit`` (a no-op inside a caller's own
+        jit), so eager calls compile once per model configuration and input
+        shape; ``dt`` is traced, so a new sample time does not recompile.
+        """
+        return _jit_rollout(self, thetas, velocity, dt)
+
+    def simulate(
+        self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt
+    ) -> Float[Array, " T"]:
+        """Free-run friction prediction for one parameter vector.
+
+        Pure JAX: jittable, differentiable, and vmappable over ``theta`` (a
+        vmapped call equals per-candidate calls). ``velocity`` and the returned
+        friction are in the model's working units (see ``needs_scaling``);
+        ``dt`` is the sample time in s (ignored by static maps).
+        """
+        theta = jnp.asarray(theta)
+        if theta.ndim != 1:
+            raise ValueError(f"theta must be 1-D, got shape {theta.shape}; use simulate_batch")
+        return self.simulate_batch(theta[None, :], velocity, dt)[0]
+
+    # ---------------------------------------------------------------- helpers
+    def check_theta(self, theta: ArrayLike) -> np.ndarray:
+        """Eager validation of ``theta`` (shape, length, finiteness); see :func:`check_theta`."""
+        return check_theta(theta, self.num_params)
+
+    def initial_guess(self, velocity: ArrayLike, friction: ArrayLike) -> np.ndarray:
+        """A starting point inside :meth:`bounds`; the default is the box centre."""
+        lower, upper = self.bounds()
+        return 0.5 * (lower + upper)
+
+    def with_data_bounds(self, velocity: ArrayLike, friction: ArrayLike) -> "AbstractFrictionModel":
+        """Return a copy whose unset search ranges are centred on the data's levels.
+
+        Models fitted on scaled data (or without data-dependent ranges) return
+        ``self`` unchanged.
+        """
+        del velocity, friction
+        return self
+
+    # ------------------------------------------------------------- internals
+    def _prepare(self, thetas, velocity) -> tuple[Array, Array]:
+        """Shape checks (trace-time, so they also work under jit) and dtype promotion."""
+        thetas = jnp.asarray(thetas)
+        velocity = jnp.asarray(velocity)
+        if thetas.ndim != 2:
+            raise ValueError(f"thetas must be a 2-D (P, n) batch, got shape {thetas.shape}")
+        if thetas.shape[-1] != self.num_params:
+            raise ValueError(
+                f"theta has {thetas.shape[-1]} entries but {type(self).__name__} has "
+                f"{self.num_params} parameters"
+            )
+        if velocity.ndim != 1:
+            raise ValueError(f"velocity must be a 1-D time series, got shape {velocity.shape}")
+        dtype = _as_float_dtype(thetas, velocity)
+        return thetas.astype(dtype), velocity.astype(dtype)
+
+
+@jax.jit
+def _jit_rollout(model: AbstractFrictionModel, thetas, velocity, dt):
+    # The model has only static fields, so it is an empty pytree whose treedef
+    # (hence the jit cache key) is its configuration.
+    return model._simulate_batch(thetas, velocity, dt)

@@ -1,0 +1,299 @@
+"""Elman recurrent networks as friction models (ALGORITHMS.md §2).
+
+Both networks map (scaled) piston velocity u(k) to (scaled) friction y(k) in
+free run: the measured friction is never fed back (§2.4). They are fitted on
+data scaled to [-1, 1] with :class:`jaxfric.models.Scaler`, so
+``needs_scaling = True``.
+
+Parameter layout of ``theta`` (blocks of N, one block per kind, so the bounds
+are simple and a block is a contiguous slice)::
+
+    Elman      [ w | r | b | v | alpha | c0 ] (+ [b_o])              6N (+1)
+    ElmanFull  [ w | W_c (row-major N*N) | b | v | c0 ] (+ [b_o])    N + N^2 + 3N (+1)
+
+Performance note (measured on the 2-core development CPU, 30 neurons, 1600
+samples, 64 candidates): scanning once over time with the state stored as an
+``(N, P)`` array -- candidates on the fast axis -- and ``unroll=2`` takes
+about 2 ms in float32 and 4.7 ms in float64, against 5 ms / 6.8 ms for a
+``(P, N)`` state and 7 ms for ``vmap`` of a single-candidate scan. Hoisting
+``w u + b`` out of the loop was slower (it materialises a (T, N, P) array).
+Hence :meth:`Elman.simulate_batch` is the primitive and :meth:`simulate` calls
+it with P = 1.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractFrictionModel
+
+__all__ = ["Elman", "ElmanFull"]
+
+
+def _check_neurons(neurons) -> None:
+    if isinstance(neurons, bool) or not isinstance(neurons, (int, np.integer)):
+        raise ValueError(f"neurons must be a positive integer, got {neurons!r}")
+    if neurons < 1:
+        raise ValueError(f"neurons must be >= 1, got {neurons}")
+
+
+def _check_positive(name: str, value: float, upper: float | None = None) -> None:
+    if not np.isfinite(value) or value <= 0.0 or (upper is not None and value >= upper):
+        rng = f"(0, {upper})" if upper is not None else "(0, inf)"
+        raise ValueError(f"{name} must lie in {rng}, got {value!r}")
+
+
+class Elman(AbstractFrictionModel):
+    """Locally recurrent (diagonal-context) Elman network, ALGORITHMS.md §2.2 (Option A).
+
+    For hidden neurons j = 1..N, with scaled velocity u(k) as input::
+
+        h_j(k) = tanh(w_j u(k) + r_j c_j(k) + b_j)
+        y(k)   = sum_j v_j h_j(k)  (+ b_o)
+        c_j(k+1) = alpha_j c_j(k) + h_j(k),        c_j(1) = c0_j
+
+    i.e. c_j(k) = alpha_j c_j(k-1) + h_j(k-1) with the initial context c0_j a
+    free parameter, as the paper stresses (§2.1). Six parameters per neuron
+    (w, r, b, v, alpha, c0), so 6N = 180 for N = 30; the optional output bias
+    b_o adds one.
+
+    Hyperparameters (static):
+        neurons: number of hidden neurons N (>= 1).
+        output_bias: include b_o (default ``False``, giving exactly 6N).
+        weight_bound: |w|, |r|, |b| <= weight_bound (default 5, §2.4 table).
+        output_weight_bound: |v| <= this (default 2).
+        alpha_max: alpha in [0, alpha_max] (default 0.99, keeps contexts stable).
+        c0_bound: |c0| <= this (default 1); also the bound of |b_o|.
+        unroll: ``lax.scan`` unroll factor of the time loop (2 was fastest).
+
+    All quantities are dimensionless (scaled data, see :class:`Scaler`).
+    """
+
+    neurons: int = eqx.field(default=30, static=True)
+    output_bias: bool = eqx.field(default=False, static=True)
+    weight_bound: float = eqx.field(default=5.0, static=True)
+    output_weight_bound: float = eqx.field(default=2.0, static=True)
+    alpha_max: float = eqx.field(default=0.99, static=True)
+    c0_bound: float = eqx.field(default=1.0, static=True)
+    unroll: int = eqx.field(default=2, static=True)
+
+    needs_scaling = True
+
+    def __check_init__(self):
+        _check_neurons(self.neurons)
+        _check_positive("weight_bound", self.weight_bound)
+        _check_positive("output_weight_bound", self.output_weight_bound)
+        _check_positive("alpha_max", self.alpha_max, upper=1.0)
+        _check_positive("c0_bound", self.c0_bound)
+        if int(self.unroll) < 1:
+            raise ValueError(f"unroll must be >= 1, got {self.unroll}")
+
+    _BLOCKS = ("w", "r", "b", "v", "alpha", "c0")
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        names = tuple(f"{blk}[{j}]" for blk in self._BLOCKS for j in range(self.neurons))
+        return names + (("b_o",) if self.output_bias else ())
+
+    @property
+    def num_params(self) -> int:
+        return 6 * self.neurons + int(self.output_bias)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Search box of §2.4: w, r, b in ±5; v in ±2; alpha in [0, 0.99]; c0, b_o in ±1."""
+        n = self.neurons
+        wb, vb, cb = self.weight_bound, self.output_weight_bound, self.c0_bound
+        lower = np.concatenate([np.full(3 * n, -wb), np.full(n, -vb), np.zeros(n), np.full(n, -cb)])
+        upper = np.concatenate([np.full(3 * n, wb), np.full(n, vb), np.full(n, self.alpha_max), np.full(n, cb)])
+        if self.output_bias:
+            lower = np.append(lower, -cb)
+            upper = np.append(upper, cb)
+        return lower.astype(np.float64), upper.astype(np.float64)
+
+    def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
+        """Split ``theta`` into the named weight blocks, each of shape ``(..., N)``.
+
+        Keys: ``w`` (input weight), ``r`` (context weight), ``b`` (hidden bias),
+        ``v`` (output weight), ``alpha`` (context self-feedback), ``c0``
+        (initial context) and, with ``output_bias``, ``b_o`` of shape ``(...)``.
+        All dimensionless (scaled units).
+        """
+        theta = jnp.asarray(theta)
+        n = self.neurons
+        out = {name: theta[..., i * n : (i + 1) * n] for i, name in enumerate(self._BLOCKS)}
+        if self.output_bias:
+            out["b_o"] = theta[..., 6 * n]
+        return out
+
+    def from_physical(self, *, w, r, b, v, alpha, c0, b_o=None) -> Array:
+        """Concatenate named weight blocks (each ``(..., N)``) into ``theta``."""
+        blocks = [jnp.asarray(x) for x in (w, r, b, v, alpha, c0)]
+        for name, x in zip(self._BLOCKS, blocks):
+            if x.shape[-1:] != (self.neurons,):
+                raise ValueError(f"{name} must have last axis of length {self.neurons}, got {x.shape}")
+        if self.output_bias:
+            if b_o is None:
+                raise ValueError("this Elman has output_bias=True: pass b_o")
+            blocks.append(jnp.asarray(b_o)[..., None])
+        elif b_o is not None:
+            raise ValueError("this Elman has output_bias=False: b_o must not be given")
+        return jnp.concatenate(blocks, axis=-1)
+
+    def _simulate_batch(
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
+    ) -> Float[Array, "P T"]:
+        """Free-run outputs of ``P`` networks on one scaled velocity record (§2.2).
+
+        One ``lax.scan`` over time carries the contexts of all candidates as an
+        ``(N, P)`` array. ``dt`` is accepted for interface uniformity and ignored
+        (the network is a discrete-time map at the data's sample rate).
+        """
+        del dt
+        thetas, u = self._prepare(thetas, velocity)
+        p = self.to_physical(thetas)
+        # (N, P): candidates on the fast axis vectorise best on CPU (module docstring).
+        w, r, b, v, alpha, c0 = (p[k].T for k in self._BLOCKS)
+
+        def step(c, uk):
+            h = jnp.tanh(w * uk + r * c + b)
+            return alpha * c + h, jnp.sum(v * h, axis=0)
+
+        _, y = jax.lax.scan(step, c0, u, unroll=self.unroll)
+        y = y.T
+        if self.output_bias:
+            y = y + p["b_o"][:, None]
+        return y
+
+
+class ElmanFull(AbstractFrictionModel):
+    """Classic Elman network with a full context matrix, ALGORITHMS.md §2.3 (Option B)::
+
+        h(k)   = tanh(w u(k) + W_c c(k) + b)
+        y(k)   = v . h(k) + b_o
+        c(k+1) = h(k),          c(1) = c0 (learned) or 0
+
+    Parameter count N + N^2 + N + N [+ N for c0] [+ 1 for b_o]: 1021 for N = 30
+    with the defaults. Offered for comparison with the 6N-parameter Option A.
+
+    Hyperparameters (static): ``neurons``; ``output_bias`` (default ``True``,
+    as in MATLAB's ``elmannet``); ``learn_c0`` (default ``True``);
+    ``weight_bound`` for |w|, |b| (default 5); ``context_bound`` for |W_c|
+    (default 1: each hidden unit sums N context terms, so a smaller box keeps
+    the pre-activations in the same range); ``output_weight_bound`` for |v|
+    (default 2); ``c0_bound`` for |c0| and |b_o| (default 1). Dimensionless.
+    """
+
+    neurons: int = eqx.field(default=30, static=True)
+    output_bias: bool = eqx.field(default=True, static=True)
+    learn_c0: bool = eqx.field(default=True, static=True)
+    weight_bound: float = eqx.field(default=5.0, static=True)
+    context_bound: float = eqx.field(default=1.0, static=True)
+    output_weight_bound: float = eqx.field(default=2.0, static=True)
+    c0_bound: float = eqx.field(default=1.0, static=True)
+
+    needs_scaling = True
+
+    def __check_init__(self):
+        _check_neurons(self.neurons)
+        for name in ("weight_bound", "context_bound", "output_weight_bound", "c0_bound"):
+            _check_positive(name, getattr(self, name))
+
+    def _sizes(self) -> list[tuple[str, int]]:
+        n = self.neurons
+        sizes = [("w", n), ("W_c", n * n), ("b", n), ("v", n)]
+        if self.learn_c0:
+            sizes.append(("c0", n))
+        if self.output_bias:
+            sizes.append(("b_o", 1))
+        return sizes
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        n = self.neurons
+        names: list[str] = []
+        for name, size in self._sizes():
+            if name == "W_c":
+                names += [f"W_c[{i},{j}]" for i in range(n) for j in range(n)]
+            elif name == "b_o":
+                names.append("b_o")
+            else:
+                names += [f"{name}[{j}]" for j in range(size)]
+        return tuple(names)
+
+    @property
+    def num_params(self) -> int:
+        return sum(size for _, size in self._sizes())
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        half = {
+            "w": self.weight_bound,
+            "W_c": self.context_bound,
+            "b": self.weight_bound,
+            "v": self.output_weight_bound,
+            "c0": self.c0_bound,
+            "b_o": self.c0_bound,
+        }
+        upper = np.concatenate([np.full(size, half[name]) for name, size in self._sizes()])
+        return (-upper).astype(np.float64), upper.astype(np.float64)
+
+    def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
+        """Named blocks: ``w``, ``b``, ``v``, ``c0`` ``(..., N)``; ``W_c`` ``(..., N, N)``
+        (row i = weights into hidden unit i); ``b_o`` ``(...)``. Dimensionless."""
+        theta = jnp.asarray(theta)
+        n = self.neurons
+        out: dict[str, Array] = {}
+        start = 0
+        for name, size in self._sizes():
+            block = theta[..., start : start + size]
+            if name == "W_c":
+                block = block.reshape(block.shape[:-1] + (n, n))
+            elif name == "b_o":
+                block = block[..., 0]
+            out[name] = block
+            start += size
+        return out
+
+    def from_physical(self, *, w, W_c, b, v, c0=None, b_o=None) -> Array:
+        """Inverse of :meth:`to_physical`."""
+        given = {"w": w, "W_c": W_c, "b": b, "v": v, "c0": c0, "b_o": b_o}
+        parts = []
+        for name, size in self._sizes():
+            x = given.pop(name)
+            if x is None:
+                raise ValueError(f"{name} is required for this ElmanFull configuration")
+            x = jnp.asarray(x)
+            if name == "W_c":
+                x = x.reshape(x.shape[:-2] + (size,))
+            elif name == "b_o":
+                x = x[..., None]
+            if x.shape[-1] != size:
+                raise ValueError(f"{name} has the wrong size {x.shape}")
+            parts.append(x)
+        extra = [k for k, x in given.items() if x is not None]
+        if extra:
+            raise ValueError(f"{extra} not used by this ElmanFull configuration")
+        return jnp.concatenate(parts, axis=-1)
+
+    def _simulate_batch(
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
+    ) -> Float[Array, "P T"]:
+        """Free-run outputs of ``P`` networks on one scaled velocity record (§2.3)."""
+        del dt
+        thetas, u = self._prepare(thetas, velocity)
+        p = self.to_physical(thetas)
+        c0 = p["c0"] if self.learn_c0 else jnp.zeros_like(p["w"])
+        w, b, v, Wc = p["w"], p["b"], p["v"], p["W_c"]
+
+        def step(c, uk):
+            h = jnp.tanh(w * uk + jnp.einsum("pij,pj->pi", Wc, c) + b)
+            return h, jnp.sum(v * h, axis=-1)
+
+        _, y = jax.lax.scan(step, c0, u)
+        y = y.T
+        if self.output_bias:
+            y = y + p["b_o"][:, None]
+        return y
