@@ -209,3 +209,25 @@ def test_elman_full_without_c0_starts_from_zero_context():
     np.testing.assert_allclose(y, numpy_elman_full(dict(p, c0=np.zeros(2), b_o=0.0), u), rtol=1e-13)
     with pytest.raises(ValueError):
         model.from_physical(**p, c0=np.zeros(2))
+
+
+def test_context_weight_bound_narrows_only_r():
+    model = Elman(neurons=3, context_weight_bound=1.0)
+    lower, upper = model.bounds()
+    np.testing.assert_allclose(model.to_physical(upper)["r"], 1.0)
+    np.testing.assert_allclose(model.to_physical(upper)["w"], 5.0)
+    np.testing.assert_allclose(model.to_physical(lower)["b"], -5.0)
+
+
+def test_unroll_does_not_change_results():
+    rng = np.random.default_rng(8)
+    base = Elman(neurons=4)
+    thetas = random_theta(base, rng, size=3)
+    u = np.sin(np.linspace(0, 3, 33))
+    with jax.enable_x64(True):
+        ref = np.asarray(base.simulate_batch(thetas, u, None))
+        for unroll in (1, 3):
+            out = Elman(neurons=4, unroll=unroll).simulate_batch(thetas, u, None)
+            np.testing.assert_allclose(out, ref, rtol=1e-13, atol=1e-13)
+    with pytest.raises(ValueError, match="unroll"):
+        Elman(unroll=0)
