@@ -1,7 +1,7 @@
 """MAPSO–NMDS (ALGORITHMS.md §5.1): MAPSO's global search, then Nelder–Mead from gBest.
 
 ``θ_MAPSO = MAPSO(J, bounds, G)`` and ``θ* = NM(J, start=θ_MAPSO)``. Optionally the
-``num_starts`` best distinct agents (by personal best) seed vmapped Nelder–Mead runs
+``num_starts`` best agents (by personal best) seed Nelder–Mead runs
 and the best refined point wins. One jitted computation end to end.
 """
 
@@ -57,21 +57,25 @@ class MAPSONMDS(AbstractSolver):
             spread = jnp.std(swarm.pbest, axis=0)
             floor = 1e-3 * self.nelder_mead.initial_step * (upper - lower)
             step = jnp.maximum(spread, floor)
+        def refine(start):
+            return self.nelder_mead.run(fn, lower, upper, args, k_local, start, step)
+
         if self.num_starts == 1:
-            starts = global_sol.value[None]
+            best = refine(global_sol.value)
+            local_evals = best.stats["num_evals"]
         else:
-            order = jnp.argsort(swarm.pbest_f)[: self.num_starts]
-            starts = swarm.pbest[order]
-        local = jax.vmap(
-            lambda s: self.nelder_mead.run(fn, lower, upper, args, k_local, s, step)
-        )(starts)
-        i = jnp.argmin(local.f)
-        best = jax.tree_util.tree_map(lambda a: a[i], local)
+            # lax.map, not vmap: under vmap Nelder-Mead's conditionals become selects
+            # and every step would pay for the shrink branch (PEERS.md 1.6).
+            starts = swarm.pbest[jnp.argsort(swarm.pbest_f)[: self.num_starts]]
+            local = jax.lax.map(refine, starts)
+            i = jnp.argmin(local.f)
+            best = jax.tree_util.tree_map(lambda a: a[i], local)
+            local_evals = jnp.sum(local.stats["num_evals"])
         # Nelder–Mead starts at gBest, so it can only improve on the global phase.
         use_local = best.f <= global_sol.f
         value = jnp.where(use_local, best.value, global_sol.value)
         f = jnp.where(use_local, best.f, global_sol.f)
-        num_evals = global_sol.stats["num_evals"] + jnp.sum(local.stats["num_evals"])
+        num_evals = global_sol.stats["num_evals"] + local_evals
         history = concat_histories(
             global_sol.history, best.history.offset(global_sol.stats["num_evals"])
         )

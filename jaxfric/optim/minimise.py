@@ -87,12 +87,13 @@ def prepare_bounds(bounds, dtype=None):
         i = int(bad[0])
         raise ValueError(
             f"every lower bound must be < its upper bound; parameter {i} has "
-            f"lower={lower[i]!r} >= upper={upper[i]!r} ({bad.size} such parameter(s))"
+            f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({bad.size} such parameter(s))"
         )
     if dtype is None:
-        dtype = jnp.result_type(*[a.dtype for a in lo_leaves + hi_leaves], float)
-        if not jnp.issubdtype(dtype, jnp.floating):
-            dtype = jnp.result_type(float)
+        dtype = np.result_type(*[a.dtype for a in lo_leaves + hi_leaves])
+        if not np.issubdtype(dtype, np.floating):
+            dtype = np.float64
+    # float64 bounds search in float32 unless the caller enabled x64 (JAX's rule).
     dtype = jax.dtypes.canonicalize_dtype(dtype)
     return (
         jnp.asarray(lower, dtype),

@@ -1,0 +1,174 @@
+"""The optimiser API: reproducibility, dtypes, exact evaluation counts, history,
+bounds, and clear errors raised before any tracing."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfric as jf
+from jaxfric import functions as F
+
+SMALL = {
+    "pso": jf.PSO(num_particles=9, num_generations=15),
+    "mapso": jf.MAPSO(lattice_size=3, num_generations=6, sl_generations=3),
+    "nm": jf.NelderMead(max_steps=60),
+    "hybrid": jf.mapso_nmds(lattice_size=3, num_generations=4, sl_generations=2, nm_max_steps=40),
+}
+BOUNDS = (np.array([-2.0, -1.0, 0.5]), np.array([3.0, 1.0, 4.0]))
+
+
+def quad(y, args):
+    return jnp.sum((y - args) ** 2)
+
+
+TARGET = jnp.array([0.3, -0.2, 1.0])
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_same_key_same_result_different_key_different_run(name):
+    solver = SMALL[name]
+    a = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
+    b = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
+    c = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(4))
+    assert bool(eqx.tree_equal(a, b))
+    assert not np.array_equal(np.asarray(a.value), np.asarray(c.value))
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_exact_evaluation_count_and_bounds(name, counter):
+    solver = SMALL[name]
+    sol = jf.minimise(counter.wrap(quad), solver, BOUNDS, args=TARGET, key=jax.random.key(0))
+    jax.block_until_ready(sol)
+    assert int(sol.stats["num_evals"]) == counter.count
+    if hasattr(solver, "evaluations"):
+        assert solver.evaluations() == counter.count
+    pts = counter.all_points()
+    assert np.all(pts >= BOUNDS[0] - 1e-6) and np.all(pts <= BOUNDS[1] + 1e-6)
+    # the reported best is the objective at the reported value
+    np.testing.assert_allclose(float(quad(sol.value, TARGET)), float(sol.f), rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_history_is_monotone_and_ends_at_best(name):
+    sol = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(1))
+    n = int(sol.history.length)
+    f = np.asarray(sol.history.f)[:n]
+    ev = np.asarray(sol.history.evals)[:n]
+    assert n >= 2
+    assert np.all(np.diff(f) <= 0), f
+    assert np.all(np.diff(ev) >= 0)
+    assert f[-1] == pytest.approx(float(sol.f))
+    assert ev[-1] <= int(sol.stats["num_evals"])
+
+
+@pytest.mark.parametrize("name", ["pso", "mapso", "nm"])
+def test_float32_and_float64(name):
+    sol = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(0), dtype=jnp.float32)
+    assert sol.value.dtype == jnp.float32 and sol.f.dtype == jnp.float32
+    with jax.enable_x64(True):
+        sol64 = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(0))
+        assert sol64.value.dtype == jnp.float64 and sol64.f.dtype == jnp.float64
+        assert bool(jnp.isfinite(sol64.f))
+
+
+def test_minimise_many_matches_single_runs():
+    keys = jax.random.split(jax.random.key(5), 3)
+    solver = SMALL["mapso"]
+    many = jf.minimise_many(quad, solver, BOUNDS, args=TARGET, keys=keys)
+    assert many.value.shape == (3, 3) and many.f.shape == (3,)
+    for i in range(3):
+        one = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=keys[i])
+        np.testing.assert_allclose(many.value[i], one.value, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(many.f[i], one.f, rtol=1e-4, atol=1e-7)
+
+
+def test_pytree_bounds_round_trip():
+    bounds = ({"a": np.zeros(2), "b": np.array(-1.0)}, {"a": np.ones(2), "b": np.array(1.0)})
+
+    def fn(y, args):
+        return jnp.sum((y["a"] - 0.25) ** 2) + (y["b"] + 0.5) ** 2
+
+    sol = jf.minimise(fn, jf.NelderMead(max_steps=400), bounds, key=jax.random.key(0))
+    assert set(sol.value) == {"a", "b"} and sol.value["a"].shape == (2,)
+    np.testing.assert_allclose(sol.value["a"], [0.25, 0.25], atol=1e-3)
+    np.testing.assert_allclose(sol.value["b"], -0.5, atol=1e-3)
+
+
+def test_nan_is_never_best():
+    def spiky(y, args):
+        # NaN on a region containing the true minimum of the smooth part
+        return jnp.where(jnp.abs(y[0]) < 0.5, jnp.nan, jnp.sum(y**2))
+
+    for solver in SMALL.values():
+        sol = jf.minimise(spiky, solver, BOUNDS, key=jax.random.key(2))
+        assert bool(jnp.isfinite(sol.f))
+        assert abs(float(sol.value[0])) >= 0.5
+
+
+def test_all_nan_objective_reports_nonfinite():
+    sol = jf.minimise(lambda y, a: jnp.nan * jnp.sum(y), SMALL["pso"], BOUNDS, key=jax.random.key(0))
+    assert sol.result == jf.RESULTS.nonfinite
+    assert not bool(sol.success)
+
+
+def test_data_change_does_not_recompile():
+    solver = jf.PSO(num_particles=4, num_generations=3)
+    jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(0))
+    from jaxfric.optim.minimise import _run
+
+    before = _run._cached._cache_size() if hasattr(_run, "_cached") else None
+    jf.minimise(quad, solver, BOUNDS, args=TARGET + 1.0, key=jax.random.key(1))
+    jf.minimise(quad, solver, (BOUNDS[0] - 1, BOUNDS[1] + 1), args=TARGET, key=jax.random.key(1))
+    if before is not None:
+        assert _run._cached._cache_size() == before
+
+
+# ------------------------------------------------------------------- bad input
+def good(**over):
+    kw = dict(fn=quad, solver=SMALL["pso"], bounds=BOUNDS, args=TARGET, key=jax.random.key(0))
+    kw.update(over)
+    fn, solver, bounds = kw.pop("fn"), kw.pop("solver"), kw.pop("bounds")
+    return jf.minimise(fn, solver, bounds, **kw)
+
+
+@pytest.mark.parametrize(
+    "over, words",
+    [
+        (dict(bounds=(np.array([1.0, 0, 0]), np.array([1.0, 1, 1]))), "lower bound must be < its upper"),
+        (dict(bounds=(np.array([2.0, 0, 0]), np.array([1.0, 1, 1]))), "parameter 0 has lower=2.0"),
+        (dict(bounds=(np.array([np.nan, 0, 0]), np.ones(3))), "finite"),
+        (dict(bounds=(np.zeros(3), np.array([1.0, np.inf, 1]))), "finite"),
+        (dict(bounds=(np.zeros(3), np.ones(4))), "different shapes"),
+        (dict(bounds=(np.zeros(3),)), "pair"),
+        (dict(bounds=(np.zeros(0), np.zeros(0))), "zero parameters"),
+        (dict(bounds=(np.array(["a"]), np.array(["b"]))), "numeric"),
+        (dict(fn=lambda y, a: y * 2), "floating-point scalar"),
+        (dict(fn=lambda y, a: jnp.sum(y).astype(jnp.int32)), "floating-point scalar"),
+        (dict(fn=lambda y, a: y @ jnp.ones(5)), "calling fn"),
+        (dict(fn="sphere"), "callable"),
+        (dict(solver=jf.PSO(num_particles=0)), "num_particles must be >= 1"),
+        (dict(solver=jf.PSO(num_generations=-3)), "num_generations must be >= 1"),
+        (dict(solver=jf.PSO(num_generations=2.5)), "num_generations must be an integer"),
+        (dict(solver=jf.MAPSO(lattice_size=0)), "lattice_size must be >= 1"),
+        (dict(solver=jf.MAPSO(po=1.5)), "po must be <= 1.0"),
+        (dict(solver=jf.MAPSO(sl_mode="weird")), "sl_mode"),
+        (dict(solver=jf.NelderMead(max_steps=0)), "max_steps must be >= 1"),
+        (dict(solver=jf.NelderMead(initial_simplex="x")), "initial_simplex"),
+        (dict(solver=jf.mapso_nmds(lattice_size=2, num_starts=9)), "num_starts"),
+        (dict(solver="pso"), "jaxfric solver"),
+        (dict(key=None), "key is required"),
+        (dict(key=np.float32(1.0)), "PRNG key"),
+        (dict(y0=np.zeros(5)), "same structure and shapes"),
+        (dict(y0=np.array([np.nan, 0, 0])), "y0 must be finite"),
+    ],
+)
+def test_bad_input_raises_clear_valueerror(over, words):
+    with pytest.raises(ValueError, match=words):
+        good(**over)
+
+
+def test_minimise_many_needs_a_batch_of_keys():
+    with pytest.raises(ValueError, match="batch of keys"):
+        jf.minimise_many(quad, SMALL["pso"], BOUNDS, args=TARGET, keys=jax.random.key(0))
