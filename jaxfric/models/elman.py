@@ -19,7 +19,9 @@ than half of it), against 5 ms / 6.8 ms for a ``(P, N)`` state and 7 ms for
 ``vmap`` of a single-candidate scan. Hoisting ``w u + b`` out of the loop was
 slower (it materialises a (T, N, P) array), and exp/expm1-based tanh variants
 were slower than ``jnp.tanh``. Hence :meth:`Elman.simulate_batch` is the
-primitive and :meth:`simulate` calls it with P = 1.
+primitive; :meth:`simulate` calls it with P = 1, and ``vmap(simulate)`` over
+theta is routed back to it by a custom batching rule (see
+:meth:`AbstractFrictionModel.simulate`).
 
 Dynamics note: with |r| up to 5 (the §2.4 box) about 98 % of random networks
 are chaotic over 1600 samples -- a 1e-15 relative change of theta changes the
