@@ -156,7 +156,7 @@ def test_vmap_over_theta_takes_the_batched_path():
     assert "f32[5,7]" not in default
 
 
-@pytest.mark.parametrize("name", ["elman", "lugre", "stribeck"])
+@pytest.mark.parametrize("name", ["elman", "lugre"])
 def test_simulate_transformations_agree(name):
     """Gradients, vmapped gradients, nested vmaps and vmaps over data or dt all
     agree with the plain computation (the custom batching rule is transparent)."""
@@ -166,15 +166,15 @@ def test_simulate_transformations_agree(name):
     v = 0.5 * np.sin(np.linspace(0, 6, 30)) * (1.0 if model.needs_scaling else 0.02)
     with jax.enable_x64(True):
         loss = lambda th, vel, dt: jnp.sum(model.simulate(th, vel, dt) ** 2)  # noqa: E731
-        g = jax.grad(loss)(thetas[0], v, 0.01)
+        g = jax.jit(jax.grad(loss))(thetas[0], v, 0.01)
         assert bool(jnp.all(jnp.isfinite(g)))
         gv = jax.jit(jax.vmap(jax.grad(loss), in_axes=(0, None, None)))(thetas, v, 0.01)
         np.testing.assert_allclose(gv[0], g, rtol=1e-10, atol=1e-10)
-        gb = jax.grad(lambda ths: jnp.sum(jax.vmap(loss, in_axes=(0, None, None))(ths, v, 0.01)))(thetas)
+        gb = jax.jit(jax.grad(lambda ths: jnp.sum(jax.vmap(loss, in_axes=(0, None, None))(ths, v, 0.01))))(thetas)
         np.testing.assert_allclose(gb, gv, rtol=1e-10, atol=1e-10)
-        nested = jax.vmap(jax.vmap(model.simulate, in_axes=(0, None, None)), in_axes=(0, None, None))(
+        nested = jax.jit(jax.vmap(jax.vmap(model.simulate, in_axes=(0, None, None)), in_axes=(0, None, None)))(
             thetas.reshape(2, 2, -1), v, 0.01
         )
         np.testing.assert_allclose(nested.reshape(4, -1), model.simulate_batch(thetas, v, 0.01), rtol=1e-12, atol=1e-12)
-        data = jax.vmap(model.simulate, in_axes=(None, 0, 0))(thetas[0], np.stack([v, 2 * v]), jnp.array([0.01, 0.02]))
+        data = jax.jit(jax.vmap(model.simulate, in_axes=(None, 0, 0)))(thetas[0], np.stack([v, 2 * v]), jnp.array([0.01, 0.02]))
         np.testing.assert_allclose(data[1], model.simulate(thetas[0], 2 * v, 0.02), rtol=1e-12, atol=1e-12)

@@ -271,3 +271,12 @@ def test_stribeck_exponent_option():
         np.testing.assert_allclose(F[-1], g + p["sigma2"] * vel, rtol=1e-9)
         grad = jax.jit(jax.grad(lambda th: jnp.sum(model.simulate(th, jnp.zeros(4), DT))))(theta)
         assert bool(jnp.all(jnp.isfinite(grad)))
+
+
+@pytest.mark.parametrize("model", [LuGre(), Dahl()], ids=["lugre", "dahl"])
+def test_sample_time_is_required(model):
+    theta = 0.5 * sum(model.bounds())
+    with pytest.raises(ValueError, match="sample time"):
+        model.simulate(theta, np.zeros(4), None)
+    with pytest.raises(ValueError, match="scalar"):
+        model.simulate(theta, np.zeros(4), np.ones(4))

@@ -34,6 +34,15 @@ __all__ = ["LuGre", "Dahl", "bristle_friction"]
 _PHI_SWITCH = 1e-8
 
 
+def _sample_time(dt, dtype) -> Array:
+    if dt is None:
+        raise ValueError("bristle models integrate in time: pass the sample time dt in seconds")
+    dt = jnp.asarray(dt, dtype)
+    if dt.ndim != 0:
+        raise ValueError(f"dt must be a scalar sample time in seconds, got shape {dt.shape}")
+    return dt
+
+
 def _phi(x: Array) -> Array:
     """phi(x) = (1 - e^{-x}) / x with the double-``where`` guard (§8.2).
 
@@ -128,7 +137,7 @@ class LuGre(AbstractPhysicalModel):
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
         thetas, v = self._prepare(thetas, velocity)
         p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = jnp.asarray(dt, v.dtype)
+        dt = _sample_time(dt, v.dtype)
         g = stribeck_curve(v[None, :], p["Fc"], p["Fs"], p["vs"], self.stribeck_exponent)
         return bristle_friction(p["sigma0"], p["sigma1"], p["sigma2"], g, v, dt)
 
@@ -165,7 +174,7 @@ class Dahl(AbstractPhysicalModel):
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
         thetas, v = self._prepare(thetas, velocity)
         p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = jnp.asarray(dt, v.dtype)
+        dt = _sample_time(dt, v.dtype)
         zero = jnp.zeros_like(p["sigma0"])
         sigma2 = p["sigma2"] if self.viscous else zero
         g = jnp.broadcast_to(p["Fc"], (thetas.shape[0], v.shape[0]))
