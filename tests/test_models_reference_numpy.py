@@ -29,3 +29,15 @@ def test_numpy_rollouts_equal_jax(output_bias):
 def test_unpack_rejects_wrong_length():
     with pytest.raises(ValueError, match="expected 12"):
         unpack_elman(np.zeros((1, 13)), 2)
+
+
+def test_numpy_rollouts_in_float32():
+    model = Elman(neurons=4)
+    lower, upper = model.bounds()
+    thetas = np.random.default_rng(9).uniform(lower, upper, (3, model.num_params)).astype(np.float32)
+    u = np.sin(np.linspace(0, 3, 20)).astype(np.float32)
+    y_jax = np.asarray(model.simulate_batch(thetas, u, None))
+    for fn in (elman_rollout_vectorised, elman_rollout_loop):
+        y = fn(thetas, u, 4, dtype=np.float32)
+        assert y.dtype == np.float32
+        np.testing.assert_allclose(y, y_jax, atol=1e-4)
