@@ -145,12 +145,12 @@ class SealFriction(eqx.Module):
     stribeck_velocity [m/s]; stribeck_shape (exponent, 2 in LuGre); viscous [N s/m].
     """
 
-    stiffness: tuple = (1.2e7, 4.0e6, 1.2e6, 4.0e5)
-    weights: tuple = (0.3, 0.3, 0.25, 0.15)
-    coulomb_pos: float = 260.0
-    coulomb_neg: float = 180.0
-    static_pos: float = 420.0
-    static_neg: float = 260.0
+    stiffness: tuple = (1.5e7, 3.0e6, 6.0e5, 1.5e5)
+    weights: tuple = (0.3, 0.3, 0.2, 0.2)
+    coulomb_pos: float = 270.0
+    coulomb_neg: float = 150.0
+    static_pos: float = 440.0
+    static_neg: float = 230.0
     stribeck_velocity: float = 2.0e-3
     stribeck_shape: float = 1.0
     pressure_cap: float = 0.0

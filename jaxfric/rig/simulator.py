@@ -28,7 +28,6 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from . import friction as _fr
 from .data import Measurements
@@ -177,7 +176,7 @@ def _substep(rig: Rig, h, closed_loop, carry, inp):
     f0 = f_scaled(ys)
     jac = jax.jacfwd(f_scaled)(ys)
     eye = jnp.eye(6, dtype=y.dtype)
-    dys = h * f0 + 0*jac[0]
+    dys = jnp.linalg.solve(eye - h * jac, h * f0)
     dy = dys * scale
     y_new = y + dy
     ctl = rig.controller
@@ -261,6 +260,8 @@ def simulate(
     float32, or float64 when x64 is enabled). Jit-compatible; ``n_samples``,
     ``substeps``, ``fs`` and ``settle_time`` are static.
     """
+    # numbers become arrays here so that new parameter values never trigger a recompilation
+    rig, sensors = jax.tree.map(jnp.asarray, (rig, sensors))
     return _simulate(rig, key, velocity_reference, command, sensors, int(n_samples), float(fs),
                      int(substeps), float(settle_time))
 
