@@ -36,6 +36,13 @@ def test_pipeline_friction_matches_true_friction(record):
     np.testing.assert_allclose(float(data.dt), 1 / FS, rtol=1e-6)
 
 
+def test_synthetic_friction_data_is_simulate_then_measure(record):
+    one_call = rig.synthetic_friction_data(jax.random.key(0))
+    two_steps = rig.estimate_friction(record.measurements(), rig.Rig())
+    np.testing.assert_array_equal(np.asarray(one_call.friction), np.asarray(two_steps.friction))
+    assert one_call.n_train == 1600
+
+
 def test_frictionless_force_balance_is_zero_up_to_noise():
     r = rig.Rig(friction=rig.SealFriction.off())
     clean = rig.simulate(r, jax.random.key(0), sensors=rig.Sensors.ideal())

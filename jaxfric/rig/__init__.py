@@ -9,6 +9,7 @@ Typical use::
     rec = rig.simulate(r, jax.random.key(0))        # 2000 samples at 128 Hz + ground truth
     data = rig.estimate_friction(rec.measurements(), r.cylinder)   # FrictionData, 1600/400 split
     data.train(), data.valid()
+    data = rig.synthetic_friction_data(jax.random.key(0))          # the same two steps in one call
 
 Recorded data: :func:`load_measurements` (raw x, p1, p2, load) or
 :func:`load_friction_pairs` (velocity/friction) from CSV files or arrays.
@@ -20,6 +21,7 @@ from .io import IrregularSamplingWarning, load_friction_pairs, load_measurements
 from .params import Controller, Cylinder, Load, Rig, SealFriction, Valve, piston_areas
 from .pipeline import butterworth_sos, differentiate, estimate_friction, force_balance, lowpass
 from .stats import CoulombLevels, coulomb_levels
+from .synthetic import synthetic_friction_data
 from .simulator import RigRecord, Sensors, default_velocity_profile, load_force, simulate
 
 __all__ = [
@@ -50,4 +52,5 @@ __all__ = [
     "resample_uniform",
     "simulate",
     "sliding_levels",
+    "synthetic_friction_data",
 ]

@@ -75,7 +75,8 @@ def estimate_friction(
     """Run the §7 pipeline on uniformly sampled measurements and return :class:`FrictionData`.
 
     Geometry comes from ``cylinder`` (anything with ``bore``, ``rod``, ``mass``,
-    ``gravity`` attributes, e.g. :class:`~jaxfric.rig.params.Cylinder`) and/or the
+    ``gravity`` attributes, e.g. :class:`~jaxfric.rig.params.Cylinder`, or a whole
+    :class:`~jaxfric.rig.params.Rig`) and/or the
     keywords, which take precedence: bore and rod diameters [m], moving mass
     [kg], gravity along -x [m/s^2] (default 0). ``cutoff`` [Hz] and ``order`` set
     the Butterworth filter; ``train_fraction`` / ``n_train`` the split (default
@@ -86,6 +87,7 @@ def estimate_friction(
     """
     if not isinstance(meas, Measurements):
         raise ValueError(f"meas must be a Measurements record, got {type(meas).__name__}")
+    cylinder = getattr(cylinder, "cylinder", cylinder)  # a whole Rig is fine too
 
     def pick(name, value, default=None):
         if value is not None:

@@ -8,7 +8,7 @@ State ``y = (x, v, p1, p2, u, I)``: position [m], velocity [m/s], chamber
 pressures [Pa], spool opening [-], integral of the position error [m s].
 
     dx/dt  = v
-    m dv/dt = p1 A1 - p2 A2 - F_L(t, x) - F_f - m g
+    m dv/dt = p1 A1 - p2 A2 - F_L(t, x, v) - F_f - m g
     dp1/dt = beta / V1(x) (Q1 - Q12 - A1 v),      V1 = V01 + A1 x
     dp2/dt = beta / V2(x) (Q2 + Q12 + A2 v),      V2 = V02 + A2 (stroke - x)
     du/dt  = (u_cmd - u) / tau
@@ -20,7 +20,11 @@ L-stable): ``(I - h J) dy = h f(y_n)`` on a scaled state, with ``J`` from
 ``jax.jacfwd``. The friction elements are advanced afterwards by their exact
 Maxwell-slip update with the solved displacement increment, and enter ``J``
 through their stuck stiffness. Samples are taken every ``substeps`` sub-steps
-(point sampling, as a DAQ without anti-alias filter does).
+(point sampling, as a DAQ without anti-alias filter does). With the defaults,
+32 sub-steps agree with 256 to a friction nMSE below 1e-5 % (tests).
+
+Not modelled: end stops (keep the reference inside the stroke), cavitation
+(pressures may dip below zero in violent transients), valve flow forces.
 """
 
 from __future__ import annotations
