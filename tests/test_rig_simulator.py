@@ -112,10 +112,11 @@ def test_frictionless_rig_matches_scipy_radau():
                                     rtol=1e-9, atol=[1e-12, 1e-12, 1e-3, 1e-3, 1e-12, 1e-14])
     assert sol.success
     x, v, p1, p2 = sol.y[:4]
-    assert np.max(np.abs(x - np.asarray(rec.x_true))) < 2e-6
-    assert np.max(np.abs(v - np.asarray(rec.velocity))) < 2e-4 * 0.014 / 1e-3
-    assert nmse_percent(p1, rec.p1_true) < 0.5 and nmse_percent(p2, rec.p2_true) < 0.5
-    assert nmse_percent(v, rec.velocity) < 0.1
+    # first-order scheme at h = 1/4096 s: errors of 0.3 um, 13 um/s, 1e-6 % (measured), with margin
+    assert np.max(np.abs(x - np.asarray(rec.x_true))) < 1e-6
+    assert np.max(np.abs(v - np.asarray(rec.velocity))) < 1e-4
+    assert nmse_percent(p1, rec.p1_true) < 1e-4 and nmse_percent(p2, rec.p2_true) < 1e-4
+    assert nmse_percent(v, rec.velocity) < 1e-4
 
 
 def test_float32_agrees_with_float64():
