@@ -51,20 +51,23 @@ def best_neighbour(x, f, side: int):
     return m, fm
 
 
-def reverse_segment_index(key, num: int, dim: int, strict: bool):
-    """Gather indices that reverse a random segment ``[i1, i2]`` of each of ``num`` rows.
+def reverse_segment_index(u_a, u_b, dim: int, strict: bool):
+    """Gather indices that reverse a random segment ``[i1, i2]`` of each row.
 
-    ``i1 < i2`` uniform over ``0..D-1`` [D]; with ``strict`` (MAGA's ``1 < i1 < i2 < D``,
-    1-based) the first and last coordinate stay put, which needs ``D >= 4``; for smaller
-    ``D`` the strict rule has no valid pair and the unrestricted rule is used.
+    ``u_a, u_b ~ U(0, 1)`` (one pair per row) pick ``i1 < i2`` uniformly over
+    ``0..D-1`` [D]; with ``strict`` (MAGA's ``1 < i1 < i2 < D``, 1-based) the first and
+    last coordinate stay put, which needs ``D >= 4``; for smaller ``D`` the strict rule
+    has no valid pair and the unrestricted rule is used. (Integers come from
+    ``floor(u·span)`` rather than ``jax.random.randint``, whose lowering is ~1,700 HLO
+    lines and made the vmapped solver compile several times slower.)
     """
+    num = u_a.shape[0]
     lo, hi = (1, dim - 1) if (strict and dim >= 4) else (0, dim)
     span = hi - lo
     if span < 2:
         return jnp.broadcast_to(jnp.arange(dim), (num, dim))
-    ka, kb = jax.random.split(key)
-    a = jax.random.randint(ka, (num,), 0, span)
-    b = jax.random.randint(kb, (num,), 0, span - 1)
+    a = jnp.minimum(jnp.floor(u_a * span).astype(jnp.int32), span - 1)
+    b = jnp.minimum(jnp.floor(u_b * (span - 1)).astype(jnp.int32), span - 2)
     b = b + (b >= a)
     i1 = lo + jnp.minimum(a, b)
     i2 = lo + jnp.maximum(a, b)
@@ -73,23 +76,23 @@ def reverse_segment_index(key, num: int, dim: int, strict: bool):
     return jnp.where(inside, i1[:, None] + i2[:, None] - k, k)
 
 
-def competition(key, x, f, side, lower, upper, po, strict_segment=False):
+def competition(u, x, f, side, lower, upper, po, strict_segment=False):
     """Neighbourhood competition and cooperation (§3.2, paper eq. (12)), synchronous.
 
     Returns the new positions and a boolean mask of the agents that lost (were replaced).
     Strategy 1 (``U < Po``): ``e = clip(m + U(−1, 1)⊙(m − l))``. Strategy 2: map the
-    winner ``m`` to the unit cube, reverse a random segment, map back.
+    winner ``m`` to the unit cube, reverse a random segment, map back. ``u`` holds
+    ``U(0, 1)`` draws of shape ``(num, D + 3)``: strategy choice, the two segment ends,
+    and the crossover weights.
     """
     num, dim = x.shape
     m, fm = best_neighbour(x, f, side)
     lose = ~(f < fm)
-    k1, k2 = jax.random.split(key)
-    u = jax.random.uniform(k1, (num, dim + 1), dtype=x.dtype)
     use_first = u[:, 0] < po
-    e1 = jnp.clip(m + (2.0 * u[:, 1:] - 1.0) * (m - x), lower, upper)
+    e1 = jnp.clip(m + (2.0 * u[:, 3:] - 1.0) * (m - x), lower, upper)
     width = upper - lower
     unit = (m - lower) / width
-    idx = reverse_segment_index(k2, num, dim, strict_segment)
+    idx = reverse_segment_index(u[:, 1], u[:, 2], dim, strict_segment)
     e2 = lower + jnp.take_along_axis(unit, idx, axis=1) * width
     e = jnp.where(use_first[:, None], e1, e2)
     return jnp.where(lose[:, None], e, x), lose
@@ -175,20 +178,30 @@ class MAPSO(AbstractSwarm):
         return p + self.num_generations * per_gen
 
     # ------------------------------------------------------------------ operators
-    def _lattice_generation(self, state: SwarmState, f_batch, side, lower, upper, w,
+    def random_width(self, dim: int) -> int:
+        """U(0, 1) numbers one agent needs per lattice generation (competition + PSO)."""
+        return 3 * dim + 3
+
+    def _lattice_generation(self, state: SwarmState, u, f_batch, side, lower, upper, w,
                             social_mode):
-        """Competition then PSO move on one lattice (main lattice or self-learning)."""
+        """Competition then PSO move on one lattice (main lattice or self-learning).
+
+        ``u`` (agents × :meth:`random_width`) holds all of this generation's random
+        numbers, drawn by the caller in one call.
+        """
+        dim = state.x.shape[1]
         vmax = self.vmax_fraction * (upper - lower)
-        key, kc, kp = jax.random.split(state.key, 3)
         x, lost = competition(
-            kc, state.x, state.f, side, lower, upper, self.po, self.strict_maga_segment
+            u[:, : dim + 3], state.x, state.f, side, lower, upper, self.po,
+            self.strict_maga_segment,
         )
+        r = jnp.stack([u[:, dim + 3 : 2 * dim + 3], u[:, 2 * dim + 3 :]])
         v = state.v
         if self.reset_velocity_on_replace:
             v = jnp.where(lost[:, None], jnp.zeros_like(v), v)
         num = x.shape[0]
         evals = state.num_evals
-        state = eqx.tree_at(lambda s: (s.v, s.key), state, (v, key))
+        state = eqx.tree_at(lambda s: s.v, state, v)
         if self.evaluate_replaced:
             f_rep = jnp.where(lost, f_batch(x), state.f)
             state = update_bests(state, x, f_rep)
@@ -203,7 +216,7 @@ class MAPSO(AbstractSwarm):
         else:
             social = state.gbest[None, :]
         x, v = pso_move(
-            kp, x, state.v, state.pbest, social, w, self.c1, self.c2, vmax,
+            r, x, state.v, state.pbest, social, w, self.c1, self.c2, vmax,
             lower, upper, self.zero_velocity_at_bounds,
         )
         f = f_batch(x)
@@ -214,26 +227,34 @@ class MAPSO(AbstractSwarm):
         """Self-learning around gBest (§3.4): returns (best position, fitness, evals)."""
         side = self.sl_size
         s = side * side
-        k_init, k_run = jax.random.split(key)
-        u = jax.random.uniform(k_init, (s, g.shape[0]), dtype=g.dtype)
+        dim = g.shape[0]
+        width = self.random_width(dim)
+        # All random numbers of the self-learning phase in one draw.
+        u = jax.random.uniform(
+            key, (s * dim + self.sl_generations * s * width,), dtype=g.dtype
+        )
+        u0 = u[: s * dim].reshape(s, dim)
+        u_inner = u[s * dim :].reshape(self.sl_generations, s, width)
         if self.sl_mode == "multiplicative":
-            cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u)
+            cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u0)
         else:
-            cand = g + (2.0 * u - 1.0) * self.sl_radius * (upper - lower)
+            cand = g + (2.0 * u0 - 1.0) * self.sl_radius * (upper - lower)
         cand = jnp.clip(cand, lower, upper).at[0].set(g)
         f = f_batch(cand[1:])
         f = jnp.concatenate([g_f[None], f])
         i = jnp.argmin(f)
         inner = SwarmState(
             x=cand, v=jnp.zeros_like(cand), f=f, pbest=cand, pbest_f=f,
-            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=k_run,
+            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=key,
         )
 
-        def body(st, j):
+        def body(st, xs):
+            j, uj = xs
             w = linear_inertia(j, self.sl_generations - 1, self.w_max, self.w_min)
-            return self._lattice_generation(st, f_batch, side, lower, upper, w, "gbest"), None
+            st = self._lattice_generation(st, uj, f_batch, side, lower, upper, w, "gbest")
+            return st, None
 
-        inner, _ = jax.lax.scan(body, inner, jnp.arange(self.sl_generations))
+        inner, _ = jax.lax.scan(body, inner, (jnp.arange(self.sl_generations), u_inner))
         return inner.gbest, inner.gbest_f, inner.num_evals
 
     # ------------------------------------------------------------- solver protocol
@@ -243,12 +264,16 @@ class MAPSO(AbstractSwarm):
 
     def step(self, state, f_batch, lower, upper, i):
         w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
+        key, k_main, k_sl = jax.random.split(state.key, 3)
+        u = jax.random.uniform(
+            k_main, (self.num_agents, self.random_width(state.x.shape[1])), dtype=state.x.dtype
+        )
         state = self._lattice_generation(
-            state, f_batch, self.lattice_size, lower, upper, w, self.social
+            state, u, f_batch, self.lattice_size, lower, upper, w, self.social
         )
         if self.sl_size * self.sl_size <= 1:
-            return state
-        key, k = jax.random.split(state.key)
+            return eqx.tree_at(lambda s: s.key, state, key)
+        k = k_sl
         g, g_f, evals = self._self_learning(k, state.gbest, state.gbest_f, f_batch, lower, upper)
         better = g_f < state.gbest_f
         # The agent whose memory is gBest takes the self-learned agent's place.

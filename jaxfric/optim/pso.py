@@ -27,16 +27,17 @@ from ._base import (
 )
 
 
-def pso_move(key, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_bounds=True):
+def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_bounds=True):
     """One PSO operator step (ALGORITHMS.md §3.3 / §10):
 
     ``v ← w v + c1 r1 ⊙ (pbest − x) + c2 r2 ⊙ (social − x)``, ``v ← clip(v, ±Vmax)``,
     ``x ← clip(x + v, lower, upper)``; ``r1, r2 ~ U(0, 1)`` drawn per particle *and*
-    per dimension (per-particle coefficients measurably hurt, PEERS.md §3). With
+    per dimension (per-particle coefficients measurably hurt, PEERS.md §3) and passed in
+    as ``r`` of shape ``(2,) + x.shape`` — callers draw all of a generation's random
+    numbers in one call, which keeps the compiled loop small. With
     ``zero_at_bounds`` the velocity of a clipped coordinate is set to zero so a
     particle does not keep pushing against the wall.
     """
-    r = jax.random.uniform(key, (2,) + x.shape, dtype=x.dtype)
     v = w * v + c1 * r[0] * (pbest - x) + c2 * r[1] * (social - x)
     v = jnp.clip(v, -vmax, vmax)
     x_new = x + v
@@ -185,8 +186,9 @@ class PSO(AbstractSwarm):
         vmax = self.vmax_fraction * (upper - lower)
         key, k = jax.random.split(state.key)
         w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
+        r = jax.random.uniform(k, (2,) + state.x.shape, dtype=state.x.dtype)
         x, v = pso_move(
-            k, state.x, state.v, state.pbest, state.gbest[None, :], w,
+            r, state.x, state.v, state.pbest, state.gbest[None, :], w,
             self.c1, self.c2, vmax, lower, upper, self.zero_velocity_at_bounds,
         )
         f = f_batch(x)
