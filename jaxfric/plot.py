@@ -1,0 +1,400 @@
+"""Matplotlib figures shared by the command line, the report writer and the notebooks.
+
+Every function builds a new :class:`~matplotlib.figure.Figure` and returns it; none
+calls ``plt.show`` or picks a backend (the CLI selects Agg, notebooks keep theirs),
+so the caller decides whether to show, save or close it.
+
+Figures (paper numbering from ALGORITHMS.md §1):
+
+- :func:`plot_data` -- velocity and computed friction against time, with the
+  training/validation split marked (the paper's Figs 9-10);
+- :func:`plot_friction_velocity` -- friction against velocity (hysteresis loops);
+- :func:`plot_fit` -- measured against estimated friction for one model (Figs 11-12);
+- :func:`plot_error` -- error curves ``F - F_hat`` of several models;
+- :func:`plot_convergence` -- best objective against function evaluations (log scale);
+- :func:`plot_table1` -- final values of the Table 1 benchmark, per function and solver.
+
+Fits are duck-typed: anything with ``predict(velocity, dt)`` returning friction in N
+works, and a plain prediction array (``F_hat`` in N on the data's time grid) is
+accepted wherever a fit is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+__all__ = [
+    "fit_label",
+    "plot_convergence",
+    "plot_data",
+    "plot_error",
+    "plot_fit",
+    "plot_friction_velocity",
+    "plot_table1",
+    "predict_on",
+    "velocity_unit",
+]
+
+_MEASURED = dict(color="0.15", lw=1.1)
+_VALID_SHADE = dict(color="tab:orange", alpha=0.08, lw=0)
+
+
+# ----------------------------------------------------------------------- helpers
+def _np(a) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64)
+
+
+def velocity_unit(velocity) -> tuple[float, str]:
+    """``(factor, label)`` to show a velocity in m/s: mm/s for slow records.
+
+    Hydraulic press rigs move at millimetres per second, where axes in m/s would
+    read ``0.01``; anything slower than 0.5 m/s is shown in mm/s.
+    """
+    vmax = float(np.max(np.abs(_np(velocity)))) if np.size(velocity) else 0.0
+    return (1e3, "mm/s") if vmax < 0.5 else (1.0, "m/s")
+
+
+def _time(data) -> np.ndarray:
+    return _np(data.t)
+
+
+def _n_train(data) -> int:
+    return int(getattr(data, "n_train", len(_np(data.velocity))))
+
+
+def _mark_split(ax, data) -> None:
+    """Shade the validation window and draw the split line (only when there is one)."""
+    t = _time(data)
+    n = _n_train(data)
+    if 0 < n < t.size:
+        split = 0.5 * (t[n - 1] + t[n])
+        ax.axvspan(split, t[-1], **_VALID_SHADE)
+        ax.axvline(split, color="tab:orange", ls="--", lw=1.0)
+
+
+def _split_legend_note(data) -> str:
+    n = _n_train(data)
+    t = _time(data)
+    if 0 < n < t.size:
+        return f"train: first {n} samples, validation (shaded): last {t.size - n}"
+    return f"{t.size} samples (no validation window)"
+
+
+def fit_label(fit, default: str = "model") -> str:
+    """A short display name for a fit: its ``label``/``name``, else its model's class name
+    (with the neuron count for an Elman network)."""
+    for attr in ("label", "name"):
+        value = getattr(fit, attr, None)
+        if isinstance(value, str) and value:
+            return value
+    model = getattr(fit, "model", None)
+    if model is None:
+        return default
+    name = type(model).__name__
+    neurons = getattr(model, "neurons", None)
+    if name == "Elman" and neurons is not None:
+        return f"ENN ({neurons} neurons)"
+    return name
+
+
+def predict_on(fit, data) -> np.ndarray:
+    """Friction [N] predicted by ``fit`` on ``data``'s velocity (free run over the record).
+
+    ``fit`` may be an object with ``predict(velocity, dt)`` or an array of
+    predictions already on the data's grid.
+    """
+    if hasattr(fit, "predict"):
+        y_hat = _np(fit.predict(data.velocity, data.dt))
+    else:
+        y_hat = _np(fit)
+    n = _np(data.velocity).size
+    if y_hat.shape != (n,):
+        raise ValueError(f"prediction has shape {y_hat.shape}, the data have {n} samples")
+    return y_hat
+
+
+def _as_fit_items(fits, labels=None) -> list[tuple[str, Any]]:
+    """Normalise ``fits`` (one fit, a sequence, or a mapping label -> fit) to pairs."""
+    if isinstance(fits, Mapping):
+        items = [(str(k), v) for k, v in fits.items()]
+    elif isinstance(fits, (list, tuple)):
+        items = [(fit_label(f, f"model {i + 1}"), f) for i, f in enumerate(fits)]
+    else:
+        items = [(fit_label(fits), fits)]
+    if labels is not None:
+        labels = list(labels)
+        if len(labels) != len(items):
+            raise ValueError(f"{len(labels)} labels for {len(items)} fits")
+        items = [(lab, f) for lab, (_, f) in zip(labels, items)]
+    return items
+
+
+def _mse_percent(y, y_hat) -> float:
+    var = float(np.var(y))
+    return float("nan") if var == 0.0 else 100.0 * float(np.mean((y - y_hat) ** 2)) / var
+
+
+# ------------------------------------------------------------------------- data
+def plot_data(data, *, title: str | None = None) -> Figure:
+    """Velocity and computed friction against time (the paper's Figs 9 and 10).
+
+    ``data`` is a :class:`jaxfric.rig.FrictionData` (or anything with ``t``,
+    ``velocity`` [m/s], ``friction`` [N] and ``n_train``). The validation window
+    is shaded.
+    """
+    t = _time(data)
+    scale, unit = velocity_unit(data.velocity)
+    fig = Figure(figsize=(9, 5.5), layout="constrained")
+    ax_v, ax_f = fig.subplots(2, 1, sharex=True)
+    ax_v.plot(t, _np(data.velocity) * scale, color="tab:blue", lw=1.1, label="velocity")
+    ax_v.axhline(0.0, color="0.6", lw=0.6)
+    ax_v.set_ylabel(f"piston velocity [{unit}]")
+    ax_v.set_title("Piston velocity (filtered position, differentiated)")
+    ax_f.plot(t, _np(data.friction), label="friction (force balance)", **_MEASURED)
+    ax_f.axhline(0.0, color="0.6", lw=0.6)
+    ax_f.set_ylabel("friction force [N]")
+    ax_f.set_xlabel("time [s]")
+    ax_f.set_title("Friction force computed from pressures, load and acceleration")
+    for ax in (ax_v, ax_f):
+        _mark_split(ax, data)
+        ax.grid(alpha=0.3)
+    ax_f.plot([], [], color="tab:orange", ls="--", label="train | validation split")
+    ax_f.legend(loc="upper right", fontsize=8)
+    fig.suptitle(title or f"Identification data: {_split_legend_note(data)}")
+    return fig
+
+
+def plot_friction_velocity(data, fits=None, *, title: str | None = None) -> Figure:
+    """Friction against velocity: the hysteresis loops of the record.
+
+    Training samples are drawn in blue, validation samples in orange. With
+    ``fits`` (one fit, a sequence, or a mapping label -> fit) the models'
+    predictions are overlaid as lines.
+    """
+    v = _np(data.velocity)
+    f = _np(data.friction)
+    n = _n_train(data)
+    scale, unit = velocity_unit(v)
+    fig = Figure(figsize=(6.5, 5), layout="constrained")
+    ax = fig.subplots()
+    ax.plot(v[:n] * scale, f[:n], ".", ms=2.0, color="tab:blue", label="measured, training")
+    if n < v.size:
+        ax.plot(v[n:] * scale, f[n:], ".", ms=2.0, color="tab:orange", label="measured, validation")
+    if fits is not None:
+        for i, (label, fit) in enumerate(_as_fit_items(fits)):
+            ax.plot(v * scale, predict_on(fit, data), "-", lw=0.9, color=f"C{i + 2}", label=label)
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.axvline(0.0, color="0.6", lw=0.6)
+    ax.set_xlabel(f"piston velocity [{unit}]")
+    ax.set_ylabel("friction force [N]")
+    ax.set_title(title or "Friction against velocity")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, markerscale=4)
+    return fig
+
+
+# ------------------------------------------------------------------------- fits
+def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -> Figure:
+    """Measured against estimated friction for one model (the paper's Figs 11-12).
+
+    Left: both against time, validation window shaded, normalised MSE % of each
+    window in the legend. Right: the same against velocity.
+    """
+    label = label or fit_label(fit)
+    t = _time(data)
+    v = _np(data.velocity)
+    y = _np(data.friction)
+    y_hat = predict_on(fit, data)
+    n = _n_train(data)
+    scale, unit = velocity_unit(v)
+    parts = [f"train {_mse_percent(y[:n], y_hat[:n]):.3g} %"]
+    if n < y.size:
+        parts.append(f"valid {_mse_percent(y[n:], y_hat[n:]):.3g} %")
+    fig = Figure(figsize=(12, 4.6), layout="constrained")
+    ax_t, ax_v = fig.subplots(1, 2, width_ratios=[2.4, 1])
+    ax_t.plot(t, y, label="measured", **_MEASURED)
+    ax_t.plot(t, y_hat, color="tab:red", lw=1.0, ls="-", label=f"estimated: {label}")
+    _mark_split(ax_t, data)
+    ax_t.set_xlabel("time [s]")
+    ax_t.set_ylabel("friction force [N]")
+    ax_t.set_title("MSE (normalised): " + ", ".join(parts))
+    ax_t.grid(alpha=0.3)
+    ax_t.legend(loc="upper right", fontsize=8)
+    ax_v.plot(v * scale, y, ".", ms=1.5, color="0.35", label="measured")
+    ax_v.plot(v * scale, y_hat, "-", lw=0.8, color="tab:red", label="estimated")
+    ax_v.set_xlabel(f"piston velocity [{unit}]")
+    ax_v.set_ylabel("friction force [N]")
+    ax_v.set_title("against velocity")
+    ax_v.grid(alpha=0.3)
+    ax_v.legend(fontsize=8, markerscale=4)
+    fig.suptitle(title or f"Measured and estimated friction: {label}")
+    return fig
+
+
+def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | None = None) -> Figure:
+    """Error curves ``F - F_hat`` [N] of one or several fits against time.
+
+    ``fits``: one fit, a sequence of fits, or a mapping label -> fit (or -> prediction
+    array). The validation window is shaded; the legend gives each model's MAX
+    error |e| over the whole record.
+    """
+    t = _time(data)
+    y = _np(data.friction)
+    fig = Figure(figsize=(9, 4.2), layout="constrained")
+    ax = fig.subplots()
+    for i, (label, fit) in enumerate(_as_fit_items(fits, labels)):
+        e = y - predict_on(fit, data)
+        ax.plot(t, e, lw=0.9, color=f"C{i}", label=f"{label} (MAX |e| = {np.max(np.abs(e)):.3g} N)")
+    ax.axhline(0.0, color="0.4", lw=0.6)
+    _mark_split(ax, data)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("error  F - F_hat [N]")
+    ax.set_title(title or "Friction estimation error")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    return fig
+
+
+# ------------------------------------------------------------------ convergence
+def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
+    """``(evals, f)`` from a History, a Solution, a fit holding one, or an ``(evals, f)`` pair.
+
+    Batched histories (from ``minimise_many``) come back 2-D, one row per run.
+    """
+    if isinstance(item, tuple) and len(item) == 2:
+        return _np(item[0]), _np(item[1])
+    if all(hasattr(item, a) for a in ("evals", "f", "length")):
+        evals, f, length = _np(item.evals), _np(item.f), np.asarray(item.length)
+        if evals.ndim == 1:
+            n = max(int(length), 1)
+            return evals[:n], f[:n]
+        return evals, f
+    for attr in ("history", "solution"):
+        inner = getattr(item, attr, None)
+        if inner is not None:
+            return _history_arrays(inner)
+    raise ValueError(f"cannot find an optimiser history in {type(item).__name__}")
+
+
+def _global_phase_evals(item):
+    """Evaluations spent by the global phase of a hybrid run, if recorded."""
+    for obj in (item, getattr(item, "solution", None)):
+        stats = getattr(obj, "stats", None)
+        if isinstance(stats, Mapping) and "num_evals_global" in stats:
+            g = np.asarray(stats["num_evals_global"])
+            return float(np.median(g)) if g.ndim else float(g)
+    return None
+
+
+def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None, *,
+                     title: str | None = None, ylabel: str = "best objective value J") -> Figure:
+    """Best objective value against function evaluations, log scale.
+
+    Items may be :class:`jaxfric.Solution`, :class:`jaxfric.History`, fits holding
+    a solution, or ``(evals, f)`` pairs; a mapping label -> item works too. For a
+    batch of runs (``minimise_many``) the median is drawn with the min-max band.
+    A dotted line marks where Nelder-Mead took over from MAPSO, when known.
+    """
+    if isinstance(solutions_or_histories, Mapping):
+        labels = list(solutions_or_histories) if labels is None else labels
+        items = list(solutions_or_histories.values())
+    elif isinstance(solutions_or_histories, (list, tuple)) and not (
+        len(solutions_or_histories) == 2 and isinstance(solutions_or_histories, tuple)
+        and np.ndim(solutions_or_histories[0]) >= 1
+    ):
+        items = list(solutions_or_histories)
+    else:
+        items = [solutions_or_histories]
+    if labels is None:
+        labels = [fit_label(it, f"run {i + 1}") for i, it in enumerate(items)]
+    labels = list(labels)
+    if len(labels) != len(items):
+        raise ValueError(f"{len(labels)} labels for {len(items)} histories")
+
+    curves = [_history_arrays(it) for it in items]
+    finite = np.concatenate([f[np.isfinite(f)].ravel() for _, f in curves] or [np.zeros(0)])
+    positive = finite[finite > 0]
+    log = finite.size > 0 and np.all(finite >= 0)
+    # Exact zeros (a test function solved) cannot sit on a log axis: draw them at a floor
+    # a decade below the smallest positive value, and say so in the title.
+    floor = positive.min() / 10.0 if positive.size else 1e-300
+    fig = Figure(figsize=(7.5, 4.6), layout="constrained")
+    ax = fig.subplots()
+    clipped = False
+    for i, ((evals, f), label) in enumerate(zip(curves, labels)):
+        color = f"C{i}"
+        if evals.ndim == 2:  # a batch of runs: median and band on a common grid
+            grid = np.linspace(0.0, float(np.max(evals)), 200)
+            rows = np.stack([np.interp(grid, e, np.where(np.isfinite(v), v, np.nan)) for e, v in zip(evals, f)])
+            mid, lo, hi = (np.nanmedian(rows, 0), np.nanmin(rows, 0), np.nanmax(rows, 0))
+            if log:
+                clipped |= bool(np.any(lo <= 0))
+                mid, lo, hi = (np.maximum(a, floor) for a in (mid, lo, hi))
+            ax.plot(grid, mid, color=color, lw=1.4, label=f"{label} (median of {evals.shape[0]})")
+            ax.fill_between(grid, lo, hi, color=color, alpha=0.15, lw=0)
+        else:
+            y = np.where(np.isfinite(f), f, np.nan)
+            if log:
+                clipped |= bool(np.any(y <= 0))
+                y = np.maximum(y, floor)
+            ax.step(evals, y, where="post", color=color, lw=1.4, label=label)
+        switch = _global_phase_evals(items[i])
+        if switch is not None:
+            ax.axvline(switch, color=color, ls=":", lw=1.0)
+    if any(_global_phase_evals(it) is not None for it in items):
+        ax.plot([], [], color="0.3", ls=":", label="MAPSO -> Nelder-Mead")
+    if log:
+        ax.set_yscale("log")
+    ax.set_xlabel("function evaluations")
+    ax.set_ylabel(ylabel + (" (log scale)" if log else ""))
+    ax.set_title((title or "Optimiser convergence") + (" (zeros drawn at the floor)" if clipped else ""))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+# ----------------------------------------------------------------------- table 1
+def plot_table1(rows: Sequence[Mapping], *, title: str | None = None) -> Figure:
+    """Mean final value per test function and solver (Table 1), with best-worst bars.
+
+    ``rows``: dicts with ``function``, ``solver``, ``mean`` and optionally ``best``,
+    ``worst`` (the rows ``benchmarks/table1.py`` writes). Log scale; values of
+    exactly zero sit at a floor below the smallest positive value.
+    """
+    rows = list(rows)
+    if not rows:
+        raise ValueError("no rows to plot")
+    functions = list(dict.fromkeys(r["function"] for r in rows))
+    solvers = list(dict.fromkeys(r["solver"] for r in rows))
+    vals = [float(r[k]) for r in rows for k in ("mean", "best", "worst") if k in r]
+    pos = [x for x in vals if x > 0 and np.isfinite(x)]
+    floor = min(pos) / 10.0 if pos else 1e-300
+    width = 0.8 / len(solvers)
+    fig = Figure(figsize=(max(6.0, 1.6 * len(functions) + 2), 4.6), layout="constrained")
+    ax = fig.subplots()
+    x = np.arange(len(functions))
+    for j, solver in enumerate(solvers):
+        means, lo, hi = [], [], []
+        for fn in functions:
+            r = next((r for r in rows if r["function"] == fn and r["solver"] == solver), None)
+            m = float(r["mean"]) if r else np.nan
+            means.append(max(m, floor))
+            lo.append(max(float(r.get("best", m)), floor) if r else np.nan)
+            hi.append(max(float(r.get("worst", m)), floor) if r else np.nan)
+        means, lo, hi = map(np.asarray, (means, lo, hi))
+        ax.bar(x + (j - (len(solvers) - 1) / 2) * width, means, width, color=f"C{j}", label=solver,
+               yerr=np.stack([np.maximum(means - lo, 0), np.maximum(hi - means, 0)]), capsize=2,
+               error_kw=dict(lw=0.8))
+    ax.set_yscale("log")
+    if any(float(r["mean"]) <= 0 for r in rows):
+        title = (title or "Table 1: final objective value per test function") + " (zeros drawn at the floor)"
+    ax.set_xticks(x, functions)
+    ax.set_ylabel("final best f: mean (bars), best-worst (whiskers)")
+    ax.set_title(title or "Table 1: final objective value per test function")
+    ax.grid(True, axis="y", which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
