@@ -393,6 +393,7 @@ def plot_table1(rows: Sequence[Mapping], *, title: str | None = None) -> Figure:
     if any(float(r["mean"]) <= 0 for r in rows):
         title = (title or "Table 1: final objective value per test function") + " (zeros drawn at the floor)"
     ax.set_xticks(x, functions)
+    ax.set_xlabel("test function")
     ax.set_ylabel("final best f: mean (bars), best-worst (whiskers)")
     ax.set_title(title or "Table 1: final objective value per test function")
     ax.grid(True, axis="y", which="both", alpha=0.3)

@@ -1,0 +1,115 @@
+"""Figures of jaxfric.plot: each returns a Figure with labelled axes that shows the data."""
+
+import io
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+import jaxfric as jf
+from jaxfric import plot
+from jaxfric.rig import FrictionData
+
+
+@pytest.fixture(scope="module")
+def data():
+    t = np.arange(400) / 128.0
+    v = 0.01 * np.sin(2 * np.pi * 0.4 * t)
+    f = 300 * np.tanh(v / 1e-3) + 2e3 * v
+    return FrictionData.from_arrays(v, f, 1 / 128.0, n_train=320)
+
+
+class FakeFit:
+    """What the plots need from a fit: predict(), a model, a solution with a history."""
+
+    def __init__(self, y_hat, label="fake"):
+        self.y_hat = np.asarray(y_hat)
+        self.label = label
+        evals = np.arange(1, 51) * 25
+        self.history = jf.History.from_arrays(evals, 10.0 ** -np.linspace(0, 3, 50))
+
+    def predict(self, velocity, dt):
+        return self.y_hat
+
+
+def _pixels(fig: Figure) -> np.ndarray:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=60)
+    assert buf.tell() > 5000
+    buf.seek(0)
+    return mpimg.imread(buf)
+
+
+def _check(fig):
+    assert isinstance(fig, Figure)
+    img = _pixels(fig)
+    assert img[..., :3].std() > 0.05  # not a blank canvas
+    used = [ax for ax in fig.axes if ax.has_data()]
+    assert used and all(ax.get_ylabel() for ax in used)
+    assert any(ax.get_xlabel() for ax in used)  # shared-x panels label the bottom one only
+
+
+def test_plot_data_marks_split_and_units(data):
+    fig = plot.plot_data(data)
+    _check(fig)
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert "piston velocity [mm/s]" in labels and "friction force [N]" in labels
+    assert "320" in fig._suptitle.get_text()
+
+
+def test_plot_friction_velocity_with_and_without_fits(data):
+    _check(plot.plot_friction_velocity(data))
+    fig = plot.plot_friction_velocity(data, {"model": np.asarray(data.friction) * 0.9})
+    _check(fig)
+    assert "model" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+
+
+def test_plot_fit_titles_with_mse(data):
+    y = np.asarray(data.friction)
+    fig = plot.plot_fit(FakeFit(y * 0.95, "ENN"), data)
+    _check(fig)
+    assert "ENN" in fig._suptitle.get_text()
+    assert "valid" in fig.axes[0].get_title()
+
+
+def test_plot_fit_rejects_wrong_length(data):
+    with pytest.raises(ValueError, match="samples"):
+        plot.plot_fit(np.zeros(3), data)
+
+
+def test_plot_error_one_curve_per_fit(data):
+    y = np.asarray(data.friction)
+    fig = plot.plot_error([FakeFit(y * 0.9, "a"), FakeFit(y * 1.1, "b")], data)
+    _check(fig)
+    assert len(fig.axes[0].get_legend().get_texts()) == 2
+
+
+def test_plot_convergence_accepts_histories_solutions_and_pairs(data):
+    fit = FakeFit(np.asarray(data.friction))
+    hist = jf.History.from_arrays(np.arange(1, 11) * 10, np.geomspace(5.0, 0.1, 10))
+    sol = jf.Solution(value=np.zeros(2), f=np.float64(0.1), result=jf.RESULTS.successful,
+                      stats={"num_evals": 100, "num_evals_global": 60}, history=hist)
+    pair = (np.array([0, 10, 20]), np.array([1.0, 0.5, 0.0]))  # an exact zero on a log axis
+    fig = plot.plot_convergence([fit, sol, pair], ["fit", "sol", "pair"])
+    _check(fig)
+    assert fig.axes[0].get_yscale() == "log"
+    with pytest.raises(ValueError, match="labels"):
+        plot.plot_convergence([fit], ["a", "b"])
+    with pytest.raises(ValueError, match="history"):
+        plot.plot_convergence([object()], ["x"])
+
+
+def test_plot_table1(data):
+    rows = [dict(function="sphere", solver="A", mean=1e-9, best=0.0, worst=1e-8),
+            dict(function="sphere", solver="B", mean=1e-2, best=1e-3, worst=1e-1),
+            dict(function="ackley", solver="A", mean=0.0),
+            dict(function="ackley", solver="B", mean=0.5)]
+    fig = plot.plot_table1(rows)
+    _check(fig)
+    assert "floor" in fig.axes[0].get_title()
+
+
+def test_velocity_unit():
+    assert plot.velocity_unit(np.array([0.01, -0.02])) == (1e3, "mm/s")
+    assert plot.velocity_unit(np.array([1.0])) == (1.0, "m/s")
