@@ -5,6 +5,7 @@ from .hybrid import MAPSONMDS, mapso_nmds
 from .mapso import MAPSO
 from .minimise import minimise, minimise_many
 from .nelder_mead import NelderMead, NelderMeadState
+from .progress import ProgressHook, RecordingProgress, TqdmProgress
 from .pso import PSO, SwarmState
 
 __all__ = [
@@ -18,6 +19,9 @@ __all__ = [
     "NelderMead",
     "NelderMeadState",
     "PSO",
+    "ProgressHook",
+    "RecordingProgress",
+    "TqdmProgress",
     "SwarmState",
     "minimise",
     "minimise_many",

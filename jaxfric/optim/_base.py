@@ -9,6 +9,7 @@ fitness are mapped to ``+inf`` so they can never be reported as the best.
 from __future__ import annotations
 
 import abc
+import math
 from typing import Any, Callable
 
 import equinox as eqx
@@ -71,14 +72,18 @@ class History(eqx.Module):
         evals = jnp.where(take, self.evals.at[idx].set(num_evals), self.evals)
         f = jnp.where(take, self.f.at[idx].set(f_best), self.f)
         length = self.length + take.astype(jnp.int32)
+
+        def compress(ev, fv):
+            # Keep every other entry, so the buffer is half full again.
+            half_idx = jnp.minimum(jnp.arange(size) * 2, size - 1)
+            half_ok = jnp.arange(size) * 2 < size
+            return (
+                jnp.where(half_ok, ev[half_idx], 0),
+                jnp.where(half_ok, fv[half_idx], jnp.inf).astype(fv.dtype),
+            )
+
         full = length >= size
-        # Compress: keep every other entry, so the buffer is half full again.
-        half_idx = jnp.arange(size) * 2
-        half_ok = half_idx < size
-        comp_evals = jnp.where(half_ok, evals[jnp.minimum(half_idx, size - 1)], 0)
-        comp_f = jnp.where(half_ok, f[jnp.minimum(half_idx, size - 1)], jnp.inf)
-        evals = jnp.where(full, comp_evals, evals)
-        f = jnp.where(full, comp_f.astype(f.dtype), f)
+        evals, f = jax.lax.cond(full, compress, lambda ev, fv: (ev, fv), evals, f)
         length = jnp.where(full, (size + 1) // 2, length)
         stride = jnp.where(full, self.stride * 2, self.stride)
         return History(evals, f, length, stride, self.counter + 1)
@@ -167,6 +172,20 @@ def linear_inertia(i, num, w_max, w_min):
     return w_max - (w_max - w_min) * i / jnp.maximum(num, 1)
 
 
+def uniform16(key, shape, dtype):
+    """``U[0, 1)`` numbers on a 2⁻¹⁶ grid, two from each 32-bit random word.
+
+    Threefry dominates a cheap swarm generation on CPU (PEERS.md §b); PSO's random
+    coefficients, competition choices and crossover weights need no more than 16
+    bits, so this halves the random-number work. Not for perturbations whose
+    granularity would limit the attainable precision.
+    """
+    n = math.prod(shape)
+    words = jax.random.bits(key, ((n + 1) // 2,), jnp.uint32)
+    halves = jnp.concatenate([words & 0xFFFF, words >> 16])[:n]
+    return (halves.astype(dtype) * (1.0 / 65536.0)).reshape(shape)
+
+
 def uniform_in_box(key, shape, lower, upper):
     u = jax.random.uniform(key, shape, dtype=lower.dtype)
     return lower + u * (upper - lower)
@@ -185,14 +204,19 @@ def result_from_f(f_best):
 class AbstractSolver(eqx.Module):
     """What :func:`jaxfric.minimise` needs from a solver.
 
-    ``run`` receives a NaN-safe objective on a flat parameter vector, the box
-    bounds as 1-D arrays of one floating dtype, and a PRNG key; it returns a
+    ``run`` receives an objective on a flat parameter vector, the box bounds as
+    1-D arrays of one floating dtype, a PRNG key, an optional start ``x0`` and an
+    optional :class:`~jaxfric.optim.progress.ProgressHook`; it returns a
     :class:`Solution` whose ``value`` is the flat vector. It must be pure and
     traceable: ``minimise`` jits it, and ``minimise_many`` vmaps it over keys.
     """
 
     @abc.abstractmethod
-    def run(self, fn: Callable, lower, upper, args, key, x0=None) -> Solution: ...
+    def run(self, fn: Callable, lower, upper, args, key, x0=None, progress=None) -> Solution: ...
+
+    def progress_totals(self) -> tuple[int | None, int | None]:
+        """(global generations, local step cap) for a progress display."""
+        return None, None
 
     def check(self) -> None:
         """Raise ``ValueError`` on invalid hyperparameters (before any tracing)."""

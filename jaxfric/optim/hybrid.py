@@ -49,16 +49,23 @@ class MAPSONMDS(AbstractSolver):
                 f"({self.mapso.num_agents})"
             )
 
-    def run(self, fn, lower, upper, args, key, x0=None) -> Solution:
+    def progress_totals(self):
+        return self.mapso.num_generations, self.nelder_mead.max_steps
+
+    def run(self, fn, lower, upper, args, key, x0=None, progress=None) -> Solution:
         k_global, k_local = jax.random.split(key)
-        global_sol, swarm = self.mapso.run_state(fn, lower, upper, args, k_global, x0)
+        global_sol, swarm = self.mapso.run_state(
+            fn, lower, upper, args, k_global, x0, progress
+        )
         step = None
         if self.simplex_from_swarm:
             spread = jnp.std(swarm.pbest, axis=0)
             floor = 1e-3 * self.nelder_mead.initial_step * (upper - lower)
             step = jnp.maximum(spread, floor)
         def refine(start):
-            return self.nelder_mead.run(fn, lower, upper, args, k_local, start, step)
+            return self.nelder_mead.run(
+                fn, lower, upper, args, k_local, start, progress, initial_step=step
+            )
 
         if self.num_starts == 1:
             best = refine(global_sol.value)

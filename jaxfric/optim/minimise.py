@@ -7,6 +7,7 @@ one vector, and run the solver as a single jitted computation. Data travel in
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any, Callable
 
 import equinox as eqx
@@ -16,6 +17,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ._base import AbstractSolver, Solution
+from .progress import ProgressHook, TqdmProgress, register
 
 
 class _Flat(eqx.Module):
@@ -148,14 +150,38 @@ def _check_key(key, name="key"):
     return key
 
 
-@eqx.filter_jit
-def _run(solver, flat, lower, upper, args, key, x0):
-    return solver.run(flat, lower, upper, args, key, x0)
+def _progress(progress, solver):
+    """``(context manager yielding a hook or None)`` for ``progress=``."""
+    if progress is None or progress is False:
+        return contextlib.nullcontext(None)
+    total, local_total = solver.progress_totals()
+    if progress is True:
+        sink = TqdmProgress(total, local_total)
+    elif callable(progress):
+        sink = progress
+    else:
+        raise ValueError(
+            "progress must be None, True (a tqdm bar) or a callable "
+            f"sink(phase, step, evals, f_best), got {type(progress).__name__}"
+        )
+    every = max(1, (total or 100) // 100)
+
+    @contextlib.contextmanager
+    def ctx():
+        with register(sink) as token:
+            yield ProgressHook(token, every_generation=every, every_step=50)
+
+    return ctx()
 
 
 @eqx.filter_jit
-def _run_many(solver, flat, lower, upper, args, keys, x0):
-    return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0))(keys)
+def _run(solver, flat, lower, upper, args, key, x0, hook):
+    return solver.run(flat, lower, upper, args, key, x0, hook)
+
+
+@eqx.filter_jit
+def _run_many(solver, flat, lower, upper, args, keys, x0, hook):
+    return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0, hook))(keys)
 
 
 def _unravel_solution(sol: Solution, flat: _Flat, batched: bool) -> Solution:
@@ -175,6 +201,7 @@ def minimise(
     key=None,
     y0=None,
     dtype=None,
+    progress=None,
 ) -> Solution:
     """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
 
@@ -189,6 +216,11 @@ def minimise(
         y0: optional starting point (Nelder–Mead's start; for swarms, one agent).
         dtype: floating dtype of the search (default: that of the bounds, or JAX's
             default float).
+        progress: ``True`` for a tqdm bar (generation or step, best f, evaluations,
+            elapsed), a callable ``sink(phase, step, evals, f_best)`` (phase 0 =
+            global generations, 1 = Nelder–Mead steps), or ``None`` (silent). Reports
+            come from inside the compiled run about every 1 % of the generations
+            and every 50 Nelder–Mead steps; a new display never recompiles.
 
     Returns:
         A :class:`Solution`.
@@ -199,7 +231,9 @@ def minimise(
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     key = _check_key(key)
-    sol = _run(solver, flat, lower, upper, args, key, x0)
+    with _progress(progress, solver) as hook:
+        sol = _run(solver, flat, lower, upper, args, key, x0, hook)
+        jax.block_until_ready(sol)
     return _unravel_solution(sol, flat, batched=False)
 
 
@@ -212,16 +246,25 @@ def minimise_many(
     args: Any = None,
     y0=None,
     dtype=None,
+    progress=None,
 ) -> Solution:
     """Independent runs of :func:`minimise`, one per key, in one vmapped jitted call.
 
     ``keys`` is a batch of PRNG keys (``jax.random.split(key, n)``). Every field of
     the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
     equals ``minimise(..., key=keys[i])`` up to floating-point reassociation.
+    ``progress`` as in :func:`minimise` (reports arrive once per run and step).
+
+    Under ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]``
+    still counts the evaluations the algorithm asked for, but XLA computes both
+    branches (the shrink's ``n`` evaluations every step), so batched Nelder–Mead runs
+    cost more per step than single ones.
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = _check_key(keys, "keys")
     if jnp.ndim(keys) < 1 or (jnp.asarray(keys).dtype == jnp.uint32 and jnp.ndim(keys) < 2):
         raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
-    sol = _run_many(solver, flat, lower, upper, args, keys, x0)
+    with _progress(progress, solver) as hook:
+        sol = _run_many(solver, flat, lower, upper, args, keys, x0, hook)
+        jax.block_until_ready(sol)
     return _unravel_solution(sol, flat, batched=True)

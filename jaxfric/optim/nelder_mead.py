@@ -74,7 +74,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
 
     * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)``;
     * ``optx.minimise(fn, NelderMead(), y0, args, options={"lower": lo, "upper": hi},
-      max_steps=..., throw=False)``.
+      max_steps=..., throw=False)`` (``options`` may also hold ``"initial_step"``, a
+      per-coordinate first step, and ``"progress"``, a ``ProgressHook``).
 
     Args:
         rtol, atol: stop when every vertex is within ``atol + rtol·|x_best|`` of the best
@@ -188,10 +189,10 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         expand = f_r < f_best
         accept_r = (f_r >= f_best) & (f_r < f_second)
         outside = (f_r >= f_second) & (f_r < f_worst)
-        x_e = jnp.clip(centroid + rho * chi * d, lower, upper)
-        x_oc = jnp.clip(centroid + rho * gamma * d, lower, upper)
-        x_ic = jnp.clip(centroid - gamma * d, lower, upper)
-        x_2 = jnp.where(expand, x_e, jnp.where(outside, x_oc, x_ic))
+        # Expansion x̄ + ρχd, outside contraction x̄ + ργd or inside contraction x̄ − γd:
+        # one trial point whose coefficient depends on the case.
+        coef = jnp.where(expand, rho * chi, jnp.where(outside, rho * gamma, -gamma))
+        x_2 = jnp.clip(centroid + coef.astype(d.dtype) * d, lower, upper)
         f_2 = jax.lax.cond(
             accept_r, lambda x: jnp.asarray(jnp.inf, F.dtype), f, x_2
         )
@@ -232,6 +233,9 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             num_shrinks=state.num_shrinks + i32(shrink),
             history=state.history.record(num_evals, F2[0]),
         )
+        hook = options.get("progress") if options else None
+        if hook is not None:
+            hook.emit(1, new_state.history.counter, num_evals, F2[0])
         return unravel(S2[0]), new_state, None
 
     def terminate(self, fn, y, args, options, state, tags):
@@ -266,12 +270,17 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return unravel(state.simplex[0]), aux, stats
 
     # ----------------------------------------------------------- jaxfric protocol
-    def run(self, fn, lower, upper, args, key, x0=None, initial_step=None) -> Solution:
+    def progress_totals(self):
+        return None, self.max_steps
+
+    def run(self, fn, lower, upper, args, key, x0=None, progress=None, initial_step=None) -> Solution:
         if x0 is None:
             x0 = uniform_in_box(key, lower.shape, lower, upper)
         options: dict[str, Any] = {"lower": lower, "upper": upper}
         if initial_step is not None:
             options["initial_step"] = initial_step
+        if progress is not None:
+            options["progress"] = progress
         sol = optx.minimise(
             fn,
             self,

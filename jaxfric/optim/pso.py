@@ -23,6 +23,7 @@ from ._base import (
     check_range,
     linear_inertia,
     result_from_f,
+    uniform16,
     uniform_in_box,
 )
 
@@ -114,7 +115,10 @@ class AbstractSwarm(AbstractSolver):
     def step(self, state, f_batch, lower, upper, i) -> SwarmState:
         raise NotImplementedError
 
-    def run_state(self, fn: Callable, lower, upper, args, key, x0=None):
+    def progress_totals(self):
+        return self.num_generations, None
+
+    def run_state(self, fn: Callable, lower, upper, args, key, x0=None, progress=None):
         """Run and return ``(Solution, final SwarmState)``."""
         f_batch = batch_objective(fn, args)
         state = self.init(f_batch, lower, upper, key, x0)
@@ -122,6 +126,8 @@ class AbstractSwarm(AbstractSolver):
 
         def body(s, i):
             s = self.step(s, f_batch, lower, upper, i)
+            if progress is not None:
+                progress.emit(0, i + 1, s.num_evals, s.gbest_f)
             return s, (s.num_evals, s.gbest_f)
 
         state, (evals, fs) = jax.lax.scan(
@@ -142,8 +148,8 @@ class AbstractSwarm(AbstractSolver):
         )
         return sol, state
 
-    def run(self, fn, lower, upper, args, key, x0=None) -> Solution:
-        return self.run_state(fn, lower, upper, args, key, x0)[0]
+    def run(self, fn, lower, upper, args, key, x0=None, progress=None) -> Solution:
+        return self.run_state(fn, lower, upper, args, key, x0, progress)[0]
 
 
 class PSO(AbstractSwarm):
@@ -186,7 +192,7 @@ class PSO(AbstractSwarm):
         vmax = self.vmax_fraction * (upper - lower)
         key, k = jax.random.split(state.key)
         w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
-        r = jax.random.uniform(k, (2,) + state.x.shape, dtype=state.x.dtype)
+        r = uniform16(k, (2,) + state.x.shape, state.x.dtype)
         x, v = pso_move(
             r, state.x, state.v, state.pbest, state.gbest[None, :], w,
             self.c1, self.c2, vmax, lower, upper, self.zero_velocity_at_bounds,
