@@ -261,12 +261,15 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
 
 # ------------------------------------------------------------------ convergence
 def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
-    """``(evals, f)`` from a History, a Solution, a fit holding one, or an ``(evals, f)`` pair.
+    """``(evals, f)`` from a History, a Solution, a fit holding one, a ``{"evals", "f"}``
+    mapping, or an ``(evals, f)`` pair.
 
     Batched histories (from ``minimise_many``) come back 2-D, one row per run.
     """
     if isinstance(item, tuple) and len(item) == 2:
         return _np(item[0]), _np(item[1])
+    if isinstance(item, Mapping) and "evals" in item and "f" in item:  # Fit.history
+        return _np(item["evals"]), _np(item["f"])
     if all(hasattr(item, a) for a in ("evals", "f", "length")):
         evals, f, length = _np(item.evals), _np(item.f), np.asarray(item.length)
         if evals.ndim == 1:
@@ -287,6 +290,10 @@ def _global_phase_evals(item):
         if isinstance(stats, Mapping) and "num_evals_global" in stats:
             g = np.asarray(stats["num_evals_global"])
             return float(np.median(g)) if g.ndim else float(g)
+    stages = getattr(item, "stages", None)  # a Fit loaded from disk keeps its stages only
+    if isinstance(stages, (list, tuple)) and len(stages) > 1 and isinstance(stages[0], Mapping):
+        if stages[0].get("stage") == "mapso" and "num_evals" in stages[0]:
+            return float(stages[0]["num_evals"])
     return None
 
 

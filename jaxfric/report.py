@@ -1,0 +1,440 @@
+"""The report folder written by ``jaxfric demo`` and ``jaxfric identify``.
+
+One call, :func:`write_report`, writes into a folder::
+
+    report.md            the comparison table, per-model details, figures, how to reproduce
+    results.json         the same numbers, machine-readable
+    data.png             velocity and computed friction against time (split marked)
+    friction_velocity.png  friction against velocity, measured and per model
+    fit_<model>.png      measured against estimated friction, one per model
+    error.png            error curves of all models
+    convergence.png      best objective against evaluations, all models
+    models/<model>.npz   each fit, saved with ``Fit.save`` (``jaxfric predict`` reads it)
+
+Every file is written to a temporary name in the same folder and moved into place
+with ``os.replace``, so an interrupted run never leaves a half-written file under a
+final name (temporaries match :data:`TEMP_PATTERNS`; :func:`remove_temporaries`
+clears them).
+
+Fits are duck-typed (see :mod:`jaxfric.plot`): the writer needs ``predict``, and uses
+``metrics``, ``model``, ``to_dict``, ``save`` and the timings when the fit has them.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import plot as _plot
+from .metrics import METRIC_FORMULAS, friction_metrics
+
+__all__ = [
+    "FIGURES",
+    "TEMP_PATTERNS",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "comparison_rows",
+    "format_table",
+    "markdown_table",
+    "remove_temporaries",
+    "save_figure",
+    "write_report",
+]
+
+FIGURES = ("data.png", "friction_velocity.png", "error.png", "convergence.png")
+"""Figures every report holds, besides one ``fit_<model>.png`` per model."""
+
+TEMP_PATTERNS = (".*.jaxfric-tmp", ".jaxfric-fit-*.tmp")
+"""Globs of the temporary files of an unfinished write (ours, and ``Fit.save``'s)."""
+
+WINDOWS = ("train", "valid", "all")
+
+
+# ------------------------------------------------------------------ atomic files
+def _temp_name(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.jaxfric-tmp")
+
+
+def _atomic(path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` then move ``tmp`` onto ``path``; the temporary goes on failure."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _temp_name(path)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def atomic_write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file + ``os.replace``)."""
+    return _atomic(path, lambda tmp: tmp.write_bytes(data))
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def save_figure(fig, path, *, dpi: int = 110) -> Path:
+    """Save a matplotlib figure as PNG atomically and release it."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def remove_temporaries(folder) -> list[Path]:
+    """Delete temporaries left by an interrupted write in ``folder`` (and ``models/``)."""
+    removed = []
+    for sub in (Path(folder), Path(folder) / "models"):
+        if sub.is_dir():
+            for pattern in TEMP_PATTERNS:
+                for p in sub.glob(pattern):
+                    try:
+                        p.unlink()
+                        removed.append(p)
+                    except OSError:
+                        pass
+    return removed
+
+
+def save_fit(fit, path) -> Path:
+    """``fit.save`` into a temporary file, then moved to ``path`` (atomic)."""
+    if not hasattr(fit, "save"):
+        raise ValueError(f"{type(fit).__name__} cannot be saved (no save method)")
+    return _atomic(path, lambda tmp: fit.save(tmp))
+
+
+# ----------------------------------------------------------- reading a fit
+def slug(name: str) -> str:
+    """File-name form of a model name: ``"ENN (30)"`` -> ``"enn_30"``."""
+    s = re.sub(r"[^a-z0-9]+", "_", str(name).lower()).strip("_")
+    return s or "model"
+
+
+def _windows(data):
+    n, total = int(data.n_train), int(np.shape(data.velocity)[-1])
+    out = {"train": slice(0, n), "all": slice(0, total)}
+    if n < total:
+        out["valid"] = slice(n, total)
+    return out
+
+
+def fit_metrics(fit, data) -> dict[str, dict[str, float]]:
+    """Metrics per window (``train``, ``valid``, ``all``) of :func:`jaxfric.metrics.friction_metrics`.
+
+    Taken from ``fit.metrics`` when the fit carries them for these windows (the library is
+    the authority), otherwise computed from the prediction on ``data``.
+    """
+    own = getattr(fit, "metrics", None)
+    if isinstance(own, Mapping) and all(isinstance(own.get(w), Mapping) for w in ("train", "all")):
+        return {w: {k: float(v) for k, v in own[w].items()} for w in WINDOWS if isinstance(own.get(w), Mapping)}
+    y = np.asarray(data.friction, dtype=np.float64)
+    y_hat = _plot.predict_on(fit, data)
+    return {w: friction_metrics(y[s], y_hat[s]) for w, s in _windows(data).items()}
+
+
+def fit_seconds(fit) -> float | None:
+    """Wall time of the identification [s], when the fit records it."""
+    t = getattr(fit, "timings", None)
+    if isinstance(t, Mapping):
+        for key in ("total", "total_s", "wall", "wall_s"):
+            if key in t:
+                return float(t[key])
+        vals = [float(v) for v in t.values() if isinstance(v, (int, float))]
+        return float(sum(vals)) if vals else None
+    for attr in ("seconds", "wall_time", "time_s"):
+        v = getattr(fit, attr, None)
+        if isinstance(v, (int, float)):
+            return float(v)
+    return None
+
+
+def fit_num_params(fit) -> int | None:
+    model = getattr(fit, "model", None)
+    n = getattr(model, "num_params", None)
+    return int(n) if n is not None else None
+
+
+def _jsonable(x):
+    """Best-effort conversion to JSON types (arrays to lists, numpy scalars to floats)."""
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (str, bool)) or x is None:
+        return x
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else str(float(x))
+    try:
+        arr = np.asarray(x)
+    except Exception:
+        return repr(x)
+    if arr.dtype.kind in "fiub":
+        return _jsonable(arr.tolist()) if arr.ndim else _jsonable(arr.item())
+    return repr(x)
+
+
+def fit_dict(fit) -> dict:
+    """``fit.to_dict()`` when available, made JSON-safe."""
+    to_dict = getattr(fit, "to_dict", None)
+    return _jsonable(to_dict()) if callable(to_dict) else {}
+
+
+# ------------------------------------------------------------------ tables
+def comparison_rows(fits: Mapping[str, Any], data) -> list[dict]:
+    """One row per fit: label, #params, metrics per window, time."""
+    rows = []
+    for name, fit in fits.items():
+        m = fit_metrics(fit, data)
+        rows.append({"name": name, "label": _plot.fit_label(fit, name), "params": fit_num_params(fit),
+                     "metrics": m, "seconds": fit_seconds(fit)})
+    return rows
+
+
+def _cell(rows, key, window, fmt):
+    out = []
+    for r in rows:
+        v = r["metrics"].get(window, {}).get(key)
+        out.append("-" if v is None else format(v, fmt))
+    return out
+
+
+def _columns(rows):
+    valid = any("valid" in r["metrics"] for r in rows)
+    w = "valid" if valid else "all"
+    cols = [
+        ("model", [r["label"] for r in rows]),
+        ("#params", ["-" if r["params"] is None else str(r["params"]) for r in rows]),
+        ("MSE % train", _cell(rows, "mse_percent", "train", ".4g")),
+    ]
+    if valid:
+        cols.append(("MSE % valid", _cell(rows, "mse_percent", "valid", ".4g")))
+    cols += [
+        (f"MAX [N] {w}", _cell(rows, "max_abs", w, ".4g")),
+        (f"FIT % {w}", _cell(rows, "fit_percent", w, ".2f")),
+        ("time [s]", ["-" if r["seconds"] is None else f"{r['seconds']:.1f}" for r in rows]),
+    ]
+    return cols
+
+
+def format_table(rows: list[dict]) -> str:
+    """The comparison as aligned plain text, for the terminal."""
+    cols = _columns(rows)
+    widths = [max(len(h), *(len(c) for c in cells)) for h, cells in cols]
+    line = lambda cells: "  ".join(  # noqa: E731
+        c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+    out = [line([h for h, _ in cols]), line(["-" * w for w in widths])]
+    for i in range(len(rows)):
+        out.append(line([cells[i] for _, cells in cols]))
+    return "\n".join(out)
+
+
+def markdown_table(rows: list[dict]) -> str:
+    """The comparison as a Markdown table."""
+    cols = _columns(rows)
+    out = ["| " + " | ".join(h for h, _ in cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    for i in range(len(rows)):
+        out.append("| " + " | ".join(cells[i] for _, cells in cols) + " |")
+    return "\n".join(out)
+
+
+# ------------------------------------------------------------------ the report
+def _data_summary(data) -> dict:
+    v = np.asarray(data.velocity, dtype=np.float64)
+    f = np.asarray(data.friction, dtype=np.float64)
+    dt = float(np.asarray(data.dt))
+    n = int(v.shape[-1])
+    return {"n_samples": n, "n_train": int(data.n_train), "n_valid": n - int(data.n_train),
+            "dt_s": dt, "fs_hz": 1.0 / dt, "duration_s": n * dt,
+            "velocity_range_m_s": [float(v.min()), float(v.max())],
+            "friction_range_N": [float(f.min()), float(f.max())]}
+
+
+def _environment() -> dict:
+    import jax
+
+    from . import __version__
+
+    return {"jaxfric": __version__, "jax": jax.__version__, "python": platform.python_version(),
+            "platform": platform.platform(), "cpu_count": os.cpu_count(),
+            "backend": jax.default_backend(),
+            "float64": bool(jax.config.jax_enable_x64)}
+
+
+def _fmt_params(d: Mapping) -> list[str]:
+    lines = []
+    for k, v in d.items():
+        arr = np.asarray(v)
+        if arr.ndim == 0 and arr.dtype.kind in "fi":
+            lines.append(f"| {k} | {float(arr):.6g} |")
+    return lines
+
+
+def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str | None = None,
+                 source: str = "", settings: Mapping | None = None, notes: list[str] | None = None,
+                 python: str | None = None, extra_files: Mapping[str, str] | None = None,
+                 save_models: bool = True, on_written: Callable[[Path], None] | None = None) -> dict:
+    """Write the report folder ``out`` for ``fits`` (name -> fit) on ``data``.
+
+    Args:
+        out: folder (created if needed; existing report files are replaced).
+        data: the :class:`jaxfric.rig.FrictionData` the fits were made on.
+        fits: mapping model name (used in file names) -> fit.
+        title: report title.
+        command: the command line that produced it (shown under "Reproduce").
+        source: one sentence on where the data came from.
+        settings: budgets, seeds and options (into report.md and results.json).
+        notes: extra remarks (e.g. resampling warnings), listed under the data.
+        python: Python code that reproduces the fits (shown under "Reproduce").
+        extra_files: name -> description of other files the caller put in ``out``.
+        save_models: save each fit to ``models/<name>.json`` (needs ``fit.save``).
+        on_written: called with each finished file's path (progress, bookkeeping).
+
+    Returns:
+        ``{"files": [paths], "rows": comparison rows, "table": plain-text table}``.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not fits:
+        raise ValueError("no fits to report")
+    written: list[Path] = []
+
+    def done(p: Path) -> None:
+        written.append(p)
+        if on_written is not None:
+            on_written(p)
+
+    rows = comparison_rows(fits, data)
+    figs: dict[str, str] = {}
+
+    def figure(name: str, make: Callable, caption: str) -> None:
+        fig = make()
+        done(save_figure(fig, out / name))
+        figs[name] = caption
+
+    figure("data.png", lambda: _plot.plot_data(data), "Velocity and friction from the force balance")
+    figure("friction_velocity.png", lambda: _plot.plot_friction_velocity(data, dict(
+        (r["label"], fits[r["name"]]) for r in rows)), "Friction against velocity, measured and estimated")
+    for r in rows:
+        name = f"fit_{slug(r['name'])}.png"
+        figure(name, lambda r=r: _plot.plot_fit(fits[r["name"]], data, label=r["label"]),
+               f"Measured and estimated friction: {r['label']}")
+    figure("error.png", lambda: _plot.plot_error({r["label"]: fits[r["name"]] for r in rows}, data),
+           "Estimation error of each model")
+    conv = {r["label"]: fits[r["name"]] for r in rows}
+    try:
+        figure("convergence.png", lambda: _plot.plot_convergence(
+            conv, ylabel="best objective J (each model's own cost)"), "Optimiser convergence")
+    except ValueError as e:  # a fit without an optimiser history (e.g. loaded from disk)
+        notes = list(notes or []) + [f"no convergence figure: {e}"]
+
+    model_files = {}
+    if save_models:
+        for r in rows:
+            fit = fits[r["name"]]
+            if hasattr(fit, "save"):
+                p = save_fit(fit, out / "models" / f"{slug(r['name'])}.npz")
+                model_files[r["name"]] = str(p.relative_to(out))
+                done(p)
+
+    results = {
+        "title": title,
+        "created": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "command": command,
+        "source": source,
+        "environment": _environment(),
+        "settings": _jsonable(dict(settings or {})),
+        "data": _data_summary(data),
+        "metric_definitions": METRIC_FORMULAS,
+        "models": {r["name"]: {"label": r["label"], "num_params": r["params"], "seconds": r["seconds"],
+                               "metrics": r["metrics"], "file": model_files.get(r["name"]),
+                               "fit": fit_dict(fits[r["name"]])} for r in rows},
+        "figures": figs,
+        "notes": list(notes or []),
+    }
+    done(atomic_write_text(out / "results.json", json.dumps(_jsonable(results), indent=2) + "\n"))
+    text = _markdown(results, rows, fits, python=python, extra_files=extra_files or {})
+    done(atomic_write_text(out / "report.md", text))
+    return {"files": written, "rows": rows, "table": format_table(rows)}
+
+
+def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | None,
+              extra_files: Mapping[str, str]) -> str:
+    d, env = results["data"], results["environment"]
+    L = [f"# {results['title']}", ""]
+    L.append(f"Written {results['created']} by jaxfric {env['jaxfric']} (jax {env['jax']}, "
+             f"{'float64' if env['float64'] else 'float32'}, {env['cpu_count']} CPU core(s), {env['backend']}).")
+    L += ["", "## Data", ""]
+    if results["source"]:
+        L += [results["source"], ""]
+    L.append(f"{d['n_samples']} samples at {d['fs_hz']:.4g} Hz ({d['duration_s']:.3g} s); the first "
+             f"{d['n_train']} estimate the models, the last {d['n_valid']} validate them. Velocity "
+             f"{d['velocity_range_m_s'][0] * 1e3:.3g} to {d['velocity_range_m_s'][1] * 1e3:.3g} mm/s, "
+             f"friction {d['friction_range_N'][0]:.4g} to {d['friction_range_N'][1]:.4g} N.")
+    for note in results["notes"]:
+        L.append(f"\n*Note:* {note}")
+    L += ["", "![data](data.png)", "", "![friction against velocity](friction_velocity.png)", ""]
+    L += ["## Comparison", "", markdown_table(rows), "",
+          "MSE % is the normalised MSE, 100·mean(e²)/var(F) over the window (100 % = no better than the "
+          "mean; < 1 % excellent, > 5 % poor); MAX is max|e|; FIT % is 100·(1 − ‖e‖/‖F − mean F‖). "
+          "Predictions are free-run: the measured friction is never fed back. Time is the wall time of "
+          "the identification, compilation included.", ""]
+    L += ["![error](error.png)", ""]
+    if "convergence.png" in results["figures"]:
+        L += ["![convergence](convergence.png)", ""]
+    for r in rows:
+        m = results["models"][r["name"]]
+        L += [f"## {r['label']}", "", f"![{r['label']}](fit_{slug(r['name'])}.png)", "",
+              "| metric | train | valid | all |", "|---|---|---|---|"]
+        for key in ("mse_percent", "max_abs", "fit_percent", "rmse", "mse_scaled_percent", "r2"):
+            vals = [r["metrics"].get(w, {}).get(key) for w in WINDOWS]
+            L.append(f"| {key} | " + " | ".join("-" if v is None else f"{v:.5g}" for v in vals) + " |")
+        fit = fits[r["name"]]
+        params = getattr(fit, "params", None) or getattr(fit, "physical", None)
+        if isinstance(params, Mapping) and not getattr(getattr(fit, "model", None), "needs_scaling", False):
+            pl = _fmt_params(params)
+            if pl:
+                L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
+        stages = getattr(fit, "stages", None)
+        if stages:
+            parts = []
+            for st in stages:
+                n = st.get("num_evals", st.get("num_steps"))
+                unit = "evaluations" if "num_evals" in st else "steps"
+                parts.append(f"{st.get('stage', '?')}: J = {float(st.get('J', float('nan'))):.5g} ({n} {unit})")
+            L += ["", "Optimiser stages: " + " → ".join(parts) + "."]
+        if m["file"]:
+            L += ["", f"Saved fit: `{m['file']}` (use `jaxfric predict {m['file']} DATA.csv`)."]
+        L.append("")
+    if results["settings"]:
+        L += ["## Settings", "", "| setting | value |", "|---|---|"]
+        L += [f"| {k} | {v} |" for k, v in results["settings"].items()]
+        L.append("")
+    if extra_files:
+        L += ["## Other files", ""] + [f"- `{k}`: {v}" for k, v in extra_files.items()] + [""]
+    L += ["## Reproduce", ""]
+    if results["command"]:
+        L += ["```", results["command"], "```", ""]
+    if python:
+        L += ["In Python:", "", "```python", python.strip("\n"), "```", ""]
+    return "\n".join(L)

@@ -1,0 +1,140 @@
+"""The report folder: every file present, written atomically, numbers consistent."""
+
+import json
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from jaxfric import report
+from jaxfric.metrics import friction_metrics
+from jaxfric.rig import FrictionData
+
+
+class _Model:
+    def __init__(self, n, needs_scaling=False):
+        self.num_params = n
+        self.needs_scaling = needs_scaling
+
+
+class FakeFit:
+    """A fit as the report sees it: predict, model, history, stages, timings, save."""
+
+    def __init__(self, y_hat, n_params, label):
+        self.y_hat = np.asarray(y_hat, dtype=float)
+        self.model = _Model(n_params)
+        self.label = label
+        self.history = {"evals": np.arange(1, 21) * 10, "f": np.geomspace(1.0, 1e-3, 20)}
+        self.stages = [{"stage": "mapso", "J": 0.1, "num_evals": 120},
+                       {"stage": "nelder_mead", "J": 1e-3, "num_evals": 80}]
+        self.timings = {"compile_s": 1.0, "run_s": 2.0, "total_s": 3.5}
+        self.params = {"Fc": np.float64(300.0)}
+
+    def predict(self, velocity, dt=None):
+        return self.y_hat
+
+    def to_dict(self):
+        return {"label": self.label, "theta": np.zeros(3)}
+
+    def save(self, path):
+        with open(path, "wb") as fh:
+            fh.write(b"fit:" + self.label.encode())
+
+
+@pytest.fixture(scope="module")
+def data():
+    t = np.arange(500) / 100.0
+    v = 0.01 * np.sin(2 * np.pi * 0.3 * t)
+    f = 200 * np.tanh(v / 2e-3)
+    return FrictionData.from_arrays(v, f, 0.01, n_train=400)
+
+
+@pytest.fixture(scope="module")
+def written(data, tmp_path_factory):
+    out = tmp_path_factory.mktemp("report")
+    y = np.asarray(data.friction)
+    fits = {"good": FakeFit(y * 0.98 + 1.0, 12, "good model"), "poor": FakeFit(y * 0.7, 3, "poor model")}
+    seen = []
+    res = report.write_report(out, data, fits, title="test report", command="jaxfric test",
+                              source="synthetic", settings={"seed": 1}, notes=["a note"],
+                              python="print('hi')", on_written=seen.append)
+    return out, fits, res, seen
+
+
+def test_every_file_is_there_and_figures_are_not_blank(written):
+    out, fits, res, seen = written
+    names = set(report.FIGURES) | {f"fit_{n}.png" for n in fits} | {"report.md", "results.json"}
+    for name in names:
+        assert (out / name).is_file(), name
+    for name in names:
+        if name.endswith(".png"):
+            assert (out / name).stat().st_size > 10_000
+            img = mpimg.imread(out / name)
+            assert img[..., :3].std() > 0.05, f"{name} looks blank"
+    for n in fits:
+        assert (out / "models" / f"{n}.npz").read_bytes().startswith(b"fit:")
+    assert sorted(map(str, seen)) == sorted(map(str, res["files"]))
+    assert not list(out.glob(".*")), "temporary files left behind"
+
+
+def test_results_json_matches_metrics(written, data):
+    out, fits, res, _ = written
+    d = json.loads((out / "results.json").read_text())
+    assert d["title"] == "test report" and d["settings"] == {"seed": 1}
+    assert d["data"]["n_samples"] == 500 and d["data"]["n_train"] == 400
+    y = np.asarray(data.friction)
+    for name, fit in fits.items():
+        m = d["models"][name]
+        assert m["num_params"] == fit.model.num_params
+        assert m["seconds"] == pytest.approx(3.5)
+        assert m["file"] == f"models/{name}.npz"
+        expect = friction_metrics(y[400:], fit.y_hat[400:])
+        assert m["metrics"]["valid"]["mse_percent"] == pytest.approx(expect["mse_percent"])
+        assert m["fit"]["theta"] == [0.0, 0.0, 0.0]
+
+
+def test_markdown_and_text_tables(written):
+    out, _, res, _ = written
+    md = (out / "report.md").read_text()
+    for piece in ("# test report", "| good model | 12 |", "| poor model | 3 |", "a note",
+                  "![convergence](convergence.png)", "jaxfric test", "print('hi')", "| Fc | 300 |"):
+        assert piece in md, piece
+    lines = res["table"].splitlines()
+    assert lines[0].split()[:2] == ["model", "#params"]
+    assert "MSE % valid" in lines[0] and "FIT % valid" in lines[0] and "time [s]" in lines[0]
+    assert len(lines) == 4
+
+
+def test_fit_metrics_prefers_the_fits_own(data):
+    fit = FakeFit(np.asarray(data.friction), 2, "own")
+    fit.metrics = {"train": {"mse_percent": 1.5}, "valid": None, "all": {"mse_percent": 2.0}}
+    m = report.fit_metrics(fit, data)
+    assert m == {"train": {"mse_percent": 1.5}, "all": {"mse_percent": 2.0}}
+
+
+def test_atomic_write_replaces_and_cleans_up(tmp_path):
+    p = tmp_path / "a.txt"
+    report.atomic_write_text(p, "one")
+    report.atomic_write_text(p, "two")
+    assert p.read_text() == "two"
+
+    def boom(tmp):
+        tmp.write_text("half")
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        report._atomic(tmp_path / "b.txt", boom)
+    assert not (tmp_path / "b.txt").exists()
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["a.txt"]
+    (tmp_path / ".c.txt.123.jaxfric-tmp").write_text("left over")
+    assert [x.name for x in report.remove_temporaries(tmp_path)] == [".c.txt.123.jaxfric-tmp"]
+
+
+def test_no_fits_is_an_error(tmp_path, data):
+    with pytest.raises(ValueError, match="no fits"):
+        report.write_report(tmp_path, data, {}, title="x")
+
+
+def test_slug():
+    assert report.slug("ENN (30 neurons)") == "enn_30_neurons"
+    assert report.slug("???") == "model"
