@@ -1,0 +1,28 @@
+"""Friction identification: model + data + optimiser → :class:`jaxfric.Fit` (ALGORITHMS.md §11).
+
+``from jaxfric.identify import identify`` (re-exported as ``jaxfric.identify``).
+"""
+
+from ._api import (
+    DEFAULT_GENERATIONS_BLACK_BOX,
+    DEFAULT_GENERATIONS_PHYSICAL,
+    NAMED_MODEL_DEFAULTS,
+    default_solver,
+    identify,
+)
+from ._data import Record, as_record
+from ._objective import CostData, OutputErrorCost
+from ._refine import GradientRefinement
+
+__all__ = [
+    "DEFAULT_GENERATIONS_BLACK_BOX",
+    "DEFAULT_GENERATIONS_PHYSICAL",
+    "NAMED_MODEL_DEFAULTS",
+    "CostData",
+    "GradientRefinement",
+    "OutputErrorCost",
+    "Record",
+    "as_record",
+    "default_solver",
+    "identify",
+]

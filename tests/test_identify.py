@@ -1,0 +1,260 @@
+"""jaxfric.identify end to end: parameter recovery on noise-free LuGre data, the cost and
+metrics against independent recomputation, reproducibility, no recompilation for new data,
+gradient refinement, and clear errors raised before any optimisation.
+
+Budgets are tiny (a 4x4 lattice, a few dozen generations, records of 1000 samples) and
+one solver configuration is reused, so the jit cache keeps the file fast.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfric
+from jaxfric.identify import GradientRefinement, identify
+from jaxfric.identify import _api
+from jaxfric.identify._timing import Stopwatch
+from jaxfric.models import Elman, LuGre
+from jaxfric.optim.minimise import _run
+from jaxfric.rig import FrictionData
+
+FS = 128.0
+DT = 1.0 / FS
+N = 1000
+TRUTH = dict(sigma0=1e7, sigma1=3e3, sigma2=4e3, Fc=200.0, Fs=300.0, vs=2e-3)
+# Shared by every LuGre test, so the solver compiles once per dtype.
+SMALL = jaxfric.mapso_nmds(lattice_size=4, num_generations=30, sl_generations=3, nm_max_steps=1200)
+SMALL_ENN = jaxfric.mapso_nmds(lattice_size=3, num_generations=10, sl_generations=2, nm_max_steps=300)
+
+
+def velocity_profile(n: int = N) -> np.ndarray:
+    """ALGORITHMS.md §7 stand-in profile: two sines with reversals, 128 Hz."""
+    t = np.arange(n) / FS
+    return 0.010 * np.sin(2 * np.pi * 0.2 * t) + 0.004 * np.sin(2 * np.pi * 0.53 * t)
+
+
+def lugre_friction(v, **params) -> np.ndarray:
+    model = LuGre()
+    theta = model.from_physical(**params)
+    return np.asarray(model.simulate(theta, jnp.asarray(v), DT))
+
+
+def hysteretic_friction(v) -> np.ndarray:
+    """LuGre plus a slow first-order hysteretic term: something an ENN can fit."""
+    f = lugre_friction(v, **TRUTH)
+    h = np.zeros_like(v)
+    for k in range(1, len(v)):
+        h[k] = 0.97 * h[k - 1] + 0.03 * 4e3 * v[k]
+    return f + h
+
+
+# ---------------------------------------------------------------------- recovery
+def test_lugre_recovered_from_noise_free_lugre_data():
+    """Known truth: MSE % < 0.01 % on prediction and Fc, Fs, sigma2 within 2 %."""
+    with jax.enable_x64(True):
+        v = velocity_profile()
+        f = lugre_friction(v, **TRUTH)
+        fit = identify("lugre", (v, f, DT), key=jax.random.key(0), solver=SMALL)
+        for window in ("train", "valid", "all"):
+            assert fit.metrics[window]["mse_percent"] < 0.01
+        p = fit.params
+        for name in ("Fc", "Fs", "sigma2"):
+            assert abs(float(p[name]) / TRUTH[name] - 1.0) < 0.02, (name, float(p[name]))
+        # The prediction reproduces the truth on data never seen in training.
+        np.testing.assert_allclose(np.asarray(fit.predict(v)), f, rtol=0, atol=0.01 * np.std(f))
+        assert fit.metrics["num_params"] == 6
+        assert fit.settings["dtype"] == "float64"
+
+
+def test_new_data_same_shapes_never_recompiles():
+    with jax.enable_x64(True):
+        v = velocity_profile()
+        f1 = lugre_friction(v, **TRUTH)
+        f2 = lugre_friction(v, **{**TRUTH, "Fc": 150.0, "sigma2": 2e3})
+        fit1 = identify("lugre", (v, f1, DT), key=1, solver=SMALL)
+        size = _run._cached._cache_size()
+        with Stopwatch() as sw:
+            fit2 = identify("lugre", (v, f2, DT), key=1, solver=SMALL)
+        assert sw.num_compiles == 0
+        assert _run._cached._cache_size() == size
+        assert fit2.timings["compile_s"] < fit2.timings["total_s"]
+        # ...and the new data really were used.
+        assert abs(float(fit2.params["Fc"]) - 150.0) < 3.0
+        assert abs(float(fit1.params["Fc"]) - 200.0) < 3.0
+
+
+def test_same_key_same_fit_other_key_other_run():
+    with jax.enable_x64(True):
+        v = velocity_profile()
+        f = lugre_friction(v, **TRUTH) + 5.0 * np.sin(3.0 * v / 0.01)  # not exactly LuGre
+        a = identify("lugre", (v, f, DT), key=jax.random.key(7), solver=SMALL)
+        b = identify("lugre", (v, f, DT), key=jax.random.key(7), solver=SMALL)
+        c = identify("lugre", (v, f, DT), key=jax.random.key(8), solver=SMALL)
+    assert np.array_equal(a.theta, b.theta)
+    assert a.metrics == b.metrics
+    assert not np.array_equal(a.theta, c.theta)
+    assert a.key_data == np.asarray(jax.random.key_data(jax.random.key(7))).tolist()
+
+
+# -------------------------------------------------------- cost, metrics, scalers
+@pytest.fixture(scope="module")
+def enn_fit():
+    v = velocity_profile()
+    f = hysteretic_friction(v)
+    data = FrictionData.from_arrays(v, f, DT, train_fraction=0.75)
+    model = Elman(neurons=4, context_weight_bound=2.0)
+    fit = identify(model, data, key=3, solver=SMALL_ENN,
+                   refine=GradientRefinement(method="bfgs", max_steps=40))
+    # FrictionData stores JAX arrays (float32 here): compare against what it holds.
+    return fit, np.asarray(data.velocity, np.float64), np.asarray(data.friction, np.float64)
+
+
+def test_enn_scalers_cost_and_metrics_match_independent_recomputation(enn_fit):
+    fit, v, f = enn_fit
+    n = 750
+    assert fit.n_train == n and fit.n_samples == N
+    # mapminmax scalers from the training window only (§2.4)
+    assert fit.velocity_scaler.lo == v[:n].min() and fit.velocity_scaler.hi == v[:n].max()
+    assert fit.friction_scaler.lo == f[:n].min() and fit.friction_scaler.hi == f[:n].max()
+    # Independent forward pass of the diagonal Elman network in float64 NumPy.
+    p = {k: np.asarray(x, np.float64) for k, x in fit.params.items()}
+    u = 2 * (v - v[:n].min()) / (v[:n].max() - v[:n].min()) - 1
+    c = p["c0"].copy()
+    y = np.empty(N)
+    for k in range(N):
+        h = np.tanh(p["w"] * u[k] + p["r"] * c + p["b"])
+        y[k] = p["v"] @ h
+        c = p["alpha"] * c + h
+    f_hat = (y + 1) * 0.5 * (f[:n].max() - f[:n].min()) + f[:n].min()
+    np.testing.assert_allclose(np.asarray(fit.predict(v)), f_hat, rtol=1e-3, atol=1e-3 * np.ptp(f))
+    y_scaled = 2 * (f[:n] - f[:n].min()) / np.ptp(f[:n]) - 1
+    assert fit.metrics["cost"] == pytest.approx(np.mean((y_scaled - y[:n]) ** 2), rel=1e-3)
+    for window, sl in (("train", slice(0, n)), ("valid", slice(n, N)), ("all", slice(0, N))):
+        e = f[sl] - f_hat[sl]
+        assert fit.metrics[window]["mse_percent"] == pytest.approx(
+            100 * np.mean(e**2) / np.var(f[sl]), rel=1e-2)
+        assert fit.metrics[window]["max_abs"] == pytest.approx(np.max(np.abs(e)), rel=1e-2, abs=1e-3)
+    assert fit.metrics["num_params"] == 24
+
+
+def test_stages_never_get_worse_and_record_their_work(enn_fit):
+    fit, _, _ = enn_fit
+    names = [s["stage"] for s in fit.stages]
+    assert names == ["mapso", "nelder_mead", "bfgs"]
+    J = [s["J"] for s in fit.stages]
+    assert J[0] >= J[1] >= J[2]
+    assert fit.stages[0]["num_evals"] == SMALL_ENN.mapso.evaluations()
+    assert 1 <= fit.stages[2]["num_steps"] <= 40
+    assert fit.solution is not None and float(fit.solution.f) == pytest.approx(J[1])
+    assert len(fit.history["f"]) >= 2 and np.all(np.diff(fit.history["f"]) <= 0)
+    t = fit.timings
+    assert {"compile_s", "run_s", "refine_compile_s", "refine_run_s", "total_s"} <= set(t)
+    assert all(v >= 0 for v in t.values())
+    # theta stays inside the box (the sine reparametrisation keeps it there)
+    lo, hi = fit.model.bounds()
+    assert np.all(fit.theta >= lo) and np.all(fit.theta <= hi)
+
+
+def test_gradient_refinement_lowers_the_cost_from_a_poor_start():
+    """Started by Nelder-Mead alone from a fixed point, BFGS must lower J and the
+    reported J must be the cost of the returned theta."""
+    v = velocity_profile()
+    f = hysteretic_friction(v)
+    model = Elman(neurons=4, context_weight_bound=2.0)
+    lo, hi = model.bounds()
+    theta0 = lo + 0.3 * (hi - lo)
+    nm = jaxfric.NelderMead(max_steps=20)
+    fit = identify(model, (v, f, DT), key=0, solver=nm, theta0=theta0,
+                   refine=GradientRefinement(method="bfgs", max_steps=40))
+    assert [s["stage"] for s in fit.stages] == ["neldermead", "bfgs"]
+    assert fit.stages[1]["improved"] and fit.stages[1]["J"] < 0.5 * fit.stages[0]["J"]
+    assert fit.metrics["cost"] == fit.stages[1]["J"]
+
+
+def test_tuple_and_frictiondata_splits():
+    v = velocity_profile()
+    f = lugre_friction(v, **TRUTH)
+    rec = _api.as_record((v, f, DT))
+    assert rec.n_train == 800 and rec.n_valid == 200  # paper's 80 / 20 split by default
+    assert _api.as_record((v, f, DT), train=600).n_train == 600
+    assert _api.as_record((v, f, DT), train=0.5).n_train == 500
+    data = FrictionData.from_arrays(v, f, DT, n_train=900)
+    assert _api.as_record(data).n_train == 900
+    assert _api.as_record(data, train=700).n_train == 700
+    assert _api.as_record(data).dt == pytest.approx(DT)
+
+
+def test_named_models_get_the_documented_defaults_and_options():
+    m = _api.resolve_model("elman", None)
+    assert m.context_weight_bound == _api.NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]
+    assert _api.resolve_model("Elman", {"neurons": 20, "context_weight_bound": 5.0}).num_params == 120
+    assert _api.resolve_model("lugre", None) == LuGre()
+    solver = _api.default_solver(_api.resolve_model("elman", None))
+    assert solver.mapso.num_agents == 64  # ALGORITHMS §3.5: Lsize 8 for the ENN
+    assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
+
+
+# ------------------------------------------------------------------ bad inputs
+@pytest.fixture
+def no_optimiser(monkeypatch):
+    """Fail the test if identify reaches the optimiser: errors must come first."""
+
+    def forbidden(*a, **k):
+        raise AssertionError("identify started optimising before rejecting the input")
+
+    monkeypatch.setattr(_api, "minimise", forbidden)
+
+
+def _good():
+    v = velocity_profile(400)
+    return v, lugre_friction(v, **TRUTH)
+
+
+@pytest.mark.parametrize(
+    "make, words",
+    [
+        (lambda v, f: dict(data=(v, f[:-1], DT)), ["same length", "400", "399"]),
+        (lambda v, f: dict(data=(np.where(np.arange(400) == 7, np.nan, v), f, DT)),
+         ["velocity", "non-finite", "NaN", "index 7"]),
+        (lambda v, f: dict(data=(v, np.where(np.arange(400) == 9, np.inf, f), DT)),
+         ["friction", "non-finite", "inf"]),
+        (lambda v, f: dict(data=(v, f, DT), train=500), ["shorter than the training split"]),
+        (lambda v, f: dict(data=(v, f, DT), train=400), ["validation window is empty"]),
+        (lambda v, f: dict(data=FrictionData.from_arrays(v, f, DT, train_fraction=1.0)),
+         ["validation window is empty"]),
+        (lambda v, f: dict(data=(v, np.full(400, 3.0), DT)), ["zero variance"]),
+        (lambda v, f: dict(data=(v, f, 0.0)), ["dt", "positive"]),
+        (lambda v, f: dict(data=(v, f)), ["(velocity, friction, dt)"]),
+        (lambda v, f: dict(data=(v, f, DT), model="elman", model_options={"neurons": 0}),
+         ["neurons", ">= 1"]),
+        (lambda v, f: dict(data=(v, f, DT), model="lugre", theta0=[7, 3, 3, 100, 1.5, np.nan]),
+         ["theta", "non-finite"]),
+        (lambda v, f: dict(data=(v, f, DT), model="lugre", theta0=[7, 3, 3, 100, 1.5]),
+         ["theta", "6 parameters"]),
+        (lambda v, f: dict(data=(v, f, DT), model="gms"), ["unknown friction model", "lugre"]),
+        (lambda v, f: dict(data=(v, f, DT), solver="mapso"), ["solver", "jaxfric solver"]),
+        (lambda v, f: dict(data=(v, f, DT), refine="adam"), ["refine"]),
+        (lambda v, f: dict(data=(v, f, DT), key=None), ["key"]),
+    ],
+)
+def test_bad_input_raises_value_error_before_optimising(no_optimiser, make, words):
+    v, f = _good()
+    kwargs = dict(model="lugre", key=0)
+    kwargs.update(make(v, f))
+    model = kwargs.pop("model")
+    data = kwargs.pop("data")
+    with pytest.raises(ValueError) as info:
+        identify(model, data, **kwargs)
+    for w in words:
+        assert w in str(info.value), (w, str(info.value))
+
+
+def test_theta0_outside_the_box_is_rejected(no_optimiser):
+    v, f = _good()
+    model = LuGre()
+    lo, hi = model.bounds()
+    with pytest.raises(ValueError, match="outside the search box"):
+        identify(model, (v, f, DT), key=0, theta0=hi + 1.0, data_bounds=False)
