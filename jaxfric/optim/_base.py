@@ -151,9 +151,16 @@ def safe_value(f):
 
 
 def batch_objective(fn: Callable, args) -> Callable:
-    """``X (P, D) -> f (P,)``: vmapped, NaN-safe version of ``fn(x, args)``."""
+    """``X (P, D) -> f (P,)``: vmapped, NaN-safe version of ``fn(x, args)``.
+
+    If ``fn`` carries a device ``layout`` (set by :func:`jaxfric.minimise` when there
+    are several devices) the population is split by agents across them.
+    """
+    layout = getattr(fn, "layout", None)
 
     def f_batch(X):
+        if layout is not None:
+            X = layout.constrain_rows(X)
         return safe_value(jax.vmap(lambda x: fn(x, args))(X))
 
     return f_batch

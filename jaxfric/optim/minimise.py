@@ -18,6 +18,7 @@ import numpy as np
 
 from ._base import AbstractSolver, Solution
 from .progress import ProgressHook, TqdmProgress, register
+from .sharding import Layout, resolve_devices, shard_keys
 
 
 class _Flat(eqx.Module):
@@ -26,6 +27,7 @@ class _Flat(eqx.Module):
     fn: Callable = eqx.field(static=True)
     treedef: Any = eqx.field(static=True)
     shapes: tuple = eqx.field(static=True)
+    layout: Layout | None = None
 
     def unravel(self, x):
         sizes = [int(np.prod(s)) for s in self.shapes]
@@ -202,6 +204,7 @@ def minimise(
     y0=None,
     dtype=None,
     progress=None,
+    devices=None,
 ) -> Solution:
     """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
 
@@ -221,6 +224,9 @@ def minimise(
             global generations, 1 = Nelder–Mead steps), or ``None`` (silent). Reports
             come from inside the compiled run about every 1 % of the generations
             and every 50 Nelder–Mead steps; a new display never recompiles.
+        devices: where to evaluate the population: ``None`` (default) splits it by
+            agents over every device when there are several (no effect on one);
+            ``False`` keeps it on one device; or a sequence of devices.
 
     Returns:
         A :class:`Solution`.
@@ -231,6 +237,9 @@ def minimise(
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     key = _check_key(key)
+    layout = resolve_devices(devices)
+    if layout is not None:
+        flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
     with _progress(progress, solver) as hook:
         sol = _run(solver, flat, lower, upper, args, key, x0, hook)
         jax.block_until_ready(sol)
@@ -247,6 +256,7 @@ def minimise_many(
     y0=None,
     dtype=None,
     progress=None,
+    devices=None,
 ) -> Solution:
     """Independent runs of :func:`minimise`, one per key, in one vmapped jitted call.
 
@@ -254,6 +264,9 @@ def minimise_many(
     the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
     equals ``minimise(..., key=keys[i])`` up to floating-point reassociation.
     ``progress`` as in :func:`minimise` (reports arrive once per run and step).
+    ``devices``: ``None`` (default) lays the runs out over every device when there
+    are several (the batch is padded to a multiple of the device count and the
+    padding dropped); ``False`` keeps them on one device; or a sequence of devices.
 
     Under ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]``
     still counts the evaluations the algorithm asked for, but XLA computes both
@@ -264,7 +277,10 @@ def minimise_many(
     keys = _check_key(keys, "keys")
     if jnp.ndim(keys) < 1 or (jnp.asarray(keys).dtype == jnp.uint32 and jnp.ndim(keys) < 2):
         raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+    keys, n = shard_keys(keys, resolve_devices(devices))
     with _progress(progress, solver) as hook:
         sol = _run_many(solver, flat, lower, upper, args, keys, x0, hook)
         jax.block_until_ready(sol)
+    if keys.shape[0] != n:
+        sol = jax.tree_util.tree_map(lambda a: a[:n], sol)
     return _unravel_solution(sol, flat, batched=True)

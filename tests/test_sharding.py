@@ -1,0 +1,53 @@
+"""Sharded and unsharded runs give the same result for the same key.
+
+JAX reads ``XLA_FLAGS`` once at start-up, so the check runs in a fresh Python
+process with four forced host (CPU) devices."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent(
+    """
+    import json, os
+    import jax, jax.numpy as jnp, numpy as np
+    import jaxfric as jf
+    from jaxfric import functions as F
+    assert jax.device_count() == 4, jax.devices()
+    lo, hi = F.get("rastrigin").bounds(6, np.float32)
+    obj = F.objective("rastrigin")
+    out = {}
+    for name, solver in [
+        ("pso", jf.PSO(num_particles=10, num_generations=20)),
+        ("hybrid", jf.mapso_nmds(lattice_size=3, num_generations=10, nm_max_steps=50)),
+    ]:
+        a = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(0))
+        b = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(0), devices=False)
+        keys = jax.random.split(jax.random.key(1), 7)  # not a multiple of 4: padded
+        m = jf.minimise_many(obj, solver, (lo, hi), keys=keys)
+        u = jf.minimise_many(obj, solver, (lo, hi), keys=keys, devices=False)
+        out[name] = dict(
+            population=bool(jnp.array_equal(a.value, b.value)) and float(a.f) == float(b.f),
+            runs=bool(jnp.array_equal(m.value, u.value)) and bool(jnp.array_equal(m.f, u.f)),
+            runs_shape=list(m.f.shape),
+            evals_equal=bool(jnp.array_equal(m.stats["num_evals"], u.stats["num_evals"])),
+        )
+    print("RESULT" + json.dumps(out))
+    """
+)
+
+
+def test_sharded_equals_unsharded_on_four_host_devices():
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    proc = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = [l for l in proc.stdout.splitlines() if l.startswith("RESULT")][0]
+    out = json.loads(line[len("RESULT"):])
+    for name, r in out.items():
+        assert r["population"], f"{name}: population-sharded run differs"
+        assert r["runs"], f"{name}: runs sharded over devices differ"
+        assert r["runs_shape"] == [7] and r["evals_equal"], (name, r)
