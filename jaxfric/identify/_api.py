@@ -9,9 +9,8 @@ Everything the user passed is checked first (:mod:`._data`, the model's own
 checks, the solver's ``check``), so bad input fails in milliseconds with a
 ``ValueError`` instead of after a long run.
 
-Extension point: each stage is one call between :class:`._timing.Stopwatch`
-brackets; a future ``progress=`` callback would be invoked between stages (and,
-for per-generation progress, the solver run in chunks).
+``progress=`` goes to :func:`jaxfric.minimise`, which reports from inside the
+compiled run; the gradient stage is one short call after it.
 """
 
 from __future__ import annotations
@@ -175,6 +174,7 @@ def identify(
     dtype=None,
     data_bounds: bool = True,
     model_options: dict | None = None,
+    progress=None,
 ) -> Fit:
     """Identify a friction model from a velocity/friction record (ALGORITHMS.md §11).
 
@@ -202,6 +202,9 @@ def identify(
             data (``model.with_data_bounds``); no effect on the Elman networks.
         model_options: constructor options for a model given by name
             (e.g. ``{"neurons": 20}``).
+        progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
+            the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
+            ``None`` (silent). A new display never recompiles.
 
     Cost (§2.4): J = mean squared training error of the free-run prediction, on
     [−1, 1]-scaled data for the networks, divided by the friction variance for
@@ -246,7 +249,7 @@ def identify(
 
         with Stopwatch() as sw:
             sol = minimise(cost, solver, (lower, upper), args=data_j, key=key, y0=theta0,
-                           dtype=dtype)
+                           dtype=dtype, progress=progress)
             sol = jax.block_until_ready(sol)
         stages = _stages(sol, solver)
         timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
