@@ -118,6 +118,24 @@ def _check_velocity(velocity, dtype) -> jax.Array:
     return jnp.asarray(velocity, dtype)
 
 
+def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt) -> jax.Array:
+    """Free-run friction [N] of ``model`` at ``theta`` for ``velocity`` [m/s] (§2.4):
+    scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
+    :class:`Scaler` pair, or ``(None, None)`` for SI-unit models). Computed in
+    ``theta``'s dtype."""
+    theta = jnp.asarray(theta)
+    dtype = theta.dtype
+    v = _check_velocity(velocity, dtype)
+    if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
+        raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
+    dt = jnp.asarray(dt, dtype)
+    model = rollout_model(model)
+    if model.needs_scaling:
+        sv, sf = scalers
+        return sf.unscale(model.simulate(theta, sv.scale(v), dt))
+    return model.simulate(theta, v, dt)
+
+
 class Fit:
     """An identified friction model and its report (returned by :func:`jaxfric.identify`).
 
@@ -193,18 +211,9 @@ class Fit:
         velocity is scaled with the training-window scaler and the output mapped
         back to newtons. ``dt`` defaults to the identification record's.
         """
-        dtype = jnp.asarray(self.theta).dtype
-        v = _check_velocity(velocity, dtype)
         dt = self.dt if dt is None else dt
-        if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
-            raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
-        theta = jnp.asarray(self.theta)
-        dt = jnp.asarray(dt, dtype)
-        model = rollout_model(self.model)
-        if model.needs_scaling:
-            y = model.simulate(theta, self.velocity_scaler.scale(v), dt)
-            return self.friction_scaler.unscale(y)
-        return model.simulate(theta, v, dt)
+        return predict(self.model, self.theta, (self.velocity_scaler, self.friction_scaler),
+                       velocity, dt)
 
     # --------------------------------------------------------------- report
     def to_dict(self, include_theta: bool = True) -> dict[str, Any]:

@@ -149,6 +149,9 @@ def test_stages_never_get_worse_and_record_their_work(enn_fit):
     assert fit.stages[0]["num_evals"] == SMALL_ENN.mapso.evaluations()
     assert 1 <= fit.stages[2]["num_steps"] <= 40
     assert fit.solution is not None and float(fit.solution.f) == pytest.approx(J[1])
+    # stage-wise MSE % of the thetas we hold: Nelder-Mead's result and the refined one
+    assert fit.stages[2]["mse_percent_valid"] == fit.metrics["valid"]["mse_percent"]
+    assert fit.stages[1]["mse_percent_train"] >= fit.stages[2]["mse_percent_train"] * 0.999
     assert len(fit.history["f"]) >= 2 and np.all(np.diff(fit.history["f"]) <= 0)
     t = fit.timings
     assert {"compile_s", "run_s", "refine_compile_s", "refine_run_s", "total_s"} <= set(t)

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import models as _models
-from ..fit import Fit, model_config, model_name, rollout_model
+from ..fit import Fit, model_config, model_name, predict, rollout_model
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise
@@ -147,10 +147,10 @@ def _history(sol) -> dict[str, np.ndarray]:
     return {"evals": np.asarray(sol.history.evals)[:n], "f": np.asarray(sol.history.f)[:n]}
 
 
-def _metrics(fit_like: Fit, record: Record) -> dict:
+def _window_metrics(y_hat, record: Record) -> dict:
     """§6 metrics in newtons on the training, validation and whole record (free run
     over the whole record, so the validation window continues the training state)."""
-    y_hat = np.asarray(fit_like.predict(record.velocity), np.float64)
+    y_hat = np.asarray(y_hat, np.float64)
     if not np.all(np.isfinite(y_hat)):
         # Bounded models cannot get here; an exotic one might. Report, do not crash.
         return {"train": None, "valid": None, "all": None, "prediction_finite": False}
@@ -160,6 +160,12 @@ def _metrics(fit_like: Fit, record: Record) -> dict:
         "valid": friction_metrics(f[n:], y_hat[n:]) if np.ptp(f[n:]) > 0 else None,
         "all": friction_metrics(f, y_hat),
     }
+
+
+def _stage_mse(metrics: dict) -> dict:
+    """MSE %, MAX and FIT % per window of one stage's θ (so a report can compare stages)."""
+    return {f"{k}_{w}": (metrics.get(w) or {}).get(k)
+            for k in ("mse_percent", "max_abs", "fit_percent") for w in ("train", "valid", "all")}
 
 
 def identify(
@@ -254,12 +260,16 @@ def identify(
         stages = _stages(sol, solver)
         timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
         theta = sol.value
+        metrics = _window_metrics(predict(model, theta, scalers, record.velocity, record.dt), record)
+        stages[-1].update(_stage_mse(metrics))
 
         if settings_refine is not None:
             lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
             with Stopwatch() as swr:
                 out = jax.block_until_ready(_refine(settings_refine, cost, theta, lo, hi, data_j))
             theta = out.theta
+            metrics = _window_metrics(
+                predict(model, theta, scalers, record.velocity, record.dt), record)
             stages.append({
                 "stage": settings_refine.method,
                 "J": float(out.f),
@@ -267,6 +277,7 @@ def identify(
                 "improved": bool(out.improved),
                 "num_steps": int(out.num_steps),
                 "result": result_name(out.result),
+                **_stage_mse(metrics),
             })
             timings.update(refine_compile_s=swr.compile_s, refine_run_s=swr.run_s)
 
@@ -279,7 +290,7 @@ def identify(
             dt=record.dt,
             n_train=record.n_train,
             n_samples=record.n_samples,
-            metrics={},
+            metrics={**metrics, "num_params": model.num_params, "cost": float(stages[-1]["J"])},
             stages=stages,
             history=_history(sol),
             solution=sol,
@@ -301,8 +312,5 @@ def identify(
                         else "mean squared error / var(F_train)",
             },
         )
-        fit.metrics = _metrics(fit, record)
-        fit.metrics["num_params"] = model.num_params
-        fit.metrics["cost"] = float(stages[-1]["J"])
     fit.timings = {**timings, "total_s": total.wall_s}
     return fit
