@@ -57,14 +57,20 @@ class MAPSONMDS(AbstractSolver):
         global_sol, swarm = self.mapso.run_state(
             fn, lower, upper, args, k_global, x0, progress
         )
+        return self.local_phase(fn, lower, upper, args, k_local, global_sol, swarm, progress)
+
+    def local_phase(self, fn, lower, upper, args, key, global_sol, swarm, progress=None):
+        """Nelder–Mead from the global phase's result (``key``: the local half of the
+        run's key, ``jax.random.split(key)[1]``)."""
         step = None
         if self.simplex_from_swarm:
             spread = jnp.std(swarm.pbest, axis=0)
             floor = 1e-3 * self.nelder_mead.initial_step * (upper - lower)
             step = jnp.maximum(spread, floor)
+
         def refine(start):
             return self.nelder_mead.run(
-                fn, lower, upper, args, k_local, start, progress, initial_step=step
+                fn, lower, upper, args, key, start, progress, initial_step=step
             )
 
         if self.num_starts == 1:

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
-from ._base import AbstractSolver, Solution
+from ._base import AbstractSolver, Solution, check_positive_int
 from .progress import ProgressHook, TqdmProgress, register
 from .sharding import Layout, resolve_devices, shard_keys
 
@@ -205,6 +205,8 @@ def minimise(
     dtype=None,
     progress=None,
     devices=None,
+    checkpoint=None,
+    checkpoint_every: int = 50,
 ) -> Solution:
     """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
 
@@ -227,6 +229,12 @@ def minimise(
         devices: where to evaluate the population: ``None`` (default) splits it by
             agents over every device when there are several (no effect on one);
             ``False`` keeps it on one device; or a sequence of devices.
+        checkpoint: a file path. The global (swarm) phase then runs in chunks of
+            ``checkpoint_every`` generations and saves its state atomically after each;
+            calling ``minimise`` again with the same path resumes from the last chunk
+            and returns exactly the uninterrupted run's result for the same key (swarm
+            solvers and MAPSO–NMDS only; see :mod:`jaxfric.optim.checkpoint`).
+        checkpoint_every: generations per chunk.
 
     Returns:
         A :class:`Solution`.
@@ -240,8 +248,18 @@ def minimise(
     layout = resolve_devices(devices)
     if layout is not None:
         flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
+    if checkpoint is not None:
+        from .checkpoint import _swarm_of, run_checkpointed
+
+        _swarm_of(solver)  # only swarm solvers can be chunked: fail before any work
+        check_positive_int("checkpoint_every", checkpoint_every)
     with _progress(progress, solver) as hook:
-        sol = _run(solver, flat, lower, upper, args, key, x0, hook)
+        if checkpoint is None:
+            sol = _run(solver, flat, lower, upper, args, key, x0, hook)
+        else:
+            sol = run_checkpointed(
+                solver, flat, lower, upper, args, key, x0, hook, checkpoint, checkpoint_every
+            )
         jax.block_until_ready(sol)
     return _unravel_solution(sol, flat, batched=False)
 

@@ -118,11 +118,18 @@ class AbstractSwarm(AbstractSolver):
     def progress_totals(self):
         return self.num_generations, None
 
-    def run_state(self, fn: Callable, lower, upper, args, key, x0=None, progress=None):
-        """Run and return ``(Solution, final SwarmState)``."""
+    def init_state(self, fn: Callable, lower, upper, args, key, x0=None) -> SwarmState:
+        """The evaluated first population."""
+        return self.init(batch_objective(fn, args), lower, upper, key, x0)
+
+    def advance(self, state, fn: Callable, lower, upper, args, start, length: int, progress=None):
+        """Generations ``start .. start + length − 1`` in one ``lax.scan``.
+
+        Returns ``(state, (evals, f_best))`` with one entry per generation. A run split
+        into several ``advance`` calls performs exactly the operations of one call, so
+        checkpointed runs reproduce uninterrupted ones.
+        """
         f_batch = batch_objective(fn, args)
-        state = self.init(f_batch, lower, upper, key, x0)
-        first = (state.num_evals[None], state.gbest_f[None])
 
         def body(s, i):
             s = self.step(s, f_batch, lower, upper, i)
@@ -130,13 +137,13 @@ class AbstractSwarm(AbstractSolver):
                 progress.emit(0, i + 1, s.num_evals, s.gbest_f)
             return s, (s.num_evals, s.gbest_f)
 
-        state, (evals, fs) = jax.lax.scan(
-            body, state, jnp.arange(self.num_generations)
-        )
-        history = History.from_arrays(
-            jnp.concatenate([first[0], evals]), jnp.concatenate([first[1], fs])
-        )
-        sol = Solution(
+        gens = jnp.asarray(start, jnp.int32) + jnp.arange(length, dtype=jnp.int32)
+        return jax.lax.scan(body, state, gens)
+
+    def finish(self, state: SwarmState, evals, f_best) -> Solution:
+        """The :class:`Solution` of a finished run; ``evals``/``f_best`` hold the
+        initial population's entry followed by one per generation."""
+        return Solution(
             value=state.gbest,
             f=state.gbest_f,
             result=result_from_f(state.gbest_f),
@@ -144,7 +151,18 @@ class AbstractSwarm(AbstractSolver):
                 "num_steps": jnp.array(self.num_generations, jnp.int32),
                 "num_evals": state.num_evals,
             },
-            history=history,
+            history=History.from_arrays(evals, f_best),
+        )
+
+    def run_state(self, fn: Callable, lower, upper, args, key, x0=None, progress=None):
+        """Run and return ``(Solution, final SwarmState)``."""
+        state = self.init_state(fn, lower, upper, args, key, x0)
+        first = (state.num_evals[None], state.gbest_f[None])
+        state, (evals, fs) = self.advance(
+            state, fn, lower, upper, args, 0, self.num_generations, progress
+        )
+        sol = self.finish(
+            state, jnp.concatenate([first[0], evals]), jnp.concatenate([first[1], fs])
         )
         return sol, state
 
