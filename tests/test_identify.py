@@ -12,6 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import jaxfric
 from jaxfric.identify import GradientRefinement, identify
@@ -200,6 +202,41 @@ def test_named_models_get_the_documented_defaults_and_options():
     assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
 
 
+def test_static_map_recovered_by_nelder_mead_alone():
+    """Coulomb + viscous data from the model itself: NM from the LS initial guess."""
+    from jaxfric.models import Coulomb
+
+    v = velocity_profile(600)
+    model = Coulomb()
+    truth = dict(Fc=180.0, sigma2=2.5e3)
+    f = np.asarray(model.simulate(model.from_physical(**truth), jnp.asarray(v)))
+    fitted = model.with_data_bounds(v[:480], f[:480])
+    fit = identify(model, (v, f, DT), key=0, solver=jaxfric.NelderMead(max_steps=300),
+                   theta0=fitted.initial_guess(v[:480], f[:480]))
+    assert fit.metrics["valid"]["mse_percent"] < 1e-3
+    assert float(fit.params["Fc"]) == pytest.approx(180.0, rel=1e-3)
+    assert float(fit.params["sigma2"]) == pytest.approx(2.5e3, rel=1e-2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(4, 3000), data=st.data())
+def test_split_property(n, data):
+    """Any count in [2, n-1] is honoured; a fraction rounds; the windows cover the record."""
+    v = np.linspace(-1.0, 1.0, n)
+    f = v**3 + 0.1
+    count = data.draw(st.integers(2, n - 1))
+    rec = _api.as_record((v, f, 0.01), train=count)
+    assert rec.n_train == count and rec.n_train + rec.n_valid == n
+    assert np.array_equal(rec.velocity, v) and np.array_equal(rec.friction, f)
+    frac = data.draw(st.floats(0.05, 0.95))
+    expect = int(round(frac * n))
+    if 2 <= expect < n:
+        assert _api.as_record((v, f, 0.01), train=frac).n_train == expect
+    else:
+        with pytest.raises(ValueError):
+            _api.as_record((v, f, 0.01), train=frac)
+
+
 # ------------------------------------------------------------------ bad inputs
 @pytest.fixture
 def no_optimiser(monkeypatch):
@@ -241,6 +278,8 @@ def _good():
         (lambda v, f: dict(data=(v, f, DT), solver="mapso"), ["solver", "jaxfric solver"]),
         (lambda v, f: dict(data=(v, f, DT), refine="adam"), ["refine"]),
         (lambda v, f: dict(data=(v, f, DT), key=None), ["key"]),
+        (lambda v, f: dict(data=(v, f, DT), key=jax.random.split(jax.random.key(0), 3)),
+         ["one JAX PRNG key", "batch"]),
     ],
 )
 def test_bad_input_raises_value_error_before_optimising(no_optimiser, make, words):
@@ -261,3 +300,37 @@ def test_theta0_outside_the_box_is_rejected(no_optimiser):
     lo, hi = model.bounds()
     with pytest.raises(ValueError, match="outside the search box"):
         identify(model, (v, f, DT), key=0, theta0=hi + 1.0, data_bounds=False)
+
+
+# ------------------------------------------------------------- refinement pieces
+def test_refinement_resolution():
+    from jaxfric.identify._refine import as_refinement
+
+    assert as_refinement(None, 6) is None and as_refinement(False, 180) is None
+    assert as_refinement(True, 6).method == "lm"  # small physical model
+    assert as_refinement("auto", 180).method == "bfgs"  # the network
+    assert as_refinement("Levenberg-Marquardt", 6).method == "lm"
+    custom = GradientRefinement(method="lbfgs", max_steps=7)
+    assert as_refinement(custom, 6) is custom
+    with pytest.raises(ValueError, match="max_steps"):
+        as_refinement(GradientRefinement(max_steps=0), 6)
+    with pytest.raises(ValueError, match="edge"):
+        as_refinement(GradientRefinement(edge=0.7), 6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(frac=st.floats(0.0, 1.0), lo=st.floats(-1e3, 1e3), width=st.floats(1e-3, 1e3))
+def test_sine_reparametrisation_round_trip_and_stays_in_box(frac, lo, width):
+    from jaxfric.identify._refine import from_box, to_box
+
+    with jax.enable_x64(True):
+        lower, upper = jnp.asarray([lo]), jnp.asarray([lo + width])
+        theta = lower + frac * (upper - lower)
+        edge = 1e-4
+        back = to_box(from_box(theta, lower, upper, edge), lower, upper)
+        inside = min(max(frac, edge), 1 - edge)  # a start on a bound is pulled inside
+        np.testing.assert_allclose(np.asarray(back), np.asarray(lower + inside * (upper - lower)),
+                                   rtol=1e-9, atol=1e-9 * (abs(lo) + width))
+        z = jnp.linspace(-50.0, 50.0, 101)
+        th = to_box(z, lower, upper)
+        assert bool(jnp.all((th >= lower) & (th <= upper)))

@@ -101,8 +101,12 @@ def _as_key(key):
     if isinstance(key, numbers.Integral) and not isinstance(key, bool):
         return jax.random.key(int(key)), int(key)
     k = jnp.asarray(key)
-    if not (jnp.issubdtype(k.dtype, jax.dtypes.prng_key) or (k.dtype == jnp.uint32 and k.shape == (2,))):
-        raise ValueError(f"key must be a JAX PRNG key or an int seed, got {key!r}")
+    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
+    if not ((typed and k.shape == ()) or (k.dtype == jnp.uint32 and k.shape == (2,))):
+        raise ValueError(
+            f"key must be one JAX PRNG key (jax.random.key(seed)) or an int seed, got "
+            f"{'a batch of keys of shape ' + str(k.shape) if typed else repr(key)}"
+        )
     return key, None
 
 
