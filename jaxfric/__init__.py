@@ -1,11 +1,23 @@
 """jaxfric: JAX-accelerated identification of nonlinear friction.
 
-The public API is re-exported here; see README.md for a tour.
+Optimisers (``minimise``, ``PSO``, ``MAPSO``, ``NelderMead``, ``MAPSONMDS``), test
+functions (``functions``), friction models (``models``: ``Elman``, ``LuGre``, ...),
+the hydraulic rig simulator and measurement pipeline (``rig``), identification
+(``identify`` → ``Fit``, ``load_fit``) and metrics (``metrics``). See README.md.
 """
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import functions
+try:
+    __version__ = _version("jaxfric")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0+unknown"
+
+from . import functions, metrics, models, rig
+from .fit import Fit, load_fit
+from .identify import identify
+from .metrics import friction_metrics
+from .models import Coulomb, Dahl, Elman, ElmanFull, LuGre, Stribeck
 from .optim import (
     MAPSO,
     MAPSONMDS,
@@ -18,22 +30,32 @@ from .optim import (
     minimise,
     minimise_many,
 )
-
-try:
-    __version__ = _version("jaxfric")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0+unknown"
+from .rig import FrictionData
 
 __all__ = [
-    "functions",
+    "Coulomb",
+    "Dahl",
+    "Elman",
+    "ElmanFull",
+    "Fit",
+    "FrictionData",
+    "History",
+    "LuGre",
     "MAPSO",
     "MAPSONMDS",
+    "NelderMead",
     "PSO",
     "RESULTS",
-    "History",
-    "NelderMead",
     "Solution",
+    "Stribeck",
+    "friction_metrics",
+    "functions",
+    "identify",
+    "load_fit",
     "mapso_nmds",
+    "metrics",
     "minimise",
     "minimise_many",
+    "models",
+    "rig",
 ]
