@@ -1,0 +1,262 @@
+"""The four sub-commands: ``demo``, ``identify``, ``predict`` and ``bench``.
+
+Each takes the parsed arguments and returns an exit status. They run in the CLI's
+worker thread (see :mod:`jaxfric.cli.errors`); files go through the atomic writers of
+:mod:`jaxfric.report`, and every finished file is recorded in :data:`KEPT` so that
+Ctrl-C can say what stayed on disk.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import KEPT, UserError
+from .fitting import budget_for, build_model, check_models, fit_all, solver_expression
+from .parser import DEFAULT_OUT
+
+
+def _say(args):
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(f"jaxfric: {msg}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def _command_line(argv) -> str:
+    return "jaxfric " + " ".join(shlex.quote(a) for a in argv)
+
+
+def _prepare_out(path: str) -> Path:
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {path} exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"cannot create the report folder {path}: {e.strerror}") from None
+    if not os.access(out, os.W_OK):
+        raise UserError(f"the report folder {path} is not writable")
+    return out
+
+
+def _csv_text(columns: dict[str, np.ndarray]) -> str:
+    """CSV with a header row; full float precision so a round trip is exact."""
+    buf = io.StringIO()
+    buf.write(",".join(columns) + "\n")
+    np.savetxt(buf, np.column_stack([np.asarray(c, dtype=np.float64) for c in columns.values()]),
+               delimiter=",", fmt="%.17g")
+    return buf.getvalue()
+
+
+def _write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
+    from jaxfric.report import atomic_write_text
+
+    p = atomic_write_text(path, _csv_text(columns))
+    KEPT.add(p)
+    return p
+
+
+def _save_fit_now(out: Path):
+    """Save each fit as soon as it exists, so an interrupted run keeps the finished models."""
+    from jaxfric.report import save_fit, slug
+
+    def keep(name, fit):
+        if hasattr(fit, "save"):
+            KEPT.add(save_fit(fit, out / "models" / f"{slug(name)}.npz"))
+
+    return keep
+
+
+def _settings(args, fits) -> dict:
+    """Budgets, seeds and options of the run, for report.md and results.json."""
+    from .fitting import build_solver, describe_solver
+
+    s = {"seed": args.seed, "float64": bool(args.x64), "quick": bool(args.quick),
+         "gradient refinement": getattr(args, "refine", "none")}
+    for name in fits:
+        model = build_model(name, args)
+        s[f"{name}: solver"] = describe_solver(build_solver(args.solver, model, budget_for(args)), model)
+    if any(n.startswith("elman") for n in fits):
+        s["neurons"] = args.neurons
+    return s
+
+
+def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
+    """Python that repeats the command's fits (shown under "Reproduce" in report.md)."""
+    lines = ["import jax", "import jaxfric as jf", "from jaxfric import rig",
+             "from jaxfric.identify import identify", "", *data_lines]
+    refine = getattr(args, "refine", "none")
+    for name in names:
+        model = build_model(name, args)
+        opts = f", model_options={{'neurons': {args.neurons}}}" if name.startswith("elman") else ""
+        solver = solver_expression(args.solver, model, budget_for(args))
+        ref = f", refine={refine!r}" if refine != "none" else ""
+        lines.append(f"fit_{name} = identify({name!r}, data, solver={solver}, key={key_expr}{opts}{ref})")
+    return "\n".join(lines)
+
+
+def _finish(args, out: Path, data, fits, *, title, source, argv, notes, python, extra_files) -> int:
+    from jaxfric.report import write_report
+
+    say = _say(args)
+    say(f"writing the report to {out}/")
+    result = write_report(out, data, fits, title=title, command=_command_line(argv), source=source,
+                          settings=_settings(args, fits), notes=notes, python=python,
+                          extra_files=extra_files, on_written=KEPT.add)
+    print(result["table"])
+    print(f"\nreport: {out / 'report.md'}  (results.json, {len(result['files'])} files)")
+    return 0
+
+
+# ---------------------------------------------------------------------- demo
+def cmd_demo(args, argv) -> int:
+    """Simulate the rig, compute friction, fit the models, write the report."""
+    import jax
+
+    from .data import simulated_rig
+
+    check_models(args.models)
+    out = _prepare_out(args.out)
+    say = _say(args)
+    data_key, fit_key = jax.random.split(jax.random.key(args.seed))
+    t0 = time.perf_counter()
+    say(f"simulating the test rig (2000 samples at 128 Hz, seed {args.seed}) and computing the friction")
+    r, record, data = simulated_rig(data_key)
+    say(f"  done in {time.perf_counter() - t0:.1f} s")
+    _write_csv(out / "rig_measurements.csv", {
+        "t": record.t, "x": record.x, "p1": record.p1, "p2": record.p2, "load": record.load})
+    _write_csv(out / "friction_data.csv", {"t": data.t, "velocity": data.velocity, "friction": data.friction})
+    fits = fit_all(data, args, fit_key, say=say, kept_fit=_save_fit_now(out))
+    cyl = r.cylinder
+    source = (f"Simulated low-speed press rig (jaxfric.rig.Rig(), seed {args.seed}): bore {cyl.bore:g} m, rod "
+              f"{cyl.rod:g} m, moving mass {cyl.mass:g} kg; measured position, chamber pressures and load "
+              "with sensor noise, then the paper's pipeline: zero-phase Butterworth 5 Hz, velocity and "
+              "acceleration by differentiation, friction by force balance (ALGORITHMS.md §7).")
+    python = _python_snippet(args, list(fits), [
+        f"data_key, fit_key = jax.random.split(jax.random.key({args.seed}))",
+        "r = rig.Rig()",
+        "record = rig.simulate(r, data_key)",
+        "data = rig.estimate_friction(record.measurements(), r.cylinder)"], "fit_key")
+    extra = {
+        "rig_measurements.csv": "the simulated raw channels t [s], x [m], p1, p2 [Pa], load [N]; try "
+        f"`jaxfric identify rig_measurements.csv --time-col t --x-col x --p1-col p1 --p2-col p2 "
+        f"--load-col load --bore {cyl.bore:g} --rod {cyl.rod:g} --mass {cyl.mass:g}`",
+        "friction_data.csv": "the pipeline's output t [s], velocity [m/s], friction [N]; try `jaxfric "
+        "identify friction_data.csv --velocity-col velocity --friction-col friction --time-col t`",
+    }
+    notes = ["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else []
+    return _finish(args, out, data, fits, title="jaxfric demo: friction identification on the simulated rig",
+                   source=source, argv=argv, notes=notes, python=python, extra_files=extra)
+
+
+# ------------------------------------------------------------------ identify
+def cmd_identify(args, argv) -> int:
+    """Fit friction models to a user's CSV file and write the report."""
+    import jax
+
+    from .data import identification_data
+
+    check_models(args.models)
+    say = _say(args)
+    data, desc, notes = identification_data(args)
+    for note in notes:
+        say(f"note: {note}")
+    say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz: {data.n_train} for estimation, "
+        f"{data.n_valid} for validation")
+    out = _prepare_out(args.out)
+    key = jax.random.key(args.seed)
+    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out))
+    python = _python_snippet(args, list(fits), [
+        f"# data: {desc}, as a jaxfric.rig.FrictionData (see jaxfric.rig.load_friction_pairs /",
+        f"# load_measurements + estimate_friction), train_fraction={args.train_fraction}",
+        "data = ..."], f"jax.random.key({args.seed})")
+    notes = list(notes) + (["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else [])
+    return _finish(args, out, data, fits, title=f"jaxfric identify: {Path(args.file).name}",
+                   source=desc[0].upper() + desc[1:] + ".", argv=argv, notes=notes, python=python,
+                   extra_files=None)
+
+
+# ------------------------------------------------------------------- predict
+def cmd_predict(args, argv) -> int:
+    """Load a saved fit and write its friction prediction for a velocity record."""
+    from jaxfric.metrics import friction_metrics
+    from jaxfric.report import atomic_write_text
+
+    from .data import prediction_input
+
+    if not os.path.exists(args.model_file):
+        raise UserError(f"model file not found: {args.model_file}")
+    try:
+        from jaxfric.fit import load_fit
+    except ImportError:
+        raise UserError("this jaxfric installation has no jaxfric.fit.load_fit") from None
+    try:
+        fit = load_fit(args.model_file)
+    except (ValueError, KeyError, TypeError, OSError) as e:
+        raise UserError(f"cannot load the fit {args.model_file}: {e}") from None
+    t, v, dt, measured, notes = prediction_input(args)
+    say = _say(args)
+    for note in notes:
+        say(f"note: {note}")
+    pred = np.asarray(fit.predict(v, dt), dtype=np.float64)
+    cols = {"t": t, "velocity": v, "friction_predicted": pred}
+    if measured is not None:
+        cols["friction_measured"] = measured
+        cols["error"] = measured - pred
+    text = _csv_text(cols)
+    if args.out == "-":
+        sys.stdout.write(text)
+    else:
+        p = atomic_write_text(args.out, text)
+        KEPT.add(p)
+        print(f"wrote {len(pred)} predictions to {p}")
+    if measured is not None:
+        m = friction_metrics(measured, pred)
+        print(f"MSE % {m['mse_percent']:.4g}, MAX {m['max_abs']:.4g} N, FIT % {m['fit_percent']:.2f}",
+              file=sys.stderr if args.out == "-" else sys.stdout)
+    return 0
+
+
+# --------------------------------------------------------------------- bench
+def benchmarks_dir() -> Path:
+    """``benchmarks/`` of the source tree (or ``$JAXFRIC_BENCHMARKS``)."""
+    env = os.environ.get("JAXFRIC_BENCHMARKS")
+    if env:
+        return Path(env)
+    import jaxfric
+
+    return Path(jaxfric.__file__).resolve().parents[1] / "benchmarks"
+
+
+def cmd_bench(args, argv) -> int:
+    """Import ``benchmarks/<name>.py`` by path and call its ``main(argv)``."""
+    path = benchmarks_dir() / f"{args.name}.py"
+    if not path.is_file():
+        raise UserError(f"benchmark script not found: {path} (the benchmarks live in the source tree's "
+                        "benchmarks/ folder; set JAXFRIC_BENCHMARKS to it)")
+    spec = importlib.util.spec_from_file_location(f"jaxfric_bench_{args.name}", path)
+    module = importlib.util.module_from_spec(spec)
+    old_argv0 = sys.argv[0]
+    sys.argv[0] = f"jaxfric bench {args.name}"  # the script's argparse shows this as its name
+    try:
+        spec.loader.exec_module(module)
+        main = getattr(module, "main", None)
+        if not callable(main):
+            raise UserError(f"{path} has no main(argv) function")
+        status = main(list(args.args))
+    finally:
+        sys.argv[0] = old_argv0
+    return 0 if status is None else int(status)
+
+
+COMMANDS = {"demo": cmd_demo, "identify": cmd_identify, "predict": cmd_predict, "bench": cmd_bench}
+DEFAULT_REPORT = DEFAULT_OUT

@@ -1,0 +1,235 @@
+"""Data for the command line: the demo's simulated rig and users' CSV files.
+
+CSV files are read here into named NumPy columns (with one-line errors naming the
+file, the column and what the header holds), then handed to the library loaders
+(:func:`jaxfric.rig.load_friction_pairs`, :func:`jaxfric.rig.load_measurements`,
+:func:`jaxfric.rig.estimate_friction`), which apply the unit factors, check the
+signals and resample irregular time stamps.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import UserError
+from .units import unit_factor
+
+
+@dataclass
+class Table:
+    """Columns of a delimited text file: ``header`` (may be empty) and float64 ``data``."""
+
+    path: str
+    header: list[str]
+    data: np.ndarray
+
+    def column(self, spec: str, option: str) -> np.ndarray:
+        """The column named ``spec`` (header name, or a 0-based index)."""
+        spec = str(spec).strip()
+        if spec in self.header:
+            return self.data[:, self.header.index(spec)]
+        try:
+            i = int(spec)
+        except ValueError:
+            have = f"the header has {', '.join(self.header)}" if self.header else "the file has no header row"
+            raise UserError(f"{option}: no column {spec!r} in {self.path}; {have}") from None
+        width = self.data.shape[1]
+        if not -width <= i < width:
+            raise UserError(f"{option}: column index {i} is out of range; {self.path} has {width} columns")
+        return self.data[:, i]
+
+
+def _delimiter(text: str | None):
+    if text is None or text.strip().lower() in ("whitespace", "space", "spaces", "ws", "none", ""):
+        return None
+    return {"\\t": "\t", "tab": "\t"}.get(text, text)
+
+
+def read_table(path: str, *, delimiter: str | None = ",", skip_rows: int = 0) -> Table:
+    """Read a delimited text file with an optional header row (detected: a first line that is
+    not all numbers). ``#`` starts a comment line. Raises :class:`UserError` for a missing or
+    unreadable file, no data rows, ragged rows or non-numeric values."""
+    if not os.path.exists(path):
+        raise UserError(f"file not found: {path}")
+    if os.path.isdir(path):
+        raise UserError(f"{path} is a folder, not a data file")
+    if skip_rows < 0:
+        raise UserError(f"--skip-rows must be >= 0, got {skip_rows}")
+    sep = _delimiter(delimiter)
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            lines = [ln.strip() for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
+    except UnicodeDecodeError:
+        raise UserError(f"{path} is not a text (CSV) file") from None
+    except OSError as e:
+        raise UserError(f"cannot read {path}: {e.strerror}") from None
+    if not lines:
+        raise UserError(f"{path} is empty")
+
+    def split(line):
+        return [c.strip().strip('"').strip("'") for c in (line.split(sep) if sep else line.split())]
+
+    first = split(lines[0])
+    if len(first) == 1:
+        for other, name in ((",", "','"), (";", "';'"), ("\t", "tab"), (None, "whitespace")):
+            if other != sep and len(lines[0].split(other)) > 1:
+                raise UserError(f"{path}: only one column found with --delimiter {delimiter!r}; the lines look "
+                                f"{name}-separated (is --delimiter right?)")
+    header: list[str] = []
+    try:
+        [float(c) for c in first]
+    except ValueError:
+        header, lines = first, lines[1:]
+    lines = lines[skip_rows:]
+    if not lines:
+        raise UserError(f"{path} has no data rows")
+    rows = []
+    width = len(header) if header else None
+    for n, line in enumerate(lines, start=1):
+        cells = split(line)
+        if width is None:
+            width = len(cells)
+        if len(cells) != width:
+            raise UserError(f"{path}: data row {n} has {len(cells)} columns, expected {width}"
+                            + (" (is --delimiter right?)" if len(cells) == 1 else ""))
+        try:
+            rows.append([float(c) if c != "" else np.nan for c in cells])
+        except ValueError:
+            bad = next(c for c in cells if not _is_number(c))
+            raise UserError(f"{path}: data row {n} holds a non-number {bad!r}") from None
+    return Table(path=path, header=header, data=np.asarray(rows, dtype=np.float64))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return text == ""
+
+
+def _time_column(table: Table, args) -> np.ndarray:
+    """Time stamps [s] from ``--time-col`` (with ``--time-unit``) or ``--dt``."""
+    if args.time_col is not None and args.dt is not None:
+        raise UserError("give either --time-col or --dt, not both")
+    n = table.data.shape[0]
+    if args.time_col is not None:
+        return table.column(args.time_col, "--time-col") * unit_factor("time", args.time_unit, "--time-unit")
+    if args.dt is not None:
+        return np.arange(n) * float(args.dt)
+    raise UserError("the sample times are missing: give --time-col COL or --dt SECONDS")
+
+
+def _load_quietly(fn, *a, **kw):
+    """Call a library loader; its irregular-sampling warning becomes one stderr note."""
+    from jaxfric.rig import IrregularSamplingWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IrregularSamplingWarning)
+        out = fn(*a, **kw)
+    notes = [str(w.message) for w in caught if issubclass(w.category, IrregularSamplingWarning)]
+    return out, notes
+
+
+def identification_data(args):
+    """:class:`jaxfric.rig.FrictionData` from ``jaxfric identify``'s file and options.
+
+    Returns ``(data, description)``, the description saying which mode and columns were used
+    (for the report). Velocity/friction columns select the pairs mode; position and
+    pressure/load columns the raw-channel mode through the §7 pipeline.
+    """
+    from jaxfric import rig
+
+    pairs = args.velocity_col is not None or args.friction_col is not None
+    raw_cols = {"x": args.x_col, "p1": args.p1_col, "p2": args.p2_col, "load": args.load_col}
+    raw = any(v is not None for v in raw_cols.values())
+    if pairs and raw:
+        raise UserError("give either --velocity-col/--friction-col (velocity and friction) or "
+                        "--x-col/--p1-col/--p2-col/--load-col (raw rig channels), not both")
+    if not pairs and not raw:
+        raise UserError("say which columns to use: --velocity-col and --friction-col, or the raw rig "
+                        "channels --x-col --p1-col --p2-col --load-col (see 'jaxfric identify --help')")
+    table = read_table(args.file, delimiter=args.delimiter, skip_rows=args.skip_rows)
+    t = _time_column(table, args)
+    notes: list[str] = []
+    if pairs:
+        if args.velocity_col is None or args.friction_col is None:
+            raise UserError("the velocity/friction mode needs both --velocity-col and --friction-col")
+        cols = {"t": t,
+                "velocity": table.column(args.velocity_col, "--velocity-col"),
+                "friction": table.column(args.friction_col, "--friction-col")}
+        scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit"),
+                 "friction": unit_factor("force", args.friction_unit, "--friction-unit")}
+        data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale,
+                                    train_fraction=args.train_fraction)
+        desc = (f"velocity/friction pairs from {args.file} (velocity column {args.velocity_col!r}, "
+                f"friction column {args.friction_col!r})")
+        return data, desc, notes
+
+    fills = {"p1": args.p1_fill, "p2": args.p2_fill, "load": args.load_fill}
+    if args.x_col is None:
+        raise UserError("the raw-channel mode needs --x-col (piston position)")
+    for ch in ("p1", "p2", "load"):
+        if raw_cols[ch] is None and fills[ch] is None:
+            raise UserError(f"--{ch}-col is missing (or give a constant with --{ch}-fill)")
+        if raw_cols[ch] is not None and fills[ch] is not None:
+            raise UserError(f"give either --{ch}-col or --{ch}-fill, not both")
+    missing = [f"--{k}" for k in ("bore", "rod", "mass") if getattr(args, k) is None]
+    if missing:
+        raise UserError(f"the raw-channel mode needs the cylinder geometry: {' '.join(missing)} "
+                        "(bore and rod diameters in m, moving mass in kg)")
+    if args.rod >= args.bore:
+        raise UserError(f"--rod ({args.rod} m) must be smaller than --bore ({args.bore} m)")
+    cols = {"t": t, "x": table.column(args.x_col, "--x-col")}
+    fill = {}
+    for ch in ("p1", "p2", "load"):
+        if raw_cols[ch] is not None:
+            cols[ch] = table.column(raw_cols[ch], f"--{ch}-col")
+        else:
+            fill[ch] = float(fills[ch])
+    p_unit = unit_factor("pressure", args.pressure_unit, "--pressure-unit")
+    scale = {"x": unit_factor("length", args.x_unit, "--x-unit"), "p1": p_unit, "p2": p_unit,
+             "load": unit_factor("force", args.load_unit, "--load-unit")}
+    meas, notes = _load_quietly(rig.load_measurements, cols, scale=scale, fill=fill)
+    data = rig.estimate_friction(meas, bore=args.bore, rod=args.rod, mass=args.mass, gravity=args.gravity,
+                                 cutoff=args.cutoff, train_fraction=args.train_fraction)
+    desc = (f"raw rig channels from {args.file} through the pipeline (Butterworth {args.cutoff:g} Hz, "
+            f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, gravity {args.gravity:g} m/s^2)")
+    return data, desc, notes
+
+
+def prediction_input(args):
+    """``(t, velocity, dt, friction_or_None, notes)`` for ``jaxfric predict`` (SI units)."""
+    from jaxfric import rig
+
+    table = read_table(args.data, delimiter=args.delimiter, skip_rows=args.skip_rows)
+    t = _time_column(table, args)
+    cols = {"t": t, "velocity": table.column(args.velocity_col, "--velocity-col")}
+    scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit")}
+    if args.friction_col is not None:
+        cols["friction"] = table.column(args.friction_col, "--friction-col")
+        scale["friction"] = unit_factor("force", args.friction_unit, "--friction-unit")
+    else:
+        cols["friction"] = np.zeros_like(t)  # placeholder: the loader wants the channel
+    data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale, train_fraction=1.0)
+    friction = np.asarray(data.friction) if args.friction_col is not None else None
+    return np.asarray(data.t), np.asarray(data.velocity), float(data.dt), friction, notes
+
+
+def simulated_rig(key):
+    """The demo's data: simulate the default rig with ``key`` and run the §7 pipeline.
+
+    Returns ``(rig, record, data)``: the :class:`jaxfric.rig.Rig`, its
+    :class:`~jaxfric.rig.RigRecord` (measured channels + ground truth) and the
+    :class:`~jaxfric.rig.FrictionData` (1600/400 split).
+    """
+    from jaxfric import rig
+
+    r = rig.Rig()
+    record = rig.simulate(r, key)
+    data = rig.estimate_friction(record.measurements(), r.cylinder)
+    return r, record, data

@@ -1,0 +1,293 @@
+"""The ``jaxfric`` argument parser: sub-commands, options, help texts with examples.
+
+Parsing only; nothing here touches JAX, so ``jaxfric --help`` answers at once.
+Argument errors are one line (``jaxfric: error: ...``), like every other user error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from .errors import EXIT_USER_ERROR, error_line
+from .units import UNITS
+
+DEFAULT_OUT = "jaxfric-report"
+SOLVERS = ("mapso-nmds", "mapso", "pso", "nelder-mead")
+
+
+class Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are a single ``jaxfric: error:`` line (no usage dump)."""
+
+    def error(self, message):  # noqa: D102 - argparse API
+        hint = f" (see '{self.prog} --help')"
+        print(error_line(message) + hint, file=sys.stderr, flush=True)
+        raise SystemExit(EXIT_USER_ERROR)
+
+
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Keep the epilog's example layout; show a default only where there is one."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (default is None or default is False or default is argparse.SUPPRESS
+                or "%(default)" in text or not action.option_strings):
+            return text
+        return f"{text} (default: {default})" if text else f"default: {default}"
+
+
+# --------------------------------------------------------------- value checkers
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    value = _number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def fraction(text: str) -> float:
+    value = _number(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"must lie strictly between 0 and 1, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value
+
+
+def seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def model_list(text: str) -> list[str]:
+    names = [t.strip().lower().replace("-", "_") for t in text.split(",") if t.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("give at least one model, e.g. elman,lugre")
+    return list(dict.fromkeys(names))
+
+
+# ------------------------------------------------------------------- epilogs
+MAIN_EPILOG = """\
+examples:
+  jaxfric demo                          simulate the rig, fit ENN and LuGre, write ./jaxfric-report/
+  jaxfric demo --quick --out /tmp/r     the same with a tiny budget (seconds)
+  jaxfric identify data.csv --velocity-col v --friction-col F --time-col t
+  jaxfric predict jaxfric-report/models/elman.npz new.csv --velocity-col v --dt 0.0078125
+  jaxfric bench table1 --quick
+  jaxfric COMMAND --help                options of one command
+
+Set JAXFRIC_DEBUG=1 (or pass --debug) to see tracebacks instead of one-line errors.
+"""
+
+DEMO_EPILOG = """\
+The demo reproduces the paper end to end on the synthetic rig (ALGORITHMS.md §1, §7):
+2000 samples at 128 Hz, 5 Hz Butterworth, friction by force balance, first 1600 samples
+for estimation and the last 400 for validation; ENN (30 neurons, 180 parameters) and
+LuGre (6 parameters), both fitted by MAPSO -> Nelder-Mead.
+
+The report folder holds report.md, results.json, figures (*.png), the saved fits
+(models/*.npz, for 'jaxfric predict') and the simulated raw channels
+(rig_measurements.csv, to try 'jaxfric identify' on).
+
+examples:
+  jaxfric demo
+  jaxfric demo --out results/demo --seed 3
+  jaxfric demo --models elman --neurons 20 --generations 400
+  jaxfric demo --quick --quiet
+"""
+
+IDENTIFY_EPILOG = """\
+Two kinds of CSV file (header row with column names; columns may also be 0-based indices):
+
+  velocity and friction     --velocity-col, --friction-col and --time-col (or --dt)
+  raw rig channels          --x-col, --p1-col, --p2-col, --load-col, --time-col (or --dt)
+                            and the cylinder: --bore, --rod [m], --mass [kg]; the channels
+                            are low-pass filtered (--cutoff), x is differentiated and the
+                            friction follows from the force balance (ALGORITHMS.md §7)
+
+Units: give each channel's unit by name or as a factor to SI (a negative factor flips a
+sign), e.g. --x-unit mm --pressure-unit bar --time-unit ms, or --load-unit -1.
+Known names: """ + "; ".join(f"{k}: {', '.join(v)}" for k, v in UNITS.items()) + """.
+
+examples:
+  jaxfric identify pairs.csv --velocity-col v --friction-col F --time-col t
+  jaxfric identify pairs.csv --velocity-col 0 --friction-col 1 --dt 0.0078125 --model lugre
+  jaxfric identify rig.csv --time-col t --x-col x --p1-col p1 --p2-col p2 --load-col load \\
+      --bore 0.10 --rod 0.07 --mass 120
+  jaxfric identify rec.txt --delimiter whitespace --time-col 0 --time-unit ms --x-col 4 \\
+      --x-unit mm --p2-col 5 --pressure-unit bar --load-col 6 --load-unit -1 --p1-fill 0 \\
+      --bore 0.025 --rod 0 --mass 0 --model lugre,elman --neurons 10
+"""
+
+PREDICT_EPILOG = """\
+Loads a fit saved by 'jaxfric demo' or 'jaxfric identify' (models/*.npz in the report
+folder, or Fit.save in Python) and writes its free-run friction prediction for the
+velocity record of DATA_CSV: columns t [s], velocity [m/s], friction_predicted [N]
+(plus friction_measured and error when --friction-col is given).
+
+examples:
+  jaxfric predict jaxfric-report/models/elman.npz new.csv --velocity-col v --time-col t
+  jaxfric predict fit.npz new.csv --velocity-col 0 --dt 0.0078125 --out pred.csv
+"""
+
+BENCH_EPILOG = """\
+Runs a benchmark script from the source tree's benchmarks/ folder; every argument after
+the benchmark's name goes to it unchanged ('jaxfric bench table1 --help' shows them).
+
+  table1     the paper's Table 1: MAPSO-NMDS against PSO on the test functions
+  friction   the friction identification benchmark (ENN sizes, ENN against LuGre)
+
+examples:
+  jaxfric bench table1 --quick
+  jaxfric bench table1 --dim 30 --runs 30 --out results
+  jaxfric bench friction --help
+"""
+
+
+# ------------------------------------------------------------------ builders
+def _common(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("general")
+    g.add_argument("--quiet", "-q", action="store_true", help="no progress bars or stage messages")
+    g.add_argument("--x64", action="store_true",
+                   help="compute in float64 (slower; float32 is accurate enough for these fits)")
+    g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
+    g.add_argument("--no-cache", action="store_true",
+                   help="do not keep compiled programs on disk (default: in $JAX_COMPILATION_CACHE_DIR, "
+                   "else ~/.cache/jaxfric/jax; a second run then skips most compilation)")
+
+
+def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
+    g = p.add_argument_group("identification")
+    g.add_argument("--model", "--models", dest="models", type=model_list, default=default_models,
+                   metavar="NAMES", help="comma-separated friction models: elman, elman_full, lugre, dahl, "
+                   "stribeck, coulomb")
+    g.add_argument("--neurons", type=positive_int, default=30, help="hidden neurons of the Elman network")
+    g.add_argument("--solver", choices=SOLVERS, default="mapso-nmds", help="optimiser")
+    g.add_argument("--generations", type=positive_int, default=None, metavar="G",
+                   help="budget: swarm generations (for nelder-mead: its step cap); default depends on "
+                   "the model, see --quick")
+    g.add_argument("--nm-evals", type=positive_int, default=None, metavar="N",
+                   help="Nelder-Mead evaluation budget of mapso-nmds (default: chosen with the generations)")
+    g.add_argument("--refine", choices=("none", "auto", "bfgs", "lbfgs", "lm", "gauss_newton"), default="none",
+                   help="gradient polish after the optimiser (not in the paper; 'auto': LM for small models, "
+                   "BFGS for the networks)")
+    g.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
+    g.add_argument("--quick", action="store_true", help="tiny budget: a smoke test in seconds, not a real fit")
+    g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="report folder (created if needed)")
+
+
+def _columns(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("columns (header name or 0-based index)")
+    g.add_argument("--time-col", metavar="COL", help="time stamps (or give --dt)")
+    g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s] when there is no time column")
+    g.add_argument("--velocity-col", metavar="COL", help="piston velocity")
+    g.add_argument("--friction-col", metavar="COL", help="friction force")
+    g.add_argument("--x-col", metavar="COL", help="piston position (raw rig channels)")
+    g.add_argument("--p1-col", metavar="COL", help="cap-side chamber pressure")
+    g.add_argument("--p2-col", metavar="COL", help="rod-side chamber pressure")
+    g.add_argument("--load-col", metavar="COL", help="external load (force sensor), opposing +x")
+    for ch in ("p1", "p2", "load"):
+        g.add_argument(f"--{ch}-fill", type=float, metavar="VALUE",
+                       help=f"constant {ch} (in its unit) when the file has no such column")
+    f = p.add_argument_group("file format")
+    f.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
+    f.add_argument("--skip-rows", type=int, default=0, metavar="N", help="data rows to drop after the header")
+    u = p.add_argument_group("units (a name or a factor to SI)")
+    u.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
+    u.add_argument("--velocity-unit", default="m/s", metavar="UNIT", help="of the velocity column")
+    u.add_argument("--friction-unit", default="N", metavar="UNIT", help="of the friction column")
+    u.add_argument("--x-unit", default="m", metavar="UNIT", help="of the position column")
+    u.add_argument("--pressure-unit", default="Pa", metavar="UNIT", help="of both pressure columns")
+    u.add_argument("--load-unit", default="N", metavar="UNIT", help="of the load column")
+
+
+def build_parser() -> Parser:
+    """The full ``jaxfric`` parser (sub-commands demo, identify, predict, bench)."""
+    from jaxfric import __version__
+
+    p = Parser(prog="jaxfric", description="Identify friction in hydraulic cylinders: Elman network (ENN) or "
+               "LuGre fitted by MAPSO -> Nelder-Mead.", epilog=MAIN_EPILOG, formatter_class=_Formatter)
+    p.add_argument("--version", action="version", version=f"jaxfric {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    sub.required = True
+
+    d = sub.add_parser("demo", help="the paper end to end on the simulated rig, with a report",
+                       description="Simulate the test rig, compute the friction, identify the ENN and "
+                       "LuGre, print the comparison table and write a report folder.",
+                       epilog=DEMO_EPILOG, formatter_class=_Formatter)
+    _fitting(d, default_models="elman,lugre")
+    _common(d)
+
+    i = sub.add_parser("identify", help="fit friction models to your own CSV recording",
+                       description="Fit friction models to a recorded CSV file and write the same report "
+                       "as the demo.", epilog=IDENTIFY_EPILOG, formatter_class=_Formatter)
+    i.add_argument("file", metavar="FILE", help="CSV (or whitespace-separated) file")
+    _columns(i)
+    g = i.add_argument_group("cylinder and pipeline (raw rig channels only)")
+    g.add_argument("--bore", type=positive_float, metavar="M", help="piston (bore) diameter [m]")
+    g.add_argument("--rod", type=nonnegative_float, metavar="M", help="rod diameter [m] (0: no rod)")
+    g.add_argument("--mass", type=nonnegative_float, metavar="KG", help="moving mass [kg]")
+    g.add_argument("--gravity", type=float, default=0.0, metavar="M/S2",
+                   help="gravity component along -x [m/s^2] (0 for a horizontal axis)")
+    g.add_argument("--cutoff", type=positive_float, default=5.0, metavar="HZ", help="Butterworth low-pass cutoff [Hz]")
+    i.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
+                   help="leading fraction of the record used for estimation; the rest validates")
+    _fitting(i, default_models="elman,lugre")
+    _common(i)
+
+    r = sub.add_parser("predict", help="predict friction with a saved fit",
+                       description="Predict friction for a velocity record with a saved fit and write a CSV.",
+                       epilog=PREDICT_EPILOG, formatter_class=_Formatter)
+    r.add_argument("model_file", metavar="MODEL_FILE", help="saved fit (models/*.npz of a report)")
+    r.add_argument("data", metavar="DATA_CSV", help="CSV with a velocity column")
+    g = r.add_argument_group("columns (header name or 0-based index)")
+    g.add_argument("--velocity-col", default="velocity", metavar="COL", help="piston velocity")
+    g.add_argument("--time-col", metavar="COL", help="time stamps (or give --dt)")
+    g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s] when there is no time column")
+    g.add_argument("--friction-col", metavar="COL", help="measured friction, to report the error")
+    g.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
+    g.add_argument("--skip-rows", type=int, default=0, metavar="N", help="data rows to drop after the header")
+    g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
+    g.add_argument("--velocity-unit", default="m/s", metavar="UNIT", help="of the velocity column")
+    g.add_argument("--friction-unit", default="N", metavar="UNIT", help="of the friction column")
+    r.add_argument("--out", "-o", default="predictions.csv", metavar="FILE",
+                   help="output CSV ('-' for standard output)")
+    _common(r)
+
+    b = sub.add_parser("bench", help="run a benchmark script (table1, friction)",
+                       description="Run one of the benchmark scripts of benchmarks/.",
+                       epilog=BENCH_EPILOG, formatter_class=_Formatter)
+    b.add_argument("name", choices=("table1", "friction"), help="which benchmark")
+    b.add_argument("args", nargs=argparse.REMAINDER, help="arguments passed to the benchmark")
+    return p

@@ -1,0 +1,285 @@
+"""The ``jaxfric`` command line, run as a user would: ``python -m jaxfric ...`` in a subprocess.
+
+Compiled programs are shared between the subprocesses through JAX's persistent
+compilation cache in this session's temporary folder (an environment variable of
+the subprocesses only; the test process's JAX configuration is never touched), so
+only the first command pays for compiling the ENN and LuGre.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def cli_env(tmp_path_factory):
+    cache = tmp_path_factory.getbasetemp() / "jax-compilation-cache"
+    cache.mkdir(exist_ok=True)
+    env = dict(os.environ)
+    env.update(JAX_COMPILATION_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="")
+    return env
+
+
+def jaxfric(env, *args, cwd=None, timeout=600):
+    return subprocess.run([sys.executable, "-m", "jaxfric", *map(str, args)], env=env, cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def assert_ok(proc):
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+
+
+@pytest.fixture(scope="module")
+def demo(cli_env, tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "report"
+    proc = jaxfric(cli_env, "demo", "--quick", "--quiet", "--out", out)
+    assert_ok(proc)
+    return out, proc
+
+
+# ------------------------------------------------------------------------ demo
+def test_demo_quick_writes_the_report(demo):
+    from jaxfric.report import FIGURES
+
+    out, proc = demo
+    figures = list(FIGURES) + ["fit_elman.png", "fit_lugre.png"]
+    for name in ["report.md", "results.json", *figures, "models/elman.npz", "models/lugre.npz",
+                 "rig_measurements.csv", "friction_data.csv"]:
+        assert (out / name).is_file(), name
+    for name in figures:
+        assert (out / name).stat().st_size > 10_000, name
+        img = mpimg.imread(out / name)
+        assert img.shape[0] > 300 and img.shape[1] > 500
+        assert img[..., :3].std() > 0.05, f"{name} looks blank"
+    assert not [p for p in out.rglob(".*")], "temporary files left behind"
+
+
+def test_demo_prints_the_comparison_table(demo):
+    out, proc = demo
+    lines = proc.stdout.splitlines()
+    header = lines[0]
+    for col in ("model", "#params", "MSE % train", "MSE % valid", "MAX [N] valid", "FIT % valid", "time [s]"):
+        assert col in header
+    assert lines[2].startswith("ENN (30 neurons)") and lines[2].split()[3] == "180"
+    assert lines[3].startswith("LuGre") and lines[3].split()[1] == "6"
+    assert proc.stderr == ""  # --quiet
+    results = json.loads((out / "results.json").read_text())
+    assert set(results["models"]) == {"elman", "lugre"}
+    assert results["data"]["n_samples"] == 2000 and results["data"]["n_train"] == 1600
+    mse = results["models"]["elman"]["metrics"]["valid"]["mse_percent"]
+    assert f"{mse:.4g}" in lines[2]
+
+
+# -------------------------------------------------- identify and predict vs Python
+@pytest.fixture(scope="module")
+def python_fit(demo):
+    """The Python API on the demo's friction_data.csv, with the CLI's quick budget and seed 5."""
+    import jax
+
+    import jaxfric as jf
+    from jaxfric import rig
+    from jaxfric.identify import identify
+
+    csv = demo[0] / "friction_data.csv"
+    data = rig.load_friction_pairs(csv, {"t": "t", "velocity": "velocity", "friction": "friction"})
+    solver = jf.mapso_nmds(lattice_size=8, num_generations=3, nm_max_evals=200)
+    fit = identify("elman", data, solver=solver, key=jax.random.key(5), model_options={"neurons": 30})
+    return csv, data, fit
+
+
+def test_identify_csv_reproduces_the_python_api(cli_env, python_fit, tmp_path):
+    csv, _, fit = python_fit
+    out = tmp_path / "rep"
+    proc = jaxfric(cli_env, "identify", csv, "--velocity-col", "velocity", "--friction-col", "friction",
+                   "--time-col", "t", "--model", "elman", "--neurons", "30", "--quick", "--seed", "5",
+                   "--quiet", "--out", out)
+    assert_ok(proc)
+    got = json.loads((out / "results.json").read_text())["models"]["elman"]["metrics"]
+    for window in ("train", "valid", "all"):
+        for key, value in fit.metrics[window].items():
+            assert got[window][key] == pytest.approx(value, rel=1e-6, abs=1e-9), (window, key)
+    assert "ENN (30 neurons)" in proc.stdout
+
+
+def test_saved_fit_predicts_the_same_through_the_cli(cli_env, python_fit, tmp_path):
+    csv, data, fit = python_fit
+    model_file = tmp_path / "elman.npz"
+    fit.save(model_file)
+    pred_csv = tmp_path / "pred.csv"
+    proc = jaxfric(cli_env, "predict", model_file, csv, "--velocity-col", "velocity", "--time-col", "t",
+                   "--friction-col", "friction", "--out", pred_csv)
+    assert_ok(proc)
+    assert "MSE %" in proc.stdout
+    table = np.genfromtxt(pred_csv, delimiter=",", names=True)
+    expect = np.asarray(fit.predict(data.velocity, data.dt), dtype=np.float64)
+    np.testing.assert_allclose(table["friction_predicted"], expect, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(table["velocity"], np.asarray(data.velocity), rtol=0, atol=0)
+    np.testing.assert_allclose(table["error"], table["friction_measured"] - table["friction_predicted"])
+
+
+def test_identify_raw_rig_channels_runs_the_pipeline(cli_env, demo, tmp_path):
+    out_demo, _ = demo
+    out = tmp_path / "raw"
+    proc = jaxfric(cli_env, "identify", out_demo / "rig_measurements.csv", "--time-col", "t", "--x-col", "x",
+                   "--p1-col", "p1", "--p2-col", "p2", "--load-col", "load", "--bore", "0.1", "--rod", "0.07",
+                   "--mass", "120", "--model", "lugre", "--quick", "--quiet", "--out", out)
+    assert_ok(proc)
+    raw = json.loads((out / "results.json").read_text())["data"]
+    pairs = json.loads((out_demo / "results.json").read_text())["data"]
+    assert raw["n_samples"] == pairs["n_samples"] and raw["n_train"] == pairs["n_train"]
+    np.testing.assert_allclose(raw["friction_range_N"], pairs["friction_range_N"], rtol=1e-4)
+    assert (out / "fit_lugre.png").is_file()
+
+
+# --------------------------------------------------------------- user errors
+@pytest.fixture(scope="module")
+def small_csv(tmp_path_factory):
+    p = tmp_path_factory.mktemp("csv") / "pairs.csv"
+    t = np.arange(300) / 100.0
+    v = 0.01 * np.sin(2 * np.pi * 0.5 * t)
+    p.write_text("t,v,F\n" + "\n".join(f"{a},{b},{c}" for a, b, c in zip(t, v, 100 * np.tanh(v / 1e-3))))
+    return p
+
+
+# The four kinds the brief names run as real subprocesses (stderr must hold one line and no
+# traceback); the other cases run in-process through main(), which is the same code path.
+SUBPROCESS_ERRORS = [
+    (["identify", "no-such-file.csv", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01"],
+     "file not found: no-such-file.csv"),
+    (["identify", "{csv}", "--velocity-col", "speed", "--friction-col", "F", "--time-col", "t"],
+     "--velocity-col: no column 'speed' in"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "fast"],
+     "argument --dt: not a number: 'fast'"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--model", "lugre,magic"],
+     "unknown model 'magic'"),
+]
+IN_PROCESS_ERRORS = [
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--time-col", "t", "--velocity-unit", "furlong"],
+     "unknown velocity unit 'furlong'"),
+    (["identify", "{csv}", "--x-col", "v", "--p1-col", "F", "--p2-col", "F", "--load-col", "F", "--time-col", "t"],
+     "needs the cylinder geometry: --bore --rod --mass"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F"], "give --time-col COL or --dt"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--train-fraction", "1"],
+     "argument --train-fraction: must lie strictly between 0 and 1"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--time-col", "t", "--delimiter", ";"],
+     "only one column found with --delimiter ';'; the lines look ','-separated"),
+    (["demo", "--neurons", "0"], "argument --neurons: must be >= 1"),
+    (["demo", "--model", ""], "argument --model/--models: give at least one model"),
+    (["predict", "missing.npz", "{csv}"], "model file not found: missing.npz"),
+    (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t"], "cannot load the fit"),
+    (["bench", "nonsense"], "argument name: invalid choice"),
+]
+
+
+def _fill(args, csv):
+    return [a.replace("{csv}", str(csv)) for a in args]
+
+
+def _assert_one_line(stderr, message):
+    assert "Traceback" not in stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("jaxfric: error: ") and message in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("args, message", SUBPROCESS_ERRORS)
+def test_user_errors_are_one_line_without_traceback(cli_env, small_csv, tmp_path, args, message):
+    proc = jaxfric(cli_env, *_fill(args, small_csv), cwd=tmp_path)
+    assert proc.returncode == 2
+    _assert_one_line(proc.stderr, message)
+    assert proc.stdout == "" and not list(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("args, message", IN_PROCESS_ERRORS)
+def test_more_user_errors(small_csv, tmp_path, monkeypatch, capsys, args, message):
+    from jaxfric.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main([*_fill(args, small_csv), "--no-cache"] if args[0] != "bench" else _fill(args, small_csv)) == 2
+    _assert_one_line(capsys.readouterr().err, message)
+    assert not list(tmp_path.iterdir())
+
+
+# -------------------------------------------------------------------- Ctrl-C
+def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path):
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxfric", "identify", str(demo[0] / "friction_data.csv"), "--velocity-col",
+         "velocity", "--friction-col", "friction", "--time-col", "t", "--model", "lugre,elman", "--quick",
+         # LuGre comes from the demo's compilation cache; a 7-neuron ENN is not there, so it
+         # is still compiling when Ctrl-C comes.
+         "--neurons", "7", "--out", str(out)],
+        env=cli_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = []
+    deadline = time.monotonic() + 300
+    for line in proc.stderr:  # wait until the long ENN run has started
+        seen.append(line)
+        if "identifying ENN" in line or time.monotonic() > deadline:
+            break
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, rest = proc.communicate(timeout=60)
+    stderr = "".join(seen) + rest
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert "jaxfric: interrupted; kept 1 finished file(s)" in stderr and "lugre.npz" in stderr
+    assert (out / "models" / "lugre.npz").is_file()
+    assert not (out / "report.md").exists()
+    assert not [p for p in out.rglob(".*")]
+
+
+# ---------------------------------------------------------------- help, bench
+@pytest.mark.parametrize("command", [[], ["demo"], ["identify"], ["predict"], ["bench"]])
+def test_help_has_examples(command, capsys):
+    from jaxfric.cli import main
+
+    assert main([*command, "--help"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("usage: jaxfric")
+    assert "examples:" in text
+
+
+def test_bench_passes_arguments_through(cli_env):
+    proc = jaxfric(cli_env, "bench", "table1", "--help")
+    assert_ok(proc)
+    assert "--quick" in proc.stdout and "jaxfric bench table1" in proc.stdout
+
+
+def test_bench_reports_a_missing_script(cli_env, tmp_path):
+    env = dict(cli_env, JAXFRIC_BENCHMARKS=str(tmp_path))
+    proc = jaxfric(env, "bench", "table1")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("jaxfric: error: benchmark script not found")
+
+
+# ------------------------------------------------------------- unit helpers
+def test_read_table_and_units(tmp_path):
+    from jaxfric.cli.data import read_table
+    from jaxfric.cli.errors import UserError
+    from jaxfric.cli.units import unit_factor
+
+    p = tmp_path / "a.txt"
+    p.write_text("# comment\n1 2 3\n4 5 6\n")
+    t = read_table(str(p), delimiter="whitespace")
+    assert t.header == [] and t.column("2", "--x").tolist() == [3.0, 6.0]
+    with pytest.raises(UserError, match="out of range"):
+        t.column("3", "--x")
+    p.write_text("a,b\n1,2\n3,x\n")
+    with pytest.raises(UserError, match="non-number 'x'"):
+        read_table(str(p))
+    assert unit_factor("pressure", "bar", "--p") == 1e5
+    assert unit_factor("force", "-1", "--load-unit") == -1.0
+    with pytest.raises(UserError, match="non-zero"):
+        unit_factor("force", "0", "--load-unit")
