@@ -1,0 +1,60 @@
+"""Every notebook in notebooks/ runs top to bottom with the small budget.
+
+Kernels get ``JAXFRIC_NOTEBOOK_BUDGET=small`` and share JAX's persistent compilation
+cache with the command-line tests of the same session (an environment variable of the
+kernels; this process's JAX configuration is untouched), so programs the CLI tests
+compiled are not compiled again.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+nbformat = pytest.importorskip("nbformat", reason="needs nbformat (pip install jaxfric[test])")
+nbclient = pytest.importorskip("nbclient", reason="needs nbclient (pip install jaxfric[test])")
+pytest.importorskip("ipykernel", reason="needs ipykernel for the python3 kernel (pip install jaxfric[test])")
+
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+
+def test_there_are_three_notebooks_without_outputs():
+    assert [p.name for p in NOTEBOOKS] == ["01_test_functions.ipynb", "02_friction_identification.ipynb",
+                                           "03_real_recordings.ipynb"]
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        for cell in nb.cells:
+            if cell.cell_type == "code":
+                assert not cell.outputs and cell.execution_count is None, f"{path.name} is committed with outputs"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_runs_with_the_small_budget(path, tmp_path_factory, monkeypatch):
+    cache = tmp_path_factory.getbasetemp() / "jax-compilation-cache"
+    cache.mkdir(exist_ok=True)
+    monkeypatch.setenv("JAXFRIC_NOTEBOOK_BUDGET", "small")
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(cache))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    nb = nbformat.read(path, as_version=4)
+    client = nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
+                                     resources={"metadata": {"path": str(path.parent)}})
+    client.execute()  # raises CellExecutionError with the failing cell's traceback
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
+    assert "budget: small" in text
+    images = sum("image/png" in o.get("data", {}) for c in nb.cells if c.cell_type == "code" for o in c.outputs)
+    if "SKIPPED" not in text:
+        assert images >= 3, f"{path.name} drew {images} figures"
+
+
+def test_real_recordings_notebook_skips_without_data(tmp_path, monkeypatch):
+    monkeypatch.setenv("JAXFRIC_NOTEBOOK_BUDGET", "small")
+    monkeypatch.setenv("JAXFRIC_PNEUMATIC_DATA", str(tmp_path / "absent"))
+    path = ROOT / "notebooks" / "03_real_recordings.ipynb"
+    nb = nbformat.read(path, as_version=4)
+    nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
+                            resources={"metadata": {"path": str(path.parent)}}).execute()
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
+    assert "SKIPPED: no pneumatic_seal_friction data" in text
