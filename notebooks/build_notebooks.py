@@ -267,6 +267,7 @@ fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
 for window, marker in (("train", "o-"), ("valid", "s--")):
     ax.plot(NEURONS, [study[n].metrics[window]["mse_percent"] for n in NEURONS], marker, label=window)
 ax.plot([20, 30, 40], [0.3277, 0.2632, 0.2377], "k^:", label="paper")
+ax.set_xticks(sorted(set(NEURONS) | {20, 30, 40}))
 ax.set_xlabel("hidden neurons N")
 ax.set_ylabel("normalised MSE [%]")
 ax.set_yscale("log")

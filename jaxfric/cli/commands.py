@@ -20,7 +20,6 @@ import numpy as np
 
 from .errors import KEPT, UserError
 from .fitting import budget_for, build_model, check_models, fit_all, solver_expression
-from .parser import DEFAULT_OUT
 
 
 def _say(args):
@@ -113,7 +112,8 @@ def _finish(args, out: Path, data, fits, *, title, source, argv, notes, python, 
                           settings=_settings(args, fits), notes=notes, python=python,
                           extra_files=extra_files, on_written=KEPT.add)
     print(result["table"])
-    print(f"\nreport: {out / 'report.md'}  (results.json, {len(result['files'])} files)")
+    n_png = sum(p.suffix == ".png" for p in result["files"])
+    print(f"\nreport: {out / 'report.md'} (with results.json, {n_png} figures and the fits in {out / 'models'})")
     return 0
 
 
@@ -259,4 +259,3 @@ def cmd_bench(args, argv) -> int:
 
 
 COMMANDS = {"demo": cmd_demo, "identify": cmd_identify, "predict": cmd_predict, "bench": cmd_bench}
-DEFAULT_REPORT = DEFAULT_OUT

@@ -124,12 +124,24 @@ def describe_solver(solver, model) -> str:
     return f"Nelder-Mead (<= {s.steps_for(model.num_params)} steps)"
 
 
+def progress_bar(solver, model, desc: str):
+    """A tqdm bar named after the model (the library's :class:`TqdmProgress` as the sink), or
+    ``True`` (the library's unnamed bar) if that class is not available."""
+    try:
+        from jaxfric.identify import default_solver
+        from jaxfric.optim.progress import TqdmProgress
+    except ImportError:  # pragma: no cover - older library
+        return True
+    s = default_solver(model) if solver is None else solver
+    total, local_total = s.progress_totals()
+    return TqdmProgress(total, local_total, desc=desc)
+
+
 def run_identify(name, data, *, solver, key, args, progress):
     """``jaxfric.identify(name, data, solver=..., key=..., ...)``.
 
-    HOOK (progress): ``progress`` is passed only when ``identify`` accepts it; the
-    library is adding it (a tqdm bar updated from inside the jitted run). Until then
-    the CLI prints a line per model, before and after.
+    ``progress`` (a tqdm bar updated from inside the jitted run, or ``None``) is passed
+    only when ``identify`` accepts it; the CLI also prints a line per model, before and after.
     """
     from jaxfric.identify import identify
 
@@ -159,7 +171,7 @@ def fit_all(data, args, key, *, say, kept_fit=None) -> dict:
             f"{describe_solver(solver, model)}")
         t0 = time.perf_counter()
         fit = run_identify(name, data, solver=solver, key=key, args=args,
-                           progress=None if args.quiet else True)
+                           progress=None if args.quiet else progress_bar(solver, model, label(name, model)))
         m = (fit.metrics.get("valid") or fit.metrics.get("all") or {})
         say(f"  done in {time.perf_counter() - t0:.1f} s (validation MSE {m.get('mse_percent', float('nan')):.4g} %)")
         fits[name] = fit

@@ -11,6 +11,7 @@ import math
 import sys
 
 from .errors import EXIT_USER_ERROR, error_line
+from .fitting import REFINE_CHOICES
 from .units import UNITS
 
 DEFAULT_OUT = "jaxfric-report"
@@ -199,7 +200,7 @@ def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
                    "the model, see --quick")
     g.add_argument("--nm-evals", type=positive_int, default=None, metavar="N",
                    help="Nelder-Mead evaluation budget of mapso-nmds (default: chosen with the generations)")
-    g.add_argument("--refine", choices=("none", "auto", "bfgs", "lbfgs", "lm", "gauss_newton"), default="none",
+    g.add_argument("--refine", choices=REFINE_CHOICES, default="none",
                    help="gradient polish after the optimiser (not in the paper; 'auto': LM for small models, "
                    "BFGS for the networks)")
     g.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
