@@ -18,7 +18,7 @@ What it measures (ALGORITHMS.md §12):
 4. the neuron study N = 20, 30, 40 (paper: 0.3277 %, 0.2632 %, 0.2377 %);
 5. ENN against LuGre (MSE %, MAX, FIT %, #params; paper: ENN MSE 95.6 % below
    LuGre's, LuGre above 5 %), for the paper's optimiser and the gradient-refined one;
-6. the MAPSO generation budget (300 against 1000).
+6. the MAPSO generation budget (the default against ``--budgets``, 300 and 1000).
 
 Writes ``friction.md``, ``friction.csv`` and ``friction_*.png`` into ``--out``.
 Metric definitions: ``jaxfric.metrics`` (MSE % = 100·mean(e²)/var(F), §6).
@@ -51,7 +51,8 @@ def parse(argv=None):
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     p.add_argument("--x64", action="store_true", help="search in float64 (default: float32)")
     p.add_argument("--quick", action="store_true", help="tiny budgets: a smoke test of the script")
-    p.add_argument("--no-budget-study", action="store_true", help="skip the G = 1000 runs")
+    p.add_argument("--budgets", default="300,1000",
+                   help="other MAPSO generation budgets to compare with the default ('' = none)")
     return p.parse_args(argv)
 
 
@@ -268,12 +269,11 @@ def main(argv=None):
             continue
         for s in seeds:
             runner.run(f"N={n} r<={rb_default:g}", Elman(neurons=n, context_weight_bound=rb_default), s)
-    budget_g = None
-    if not (args.quick or args.no_budget_study):
-        budget_g = 1000
+    budgets = [] if args.quick or not args.budgets else [int(g) for g in args.budgets.split(",")]
+    for g in budgets:
         for s in seeds:
-            runner.run(f"N=30 r<={rb_default:g} G={budget_g}",
-                       Elman(neurons=30, context_weight_bound=rb_default), s, generations=budget_g)
+            runner.run(f"N=30 r<={rb_default:g} G={g}",
+                       Elman(neurons=30, context_weight_bound=rb_default), s, generations=g)
 
     # 5. LuGre
     print("LuGre runs ...", flush=True)
@@ -378,15 +378,16 @@ def main(argv=None):
         add(f"| {m} | {w} | {e:.3f} | {g:.3f} | {r:.1f} % |")
     add("")
 
-    if budget_g:
-        add(f"## MAPSO budget (N = 30, |r| ≤ {rb_default:g})\n")
-        bcfg = f"N=30 r<={rb_default:g} G={budget_g}"
-        add(table(runner, [
-            (f"G = {DEFAULT_GENERATIONS_BLACK_BOX}, MAPSO–NMDS", main_cfg, "MAPSO–NMDS", []),
-            (f"G = {DEFAULT_GENERATIONS_BLACK_BOX}, + BFGS", main_cfg, "MAPSO–NMDS + BFGS", []),
-            (f"G = {budget_g}, MAPSO–NMDS", bcfg, "MAPSO–NMDS", []),
-            (f"G = {budget_g}, + BFGS", bcfg, "MAPSO–NMDS + BFGS", []),
-        ], mse_cols, ["budget, method"] + hdr[1:]))
+    if budgets:
+        add(f"## MAPSO generation budget (N = 30, |r| ≤ {rb_default:g})\n")
+        cfgs = sorted([(DEFAULT_GENERATIONS_BLACK_BOX, main_cfg)]
+                      + [(g, f"N=30 r<={rb_default:g} G={g}") for g in budgets])
+        entries = []
+        for g, cfg in cfgs:
+            tag = " (default)" if g == DEFAULT_GENERATIONS_BLACK_BOX else ""
+            entries.append((f"G = {g}{tag}, MAPSO–NMDS", cfg, "MAPSO–NMDS", []))
+            entries.append((f"G = {g}{tag}, + BFGS", cfg, "MAPSO–NMDS + BFGS", []))
+        add(table(runner, entries, mse_cols, ["budget, method"] + hdr[1:]))
         add("")
 
     add("## Figures\n")

@@ -334,3 +334,16 @@ def test_sine_reparametrisation_round_trip_and_stays_in_box(frac, lo, width):
         z = jnp.linspace(-50.0, 50.0, 101)
         th = to_box(z, lower, upper)
         assert bool(jnp.all((th >= lower) & (th <= upper)))
+
+
+def test_divergent_validation_warns():
+    good = {"train": {"mse_percent": 0.2}, "valid": {"mse_percent": 0.3}}
+    bad = {"train": {"mse_percent": 0.2}, "valid": {"mse_percent": 231.0}}
+    import warnings as w
+
+    with w.catch_warnings():
+        w.simplefilter("error")
+        _api._warn_if_divergent(good)
+        _api._warn_if_divergent({"train": good["train"], "valid": None})
+    with pytest.warns(RuntimeWarning, match="validation MSE 231 %"):
+        _api._warn_if_divergent(bad)
