@@ -153,17 +153,20 @@ def plot_data(data, *, title: str | None = None) -> Figure:
     ax_v.plot(t, _np(data.velocity) * scale, color="tab:blue", lw=1.1, label="velocity")
     ax_v.axhline(0.0, color="0.6", lw=0.6)
     ax_v.set_ylabel(f"piston velocity [{unit}]")
-    ax_v.set_title("Piston velocity (filtered position, differentiated)")
+    # Records from the rig pipeline carry pressures; velocity/friction pairs loaded as such do not.
+    from_pipeline = getattr(data, "p1", None) is not None
+    ax_v.set_title("Piston velocity (filtered position, differentiated)" if from_pipeline else "Piston velocity")
     ax_f.plot(t, _np(data.friction), label="friction (force balance)", **_MEASURED)
     ax_f.axhline(0.0, color="0.6", lw=0.6)
     ax_f.set_ylabel("friction force [N]")
     ax_f.set_xlabel("time [s]")
-    ax_f.set_title("Friction force computed from pressures, load and acceleration")
+    ax_f.set_title("Friction force computed from pressures, load and acceleration" if from_pipeline
+                   else "Friction force")
     for ax in (ax_v, ax_f):
         _mark_split(ax, data)
         ax.grid(alpha=0.3)
     ax_f.plot([], [], color="tab:orange", ls="--", label="train | validation split")
-    ax_f.legend(loc="upper right", fontsize=8)
+    ax_f.legend(loc="best", fontsize=8)
     fig.suptitle(title or f"Identification data: {_split_legend_note(data)}")
     return fig
 
