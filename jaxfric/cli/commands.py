@@ -44,6 +44,7 @@ def _prepare_out(path: str) -> Path:
         raise UserError(f"cannot create the report folder {path}: {e.strerror}") from None
     if not os.access(out, os.W_OK):
         raise UserError(f"the report folder {path} is not writable")
+    KEPT.watch(out)
     return out
 
 
@@ -216,6 +217,7 @@ def cmd_predict(args, argv) -> int:
     if args.out == "-":
         sys.stdout.write(text)
     else:
+        KEPT.watch(Path(args.out).resolve().parent)
         p = atomic_write_text(args.out, text)
         KEPT.add(p)
         print(f"wrote {len(pred)} predictions to {p}")
@@ -243,6 +245,7 @@ def cmd_bench(args, argv) -> int:
     if not path.is_file():
         raise UserError(f"benchmark script not found: {path} (the benchmarks live in the source tree's "
                         "benchmarks/ folder; set JAXFRIC_BENCHMARKS to it)")
+    KEPT.otherwise = "the files the benchmark finished stay in its output folder"
     spec = importlib.util.spec_from_file_location(f"jaxfric_bench_{args.name}", path)
     module = importlib.util.module_from_spec(spec)
     old_argv0 = sys.argv[0]

@@ -9,7 +9,7 @@ Ctrl-C: a jitted XLA computation does not return to the Python interpreter until
 has finished, so a ``KeyboardInterrupt`` raised in the thread that runs it would wait
 for the whole optimisation. The work therefore runs in a worker thread while the main
 thread waits in short slices; Ctrl-C reaches the main thread at once, which says what
-was kept (:class:`Kept`), removes half-written temporary files and exits with 130.
+was kept (:class:`Kept`), removes temporaries of unfinished writes and exits with 130.
 """
 
 from __future__ import annotations
@@ -31,42 +31,38 @@ class UserError(Exception):
 class Kept:
     """What a command has written so far (for the Ctrl-C message), thread-safe.
 
-    Writers call :meth:`add` after a file is complete (atomically renamed into
-    place) and :meth:`temp` / :meth:`done_temp` around temporary files, so an
-    interrupt can remove the unfinished ones.
+    Writers call :meth:`add` once a file is complete (atomically moved into place)
+    and :meth:`watch` on the folders they write to, so that an interrupt can remove
+    the temporaries of a write that was cut short (see :func:`jaxfric.report.remove_temporaries`).
     """
 
     def __init__(self):
         self._lock = threading.Lock()
         self.files: list[Path] = []
-        self._temps: set[Path] = set()
+        self.folders: list[Path] = []
+        self.otherwise = "nothing was written"  # said when no file was recorded
 
     def add(self, path) -> None:
         with self._lock:
             self.files.append(Path(path))
 
-    def temp(self, path) -> None:
+    def watch(self, folder) -> None:
         with self._lock:
-            self._temps.add(Path(path))
-
-    def done_temp(self, path) -> None:
-        with self._lock:
-            self._temps.discard(Path(path))
+            self.folders.append(Path(folder))
 
     def remove_temps(self) -> None:
+        from jaxfric.report import remove_temporaries
+
         with self._lock:
-            temps, self._temps = list(self._temps), set()
-        for p in temps:
-            try:
-                p.unlink()
-            except OSError:
-                pass
+            folders = list(self.folders)
+        for folder in folders:
+            remove_temporaries(folder)
 
     def describe(self) -> str:
         with self._lock:
             files = list(self.files)
         if not files:
-            return "nothing was written"
+            return self.otherwise
         folders = sorted({str(p.parent) for p in files})
         names = ", ".join(p.name for p in files[:6]) + (f" and {len(files) - 6} more" if len(files) > 6 else "")
         where = folders[0] if len(folders) == 1 else ", ".join(folders)
