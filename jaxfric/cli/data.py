@@ -138,8 +138,8 @@ def _load_quietly(fn, *a, **kw):
 def identification_data(args):
     """:class:`jaxfric.rig.FrictionData` from ``jaxfric identify``'s file and options.
 
-    Returns ``(data, description)``, the description saying which mode and columns were used
-    (for the report). Velocity/friction columns select the pairs mode; position and
+    Returns ``(data, description, notes)``: the description says which mode and columns were
+    used (for the report), the notes carry the loaders' warnings (e.g. resampled time stamps). Velocity/friction columns select the pairs mode; position and
     pressure/load columns the raw-channel mode through the §7 pipeline.
     """
     from jaxfric import rig

@@ -44,7 +44,8 @@ class Kept:
 
     def add(self, path) -> None:
         with self._lock:
-            self.files.append(Path(path))
+            if Path(path) not in self.files:  # a file rewritten (e.g. a fit saved again) counts once
+                self.files.append(Path(path))
 
     def watch(self, folder) -> None:
         with self._lock:
