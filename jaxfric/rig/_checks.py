@@ -12,12 +12,17 @@ import numpy as np
 
 def as_channel(name: str, values, n: int | None = None) -> np.ndarray:
     """``values`` as a 1-D float64 array of finite numbers (length ``n`` if given)."""
+    if np.iscomplexobj(values):
+        # np.asarray(..., float64) would silently drop the imaginary part.
+        raise ValueError(f"channel '{name}' holds complex numbers; give real values")
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
         raise ValueError(f"channel '{name}' is not numeric: {err}") from None
     if arr.ndim != 1:
         raise ValueError(f"channel '{name}' must be 1-D, got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"channel '{name}' is empty (no samples)")
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"channel '{name}' has {arr.shape[0]} samples, expected {n}")
     bad = ~np.isfinite(arr)
@@ -37,10 +42,11 @@ def check_increasing(t: np.ndarray, name: str = "t") -> None:
     d = np.diff(t)
     if np.any(d == 0):
         i = int(np.flatnonzero(d == 0)[0])
-        raise ValueError(f"duplicate time stamps in '{name}': t[{i}] == t[{i + 1}] == {t[i]!r}")
+        raise ValueError(f"duplicate time stamps in '{name}': t[{i}] == t[{i + 1}] == {float(t[i])!r}")
     if np.any(d < 0):
         i = int(np.flatnonzero(d < 0)[0])
-        raise ValueError(f"time stamps in '{name}' are not sorted: t[{i}] = {t[i]!r} > t[{i + 1}] = {t[i + 1]!r}")
+        raise ValueError(f"time stamps in '{name}' are not sorted: t[{i}] = {float(t[i])!r} > "
+                         f"t[{i + 1}] = {float(t[i + 1])!r}")
 
 
 def is_uniform(t: np.ndarray, rtol: float = 1e-3) -> bool:
@@ -57,7 +63,7 @@ def check_positive(name: str, value, allow_zero: bool = False) -> float:
         raise ValueError(f"{name} must be a number, got {value!r}") from None
     ok = np.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
     if not ok:
-        raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {value!r}")
+        raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite, got {v!r}")
     return v
 
 

@@ -95,8 +95,14 @@ class FrictionData(eqx.Module):
         """
         velocity = as_channel("velocity", velocity)
         n = velocity.shape[0]
+        if n < 2:
+            raise ValueError(f"a friction record needs at least 2 samples, got {n}")
         friction = as_channel("friction", friction, n)
-        stamps = np.asarray(dt_or_t, dtype=np.float64)
+        try:
+            stamps = np.asarray(dt_or_t, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError("dt_or_t must be the sample interval [s] (a number) or the time "
+                             f"stamps [s] (an array), got {dt_or_t!r}") from None
         if stamps.ndim == 0:
             dt = check_positive("dt", stamps)
             t = np.arange(n) * dt

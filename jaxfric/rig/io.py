@@ -62,45 +62,93 @@ def _uniformise(signals: dict, on_irregular: str, dt: float | None, rtol: float)
 
 
 def _read_table(path, columns: Mapping, delimiter, skip_rows: int, comments: str) -> dict:
-    """Read the requested columns of a delimited text file as float64 arrays."""
+    """Read the requested columns of a delimited text file as float64 arrays.
+
+    Every problem is a ValueError naming the file and, for a bad cell, its line, column
+    and text: a cell that is not a number (text in a numeric column, an empty cell) is
+    an error here rather than a NaN that fails later as "non-finite samples".
+    """
     if not os.path.exists(path):
         raise ValueError(f"file not found: {path}")
-    with open(path, encoding="utf-8-sig") as fh:
-        lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith(comments)]
+    if os.path.isdir(path):
+        raise ValueError(f"{path} is a folder, not a data file")
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            numbered = [(i, ln) for i, ln in enumerate(fh, start=1)
+                        if ln.strip() and not (comments and ln.lstrip().startswith(comments))]
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a text (CSV) file") from None
+    except OSError as err:
+        raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
+
+    def cells(line: str) -> list[str]:
+        if comments and comments in line:
+            line = line.split(comments, 1)[0]
+        parts = line.split(delimiter) if delimiter is not None else line.split()
+        return [c.strip().strip('"').strip("'") for c in parts]
+
     by_name = any(isinstance(c, str) for c in columns.values())
     header = []
     if by_name:
-        if not lines:
+        if not numbered:
             raise ValueError(f"{path}: empty file, no header to map column names")
-        header = [h.strip().strip('"').strip("'") for h in lines[0].split(delimiter)]
-        lines = lines[1:]
-    lines = lines[skip_rows:]
-    if not lines:
+        header = cells(numbered[0][1])
+        numbered = numbered[1:]
+    numbered = numbered[skip_rows:]
+    if not numbered:
         raise ValueError(f"{path}: no data rows")
-    index = {}
+    rows = [(lineno, cells(line)) for lineno, line in numbered]
+    width = len(rows[0][1])
+    for lineno, row in rows:
+        if len(row) != width:
+            raise ValueError(f"{path}: line {lineno} has {len(row)} columns, expected {width} "
+                             "(is the delimiter right?)")
+    index, names = {}, {}
     for channel, col in columns.items():
         if isinstance(col, str):
             if col not in header:
                 raise ValueError(f"{path}: column '{col}' (for channel '{channel}') is missing; "
                                  f"the header has {header}")
             index[channel] = header.index(col)
+            names[channel] = f"column '{col}'"
         else:
             index[channel] = int(col)
-    try:
-        table = np.genfromtxt(lines, delimiter=delimiter, dtype=np.float64, ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"{path}: could not parse the data rows: {err}") from None
-    width = table.shape[1]
+            names[channel] = f"column {int(col)}"
     for channel, i in index.items():
         if not -width <= i < width:
             raise ValueError(f"{path}: column index {i} (for channel '{channel}') is missing; "
                              f"the file has {width} columns")
-    return {channel: table[:, i] for channel, i in index.items()}
+    out = {}
+    for channel, i in index.items():
+        values = np.empty(len(rows), np.float64)
+        for k, (lineno, row) in enumerate(rows):
+            text = row[i]
+            try:
+                values[k] = float(text)
+            except ValueError:
+                what = "is empty" if text == "" else f"holds {text!r}, not a number"
+                raise ValueError(f"{path}: line {lineno}, {names[channel]} (channel '{channel}') "
+                                 f"{what}") from None
+        out[channel] = values
+    return out
+
+
+def _factor(kind: str, channel: str, value, *, allow_zero: bool) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{kind} for channel '{channel}' must be a number, got {value!r}") from None
+    if not np.isfinite(v) or (v == 0.0 and not allow_zero):
+        need = "a finite number" if allow_zero else "a finite, non-zero number"
+        raise ValueError(f"{kind} for channel '{channel}' must be {need}, got {value!r}")
+    return v
 
 
 def _gather(source, columns, required, scale, fill, delimiter, skip_rows, comments) -> dict:
-    scale = dict(scale or {})
-    fill = dict(fill or {})
+    if isinstance(skip_rows, bool) or not isinstance(skip_rows, (int, np.integer)) or skip_rows < 0:
+        raise ValueError(f"skip_rows must be a whole number >= 0, got {skip_rows!r}")
+    scale = {ch: _factor("scale", ch, v, allow_zero=False) for ch, v in dict(scale or {}).items()}
+    fill = {ch: _factor("fill", ch, v, allow_zero=True) for ch, v in dict(fill or {}).items()}
     if isinstance(source, Mapping):
         columns = dict(columns) if columns is not None else {c: c for c in required if c in source}
         missing_keys = [col for col in columns.values() if col not in source]
