@@ -32,6 +32,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import friction as _fr
 from .data import Measurements
@@ -232,6 +233,39 @@ def _float_dtype(tree):
 
 
 # --------------------------------------------------------------------------- entry point
+def _whole(name: str, value, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+
+
+def _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_reference, command):
+    """Reject bad arguments of :func:`simulate` before tracing (a clear ValueError instead
+    of a ZeroDivisionError, a reshape error or a silently empty or NaN record)."""
+    dtype = getattr(key, "dtype", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    raw = dtype == jnp.uint32 and jnp.shape(key)[-1:] == (2,)
+    if not (typed or raw):
+        raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed)), got {key!r}")
+    _whole("n_samples", n_samples, 2)
+    _whole("substeps", substeps, 1)
+    for name, value, zero_ok in (("fs", fs, False), ("settle_time", settle_time, True)):
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a number, got {value!r}") from None
+        if not np.isfinite(v) or v < 0.0 or (v == 0.0 and not zero_ok):
+            need = "non-negative" if zero_ok else "positive"
+            raise ValueError(f"{name} must be {need} and finite, got {value!r}")
+    for name, arr in (("velocity_reference", velocity_reference), ("command", command)):
+        if arr is None or isinstance(arr, jax.core.Tracer):
+            continue  # traced under a caller's jit/vmap: checked for shape only, later
+        a = np.asarray(arr)
+        if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
+            raise ValueError(f"{name} must be real numbers, got dtype {a.dtype}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} holds NaN or inf")
+
+
 def simulate(
     rig: Rig,
     key: jax.Array,
@@ -264,6 +298,7 @@ def simulate(
     float32, or float64 when x64 is enabled). Jit-compatible; ``n_samples``,
     ``substeps``, ``fs`` and ``settle_time`` are static.
     """
+    _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_reference, command)
     # numbers become arrays here so that new parameter values never trigger a recompilation
     rig, sensors = jax.tree.map(jnp.asarray, (rig, sensors))
     return _simulate(rig, key, velocity_reference, command, sensors, int(n_samples), float(fs),
