@@ -150,6 +150,7 @@ class AbstractFrictionModel(eqx.Module):
         jit), so eager calls compile once per model configuration and input
         shape; ``dt`` is traced, so a new sample time does not recompile.
         """
+        self._check_dt(dt)
         return _jit_rollout(self, thetas, velocity, dt)
 
     def simulate(
@@ -170,9 +171,23 @@ class AbstractFrictionModel(eqx.Module):
         theta = jnp.asarray(theta)
         if theta.ndim != 1:
             raise ValueError(f"theta must be 1-D, got shape {theta.shape}; use simulate_batch")
+        self._check_dt(dt)
         return _single_rollout(self)(theta, velocity, dt)
 
     # ---------------------------------------------------------------- helpers
+    #: Models whose rollout integrates in time reject a concrete non-positive or
+    #: non-finite ``dt`` eagerly (inside a jit it is traced and cannot be checked).
+    _checks_dt: ClassVar[bool] = False
+
+    def _check_dt(self, dt) -> None:
+        if not self._checks_dt or dt is None or isinstance(dt, jax.core.Tracer):
+            return
+        arr = np.asarray(dt)
+        if arr.ndim == 0 and np.issubdtype(arr.dtype, np.number):
+            value = float(arr)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"dt must be a positive, finite sample time in seconds, got {value!r}")
+
     def check_theta(self, theta: ArrayLike) -> np.ndarray:
         """Eager validation of ``theta`` (shape, length, finiteness); see :func:`check_theta`."""
         return check_theta(theta, self.num_params)
@@ -205,6 +220,8 @@ class AbstractFrictionModel(eqx.Module):
             )
         if velocity.ndim != 1:
             raise ValueError(f"velocity must be a 1-D time series, got shape {velocity.shape}")
+        if velocity.shape[0] == 0:
+            raise ValueError("velocity is empty: a rollout needs at least one sample")
         dtype = _as_float_dtype(thetas, velocity)
         return thetas.astype(dtype), velocity.astype(dtype)
 

@@ -41,7 +41,10 @@ def as_range(value) -> tuple[float, float] | None:
     """Field converter: ``None`` or a hashable ``(low, high)`` pair of floats."""
     if value is None:
         return None
-    lo, hi = (float(x) for x in value)
+    try:
+        lo, hi = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"a search range must be a (low, high) pair of numbers, got {value!r}") from None
     return (lo, hi)
 
 

@@ -115,6 +115,8 @@ class LuGre(AbstractPhysicalModel):
     Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
+    _checks_dt = True
+
     def __check_init__(self):
         if not self.stribeck_exponent > 0.0:
             raise ValueError(f"stribeck_exponent must be positive, got {self.stribeck_exponent}")
@@ -157,6 +159,8 @@ class Dahl(AbstractPhysicalModel):
     sigma0_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+
+    _checks_dt = True
 
     def __check_init__(self):
         self._check_ranges()
