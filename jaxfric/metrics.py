@@ -51,8 +51,15 @@ METRIC_FORMULAS: dict[str, str] = {
 
 
 def _as_checked_pair(y, y_hat) -> tuple[np.ndarray, np.ndarray]:
-    y = np.asarray(y, dtype=np.float64)
-    y_hat = np.asarray(y_hat, dtype=np.float64)
+    arrays = []
+    for name, arr in (("y", y), ("y_hat", y_hat)):
+        if np.iscomplexobj(arr):
+            raise ValueError(f"{name} holds complex numbers; metrics need real values")
+        try:
+            arrays.append(np.asarray(arr, dtype=np.float64))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{name} is not numeric: {err}") from None
+    y, y_hat = arrays
     if y.shape != y_hat.shape:
         raise ValueError(f"y and y_hat must have the same shape, got {y.shape} and {y_hat.shape}")
     if y.size == 0:
@@ -63,44 +70,87 @@ def _as_checked_pair(y, y_hat) -> tuple[np.ndarray, np.ndarray]:
     return y.ravel(), y_hat.ravel()
 
 
-def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
-    """All metrics of the module table for measured ``y`` and predicted ``y_hat``.
-
-    Implements ALGORITHMS.md §6 (MSE %, MAX) and the MATLAB FIT % of PEERS.md.
-    Accepts NumPy or JAX arrays of equal shape (flattened; computed in
-    float64) and returns plain Python floats.
-
-    Raises ``ValueError`` for mismatched shapes, empty input, NaN/inf, or a
-    measured signal with zero variance (every normalised metric would divide by
-    zero).
-    """
-    y, y_hat = _as_checked_pair(y, y_hat)
-    e = y - y_hat
-    dev = y - y.mean()
-    ss_tot = float(dev @ dev)
-    y_range = float(y.max() - y.min())
-    if not ss_tot > 0.0 or y_range == 0.0:
-        raise ValueError(
-            "measured friction y has zero variance (a constant signal); "
-            "mse_percent, fit_percent and r2 are undefined"
-        )
-    n = y.size
-    ss_err = float(e @ e)
-    mse = ss_err / n
-    max_abs = float(np.max(np.abs(e)))
-    y_absmax = float(np.max(np.abs(y)))
-    rrse = float(np.sqrt(ss_err / ss_tot))
-    return {
+def _table(ss_err, ss_tot, mse, rmse, mse_scaled_percent, max_abs, y_absmax) -> dict[str, float]:
+    """The metric table from the sums of squares of the error and of ``y - ybar`` (same
+    units) and the error sizes; NumPy float64 scalars, so an overflow gives inf rather
+    than raising."""
+    rrse = np.sqrt(ss_err / ss_tot)
+    out = {
         "mse": mse,
-        "rmse": float(np.sqrt(mse)),
+        "rmse": rmse,
         "mse_percent": 100.0 * ss_err / ss_tot,
-        "mse_scaled_percent": 100.0 * mse * (2.0 / y_range) ** 2,
+        "mse_scaled_percent": mse_scaled_percent,
         "max_abs": max_abs,
         "max_percent": 100.0 * max_abs / y_absmax,
         "fit_percent": 100.0 * (1.0 - rrse),
         "rrse": rrse,
         "r2": 1.0 - ss_err / ss_tot,
     }
+    return {k: float(v) for k, v in out.items()}
+
+
+def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
+    """All metrics of the module table for measured ``y`` and predicted ``y_hat``.
+
+    Implements ALGORITHMS.md §6 (MSE %, MAX) and the MATLAB FIT % of PEERS.md.
+    Accepts NumPy or JAX arrays of equal shape (flattened; computed in
+    float64) and returns plain Python floats, never NaN or inf: when the plain
+    sums of squares would overflow or underflow (signals near 1e200 or 1e-200)
+    they are formed on rescaled data instead.
+
+    Raises ``ValueError`` for mismatched shapes, empty, complex or non-numeric
+    input, NaN/inf, a measured signal with zero variance (every normalised
+    metric would divide by zero), or errors so large that ``mse`` itself
+    exceeds the float64 range.
+    """
+    y, y_hat = _as_checked_pair(y, y_hat)
+    y_range = float(y.max() - y.min())
+    if y_range == 0.0:
+        raise ValueError(
+            "measured friction y has zero variance (a constant signal); "
+            "mse_percent, fit_percent and r2 are undefined"
+        )
+    n = y.size
+    f64 = np.float64
+    y_absmax = f64(np.max(np.abs(y)))
+    with np.errstate(over="ignore", invalid="ignore", under="ignore", divide="ignore"):
+        e = y - y_hat
+        dev = y - y.mean()
+        ss_tot = dev @ dev
+        ss_err = e @ e
+        mse = ss_err / n
+        out = _table(ss_err, ss_tot, mse, np.sqrt(mse), 100.0 * mse * (2.0 / f64(y_range)) ** 2,
+                     np.max(np.abs(e)), y_absmax)
+        if not (ss_tot > 0.0 and all(np.isfinite(v) for v in out.values())):
+            # Rescaled sums: y by max|y| and the error by max|e| (halved first if
+            # y - y_hat itself overflows), so nothing overflows or underflows on the way.
+            half = not np.all(np.isfinite(e))
+            if half:
+                e = 0.5 * y - 0.5 * y_hat
+            e_max = np.max(np.abs(e))
+            y_u = y / y_absmax
+            dev_u = y_u - y_u.mean()
+            ss_tot_u = dev_u @ dev_u
+            if not ss_tot_u > 0.0:
+                raise ValueError("measured friction y has (numerically) zero variance; "
+                                 "mse_percent, fit_percent and r2 are undefined")
+            if e_max == 0.0:
+                out = _table(f64(0.0), f64(1.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0), y_absmax)
+            else:
+                e_u = e / e_max
+                e_scale = (2.0 if half else 1.0) * e_max
+                ms_u = (e_u @ e_u) / n  # mean square error in units of e_scale^2
+                rmse = e_scale * np.sqrt(ms_u)
+                ratio = ((e_u @ e_u) / ss_tot_u) * (e_scale / y_absmax) ** 2
+                out = _table(ratio, f64(1.0), rmse * rmse, rmse, 100.0 * ms_u * (2.0 * (e_scale / f64(y_range))) ** 2,
+                             e_scale * np.max(np.abs(e_u)), y_absmax)
+    bad = [k for k, v in out.items() if not np.isfinite(v)]
+    if bad:
+        raise ValueError(
+            f"metrics {bad} exceed the float64 range (errors of about {out['rmse']:.3g} N); "
+            "the prediction has diverged"
+        )
+    return out
 
 
 def mse_percent_jax(y: ArrayLike, y_hat: ArrayLike, axis: int | None = -1) -> Array:
