@@ -15,7 +15,6 @@ This is preprocessing, done once per record in NumPy float64.
 from __future__ import annotations
 
 import numpy as np
-import scipy.signal
 
 from ._checks import check_positive, filter_padlen, is_uniform
 from .data import FrictionData, Measurements
@@ -30,6 +29,8 @@ def butterworth_sos(fs: float, cutoff: float = 5.0, order: int = 4) -> np.ndarra
         raise ValueError(f"cutoff {cutoff} Hz must be below the Nyquist frequency {fs / 2} Hz (fs = {fs} Hz)")
     if int(order) != order or order < 1:
         raise ValueError(f"filter order must be a positive integer, got {order!r}")
+    import scipy.signal  # here, not at import: it is 1.5 s of every `jaxfric` start-up
+
     return scipy.signal.butter(int(order), cutoff, btype="low", fs=fs, output="sos")
 
 
@@ -41,6 +42,8 @@ def lowpass(signal, fs: float, cutoff: float = 5.0, order: int = 4) -> np.ndarra
     if signal.shape[-1] <= pad:
         raise ValueError(f"record too short for the order-{order} filter: {signal.shape[-1]} samples, "
                          f"sosfiltfilt needs more than padlen = {pad}")
+    import scipy.signal
+
     return scipy.signal.sosfiltfilt(sos, signal, axis=-1)
 
 
@@ -113,6 +116,8 @@ def estimate_friction(
     if meas.n_samples <= pad:
         raise ValueError(f"record too short for the order-{order} filter: {meas.n_samples} samples, "
                          f"sosfiltfilt needs more than padlen = {pad}")
+
+    import scipy.signal
 
     x, p1, p2, load = scipy.signal.sosfiltfilt(sos, np.stack([meas.x, meas.p1, meas.p2, meas.load]), axis=-1)
     v, a = differentiate(x, dt)
