@@ -200,16 +200,12 @@ API_CASES = [
         lambda f: jf.minimise(counted, PSO, (np.full(3, -3e38, np.float32), np.full(3, 3e38, np.float32)),
                               key=KEY),
         ValueError, ["upper - lower", "float32"],
-        marks=_xfail("optim/minimise.py prepare_bounds: upper - lower = inf in float32, the swarm then "
-                     "reports value=[inf inf inf], outside the box; check np.isfinite(upper - lower) in "
-                     "the search dtype and raise ValueError naming 'upper - lower' and the dtype")),
+    ),
     pytest.param(
         "minimise/bounds-collapse-in-float32",
         lambda f: jf.minimise(counted, PSO, (np.array([1.0, 0.0]), np.array([1.0 + 1e-12, 1.0])), key=KEY),
         ValueError, ["float32", "lower bound must be < its upper bound"],
-        marks=_xfail("optim/minimise.py prepare_bounds: lower < upper is checked in float64 before the "
-                     "cast to the float32 search dtype, where 1 and 1 + 1e-12 become equal (a silent "
-                     "zero-width box); repeat the lower < upper check after the cast, naming the dtype")),
+    ),
     # ------------------------------------------------------------ optimiser: budgets, names
     ("minimise/pso-zero-generations", lambda f: jf.minimise(counted, jf.PSO(num_generations=0), (LO, HI), key=KEY),
      ValueError, ["num_generations must be >= 1, got 0"]),
@@ -257,10 +253,7 @@ API_CASES = [
     pytest.param(
         "minimise/key-batch", lambda f: jf.minimise(counted, PSO, (LO, HI), key=jax.random.split(KEY, 3)),
         ValueError, ["one key", "minimise_many"],
-        marks=_xfail("optim/minimise.py _check_key: a batch of keys passes the check and fails inside the "
-                     "jitted run with JAX's 'split accepts a single key'; reject key arrays with ndim > 0 "
-                     "(typed) or shape != (2,) (raw uint32) with 'key must be one key; for several runs "
-                     "use minimise_many'")),
+    ),
     ("minimise/y0-nan", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, y0=_with(LO, 0, np.nan)),
      ValueError, ["y0 must be finite"]),
     ("minimise/y0-shape", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, y0=np.zeros(2)), ValueError,
@@ -268,9 +261,7 @@ API_CASES = [
     pytest.param(
         "minimise/dtype-int", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, dtype=np.int32), ValueError,
         ["dtype must be a floating"],
-        marks=_xfail("optim/minimise.py prepare_bounds: dtype=int32 is accepted and the error blames fn "
-                     "('fn(y, args) must return a floating-point scalar, got () int32'); raise "
-                     "'dtype must be a floating dtype, got int32' when a given dtype is not floating")),
+    ),
     ("minimise/progress-bad", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, progress="yes"), ValueError,
      ["progress must be None, True (a tqdm bar) or a callable"]),
     ("minimise/checkpoint-nelder-mead",
@@ -296,16 +287,12 @@ API_CASES = [
         "minimise_many/no-keys",
         lambda f: jf.minimise_many(counted, PSO, (LO, HI), keys=jax.random.split(KEY, 0)), ValueError,
         ["keys", "empty"],
-        marks=_xfail("optim/minimise.py minimise_many: an empty batch of keys runs zero optimisations and "
-                     "returns an empty Solution; raise 'keys is empty: pass at least one key'")),
+    ),
     pytest.param(
         "minimise_many/devices-bad",
         lambda f: jf.minimise_many(counted, PSO, (LO, HI), keys=jax.random.split(KEY, 2), devices="gpu"),
         ValueError, ["devices"],
-        marks=_xfail("optim/sharding.py resolve_devices: devices='gpu' ends in AttributeError "
-                     "(''numpy.str_' object has no attribute 'platform''); accept None/False/a sequence "
-                     "of jax.Device and raise ValueError('devices must be None, False or a sequence of "
-                     "jax devices, got ...') otherwise")),
+    ),
     # ---------------------------------------------------------------------------- identify
     ("identify/unknown-model", lambda f: jf.identify("magic", (V, F, 0.01), key=0), ValueError,
      ["unknown friction model 'magic'", "lugre"]),

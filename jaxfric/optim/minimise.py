@@ -97,11 +97,36 @@ def prepare_bounds(bounds, dtype=None):
         dtype = np.result_type(*[a.dtype for a in lo_leaves + hi_leaves])
         if not np.issubdtype(dtype, np.floating):
             dtype = np.float64
+    else:
+        try:
+            given = np.dtype(dtype)
+        except TypeError:
+            raise ValueError(f"dtype must be a floating dtype, got {dtype!r}") from None
+        if not np.issubdtype(given, np.floating):
+            raise ValueError(f"dtype must be a floating dtype, got {given}")
     # float64 bounds search in float32 unless the caller enabled x64 (JAX's rule).
     dtype = jax.dtypes.canonicalize_dtype(dtype)
+    # The box must survive the cast to the search dtype: no zero widths, no overflow.
+    lo_c, hi_c = lower.astype(dtype), upper.astype(dtype)
+    with np.errstate(over="ignore", invalid="ignore"):
+        width = hi_c - lo_c
+    bad = np.nonzero(~(lo_c < hi_c))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"every lower bound must be < its upper bound in the search dtype {dtype}; "
+            f"parameter {i} has lower={float(lower[i])!r}, upper={float(upper[i])!r}, "
+            f"which are equal in {dtype} (rescale the parameter or use float64)"
+        )
+    if not np.all(np.isfinite(width)):
+        i = int(np.nonzero(~np.isfinite(width))[0][0])
+        raise ValueError(
+            f"upper - lower overflows the search dtype {dtype} for parameter {i} "
+            f"(lower={float(lower[i])!r}, upper={float(upper[i])!r}); rescale it or use float64"
+        )
     return (
-        jnp.asarray(lower, dtype),
-        jnp.asarray(upper, dtype),
+        jnp.asarray(lo_c, dtype),
+        jnp.asarray(hi_c, dtype),
         lo_def,
         tuple(shapes),
     )
@@ -143,12 +168,25 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
     return flat, lower, upper, x0
 
 
-def _check_key(key, name="key"):
+def _check_key(key, name="key", batch=False):
+    """A single key (``batch=False``) or a non-empty batch of keys, else ``ValueError``."""
     if key is None:
         raise ValueError(f"{name} is required: pass jax.random.key(seed)")
     k = jnp.asarray(key)
-    if not (jnp.issubdtype(k.dtype, jax.dtypes.prng_key) or k.dtype == jnp.uint32):
+    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
+    if not (typed or k.dtype == jnp.uint32):
         raise ValueError(f"{name} must be a JAX PRNG key, got dtype {k.dtype}")
+    key_ndim = k.ndim if typed else k.ndim - 1  # raw uint32 keys carry a trailing axis
+    if not batch and key_ndim != 0:
+        raise ValueError(
+            f"{name} must be one key, got a batch of shape {k.shape}; "
+            "for several runs use minimise_many"
+        )
+    if batch:
+        if key_ndim != 1:
+            raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+        if k.shape[0] == 0:
+            raise ValueError("keys is empty: pass at least one key")
     return key
 
 
@@ -292,9 +330,7 @@ def minimise_many(
     cost more per step than single ones.
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
-    keys = _check_key(keys, "keys")
-    if jnp.ndim(keys) < 1 or (jnp.asarray(keys).dtype == jnp.uint32 and jnp.ndim(keys) < 2):
-        raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+    keys = _check_key(keys, "keys", batch=True)
     keys, n = shard_keys(keys, resolve_devices(devices))
     with _progress(progress, solver) as hook:
         sol = _run_many(solver, flat, lower, upper, args, keys, x0, hook)

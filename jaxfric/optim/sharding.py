@@ -66,9 +66,19 @@ def resolve_devices(devices) -> Layout | None:
             raise ValueError(f"devices must be >= 1, got {devices}")
         devs = jax.devices()[:devices]
     else:
+        if isinstance(devices, (str, bytes)) or not hasattr(devices, "__iter__"):
+            raise ValueError(
+                "devices must be None, False, a device count or a sequence of jax devices, "
+                f"got {devices!r}"
+            )
         devs = list(devices)
         if not devs:
             raise ValueError("devices is an empty sequence")
+        if not all(isinstance(d, jax.Device) for d in devs):
+            raise ValueError(
+                "devices must be None, False, a device count or a sequence of jax devices, "
+                f"got {devices!r}"
+            )
     if len(devs) <= 1:
         return None
     return Layout(tuple(devs))
