@@ -136,7 +136,8 @@ def cmd_demo(args, argv) -> int:
     _write_csv(out / "rig_measurements.csv", {
         "t": record.t, "x": record.x, "p1": record.p1, "p2": record.p2, "load": record.load})
     _write_csv(out / "friction_data.csv", {"t": data.t, "velocity": data.velocity, "friction": data.friction})
-    fits = fit_all(data, args, fit_key, say=say, kept_fit=_save_fit_now(out))
+    notes = ["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else []
+    fits = fit_all(data, args, fit_key, say=say, kept_fit=_save_fit_now(out), notes=notes)
     cyl = r.cylinder
     source = (f"Simulated low-speed press rig (jaxfric.rig.Rig(), seed {args.seed}): bore {cyl.bore:g} m, rod "
               f"{cyl.rod:g} m, moving mass {cyl.mass:g} kg; measured position, chamber pressures and load "
@@ -154,7 +155,6 @@ def cmd_demo(args, argv) -> int:
         "friction_data.csv": "the pipeline's output t [s], velocity [m/s], friction [N]; try `jaxfric "
         "identify friction_data.csv --velocity-col velocity --friction-col friction --time-col t`",
     }
-    notes = ["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else []
     return _finish(args, out, data, fits, title="jaxfric demo: friction identification on the simulated rig",
                    source=source, argv=argv, notes=notes, python=python, extra_files=extra)
 
@@ -175,12 +175,12 @@ def cmd_identify(args, argv) -> int:
         f"{data.n_valid} for validation")
     out = _prepare_out(args.out)
     key = jax.random.key(args.seed)
-    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out))
+    notes = list(notes) + (["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else [])
+    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out), notes=notes)
     python = _python_snippet(args, list(fits), [
         f"# data: {desc}, as a jaxfric.rig.FrictionData (see jaxfric.rig.load_friction_pairs /",
         f"# load_measurements + estimate_friction), train_fraction={args.train_fraction}",
         "data = ..."], f"jax.random.key({args.seed})")
-    notes = list(notes) + (["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else [])
     return _finish(args, out, data, fits, title=f"jaxfric identify: {Path(args.file).name}",
                    source=desc[0].upper() + desc[1:] + ".", argv=argv, notes=notes, python=python,
                    extra_files=None)

@@ -16,7 +16,9 @@ warms the compilation cache.
 from __future__ import annotations
 
 import inspect
+import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 from .errors import UserError
@@ -155,13 +157,15 @@ def run_identify(name, data, *, solver, key, args, progress):
     return identify(name, data, **kwargs)
 
 
-def fit_all(data, args, key, *, say, kept_fit=None) -> dict:
+def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
     """Identify every model of ``args.models`` on ``data`` with ``key``; ``name -> Fit``.
 
     Every model gets the same ``key`` (they are independent problems), so a model's
     result does not depend on which other models were asked for. ``say(msg)`` prints
     stage messages (silent with ``--quiet``); ``kept_fit(name, fit)`` runs as soon as a
-    model is done (the CLI saves it there, so Ctrl-C keeps it).
+    model is done (the CLI saves it there, so Ctrl-C keeps it). Warnings from ``identify``
+    (e.g. a free run that diverges on validation) become one ``jaxfric: warning:`` line each,
+    shown even with ``--quiet``, and are appended to ``notes`` for the report.
     """
     fits = {}
     for name in check_models(args.models):
@@ -170,8 +174,16 @@ def fit_all(data, args, key, *, say, kept_fit=None) -> dict:
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
             f"{describe_solver(solver, model)}")
         t0 = time.perf_counter()
-        fit = run_identify(name, data, solver=solver, key=key, args=args,
-                           progress=None if args.quiet else progress_bar(solver, model, label(name, model)))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            fit = run_identify(name, data, solver=solver, key=key, args=args,
+                               progress=None if args.quiet else progress_bar(solver, model, label(name, model)))
+        for w in caught:
+            if issubclass(w.category, (RuntimeWarning, UserWarning)):
+                text = " ".join(str(w.message).split())
+                print(f"jaxfric: warning: {label(name, model)}: {text}", file=sys.stderr, flush=True)
+                if notes is not None:
+                    notes.append(f"{label(name, model)}: {text}")
         m = (fit.metrics.get("valid") or fit.metrics.get("all") or {})
         say(f"  done in {time.perf_counter() - t0:.1f} s (validation MSE {m.get('mse_percent', float('nan')):.4g} %)")
         fits[name] = fit
