@@ -181,6 +181,8 @@ IN_PROCESS_ERRORS = [
     (["predict", "missing.npz", "{csv}"], "model file not found: missing.npz"),
     (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t"], "cannot load the fit"),
     (["bench", "nonsense"], "argument name: invalid choice"),
+    (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t", "--out", "."],
+     "--out . is a folder; give a file name"),
 ]
 
 
@@ -211,6 +213,22 @@ def test_more_user_errors(small_csv, tmp_path, monkeypatch, capsys, args, messag
     assert main([*_fill(args, small_csv), "--no-cache"] if args[0] != "bench" else _fill(args, small_csv)) == 2
     _assert_one_line(capsys.readouterr().err, message)
     assert not list(tmp_path.iterdir())
+
+
+def test_bad_data_fail_before_any_stage_message_or_bar(tmp_path, monkeypatch, capsys):
+    """Without --quiet: identify's record checks run before 'identifying ...' and the bar."""
+    from jaxfric.cli import main
+
+    p = tmp_path / "constant.csv"
+    p.write_text("t,v,F\n" + "\n".join(f"{k / 100},{0.01 * np.sin(k / 9)},5.0" for k in range(100)))
+    monkeypatch.chdir(tmp_path)
+    status = main(["identify", str(p), "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
+                   "--model", "coulomb", "--quick", "--no-cache"])
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("jaxfric: error: friction has zero variance"), err
+    assert "identifying" not in err and "%|" not in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["constant.csv"]
 
 
 # -------------------------------------------------------------------- Ctrl-C

@@ -166,9 +166,14 @@ def cmd_identify(args, argv) -> int:
 
     from .data import identification_data
 
+    from jaxfric.identify import as_record
+
     check_models(args.models)
     say = _say(args)
     data, desc, notes = identification_data(args)
+    # identify's own record checks (lengths, NaN, split, constant friction), now: before any
+    # stage message, progress bar or report folder.
+    as_record(data)
     for note in notes:
         say(f"note: {note}")
     say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz: {data.n_train} for estimation, "
@@ -196,6 +201,8 @@ def cmd_predict(args, argv) -> int:
 
     if not os.path.exists(args.model_file):
         raise UserError(f"model file not found: {args.model_file}")
+    if args.out != "-" and os.path.isdir(args.out):
+        raise UserError(f"--out {args.out} is a folder; give a file name, e.g. {os.path.join(args.out, 'predictions.csv')}")
     try:
         from jaxfric.fit import load_fit
     except ImportError:

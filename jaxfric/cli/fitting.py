@@ -126,17 +126,37 @@ def describe_solver(solver, model) -> str:
     return f"Nelder-Mead (<= {s.steps_for(model.num_params)} steps)"
 
 
+class LazyBar:
+    """A progress sink that draws its tqdm bar only when the first report arrives.
+
+    ``identify`` checks the data before it optimises; a bar drawn up front would be left
+    half-drawn on the terminal (and glued to the error line) when that check fails.
+    """
+
+    def __init__(self, total, local_total, desc: str):
+        self.args = (total, local_total)
+        self.desc = desc
+        self.bar = None
+
+    def __call__(self, phase, step, evals, f_best):
+        if self.bar is None:
+            from jaxfric.optim.progress import TqdmProgress
+
+            self.bar = TqdmProgress(*self.args, desc=self.desc)
+        self.bar(phase, step, evals, f_best)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
 def progress_bar(solver, model, desc: str):
-    """A tqdm bar named after the model (the library's :class:`TqdmProgress` as the sink), or
-    ``True`` (the library's unnamed bar) if that class is not available."""
-    try:
-        from jaxfric.identify import default_solver
-        from jaxfric.optim.progress import TqdmProgress
-    except ImportError:  # pragma: no cover - older library
-        return True
+    """A lazily drawn tqdm bar named after the model (see :class:`LazyBar`)."""
+    from jaxfric.identify import default_solver
+
     s = default_solver(model) if solver is None else solver
     total, local_total = s.progress_totals()
-    return TqdmProgress(total, local_total, desc=desc)
+    return LazyBar(total, local_total, desc)
 
 
 def run_identify(name, data, *, solver, key, args, progress):
@@ -174,10 +194,14 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
             f"{describe_solver(solver, model)}")
         t0 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            fit = run_identify(name, data, solver=solver, key=key, args=args,
-                               progress=None if args.quiet else progress_bar(solver, model, label(name, model)))
+        bar = None if args.quiet else progress_bar(solver, model, label(name, model))
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                fit = run_identify(name, data, solver=solver, key=key, args=args, progress=bar)
+        finally:
+            if bar is not None:
+                bar.close()  # also when identify raises: the error line must start a line of its own
         for w in caught:
             if issubclass(w.category, (RuntimeWarning, UserWarning)):
                 text = " ".join(str(w.message).split())
