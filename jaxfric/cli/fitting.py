@@ -151,9 +151,15 @@ class LazyBar:
 
 
 def progress_bar(solver, model, desc: str):
-    """A lazily drawn tqdm bar named after the model (see :class:`LazyBar`)."""
+    """A lazily drawn tqdm bar named after the model (see :class:`LazyBar`), or ``None``
+    when tqdm is not installed (it is not a declared dependency of jaxfric: the bar is
+    then left out rather than failing inside the compiled run's callback)."""
+    import importlib.util
+
     from jaxfric.identify import default_solver
 
+    if importlib.util.find_spec("tqdm") is None:
+        return None
     s = default_solver(model) if solver is None else solver
     total, local_total = s.progress_totals()
     return LazyBar(total, local_total, desc)
