@@ -18,7 +18,7 @@ What it measures (ALGORITHMS.md §12):
 4. the neuron study N = 20, 30, 40 (paper: 0.3277 %, 0.2632 %, 0.2377 %);
 5. ENN against LuGre (MSE %, MAX, FIT %, #params; paper: ENN MSE 95.6 % below
    LuGre's, LuGre above 5 %), for the paper's optimiser and the gradient-refined one;
-6. the MAPSO generation budget (the default against ``--budgets``, 300 and 1000).
+6. the MAPSO generation budget (the default against ``--budgets``, 500 and 1000).
 
 Writes ``friction.md``, ``friction.csv`` and ``friction_*.png`` into ``--out``.
 Metric definitions: ``jaxfric.metrics`` (MSE % = 100·mean(e²)/var(F), §6).
@@ -51,7 +51,7 @@ def parse(argv=None):
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     p.add_argument("--x64", action="store_true", help="search in float64 (default: float32)")
     p.add_argument("--quick", action="store_true", help="tiny budgets: a smoke test of the script")
-    p.add_argument("--budgets", default="300,1000",
+    p.add_argument("--budgets", default="500,1000",
                    help="other MAPSO generation budgets to compare with the default ('' = none)")
     return p.parse_args(argv)
 

@@ -44,10 +44,13 @@ NAMED_MODEL_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 #: MAPSO generations of the default solver for black-box models (§3.5: "300–1000 for
-#: the ENN"). 500 generations (81 000 evaluations) + Nelder–Mead's 36 000 take about
-#: 17 s for the 30-neuron network on an idle 2-core CPU, compile time apart
-#: (benchmarks/friction.py times it and compares 300 and 1000).
-DEFAULT_GENERATIONS_BLACK_BOX = 500
+#: the ENN"). 300 generations (48 600 evaluations) + Nelder–Mead's 36 000 take about
+#: 13 s for the 30-neuron network on an idle 2-core CPU, compile time apart. More
+#: generations did not help on the simulated rig: after BFGS, 9 keys at G = 300 gave
+#: validation MSE 0.15–0.28 %, 6 keys at G = 500 gave 0.24–0.46 % (a swarm that has
+#: converged further hands Nelder–Mead a smaller simplex, see
+#: ``MAPSONMDS.simplex_from_swarm``); benchmarks/friction.py compares 300, 500, 1000.
+DEFAULT_GENERATIONS_BLACK_BOX = 300
 #: MAPSO generations of the default solver for physical models (a few parameters).
 DEFAULT_GENERATIONS_PHYSICAL = 200
 #: Above this many parameters the default lattice is 8×8 = 64 agents (§3.5), else 5×5.
