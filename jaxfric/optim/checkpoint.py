@@ -72,6 +72,12 @@ def _finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, 
     return sol
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def _save(path: Path, fingerprint: str, done: int, state: SwarmState, evals, f_best, impl):
     leaves = {
         "x": state.x, "v": state.v, "f": state.f, "pbest": state.pbest,
@@ -87,6 +93,7 @@ def _save(path: Path, fingerprint: str, done: int, state: SwarmState, evals, f_b
         with os.fdopen(fd, "wb") as fh:
             np.savez(fh, __meta__=np.frombuffer(json.dumps(meta).encode(), np.uint8),
                      **{k: np.asarray(v) for k, v in leaves.items()})
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
