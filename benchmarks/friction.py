@@ -51,6 +51,8 @@ def parse(argv=None):
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     p.add_argument("--x64", action="store_true", help="search in float64 (default: float32)")
     p.add_argument("--quick", action="store_true", help="tiny budgets: a smoke test of the script")
+    p.add_argument("--report-only", action="store_true",
+                   help="rewrite friction.md from an existing friction.csv (no identification)")
     p.add_argument("--budgets", default="500,1000",
                    help="other MAPSO generation budgets to compare with the default ('' = none)")
     return p.parse_args(argv)
@@ -171,7 +173,7 @@ def table(runner, configs_methods, columns, header):
         cells = [label]
         for key, digits in columns:
             if key == "num_params":
-                cells.append(str(rs[0]["num_params"]))
+                cells.append(str(int(rs[0]["num_params"])))
             else:
                 cells.append(fmt([r[key] for r in rs], digits))
         cells += extra
@@ -180,7 +182,7 @@ def table(runner, configs_methods, columns, header):
 
 
 def write_csv(rows, path):
-    keys = list(rows[0])
+    keys = list(dict.fromkeys(k for r in rows for k in r))
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
@@ -222,44 +224,38 @@ def figures(runner, data, out, enn_key, lugre_key):
     return files
 
 
-def main(argv=None):
-    args = parse(argv)
-    if args.x64:
-        jax.config.update("jax_enable_x64", True)
-    from jaxfric import rig
-    from jaxfric.identify import DEFAULT_GENERATIONS_BLACK_BOX, NAMED_MODEL_DEFAULTS, identify
+TIMING_CONFIG = "default timing"
+
+
+def run_benchmark(args, data, out):
+    """All identifications; returns (rows, figure files)."""
+    from jaxfric.identify import NAMED_MODEL_DEFAULTS, identify
     from jaxfric.models import Elman, LuGre
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.seeds))
     rb_default = NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]
-    load_before = os.getloadavg()
-    t_start = time.perf_counter()
-
-    print("simulating the rig ...", flush=True)
-    data = rig.synthetic_friction_data(jax.random.key(args.data_seed))
-    f = np.asarray(data.friction, np.float64)
-    print(f"  {data.n_samples} samples, {data.n_train} training, friction {f.min():.0f}..{f.max():.0f} N")
     runner = Runner(data, args)
     dtype = runner.dtype
 
     # 1. one full default identification, timed (compile apart), then again from the cache
-    timing = []
     if not args.quick:
         print("default ENN identification (timing) ...", flush=True)
-        for k in (100, 101):
-            fit = identify("elman", data, key=k, dtype=dtype)
-            timing.append(("paper default", fit.timings, fit.metrics["valid"]["mse_percent"]))
-        fit = identify("elman", data, key=100, dtype=dtype, refine="bfgs")
-        timing.append(("default + refine='bfgs'", fit.timings, fit.metrics["valid"]["mse_percent"]))
+        for k, refine, label in ((100, None, "paper default (first call)"),
+                                 (101, None, "paper default (cached)"),
+                                 (100, "bfgs", "default + refine='bfgs'")):
+            fit = identify("elman", data, key=k, dtype=dtype, refine=refine)
+            t = fit.timings
+            runner.rows.append(row(TIMING_CONFIG, label, k, fit, fit.stages[-1],
+                                   time_run=t["run_s"] + t.get("refine_run_s", 0.0),
+                                   time_compile=t["compile_s"] + t.get("refine_compile_s", 0.0)))
+            runner.rows[-1]["time_total_s"] = t["total_s"]
+            print(f"  {label}: {t}", flush=True)
 
     # 2.-4. ENN configurations
     neurons = (4,) if args.quick else (20, 30, 40)
     n_main = neurons[-1] if args.quick else 30
-    boxes = (1.0, 2.0, 5.0)
     print("ENN runs ...", flush=True)
-    for rb in boxes:
+    for rb in BOXES:
         for s in seeds:
             model = Elman(neurons=n_main, context_weight_bound=rb)
             runner.run(f"N={n_main} r<={rb:g}", model, s)
@@ -279,55 +275,98 @@ def main(argv=None):
     print("LuGre runs ...", flush=True)
     for s in seeds:
         runner.run("LuGre", LuGre(), s)
-    rows = runner.rows
-    write_csv(rows, out / "friction.csv")
-
     main_cfg = f"N={n_main} r<={rb_default:g}"
     files = figures(runner, data, out, (main_cfg, False, 0), ("LuGre", False, 0))
+    return runner.rows, files
 
-    # ------------------------------------------------------------- markdown
+
+BOXES = (1.0, 2.0, 5.0)
+
+
+def read_csv(path):
+    rows = []
+    with open(path) as fh:
+        for r in csv.DictReader(fh):
+            for k, v in r.items():
+                if k in ("config", "method", "model"):
+                    continue
+                try:
+                    r[k] = float(v) if v not in ("", "None") else None
+                except ValueError:
+                    pass
+            rows.append(r)
+    return rows
+
+
+class Rows:
+    """``select(config, method)`` over CSV-like rows (the report's only data source)."""
+
+    def __init__(self, rows):
+        self.rows = rows
+
+    def select(self, config, method):
+        return [r for r in self.rows if r["config"] == config and r["method"] == method]
+
+    def configs(self):
+        return sorted({r["config"] for r in self.rows})
+
+
+def write_markdown(out, rows, files, meta):
+    from jaxfric.identify import DEFAULT_GENERATIONS_BLACK_BOX, NAMED_MODEL_DEFAULTS
+
+    R = Rows(rows)
+    rb_default = NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]
+    neurons = sorted({int(r["neurons"]) for r in rows if r["model"] == "Elman" and r["neurons"]})
+    n_main = 30 if 30 in neurons else neurons[-1]
+    main_cfg = f"N={n_main} r<={rb_default:g}"
+    n_keys = len({r["seed"] for r in R.select(main_cfg, "MAPSO–NMDS")})
     L = []
     add = L.append
     add("# Friction identification on the simulated rig (`benchmarks/friction.py`)\n")
-    add(f"Data: `jaxfric.rig.synthetic_friction_data(jax.random.key({args.data_seed}))` at the "
-        f"default sensor noise: {data.n_samples} samples at {1 / float(data.dt):.0f} Hz, "
-        f"{data.n_train} training / {data.n_samples - data.n_train} validation samples "
-        f"(ALGORITHMS.md §7). The rig's seal friction is richer than LuGre (Maxwell-slip "
-        f"elements plus unmodelled effects), so LuGre cannot fit it exactly.\n")
-    add(f"Search dtype {np.dtype(dtype).name}; {len(seeds)} optimiser key(s) per configuration "
-        f"(numbers are mean (min–max) over keys). MSE % = 100·mean(e²)/var(F) over the stated "
-        f"window (§6); MAX = max|e| [N]; FIT % = 100·(1 − ‖e‖/‖F − mean F‖).")
-    add(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores, "
-        f"load average {load_before[0]:.1f} at the start (other jobs share the machine, so "
-        f"times are upper bounds). jax {jax.__version__}.\n")
-    default_desc = ("identify's default solver: MAPSO 8×8 lattice (64 agents, §3.5), "
-                    f"G = {DEFAULT_GENERATIONS_BLACK_BOX} generations (162 evaluations each), then "
-                    "Nelder–Mead with fminsearch's budget of 200·n iterations and 200·n "
-                    "evaluations (36 000 for N = 30).")
-    add(f"ENN solver: {default_desc} Gradient stage (not in the paper): BFGS on J, 2000 "
-        "steps, box kept by the sine reparametrisation. LuGre: MAPSO 5×5, G = 200, "
-        "Nelder–Mead 1200 iterations, then Levenberg–Marquardt (200 steps); data-centred "
-        "bounds (`with_data_bounds`).\n")
+    add(f"Data: `jaxfric.rig.synthetic_friction_data(jax.random.key({meta['data_seed']}))` at the "
+        f"default sensor noise: {meta['n_samples']} samples at {meta['fs']:.0f} Hz, "
+        f"{meta['n_train']} training / {meta['n_samples'] - meta['n_train']} validation samples "
+        "(ALGORITHMS.md §7). The rig's seal friction is a pressure-dependent, asymmetric "
+        "Maxwell-slip model (Coulomb level 270 N extending, 150 N retracting), richer than "
+        "LuGre on purpose.\n")
+    add(f"Search dtype {meta['dtype']}; {n_keys} optimiser keys per configuration on the same "
+        "record; cells are mean (min–max) over keys. MSE % = 100·mean(e²)/var(F) over the "
+        "stated window (§6); MAX = max|e| [N]; FIT % = 100·(1 − ‖e‖/‖F − mean F‖). "
+        f"Machine: {meta['machine']}, {meta['cores']} CPU cores, load average "
+        f"{meta['load']:.1f} at the start: other jobs shared the machine, so times are upper "
+        f"bounds. jax {meta['jax']}.\n")
+    add(f"ENN solver = `identify`'s default: MAPSO on an 8×8 lattice (64 agents, §3.5) for "
+        f"G = {DEFAULT_GENERATIONS_BLACK_BOX} generations (162 evaluations each), then "
+        "Nelder–Mead with fminsearch's budget, 200·n iterations and 200·n evaluations "
+        "(36 000 for N = 30), started from a simplex sized by the swarm's spread. Gradient "
+        "stage (not in the paper, `refine=\"bfgs\"`): BFGS on J through the scan (exact BPTT "
+        "gradient), at most 2000 steps, box kept by the sine reparametrisation. LuGre: "
+        "MAPSO 5×5, G = 200, Nelder–Mead 1200 iterations, then Levenberg–Marquardt "
+        "(`refine=\"lm\"`, 200 steps); data-centred bounds (`with_data_bounds`). "
+        "\"MAPSO only\" and \"MAPSO + BFGS\" are separate runs with `solver=MAPSO(...)` "
+        "(the same lattice and G).\n")
 
+    timing = R.select(TIMING_CONFIG, "paper default (first call)")
     if timing:
-        add("## Timing of one full default ENN identification (N = 30)\n")
+        add(f"## Timing of one full default ENN identification (N = {n_main})\n")
         add("`identify(\"elman\", data, key=...)` with every default (float32 unless "
-            "`--x64`). Compile time is measured from JAX's compile events, apart from the run.\n")
-        add("| call | compile [s] | optimiser run [s] | gradient run [s] | total wall [s] | valid MSE % |")
+            "`--x64`). Compile time comes from JAX's compile events, apart from the run.\n")
+        add("| call | compile [s] | run [s] | total wall [s] | MSE % train | MSE % valid |")
         add("|---|---|---|---|---|---|")
-        for i, (name, t, mse) in enumerate(timing):
-            tag = name + (" (first call)" if i == 0 else " (cached)" if i == 1 else "")
-            comp = t["compile_s"] + t.get("refine_compile_s", 0.0)
-            add(f"| {tag} | {comp:.1f} | {t['run_s']:.1f} | {t.get('refine_run_s', 0.0):.1f} | "
-                f"{t['total_s']:.1f} | {mse:.3f} |")
+        for label in ("paper default (first call)", "paper default (cached)",
+                      "default + refine='bfgs'"):
+            for r in R.select(TIMING_CONFIG, label):
+                add(f"| {label} | {r['time_compile_s']:.1f} | {r['time_run_s']:.1f} | "
+                    f"{r['time_total_s']:.1f} | {r['mse_percent_train']:.3f} | "
+                    f"{r['mse_percent_valid']:.3f} |")
         add("")
 
     mse_cols = [("mse_percent_train", 3), ("mse_percent_valid", 3), ("num_params", 0),
                 ("time_run_s", 1)]
     hdr = ["method", "MSE % train", "MSE % valid", "#params", "run time [s]"]
 
-    add(f"## Optimiser stages (ENN N = {n_main}, |r| ≤ {rb_default:g})\n")
-    add(table(runner, [
+    add(f"## Optimiser stages (ENN N = {n_main}, \\|r\\| ≤ {rb_default:g})\n")
+    add(table(R, [
         ("MAPSO only", main_cfg, "MAPSO only", []),
         ("MAPSO–NMDS (paper)", main_cfg, "MAPSO–NMDS", []),
         ("MAPSO–NMDS + BFGS", main_cfg, "MAPSO–NMDS + BFGS", []),
@@ -336,67 +375,153 @@ def main(argv=None):
     add("")
 
     add(f"## Elman context-weight box (N = {n_main})\n")
-    add("|r| ≤ 5 is the spec's box (§2.4); with it about 98 % of random networks are chaotic "
-        "over 1600 samples (models/elman.py).\n")
-    add(table(runner, [(f"\\|r\\| ≤ {rb:g}, {m}", f"N={n_main} r<={rb:g}", meth, [])
-                       for rb in boxes for m, meth in (("MAPSO–NMDS", "MAPSO–NMDS"),
-                                                       ("+ BFGS", "MAPSO–NMDS + BFGS"))],
+    add("\\|r\\| ≤ 5 is the spec's box (§2.4); with it about 98 % of random networks are "
+        f"chaotic over 1600 samples (models/elman.py). `identify(\"elman\", ...)` uses "
+        f"\\|r\\| ≤ {rb_default:g}.\n")
+    add(table(R, [(f"\\|r\\| ≤ {rb:g}, {m}", f"N={n_main} r<={rb:g}", meth, [])
+                  for rb in BOXES for m, meth in (("MAPSO–NMDS", "MAPSO–NMDS"),
+                                                  ("+ BFGS", "MAPSO–NMDS + BFGS"),
+                                                  ("MAPSO + BFGS", "MAPSO + BFGS"))],
                 mse_cols, ["box, method"] + hdr[1:]))
     add("")
 
-    add(f"## Neuron study (|r| ≤ {rb_default:g})\n")
+    add(f"## Neuron study (\\|r\\| ≤ {rb_default:g})\n")
+    add("The paper does not say which window its MSE covers (§6); ours are per window.\n")
     cfg_n = {n: (main_cfg if n == n_main else f"N={n} r<={rb_default:g}") for n in neurons}
     entries = []
     for n in neurons:
         paper = f"{PAPER_NEURONS[n]:.4f}" if n in PAPER_NEURONS else "–"
         entries.append((f"N = {n}, MAPSO–NMDS", cfg_n[n], "MAPSO–NMDS", [paper]))
         entries.append((f"N = {n}, + BFGS", cfg_n[n], "MAPSO–NMDS + BFGS", [paper]))
-    add(table(runner, entries, mse_cols, ["N, method"] + hdr[1:] + ["paper MSE %"]))
+    add(table(R, entries, mse_cols, ["N, method"] + hdr[1:] + ["paper MSE %"]))
     add("")
 
     add("## ENN against LuGre (Table 4 of the paper)\n")
     full_cols = [("mse_percent_valid", 3), ("mse_percent_all", 3), ("max_abs_valid", 1),
-                 ("max_abs_all", 1), ("fit_percent_valid", 2), ("num_params", 0)]
-    add(table(runner, [
+                 ("max_abs_all", 1), ("fit_percent_valid", 2), ("fit_percent_all", 2),
+                 ("num_params", 0)]
+    add(table(R, [
         (f"ENN N = {n_main}, MAPSO–NMDS", main_cfg, "MAPSO–NMDS", []),
         (f"ENN N = {n_main}, MAPSO–NMDS + BFGS", main_cfg, "MAPSO–NMDS + BFGS", []),
         ("LuGre, MAPSO–NMDS", "LuGre", "MAPSO–NMDS", []),
         ("LuGre, MAPSO–NMDS + LM", "LuGre", "MAPSO–NMDS + LM", []),
     ], full_cols, ["model, method", "MSE % valid", "MSE % all", "MAX valid [N]", "MAX all [N]",
-                   "FIT % valid", "#params"]))
+                   "FIT % valid", "FIT % all", "#params"]))
     add("")
-    red = []
+    red = {}
+    add("MSE reduction of the ENN against LuGre (means over keys; paper: 95.6 %, LuGre > 5 %):\n")
+    add("| ENN method (LuGre method) | window | ENN MSE % | LuGre MSE % | reduction |")
+    add("|---|---|---|---|---|")
     for enn_m, lug_m in (("MAPSO–NMDS", "MAPSO–NMDS"), ("MAPSO–NMDS + BFGS", "MAPSO–NMDS + LM")):
         for w in ("valid", "all"):
-            e = stats([r[f"mse_percent_{w}"] for r in runner.select(main_cfg, enn_m)])[0]
-            g = stats([r[f"mse_percent_{w}"] for r in runner.select("LuGre", lug_m)])[0]
-            red.append((enn_m, w, e, g, 100 * (1 - e / g)))
-    add("MSE reduction of the ENN against LuGre (means over keys; paper: 95.6 %, LuGre > 5 %):\n")
-    add("| ENN method | window | ENN MSE % | LuGre MSE % | reduction |")
-    add("|---|---|---|---|---|")
-    for m, w, e, g, r in red:
-        add(f"| {m} | {w} | {e:.3f} | {g:.3f} | {r:.1f} % |")
+            e = stats([r[f"mse_percent_{w}"] for r in R.select(main_cfg, enn_m)])[0]
+            g = stats([r[f"mse_percent_{w}"] for r in R.select("LuGre", lug_m)])[0]
+            red[(enn_m, w)] = (e, g, 100 * (1 - e / g))
+            add(f"| {enn_m} ({lug_m}) | {w} | {e:.3f} | {g:.3f} | {100 * (1 - e / g):.1f} % |")
     add("")
 
-    if budgets:
-        add(f"## MAPSO generation budget (N = 30, |r| ≤ {rb_default:g})\n")
-        cfgs = sorted([(DEFAULT_GENERATIONS_BLACK_BOX, main_cfg)]
-                      + [(g, f"N=30 r<={rb_default:g} G={g}") for g in budgets])
+    budget_cfgs = sorted({r["config"] for r in rows if r["config"].startswith(f"N=30 r<={rb_default:g} G=")})
+    if budget_cfgs:
+        add(f"## MAPSO generation budget (N = 30, \\|r\\| ≤ {rb_default:g})\n")
+        cfgs = [(DEFAULT_GENERATIONS_BLACK_BOX, main_cfg)] + [
+            (int(c.rsplit("G=", 1)[1]), c) for c in budget_cfgs]
         entries = []
-        for g, cfg in cfgs:
+        for g, cfg in sorted(cfgs):
             tag = " (default)" if g == DEFAULT_GENERATIONS_BLACK_BOX else ""
             entries.append((f"G = {g}{tag}, MAPSO–NMDS", cfg, "MAPSO–NMDS", []))
             entries.append((f"G = {g}{tag}, + BFGS", cfg, "MAPSO–NMDS + BFGS", []))
-        add(table(runner, entries, mse_cols, ["budget, method"] + hdr[1:]))
+        add(table(R, entries, mse_cols, ["budget, method"] + hdr[1:]))
         add("")
 
+    # ------------------------------------------------------------- findings
+    add("## Findings\n")
+    refined = [r["mse_percent_valid"] for r in R.select(main_cfg, "MAPSO–NMDS + BFGS")]
+    paper_only = [r["mse_percent_valid"] for r in R.select(main_cfg, "MAPSO–NMDS")]
+    lug = [r["mse_percent_valid"] for r in R.select("LuGre", "MAPSO–NMDS")]
+    if refined:
+        ok = max(refined) <= 0.3
+        verdict = ("met by every key" if ok else "met on average"
+                   if np.mean(refined) <= 0.3 else "not met")
+        po = stats(paper_only)[0]
+        add(f"- ENN N = {n_main}, MAPSO–NMDS + BFGS: validation MSE {fmt(refined)} % over "
+            f"{len(refined)} keys — the ≤ 0.3 % target is {verdict}. The paper's MAPSO–NMDS "
+            f"alone reaches {fmt(paper_only)} %, {'above' if po > 0.2632 else 'at or below'} "
+            "the paper's 0.2632 % (whose window is unknown).")
+    if lug:
+        from jaxfric.rig import SealFriction
+
+        sf = SealFriction()
+        lug_J = [r["J"] for r in R.select("LuGre", "MAPSO–NMDS + LM")]
+        same = len(lug_J) > 1 and (max(lug_J) - min(lug_J)) <= 1e-3 * min(lug_J)
+        add(f"- LuGre: validation MSE {fmt(lug)} % (paper: above 5 %), whole record "
+            f"{fmt([r['mse_percent_all'] for r in R.select('LuGre', 'MAPSO–NMDS')])} %. "
+            + ("Every key and the LM polish reach the same cost, so the error is structural: "
+               if same else "")
+            + "LuGre is symmetric and pressure-blind, while the rig's seal friction has "
+            f"Coulomb levels of {sf.coulomb_pos:.0f} N extending and {sf.coulomb_neg:.0f} N "
+            "retracting and grows with the rod-chamber pressure, which leaves a near-constant "
+            "offset in the LuGre error (see the error figure).")
+    if red:
+        e, g, r = red[("MAPSO–NMDS", "valid")]
+        e2, g2, r2 = red[("MAPSO–NMDS + BFGS", "valid")]
+        add(f"- ENN against LuGre on validation: {r:.1f} % lower MSE with the paper's "
+            f"optimiser, {r2:.1f} % lower after the gradient stage (paper: 95.6 %).")
+    stage_rows = {m: stats([x["mse_percent_train"] for x in R.select(main_cfg, m)])[0]
+                  for m in ("MAPSO only", "MAPSO–NMDS", "MAPSO–NMDS + BFGS", "MAPSO + BFGS")}
+    if all(np.isfinite(v) for v in stage_rows.values()):
+        a, b, c = (stage_rows[m] for m in ("MAPSO only", "MAPSO–NMDS", "MAPSO–NMDS + BFGS"))
+        add(f"- Stages (training MSE %, means): MAPSO alone {a:.2f}, + Nelder–Mead {b:.2f} "
+            f"({a / b:.1f}× lower), + BFGS {c:.3f} (another {b / c:.1f}×); BFGS straight after "
+            f"MAPSO {stage_rows['MAPSO + BFGS']:.3f}.")
+    tr = {n: stats([r["mse_percent_train"] for r in R.select(cfg_n[n], "MAPSO–NMDS + BFGS")])[0]
+          for n in neurons}
+    if len(tr) == 3:
+        mono = tr[neurons[2]] <= tr[neurons[1]] <= tr[neurons[0]]
+        add(f"- Neuron study, training MSE after BFGS: "
+            + ", ".join(f"N = {n}: {tr[n]:.3f} %" for n in neurons)
+            + (" — decreasing with N, as the paper's (§12 (b))." if mono else
+               " — not monotone in N at this number of keys (§12 (b) expects it)."))
+    if timing:
+        cached = R.select(TIMING_CONFIG, "paper default (cached)")[0]
+        first = timing[0]
+        add(f"- A full default identification (N = 30) ran in {cached['time_run_s']:.1f} s "
+            f"from the jit cache; the first call added {first['time_compile_s']:.1f} s of "
+            "compilation. A new record of the same length does not recompile (tests).")
+    add("- The validation error of a free-running recurrent network scatters from key to key "
+        "far more than the training error does (different local minima extrapolate "
+        "differently); judge a fit on its validation window. `identify` warns when "
+        "validation MSE exceeds 10× the training MSE and 5 %.")
+    add("")
     add("## Figures\n")
     for name in files:
-        add(f"![{name}]({name})")
-    add("")
-    add(f"Total benchmark wall time: {time.perf_counter() - t_start:.0f} s. "
-        f"Raw numbers per key: `friction.csv`.")
+        add(f"![{name}]({name})\n")
+    add(f"Raw numbers per key: `friction.csv`. Benchmark wall time: {meta['wall']:.0f} s.")
     (out / "friction.md").write_text("\n".join(L) + "\n")
+
+
+def main(argv=None):
+    args = parse(argv)
+    if args.x64:
+        jax.config.update("jax_enable_x64", True)
+    from jaxfric import rig
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    load = os.getloadavg()[0]
+    t_start = time.perf_counter()
+    print("simulating the rig ...", flush=True)
+    data = rig.synthetic_friction_data(jax.random.key(args.data_seed))
+    if args.report_only:
+        rows = read_csv(out / "friction.csv")
+        files = sorted(p.name for p in out.glob("friction_*.png"))
+    else:
+        rows, files = run_benchmark(args, data, out)
+        write_csv(rows, out / "friction.csv")
+    meta = {"data_seed": args.data_seed, "n_samples": data.n_samples, "n_train": data.n_train,
+            "fs": 1.0 / float(data.dt), "dtype": "float64" if args.x64 else "float32",
+            "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "load": load, "jax": jax.__version__, "wall": time.perf_counter() - t_start}
+    write_markdown(out, rows, files, meta)
     print(f"wrote {out / 'friction.md'}, friction.csv and {len(files)} figures")
 
 
