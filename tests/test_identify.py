@@ -90,6 +90,17 @@ def test_new_data_same_shapes_never_recompiles():
         assert abs(float(fit1.params["Fc"]) - 200.0) < 3.0
 
 
+def test_multi_start_nelder_mead_from_the_best_agents():
+    """MAPSONMDS(num_starts=k) refines the k best agents; identify takes it as any solver."""
+    with jax.enable_x64(True):
+        v = velocity_profile()
+        f = lugre_friction(v, **TRUTH)
+        solver = jaxfric.MAPSONMDS(mapso=SMALL.mapso, nelder_mead=SMALL.nelder_mead, num_starts=3)
+        fit = identify("lugre", (v, f, DT), key=0, solver=solver)
+    assert fit.stages[1]["J"] <= fit.stages[0]["J"]
+    assert fit.metrics["all"]["mse_percent"] < 0.01
+
+
 def test_same_key_same_fit_other_key_other_run():
     with jax.enable_x64(True):
         v = velocity_profile()
@@ -207,8 +218,9 @@ def test_named_models_get_the_documented_defaults_and_options():
     assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
 
 
-def test_static_map_recovered_by_nelder_mead_alone():
-    """Coulomb + viscous data from the model itself: NM from the LS initial guess."""
+def test_static_map_recovered_by_levenberg_marquardt():
+    """Coulomb + viscous data from the model itself: a few NM steps from the box
+    centre, then LM on the residuals must find the truth."""
     from jaxfric.models import Coulomb
 
     v = velocity_profile(600)
@@ -216,8 +228,11 @@ def test_static_map_recovered_by_nelder_mead_alone():
     truth = dict(Fc=180.0, sigma2=2.5e3)
     f = np.asarray(model.simulate(model.from_physical(**truth), jnp.asarray(v)))
     fitted = model.with_data_bounds(v[:480], f[:480])
-    fit = identify(model, (v, f, DT), key=0, solver=jaxfric.NelderMead(max_steps=300),
-                   theta0=fitted.initial_guess(v[:480], f[:480]))
+    lo, hi = fitted.bounds()
+    fit = identify(model, (v, f, DT), key=0, solver=jaxfric.NelderMead(max_steps=5),
+                   theta0=0.5 * (lo + hi), refine="lm")
+    assert fit.stages[-1]["stage"] == "lm" and fit.stages[-1]["improved"]
+    assert fit.stages[-1]["J"] < 1e-3 * fit.stages[0]["J"]
     assert fit.metrics["valid"]["mse_percent"] < 1e-3
     assert float(fit.params["Fc"]) == pytest.approx(180.0, rel=1e-3)
     assert float(fit.params["sigma2"]) == pytest.approx(2.5e3, rel=1e-2)
