@@ -19,8 +19,9 @@ SCRIPT = textwrap.dedent(
     lo, hi = F.get("rastrigin").bounds(6, np.float32)
     obj = F.objective("rastrigin")
     out = {}
+    # The hybrid covers every sharded path: swarm populations (MAPSO's lattice and
+    # self-learning evaluations), Nelder-Mead, and runs laid out over devices.
     for name, solver in [
-        ("pso", jf.PSO(num_particles=10, num_generations=20)),
         ("hybrid", jf.mapso_nmds(lattice_size=3, num_generations=10, nm_max_steps=50)),
     ]:
         a = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(0))
