@@ -75,13 +75,16 @@ def _table(ss_err, ss_tot, mse, rmse, mse_scaled_percent, max_abs, y_absmax) -> 
     units) and the error sizes; NumPy float64 scalars, so an overflow gives inf rather
     than raising."""
     rrse = np.sqrt(ss_err / ss_tot)
+    max_percent = 100.0 * max_abs / y_absmax
+    if not np.isfinite(max_percent):  # 100 * max_abs overflowed
+        max_percent = 100.0 * (max_abs / y_absmax)
     out = {
         "mse": mse,
         "rmse": rmse,
         "mse_percent": 100.0 * ss_err / ss_tot,
         "mse_scaled_percent": mse_scaled_percent,
         "max_abs": max_abs,
-        "max_percent": 100.0 * max_abs / y_absmax,
+        "max_percent": max_percent,
         "fit_percent": 100.0 * (1.0 - rrse),
         "rrse": rrse,
         "r2": 1.0 - ss_err / ss_tot,
@@ -104,8 +107,8 @@ def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
     exceeds the float64 range.
     """
     y, y_hat = _as_checked_pair(y, y_hat)
-    y_range = float(y.max() - y.min())
-    if y_range == 0.0:
+    half_range = np.float64(0.5 * y.max() - 0.5 * y.min())  # max - min itself may overflow
+    if half_range == 0.0:
         raise ValueError(
             "measured friction y has zero variance (a constant signal); "
             "mse_percent, fit_percent and r2 are undefined"
@@ -114,12 +117,13 @@ def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
     f64 = np.float64
     y_absmax = f64(np.max(np.abs(y)))
     with np.errstate(over="ignore", invalid="ignore", under="ignore", divide="ignore"):
+        y_range = 2.0 * half_range  # inf only for |y| near 1e308, where the rescaled path runs
         e = y - y_hat
         dev = y - y.mean()
         ss_tot = dev @ dev
         ss_err = e @ e
         mse = ss_err / n
-        out = _table(ss_err, ss_tot, mse, np.sqrt(mse), 100.0 * mse * (2.0 / f64(y_range)) ** 2,
+        out = _table(ss_err, ss_tot, mse, np.sqrt(mse), 100.0 * mse * (2.0 / y_range) ** 2,
                      np.max(np.abs(e)), y_absmax)
         if not (ss_tot > 0.0 and all(np.isfinite(v) for v in out.values())):
             # Rescaled sums: y by max|y| and the error by max|e| (halved first if
@@ -142,7 +146,7 @@ def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
                 ms_u = (e_u @ e_u) / n  # mean square error in units of e_scale^2
                 rmse = e_scale * np.sqrt(ms_u)
                 ratio = ((e_u @ e_u) / ss_tot_u) * (e_scale / y_absmax) ** 2
-                out = _table(ratio, f64(1.0), rmse * rmse, rmse, 100.0 * ms_u * (2.0 * (e_scale / f64(y_range))) ** 2,
+                out = _table(ratio, f64(1.0), rmse * rmse, rmse, 100.0 * ms_u * (e_scale / half_range) ** 2,
                              e_scale * np.max(np.abs(e_u)), y_absmax)
     bad = [k for k, v in out.items() if not np.isfinite(v)]
     if bad:
