@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import platform
 import sys
@@ -487,6 +488,17 @@ def write_markdown(out, rows, files, meta):
         add(f"- A full default identification (N = 30) ran in {cached['time_run_s']:.1f} s "
             f"from the jit cache; the first call added {first['time_compile_s']:.1f} s of "
             "compilation. A new record of the same length does not recompile (tests).")
+    box_notes = []
+    for rb in BOXES:
+        rs = R.select(f"N={n_main} r<={rb:g}", "MAPSO–NMDS + BFGS")
+        if rs:
+            bad = [r for r in rs if r["mse_percent_valid"] > max(10 * r["mse_percent_train"], 5.0)]
+            box_notes.append(f"\\|r\\| ≤ {rb:g}: validation {fmt([r['mse_percent_valid'] for r in rs])} %"
+                             + (f", {len(bad)} of {len(rs)} keys diverged on the validation window"
+                                if bad else ""))
+    if box_notes:
+        add("- Context-weight box, after BFGS: " + "; ".join(box_notes) + ". The narrowest box "
+            "gives the lowest and least scattered validation error, hence the default.")
     add("- The validation error of a free-running recurrent network scatters from key to key "
         "far more than the training error does (different local minima extrapolate "
         "differently); judge a fit on its validation window. `identify` warns when "
@@ -511,16 +523,20 @@ def main(argv=None):
     t_start = time.perf_counter()
     print("simulating the rig ...", flush=True)
     data = rig.synthetic_friction_data(jax.random.key(args.data_seed))
+    meta_path = out / "friction_meta.json"
     if args.report_only:
         rows = read_csv(out / "friction.csv")
         files = sorted(p.name for p in out.glob("friction_*.png"))
+        meta = json.loads(meta_path.read_text())  # the run's own machine load and wall time
     else:
         rows, files = run_benchmark(args, data, out)
         write_csv(rows, out / "friction.csv")
-    meta = {"data_seed": args.data_seed, "n_samples": data.n_samples, "n_train": data.n_train,
-            "fs": 1.0 / float(data.dt), "dtype": "float64" if args.x64 else "float32",
-            "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "load": load, "jax": jax.__version__, "wall": time.perf_counter() - t_start}
+        meta = {"data_seed": args.data_seed, "n_samples": data.n_samples,
+                "n_train": data.n_train, "fs": 1.0 / float(data.dt),
+                "dtype": "float64" if args.x64 else "float32",
+                "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+                "load": load, "jax": jax.__version__, "wall": time.perf_counter() - t_start}
+        meta_path.write_text(json.dumps(meta, indent=1) + "\n")
     write_markdown(out, rows, files, meta)
     print(f"wrote {out / 'friction.md'}, friction.csv and {len(files)} figures")
 
