@@ -365,3 +365,18 @@ def test_divergent_validation_warns():
         _api._warn_if_divergent({"train": good["train"], "valid": None})
     with pytest.warns(RuntimeWarning, match="validation MSE 231 %"):
         _api._warn_if_divergent(bad)
+
+
+def test_real_fit_saves_loads_and_summarises(enn_fit, tmp_path):
+    import json
+
+    from jaxfric.fit import load_fit
+
+    fit, v, _ = enn_fit
+    json.dumps(fit.to_dict())  # JSON-able as is
+    fit.save(tmp_path / "enn.npz")
+    back = load_fit(tmp_path / "enn.npz")
+    assert np.array_equal(np.asarray(back.predict(v)), np.asarray(fit.predict(v)))
+    assert back.stages == json.loads(json.dumps(fit.stages))
+    assert back.settings["refine"]["method"] == "bfgs"
+    assert "valid" in fit.summary() and "bfgs" in fit.summary()
