@@ -309,14 +309,11 @@ API_CASES = [
     pytest.param(
         "identify/empty-record", lambda f: jf.identify("lugre", (np.zeros(0), np.zeros(0), 0.01), key=0),
         ValueError, ["0 samples", "at least 3"],
-        marks=_xfail("identify/_data.py as_record: an empty record reports 'the validation window is empty: "
-                     "all 0 samples are used for training'; check the length first: 'the record has 0 "
-                     "samples; identification needs at least 3 (2 to train, 1 to validate)'")),
+    ),
     pytest.param(
         "identify/one-sample-record", lambda f: jf.identify("lugre", (V[:1], F[:1], 0.01), key=0),
         ValueError, ["1 sample", "at least 3"],
-        marks=_xfail("identify/_data.py as_record: same as the empty record ('all 1 samples are used for "
-                     "training'); say the record is too short and how long it must be")),
+    ),
     ("identify/constant-friction", lambda f: jf.identify("lugre", (V, np.full(N, 7.0), 0.01), key=0), ValueError,
      ["friction has zero variance over the training window"]),
     ("identify/constant-velocity", lambda f: jf.identify("lugre", (np.full(N, 0.01), F, 0.01), key=0), ValueError,
@@ -332,9 +329,7 @@ API_CASES = [
     pytest.param(
         "identify/velocity-complex", lambda f: jf.identify("lugre", (V + 1j, F, 0.01), key=0), ValueError,
         ["velocity", "complex"],
-        marks=_xfail("identify/_data.py _channel: complex data are cast to float64 with only a "
-                     "ComplexWarning (the imaginary part is dropped) and the fit runs; reject "
-                     "np.iscomplexobj(values) with '<name> holds complex numbers'")),
+    ),
     ("identify/train-fraction-too-big", lambda f: jf.identify("lugre", (V, F, 0.01), key=0, train=1.5), ValueError,
      ["a train fraction must lie in (0, 1)"]),
     ("identify/train-longer-than-record", lambda f: jf.identify("lugre", (V, F, 0.01), key=0, train=80), ValueError,

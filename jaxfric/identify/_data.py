@@ -54,6 +54,11 @@ class Record:
 
 
 def _channel(name: str, values) -> np.ndarray:
+    if np.iscomplexobj(values):
+        raise ValueError(
+            f"{name} holds complex numbers; pass the real-valued signal "
+            "(the imaginary part would otherwise be dropped silently)"
+        )
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -161,8 +166,14 @@ def as_record(data, train=None) -> Record:
             f"velocity and friction must have the same length, got {velocity.shape[0]} "
             f"and {friction.shape[0]} samples"
         )
+    n = velocity.shape[0]
+    if n < 3:
+        raise ValueError(
+            f"the record has {n} sample{'' if n == 1 else 's'}; identification needs at "
+            "least 3 (2 to train, 1 to validate)"
+        )
     dt = _sample_time(dt)
-    n_train = _train_count(velocity.shape[0], train, data_count)
+    n_train = _train_count(n, train, data_count)
     f_train = friction[:n_train]
     if not np.ptp(f_train) > 0.0:
         raise ValueError(
