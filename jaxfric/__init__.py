@@ -15,7 +15,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 
 from . import functions, metrics, models, rig
 from .fit import Fit, load_fit
-from .identify import identify
+from .identify import GradientRefinement, identify
 from .metrics import friction_metrics
 from .models import Coulomb, Dahl, Elman, ElmanFull, LuGre, Stribeck
 from .optim import (
@@ -38,6 +38,7 @@ __all__ = [
     "Elman",
     "ElmanFull",
     "Fit",
+    "GradientRefinement",
     "FrictionData",
     "History",
     "LuGre",
