@@ -13,6 +13,8 @@ from jaxfric import functions as F
 SMALL = {
     "pso": jf.PSO(num_particles=9, num_generations=15),
     "mapso": jf.MAPSO(lattice_size=3, num_generations=6, sl_generations=3),
+    # a 1×1 self-learning lattice does no self-learning, whatever sl_generations says
+    "mapso_no_sl": jf.MAPSO(lattice_size=3, num_generations=6, sl_size=1, sl_generations=3),
     "nm": jf.NelderMead(max_steps=60),
     "hybrid": jf.mapso_nmds(lattice_size=3, num_generations=4, sl_generations=2, nm_max_steps=40),
 }

@@ -30,7 +30,7 @@ from .hybrid import MAPSONMDS
 from .pso import AbstractSwarm, SwarmState
 
 FORMAT = "jaxfric-checkpoint"
-VERSION = 1
+VERSION = 2  # 2: swarms draw counter-based numbers per generation (0.2.0)
 
 
 def _swarm_of(solver):

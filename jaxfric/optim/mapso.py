@@ -19,7 +19,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._base import check_positive_int, check_range, linear_inertia, uniform16
+from ._base import (
+    check_positive_int,
+    check_range,
+    counter_seed,
+    counter_uniform,
+    linear_inertia,
+)
 from .pso import AbstractSwarm, SwarmState, init_swarm, pso_move, update_bests
 
 
@@ -174,7 +180,7 @@ class MAPSO(AbstractSwarm):
         """Exact number of objective evaluations of one run."""
         p, s = self.num_agents, self.sl_size**2
         per_gen = p * (2 if self.evaluate_replaced else 1)
-        if self.sl_generations > 0 or s > 1:
+        if s > 1:  # a 1×1 self-learning lattice is no self-learning (see step)
             per_gen += (s - 1) + s * self.sl_generations
         return p + self.num_generations * per_gen
 
@@ -224,17 +230,11 @@ class MAPSO(AbstractSwarm):
         state = eqx.tree_at(lambda s: (s.v, s.num_evals), state, (v, evals + num))
         return update_bests(state, x, f)
 
-    def _self_learning(self, key, g, g_f, f_batch, lower, upper):
+    def _self_learning(self, u0, u_inner, g, g_f, f_batch, lower, upper):
         """Self-learning around gBest (§3.4): returns (best position, fitness, evals)."""
         side = self.sl_size
         s = side * side
         dim = g.shape[0]
-        width = self.random_width(dim)
-        k0, k_inner = jax.random.split(key)
-        # Full resolution for the perturbation of gBest, whose granularity would
-        # otherwise cap the attainable precision; 16 bits for the inner swarm.
-        u0 = jax.random.uniform(k0, (s, dim), dtype=g.dtype)
-        u_inner = uniform16(k_inner, (self.sl_generations, s, width), g.dtype)
         if self.sl_mode == "multiplicative":
             cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u0)
         else:
@@ -245,7 +245,7 @@ class MAPSO(AbstractSwarm):
         i = jnp.argmin(f)
         inner = SwarmState(
             x=cand, v=jnp.zeros_like(cand), f=f, pbest=cand, pbest_f=f,
-            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=key,
+            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=None,
         )
 
         def body(st, xs):
@@ -262,19 +262,31 @@ class MAPSO(AbstractSwarm):
         vmax = self.vmax_fraction * (upper - lower)
         return init_swarm(key, f_batch, self.num_agents, lower, upper, vmax, x0)
 
-    def step(self, state, f_batch, lower, upper, i):
+    def draw(self, key, i, x):
+        """Generation ``i``'s numbers: the main lattice's (agents × :meth:`random_width`),
+        self-learning's perturbation ``u0`` (sLsize² × D) and its inner lattice's
+        (sGen × sLsize² × width)."""
+        dim, dt = x.shape[1], x.dtype
+        width = self.random_width(dim)
+        s = self.sl_size**2
+        main = counter_uniform(counter_seed(key, i, 0), (self.num_agents, width), dt)
+        if s <= 1:
+            return main, None, None
+        u0 = counter_uniform(counter_seed(key, i, 1), (s, dim), dt)
+        inner = counter_uniform(counter_seed(key, i, 2), (self.sl_generations, s, width), dt)
+        return main, u0, inner
+
+    def step(self, state, f_batch, lower, upper, i, u):
+        u, u0, u_inner = u
         w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
-        key, k_main, k_sl = jax.random.split(state.key, 3)
-        u = uniform16(
-            k_main, (self.num_agents, self.random_width(state.x.shape[1])), state.x.dtype
-        )
         state = self._lattice_generation(
             state, u, f_batch, self.lattice_size, lower, upper, w, self.social
         )
         if self.sl_size * self.sl_size <= 1:
-            return eqx.tree_at(lambda s: s.key, state, key)
-        k = k_sl
-        g, g_f, evals = self._self_learning(k, state.gbest, state.gbest_f, f_batch, lower, upper)
+            return state
+        g, g_f, evals = self._self_learning(
+            u0, u_inner, state.gbest, state.gbest_f, f_batch, lower, upper
+        )
         better = g_f < state.gbest_f
         # The agent whose memory is gBest takes the self-learned agent's place.
         a = jnp.argmin(state.pbest_f)
@@ -283,7 +295,7 @@ class MAPSO(AbstractSwarm):
             return jnp.where(better, arr.at[a].set(val), arr)
 
         return eqx.tree_at(
-            lambda s: (s.x, s.f, s.pbest, s.pbest_f, s.gbest, s.gbest_f, s.num_evals, s.key),
+            lambda s: (s.x, s.f, s.pbest, s.pbest_f, s.gbest, s.gbest_f, s.num_evals),
             state,
             (
                 put(state.x, g),
@@ -293,6 +305,5 @@ class MAPSO(AbstractSwarm):
                 jnp.where(better, g, state.gbest),
                 jnp.where(better, g_f, state.gbest_f),
                 state.num_evals + evals,
-                key,
             ),
         )

@@ -23,7 +23,8 @@ from ._base import (
     check_range,
     linear_inertia,
     result_from_f,
-    uniform16,
+    counter_seed,
+    counter_uniform,
     uniform_in_box,
 )
 
@@ -103,8 +104,8 @@ def init_swarm(key, f_batch, num, lower, upper, vmax, x0=None) -> SwarmState:
 class AbstractSwarm(AbstractSolver):
     """A population solver that runs a fixed number of generations in ``lax.scan``.
 
-    Subclasses implement ``init`` and ``step``; ``run`` records one history entry
-    per generation (plus the initial population).
+    Subclasses implement ``init``, ``draw`` and ``step``; ``run`` records one history
+    entry per generation (plus the initial population).
     """
 
     num_generations: eqx.AbstractVar[int]
@@ -112,7 +113,13 @@ class AbstractSwarm(AbstractSolver):
     def init(self, f_batch, lower, upper, key, x0=None) -> SwarmState:
         raise NotImplementedError
 
-    def step(self, state, f_batch, lower, upper, i) -> SwarmState:
+    def draw(self, key, i, x):
+        """The random numbers generation ``i`` uses (a pytree of arrays), a pure
+        function of the run's key and ``i`` (:func:`counter_uniform`)."""
+        raise NotImplementedError
+
+    def step(self, state, f_batch, lower, upper, i, u) -> SwarmState:
+        """Generation ``i``, given its random numbers ``u = draw(state.key, i, state.x)``."""
         raise NotImplementedError
 
     def progress_totals(self):
@@ -131,14 +138,20 @@ class AbstractSwarm(AbstractSolver):
         """
         f_batch = batch_objective(fn, args)
 
-        def body(s, i):
-            s = self.step(s, f_batch, lower, upper, i)
+        def body(carry, i):
+            s, u = carry
+            # Next generation's numbers now, so they are stored once in the carry
+            # rather than recomputed in every fused consumer (see counter_uniform).
+            u_next = self.draw(s.key, i + 1, s.x)
+            s = self.step(s, f_batch, lower, upper, i, u)
             if progress is not None:
                 progress.emit(0, i + 1, s.num_evals, s.gbest_f)
-            return s, (s.num_evals, s.gbest_f)
+            return (s, u_next), (s.num_evals, s.gbest_f)
 
-        gens = jnp.asarray(start, jnp.int32) + jnp.arange(length, dtype=jnp.int32)
-        return jax.lax.scan(body, state, gens)
+        start = jnp.asarray(start, jnp.int32)
+        gens = start + jnp.arange(length, dtype=jnp.int32)
+        (state, _), out = jax.lax.scan(body, (state, self.draw(state.key, start, state.x)), gens)
+        return state, out
 
     def finish(self, state: SwarmState, evals, f_best) -> Solution:
         """The :class:`Solution` of a finished run; ``evals``/``f_best`` hold the
@@ -206,19 +219,19 @@ class PSO(AbstractSwarm):
         vmax = self.vmax_fraction * (upper - lower)
         return init_swarm(key, f_batch, self.num_particles, lower, upper, vmax, x0)
 
-    def step(self, state, f_batch, lower, upper, i):
+    def draw(self, key, i, x):
+        """``r1, r2`` for every particle and dimension, shape ``(2, P, D)``."""
+        return counter_uniform(counter_seed(key, i), (2,) + x.shape, x.dtype)
+
+    def step(self, state, f_batch, lower, upper, i, u):
         vmax = self.vmax_fraction * (upper - lower)
-        key, k = jax.random.split(state.key)
         w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
-        r = uniform16(k, (2,) + state.x.shape, state.x.dtype)
         x, v = pso_move(
-            r, state.x, state.v, state.pbest, state.gbest[None, :], w,
+            u, state.x, state.v, state.pbest, state.gbest[None, :], w,
             self.c1, self.c2, vmax, lower, upper, self.zero_velocity_at_bounds,
         )
         f = f_batch(x)
         state = eqx.tree_at(
-            lambda s: (s.v, s.key, s.num_evals),
-            state,
-            (v, key, state.num_evals + self.num_particles),
+            lambda s: (s.v, s.num_evals), state, (v, state.num_evals + self.num_particles)
         )
         return update_bests(state, x, f)

@@ -1,0 +1,76 @@
+"""The swarms' counter-based random numbers (``jaxfric.optim._base.counter_uniform``).
+
+Checked against scipy's distribution tests, not against stored values: uniform on
+[0, 1), no correlation between neighbouring counters, generations, streams or keys,
+full float64 resolution, and vmap-consistent.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.stats
+
+from jaxfric.optim._base import counter_seed, counter_uniform
+
+N = 200_000
+
+
+def draw(key=0, *words, n=N, dtype=jnp.float32):
+    return np.asarray(counter_uniform(counter_seed(jax.random.key(key), *words), (n,), dtype))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_uniform_on_unit_interval(dtype):
+    with jax.enable_x64(dtype == "float64"):
+        u = draw(3, 7, dtype=jnp.dtype(dtype))
+    assert u.dtype == np.dtype(dtype)
+    assert u.min() >= 0.0 and u.max() < 1.0
+    # Kolmogorov–Smirnov against U(0, 1) and a 256-bucket chi-square.
+    assert scipy.stats.kstest(u, "uniform").pvalue > 1e-3
+    counts = np.bincount((u * 256).astype(int), minlength=256)
+    assert scipy.stats.chisquare(counts).pvalue > 1e-3
+    assert abs(u.mean() - 0.5) < 5 * np.sqrt(1 / 12 / N)
+
+
+def test_float64_has_more_than_float32_resolution():
+    with jax.enable_x64(True):
+        u = draw(0, 1, n=10_000, dtype=jnp.float64)
+    # 24-bit numbers are multiples of 2^-24; 53-bit ones almost never are.
+    assert np.mean(np.mod(u * 2.0**24, 1.0) != 0.0) > 0.99
+    u32 = draw(0, 1, n=10_000)
+    assert np.all(np.mod(u32.astype(np.float64) * 2.0**24, 1.0) == 0.0)
+
+
+def test_no_correlation_between_neighbours_generations_streams_and_keys():
+    bound = 5 / np.sqrt(N)  # five standard errors of a correlation coefficient
+    a = draw(0, 10, 0)
+    pairs = {
+        "lag 1": (a[:-1], a[1:]),
+        "lag 2": (a[:-2], a[2:]),
+        "next generation": (a, draw(0, 11, 0)),
+        "other stream": (a, draw(0, 10, 1)),
+        "other key": (a, draw(1, 10, 0)),
+    }
+    for name, (x, y) in pairs.items():
+        r = np.corrcoef(x, y)[0, 1]
+        assert abs(r) < bound, f"{name}: correlation {r:.4f}"
+    # Pairs of neighbours fill the unit square evenly (a 16×16 chi-square).
+    grid = np.histogram2d(a[0::2], a[1::2], bins=16, range=[[0, 1], [0, 1]])[0]
+    assert scipy.stats.chisquare(grid.ravel()).pvalue > 1e-3
+
+
+def test_same_inputs_same_numbers_and_vmap_agrees():
+    np.testing.assert_array_equal(draw(5, 2, 1), draw(5, 2, 1))
+    assert not np.array_equal(draw(5, 2, 1, n=64), draw(5, 3, 1, n=64))
+    keys = jax.random.split(jax.random.key(9), 4)
+    batched = jax.vmap(lambda k: counter_uniform(counter_seed(k, 4), (3, 5), jnp.float32))(keys)
+    for b, k in zip(batched, keys):
+        np.testing.assert_array_equal(b, counter_uniform(counter_seed(k, 4), (3, 5), jnp.float32))
+
+
+def test_generation_words_are_traceable():
+    """The generation index is a traced integer inside the swarm's scan."""
+    key = jax.random.key(0)
+    f = jax.jit(lambda i: counter_uniform(counter_seed(key, i, 2), (8,), jnp.float32))
+    np.testing.assert_array_equal(f(jnp.int32(6)), draw(0, 6, 2, n=8))
