@@ -256,6 +256,8 @@ API_CASES = [
     ),
     ("minimise/y0-nan", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, y0=_with(LO, 0, np.nan)),
      ValueError, ["y0 must be finite"]),
+    ("minimise/y0-outside-box", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, y0=_with(LO, 1, HI[1] + 1.0)),
+     ValueError, ["y0 lies outside the bounds", "flat index 1", "never clipped"]),
     ("minimise/y0-shape", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, y0=np.zeros(2)), ValueError,
      ["y0 must have the same structure and shapes as the bounds"]),
     pytest.param(

@@ -165,6 +165,14 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
         x0 = jnp.asarray(np.concatenate([a.ravel() for a in y_leaves]), lower.dtype)
         if not bool(jnp.all(jnp.isfinite(x0))):
             raise ValueError("y0 must be finite (found NaN or inf)")
+        outside = np.nonzero(np.asarray((x0 < lower) | (x0 > upper)))[0]
+        if outside.size:
+            i = int(outside[0])
+            raise ValueError(
+                f"y0 lies outside the bounds at {outside.size} parameter(s), first at flat "
+                f"index {i}: {float(x0[i])!r} not in [{float(lower[i])!r}, {float(upper[i])!r}]; "
+                "a start is used as given, never clipped"
+            )
     return flat, lower, upper, x0
 
 
@@ -256,7 +264,8 @@ def minimise(
         bounds: ``(lower, upper)``, arrays or matching pytrees of arrays.
         args: data passed to ``fn``; arrays here do not trigger recompilation.
         key: a JAX PRNG key (``jax.random.key(0)``). Same key, same result.
-        y0: optional starting point (Nelder–Mead's start; for swarms, one agent).
+        y0: optional starting point (Nelder–Mead's start; for swarms, one agent),
+            inside the bounds (a start outside them is an error, not clipped).
         dtype: floating dtype of the search (default: that of the bounds, or JAX's
             default float).
         progress: ``True`` for a tqdm bar (generation or step, best f, evaluations,
