@@ -988,37 +988,39 @@ Mechanisms behind the misses, with the rows of this run that show them. Figures 
 *probe* were measured while writing this benchmark with throw-away variants of library code
 and are not re-measured by this script.
 
-- **Single-run PSO on a cheap function** (§1) is bounded by per-generation fixed cost, not by
-  the objective: a 100×30 swarm does little arithmetic per generation, and most of a
-  generation is the threefry generator drawing r1, r2 inside the `lax.scan` body (plus the
-  fixed cost of each `minimise` call, see the 1-generation diagnostic row). *Probe*: making
-  `uniform16` hash a counter with one key word per generation (murmur3 finaliser, 16 bits per
-  number) made single-run PSO 2.7× faster and 8 vmapped seeds 1.6× faster at an unchanged
-  median best f; drawing 50 generations' numbers per threefry call (nested scan) made it 1.4×
-  faster. The vmapped rows amortise the per-step cost and meet the target.
+- **Swarm random numbers** (§1): threefry was most of a cheap swarm generation on CPU. Since
+  0.2.0 every generation's numbers are a counter hash keyed by (run key, generation, stream)
+  and drawn one generation ahead (`jaxfric.optim._base.counter_uniform`), which made
+  single-run PSO about 2.2× and MAPSO about 2× faster (`benchmarks/speed_optim.py` before and
+  after, quiet machine).
 - **MAPSO** (§1) runs, per generation, one 100-agent lattice step and sGen = 10 self-learning
   steps of 9 agents (after an 8-agent start): 11 sequential steps per 198 evaluations,
-  against PSO's one step per 100. Each step pays a fixed cost (neighbour rolls and gathers,
-  the segment reversal, the PSO move, bests, 3–5 threefry calls), so on a function this
-  cheap MAPSO's evaluations per second stay near pyswarms'. 3× needs that per-step cost to
-  fall several-fold: the cheaper generator of the *probe* above halved MAPSO's run time
-  (2.1× single, 1.2× for 8 vmapped seeds), which is not enough on its own.
-- **Small ENN batches**: the rollout of 9 candidates runs at about a fifth of the efficiency
-  of 8 or 64 candidates (§5 diagnostic rows; XLA's code for the (30, 9) state), and MAPSO's
-  self-learning evaluates exactly 8–9 candidates per call. That is why, in §3's stage
-  diagnostic, the self-learning's evaluations cost about 5× more each than the main lattice's
-  and take most of identify's MAPSO stage. *Probe*: carrying the context as a flat (N·P,)
-  vector (reshape only for the output sum) ran 9–16 candidates 1.6–5× faster and 24 or 64
-  within about 10 % of now, in both dtypes (one noisy probe run: re-measure before adopting).
+  against PSO's one step per 100. A 9-agent step is a handful of arithmetic, so its time is
+  XLA's per-kernel cost: *probe* (profiler): each self-learning step ran as 24 kernels (8
+  copies of the loop state, 16 fusions) at about 0.4 µs each, and the self-learning took
+  two thirds of a generation. Throw-away variants that did not help, all *probe*: unrolling
+  the self-learning loop (2–4× slower: XLA then fuses across steps and recomputes them),
+  packing the inner state into one array (12 % slower), a constant-index gather instead of
+  the four rolls (no change), a select chain instead of argmin for the best neighbour (25 %
+  slower). XLA's older kernel emitters (`XLA_FLAGS=--xla_cpu_use_fusion_emitters=false`, a
+  process-wide flag the library does not set) made MAPSO 1.6× faster and PSO 1.5× slower.
+  Meeting 3× on a function this cheap needs the self-learning step in a few kernels, which
+  XLA's CPU fusion does not produce from this program.
+- **Small ENN batches** (§5): XLA's code for a (30, 9) context state ran 2–3× slower per
+  element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
+  which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a
+  default ENN identification's run time.
 - **Batched Nelder–Mead** (`minimise_many`) vmaps the while loop, so its conditionals become
   selects: every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for
   the slowest run. The `lax.map` diagnostic row runs the same seeds one after another inside
   one jitted call.
-- **float64 ENN rollouts** (§2): XLA's float64 `tanh` costs about 2.5× float32's while
-  NumPy's per-step Python overhead does not depend on the dtype. The float64 scan already runs
-  at or near the recurrence-free ceiling (§5), so no rewrite of the scan lifts the float64
-  ratios much on this CPU; they sit at the 5× / 100× thresholds and flip with the machine's
-  load. float32 (identify's default unless x64 is enabled) meets both with margin.
+- **float64 ENN rollouts** (§2): a float64 step costs about twice a float32 one. Not because
+  of `tanh` alone: *probe*, XLA's float64 `tanh` over a large array ran at NumPy's speed or
+  better, and a float64 scan with `tanh` replaced by a multiply cost 85 % of the real one;
+  unroll 1–8, a dot for the output sum and an expm1-based `tanh` were no faster. NumPy's time
+  is mostly per-step Python overhead that does not depend on the dtype, so the float64 ratios
+  are the smaller ones and sit near the 5× / 100× thresholds. float32 (identify's default
+  unless x64 is enabled) meets both with margin.
 - **Compile time** (§4): one XLA compilation of the whole MAPSO–NMDS run dominates (the
   jit(_run) program; the other ~20 compiles are tiny eager operations of about 0.05 s each).
   The ENN rollout is inlined at every evaluation site of that program (initial swarm, main

@@ -177,10 +177,10 @@ def to_markdown(rows: list[dict], quick: bool) -> str:
         "Targets: batched JAX ENN >= 5x NumPy vectorised and >= 100x the per-candidate loop.",
         "Measured (JAX simulate_batch vs NumPy of the same dtype, vectorised / loop): " + "; ".join(summary) + ".",
         "",
-        "Notes: the JAX \"first call\" includes tracing and XLA compilation. float64 `tanh` "
-        "costs XLA about 2.5x float32 `tanh` (half the SIMD width), while NumPy's time is mostly "
-        "per-step Python overhead that does not depend on dtype, so the float64 ratios are the "
-        "smaller ones. Timings on a shared 2-core machine vary by tens of percent between runs; "
+        "Notes: the JAX \"first call\" includes tracing and XLA compilation. A float64 scan step "
+        "costs XLA about twice a float32 one (not `tanh` alone: see peers.md, Known limits), while "
+        "NumPy's time is mostly per-step Python overhead that does not depend on dtype, so the "
+        "float64 ratios are the smaller ones. Timings on a shared 2-core machine vary by tens of percent between runs; "
         "compare ratios measured in one run.",
         "",
     ]
