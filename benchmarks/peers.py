@@ -1014,6 +1014,12 @@ and are not re-measured by this script.
   selects: every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for
   the slowest run. The `lax.map` diagnostic row runs the same seeds one after another inside
   one jitted call.
+- **Scan efficiency depends on the machine's load** (§5): the recurrence-free ceiling kernels
+  are large fusions that XLA splits over both cores of this machine when they are free, while
+  a scan step (30 × 64 numbers) is too small to split. Pinned to one core
+  (`taskset -c 0 python benchmarks/peers.py --sections 5 --tag 1core`, committed as
+  `peers_1core.md`) the same scan ran in the same time and reached 77 % of the ceiling in
+  both dtypes; on a loaded machine the ceiling gets one core too (76 % in the 0.1.0 run).
 - **float64 ENN rollouts** (§2): a float64 step costs about twice a float32 one. Not because
   of `tanh` alone: *probe*, XLA's float64 `tanh` over a large array ran at NumPy's speed or
   better, and a float64 scan with `tanh` replaced by a multiply cost 85 % of the real one;
