@@ -549,7 +549,7 @@ CLI_CASES = [
     ("cli identify/text-in-numeric-column", ["identify", "{text}", *PAIRS, *QUIET],
      ["data row 8 holds a non-number 'abc'"]),
     ("cli identify/empty-cell", ["identify", "{blank}", *PAIRS, *QUIET],
-     ["channel 'velocity' has 1 non-finite samples"]),
+     ["--velocity-col: column 'v'", "1 empty or NaN cell(s), first in data row 8"]),
     ("cli identify/unsorted-time", ["identify", "{unsorted}", *PAIRS, *QUIET], ["time stamps in 't' are not sorted"]),
     ("cli identify/one-sample", ["identify", "{one}", *PAIRS, *QUIET], ["needs at least 2 samples, got 1"]),
     ("cli identify/constant-friction", ["identify", "{constant}", *PAIRS, *QUIET],

@@ -28,10 +28,11 @@ class Table:
     data: np.ndarray
 
     def column(self, spec: str, option: str) -> np.ndarray:
-        """The column named ``spec`` (header name, or a 0-based index)."""
+        """The column named ``spec`` (header name, or a 0-based index), after checking
+        it has no empty or NaN cell (other columns may: they are not used)."""
         spec = str(spec).strip()
         if spec in self.header:
-            return self.data[:, self.header.index(spec)]
+            return self._checked(self.data[:, self.header.index(spec)], spec, option)
         try:
             i = int(spec)
         except ValueError:
@@ -40,7 +41,14 @@ class Table:
         width = self.data.shape[1]
         if not -width <= i < width:
             raise UserError(f"{option}: column index {i} is out of range; {self.path} has {width} columns")
-        return self.data[:, i]
+        return self._checked(self.data[:, i], spec, option)
+
+    def _checked(self, col: np.ndarray, spec: str, option: str) -> np.ndarray:
+        missing = np.nonzero(np.isnan(col))[0]
+        if missing.size:
+            raise UserError(f"{option}: column {spec!r} of {self.path} has {missing.size} empty or NaN "
+                            f"cell(s), first in data row {int(missing[0]) + 1}")
+        return col
 
 
 def _delimiter(text: str | None):
