@@ -21,10 +21,10 @@ from ._base import (
     batch_objective,
     check_positive_int,
     check_range,
-    linear_inertia,
-    result_from_f,
     counter_seed,
     counter_uniform,
+    linear_inertia,
+    result_from_f,
     uniform_in_box,
 )
 
