@@ -49,6 +49,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import functools
 import logging
 import math
 import os
@@ -555,8 +556,11 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
     dtype = jnp.dtype(f1.settings["dtype"])
     cdata = cost_data(model, record, scalers, dtype)
     cost = OutputErrorCost(rollout_model(model))
-    one = jax.jit(cost)
-    many = jax.jit(jax.vmap(cost, in_axes=(0, None)))
+    # scipy's objective compiled with the options jaxfric's own rollouts use (the
+    # faster choice on this CPU): the peer gets the same kernels, not slower ones.
+    jit = functools.partial(jax.jit, compiler_options=jf.compiler_options("rollout") or None)
+    one = jit(cost)
+    many = jit(jax.vmap(cost, in_axes=(0, None)))
     j_check = float(one(jnp.asarray(f1.theta, dtype), cdata))
     assert abs(j_check - f1.metrics["cost"]) <= 1e-3 * abs(f1.metrics["cost"]) + 1e-7, (j_check, f1.metrics["cost"])
 
@@ -675,6 +679,8 @@ def section_scan(sz: Sizes, rows: list, log) -> None:
     s = np.cos(2 * np.pi * 0.37 * np.arange(T) / 128.0)  # stands in for the context
     X = rng.uniform(-1, 1, (T, N, P))
     blocks = ("w", "r", "b", "v", "alpha", "c0")
+    # Scan and ceilings compiled alike, with the options jaxfric's own jits use.
+    jit = functools.partial(jax.jit, compiler_options=jf.compiler_options("rollout") or None)
 
     def ceiling_fly(th, u, s):
         # Same per neuron-step work as the recurrence (2 mul, 2 add, tanh, mul + fma, reduce)
@@ -705,13 +711,13 @@ def section_scan(sz: Sizes, rows: list, log) -> None:
                     tn = jnp.asarray(np.random.default_rng(n_cand).uniform(lo, hi, (n_cand, elman.num_params)), dt)
                     variants.append(("diag", f"(diagnostic) simulate_batch, {n_cand} candidates", elman, tn))
             for kind, label, model, tt in variants:
-                fn = jax.jit(lambda t, x, m=model: m.simulate_batch(t, x, None))
+                fn = jit(lambda t, x, m=model: m.simulate_batch(t, x, None))
                 fn(tt, a_u).block_until_ready()
                 cases.append(Case(label, (lambda r, fn=fn, a=(tt, a_u): fn(*a).block_until_ready()), x64=x64,
                                   per_round=5, meta=dict(kind=kind, dtype=dname, work=tt.shape[0] * N * T)))
             for kind, label, f, third in (("ceil", "ceiling: no recurrence, context computed on the fly", ceiling_fly, a_s),
                                           ("ceil", "ceiling: no recurrence, precomputed (T,N,P) context", ceiling_pre, a_X)):
-                fn = jax.jit(f)
+                fn = jit(f)
                 fn(a_th, a_u, third).block_until_ready()
                 cases.append(Case(label, (lambda r, fn=fn, a=(a_th, a_u, third): fn(*a).block_until_ready()), x64=x64,
                                   per_round=5, meta=dict(kind=kind, dtype=dname, work=P * N * T)))

@@ -6,7 +6,8 @@ swarm generation). Measured in one process, compile time apart, medians over
 repeats:
 
 - JAX ``Elman.simulate_batch`` (one ``lax.scan`` over time, (N, P) state),
-  float32 and float64; ``vmap(Elman.simulate)`` (routed to ``simulate_batch``
+  float32 and float64, compiled with :func:`jaxfric.compiler_options` ``("rollout")``
+  as the library's own jits are (and once with XLA's defaults); ``vmap(Elman.simulate)`` (routed to ``simulate_batch``
   by a custom batching rule, what a vmapping optimiser gets); and JAX's default
   batching of a single-candidate scan, for comparison;
 - :func:`jaxfric.models.reference_numpy.elman_rollout_vectorised` (Python time
@@ -35,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import jaxfric as jf
 from jaxfric.models import Elman, LuGre
 from jaxfric.models.reference_numpy import elman_rollout_loop, elman_rollout_vectorised
 
@@ -42,6 +44,7 @@ NEURONS, SAMPLES, CANDIDATES, FS = 30, 1600, 64, 128.0
 NP_VEC = "NumPy vectorised over candidates"
 NP_LOOP = "NumPy per-candidate loop"
 JAX_BATCH = "JAX simulate_batch (scan, (N,P) state)"
+JAX_DEFAULT_OPTIONS = "JAX simulate_batch, XLA's default compiler options"
 
 
 def _first_call(fn, *args) -> float:
@@ -93,16 +96,21 @@ def run(quick: bool = False) -> list[dict]:
             dtype = jnp.float64 if x64 else jnp.float32
             uj, thj = jnp.asarray(u, dtype), jnp.asarray(th_e, dtype)
             vj, tlj = jnp.asarray(v, dtype), jnp.asarray(th_l, dtype)
-            # x64 must be on while these are traced and compiled: compile them here.
-            batched = jax.jit(lambda th, x: elman.simulate_batch(th, x, None))
+            # x64 must be on while these are traced and compiled: compile them here, with
+            # the options jaxfric's own jits use (jaxfric.compiler_options, jaxfric/_xla.py).
+            jit = functools.partial(jax.jit, compiler_options=jf.compiler_options("rollout") or None)
+            batched = jit(lambda th, x: elman.simulate_batch(th, x, None))
+            # The same rollout with XLA's default options (256-bit vectors), for comparison.
+            default = jax.jit(lambda th, x: elman.simulate_batch(th, x, None))
             # What an optimiser that vmaps a per-candidate objective gets: simulate's
             # custom batching rule forwards to simulate_batch.
-            vm = jax.jit(jax.vmap(lambda th, x: elman.simulate(th, x, None), in_axes=(0, None)))
+            vm = jit(jax.vmap(lambda th, x: elman.simulate(th, x, None), in_axes=(0, None)))
             # JAX's default batching of a single-candidate scan, for comparison.
-            plain = jax.jit(jax.vmap(lambda th, x: elman.simulate_batch(th[None], x, None)[0], in_axes=(0, None)))
-            lug = jax.jit(lambda th, x: lugre.simulate_batch(th, x, 1.0 / FS))
+            plain = jit(jax.vmap(lambda th, x: elman.simulate_batch(th[None], x, None)[0], in_axes=(0, None)))
+            lug = jit(lambda th, x: lugre.simulate_batch(th, x, 1.0 / FS))
             for model, impl, fn, args in [
                 ("Elman", JAX_BATCH, batched, (thj, uj)),
+                ("Elman", JAX_DEFAULT_OPTIONS, default, (thj, uj)),
                 ("Elman", "JAX vmap(simulate) (custom batching rule)", vm, (thj, uj)),
                 ("Elman", "JAX default vmap of a 1-candidate scan", plain, (thj, uj)),
                 ("LuGre", "JAX simulate_batch (exact ZOH, scan)", lug, (tlj, vj)),

@@ -14,6 +14,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 from . import functions, metrics, models, rig
+from ._xla import compiler_options
 from .fit import Fit, load_fit
 from .identify import GradientRefinement, identify
 from .metrics import friction_metrics
@@ -49,6 +50,7 @@ __all__ = [
     "RESULTS",
     "Solution",
     "Stribeck",
+    "compiler_options",
     "friction_metrics",
     "functions",
     "identify",

@@ -45,3 +45,16 @@ class CallCounter:
 @pytest.fixture
 def counter():
     return CallCounter()
+
+
+@pytest.fixture
+def run_cache_size():
+    """Number of compilations cached for ``minimise``'s single-run executable (with the
+    default ``compiler_options``): a test counts recompilations with it."""
+    from jaxfric import _xla
+    from jaxfric.optim.minimise import _run
+
+    def size():
+        return _xla.filter_jit(_run, _xla.resolve("auto", "solver"))._cached._cache_size()
+
+    return size

@@ -237,9 +237,10 @@ def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "jaxfric", "identify", str(demo[0] / "friction_data.csv"), "--velocity-col",
          "velocity", "--friction-col", "friction", "--time-col", "t", "--model", "lugre,elman", "--quick",
-         # LuGre comes from the demo's compilation cache; a 7-neuron ENN is not there, so it
-         # is still compiling when Ctrl-C comes.
-         "--neurons", "7", "--quiet", "--out", str(out)],
+         # 3000 generations: LuGre finishes in seconds, while the 7-neuron ENN (not in the
+         # demo's compilation cache) is still compiling or running when Ctrl-C comes, however
+         # fast compilation gets.
+         "--generations", "3000", "--neurons", "7", "--quiet", "--out", str(out)],
         env=cli_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
     while not (out / "models" / "lugre.npz").exists() and proc.poll() is None and time.monotonic() < deadline:

@@ -22,7 +22,6 @@ from jaxfric.identify import GradientRefinement, identify
 from jaxfric.identify import _api
 from jaxfric.identify._timing import Stopwatch
 from jaxfric.models import Elman, LuGre
-from jaxfric.optim.minimise import _run
 from jaxfric.rig import FrictionData
 
 FS = 128.0
@@ -73,17 +72,17 @@ def test_lugre_recovered_from_noise_free_lugre_data():
         assert fit.settings["dtype"] == "float64"
 
 
-def test_new_data_same_shapes_never_recompiles():
+def test_new_data_same_shapes_never_recompiles(run_cache_size):
     with jax.enable_x64(True):
         v = velocity_profile()
         f1 = lugre_friction(v, **TRUTH)
         f2 = lugre_friction(v, **{**TRUTH, "Fc": 150.0, "sigma2": 2e3})
         fit1 = identify("lugre", (v, f1, DT), key=1, solver=SMALL)
-        size = _run._cached._cache_size()
+        size = run_cache_size()
         with Stopwatch() as sw:
             fit2 = identify("lugre", (v, f2, DT), key=1, solver=SMALL)
         assert sw.num_compiles == 0
-        assert _run._cached._cache_size() == size
+        assert run_cache_size() == size
         assert fit2.timings["compile_s"] < fit2.timings["total_s"]
         # ...and the new data really were used.
         assert abs(float(fit2.params["Fc"]) - 150.0) < 3.0

@@ -115,16 +115,14 @@ def test_all_nan_objective_reports_nonfinite():
     assert not bool(sol.success)
 
 
-def test_data_change_does_not_recompile():
+def test_data_change_does_not_recompile(run_cache_size):
     solver = jf.PSO(num_particles=4, num_generations=3)
     jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(0))
-    from jaxfric.optim.minimise import _run
-
-    before = _run._cached._cache_size() if hasattr(_run, "_cached") else None
+    before = run_cache_size()
+    assert before >= 1
     jf.minimise(quad, solver, BOUNDS, args=TARGET + 1.0, key=jax.random.key(1))
     jf.minimise(quad, solver, (BOUNDS[0] - 1, BOUNDS[1] + 1), args=TARGET, key=jax.random.key(1))
-    if before is not None:
-        assert _run._cached._cache_size() == before
+    assert run_cache_size() == before
 
 
 # ------------------------------------------------------------------- bad input

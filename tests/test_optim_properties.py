@@ -31,7 +31,6 @@ from hypothesis import strategies as st
 
 import jaxfric as jf
 from jaxfric.optim import RecordingProgress
-from jaxfric.optim.minimise import _run
 
 SOLVERS = {
     "pso": jf.PSO(num_particles=6, num_generations=5),
@@ -262,7 +261,7 @@ def test_hybrid_refines_global_phase_and_multistart_counts(counter):
     assert float(sol.f) <= float(single.f) + 1e-6
 
 
-def test_progress_reports_from_inside_the_run_without_recompiling():
+def test_progress_reports_from_inside_the_run_without_recompiling(run_cache_size):
     bounds = (-np.ones(3), np.ones(3))
     solver = jf.mapso_nmds(lattice_size=2, num_generations=200, sl_generations=1, nm_max_steps=120)
     fn = lambda y, a: jnp.sum((y - 0.2) ** 2)  # noqa: E731
@@ -273,12 +272,11 @@ def test_progress_reports_from_inside_the_run_without_recompiling():
     glob = [r for r in first.reports if r[0] == "global"]
     assert [r[1] for r in glob] == list(range(2, 201, 2))  # every 1 % of 200 generations
     assert all(np.diff([r[3] for r in glob]) <= 0)
-    size = _run._cached._cache_size() if hasattr(_run, "_cached") else None
+    size = run_cache_size()
     second = RecordingProgress()
     sol2 = jf.minimise(fn, solver, bounds, key=jax.random.key(0), progress=second)
     assert first.reports == second.reports
     assert float(sol.f) == float(sol2.f)
-    if size is not None:
-        assert _run._cached._cache_size() == size
+    assert run_cache_size() == size
     with pytest.raises(ValueError, match="progress must be"):
         jf.minimise(fn, solver, bounds, key=jax.random.key(0), progress="yes")

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _xla
 from .. import models as _models
 from ..fit import Fit, model_config, model_name, predict, rollout_model
 from ..metrics import friction_metrics
@@ -30,7 +31,7 @@ from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise
 from ._data import Record, as_record
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
-from ._refine import GradientRefinement, as_refinement, refine as _refine, result_name
+from ._refine import GradientRefinement, as_refinement, refine_impl, result_name
 from ._timing import Stopwatch
 
 #: Defaults applied when a model is given by *name* (explicit options win).
@@ -213,6 +214,7 @@ def identify(
     data_bounds: bool = True,
     model_options: dict | None = None,
     progress=None,
+    compiler_options="auto",
 ) -> Fit:
     """Identify a friction model from a velocity/friction record (ALGORITHMS.md §11).
 
@@ -243,6 +245,9 @@ def identify(
         progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
             the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
             ``None`` (silent). A new display never recompiles.
+        compiler_options: XLA options for the optimiser run and the gradient stage
+            (their executables only): ``"auto"`` (default, see
+            :func:`jaxfric.compiler_options`), ``None`` (XLA's defaults) or a dict.
 
     Cost (§2.4): J = mean squared training error of the free-run prediction, on
     [−1, 1]-scaled data for the networks, divided by the friction variance for
@@ -272,6 +277,7 @@ def identify(
             )
         solver.check()
         settings_refine = as_refinement(refine, model.num_params)
+        refine_options = _xla.resolve(compiler_options, "rollout")
         lower, upper = model.bounds()
         theta0 = _check_theta0(model, theta0, lower, upper)
         key, seed = _as_key(key)
@@ -287,7 +293,7 @@ def identify(
 
         with Stopwatch() as sw:
             sol = minimise(cost, solver, (lower, upper), args=data_j, key=key, y0=theta0,
-                           dtype=dtype, progress=progress)
+                           dtype=dtype, progress=progress, compiler_options=compiler_options)
             sol = jax.block_until_ready(sol)
         stages = _stages(sol, solver)
         timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
@@ -298,7 +304,8 @@ def identify(
         if settings_refine is not None:
             lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
             with Stopwatch() as swr:
-                out = jax.block_until_ready(_refine(settings_refine, cost, theta, lo, hi, data_j))
+                run_refine = _xla.filter_jit(refine_impl, refine_options)
+                out = jax.block_until_ready(run_refine(settings_refine, cost, theta, lo, hi, data_j))
             theta = out.theta
             metrics = _window_metrics(
                 predict(model, theta, scalers, record.velocity, record.dt), record)

@@ -140,10 +140,11 @@ class RefineOutcome(eqx.Module):
     num_steps: jax.Array
 
 
-@eqx.filter_jit
-def refine(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
-           data: CostData) -> RefineOutcome:
-    """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]`` (one jitted call).
+def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
+                data: CostData) -> RefineOutcome:
+    """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]``.
+
+    :func:`jaxfric.identify` runs it as one jitted call (with its ``compiler_options``).
 
     ``cost(theta, data)`` is J; the start's own J is evaluated too, so the
     returned θ is never worse than ``theta0`` (a non-finite refined J counts as worse).

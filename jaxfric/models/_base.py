@@ -31,6 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .. import _xla
+
 __all__ = ["AbstractFrictionModel", "check_theta", "friction_scales"]
 
 
@@ -148,10 +150,13 @@ class AbstractFrictionModel(eqx.Module):
 
         The rollout is wrapped in ``jax.jit`` (a no-op inside a caller's own
         jit), so eager calls compile once per model configuration and input
-        shape; ``dt`` is traced, so a new sample time does not recompile.
+        shape; ``dt`` is traced, so a new sample time does not recompile. On CPU
+        it compiles with :func:`jaxfric.compiler_options` ``("rollout")``
+        (512-bit vectors where the CPU has them).
         """
         self._check_dt(dt)
-        return _jit_rollout(self, thetas, velocity, dt)
+        rollout = _xla.jit(_jit_rollout, _xla.resolve(_xla.AUTO, "rollout"))
+        return rollout(self, thetas, velocity, dt)
 
     def simulate(
         self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt=None
@@ -226,7 +231,6 @@ class AbstractFrictionModel(eqx.Module):
         return thetas.astype(dtype), velocity.astype(dtype)
 
 
-@jax.jit
 def _jit_rollout(model: AbstractFrictionModel, thetas, velocity, dt):
     # The model has only static fields, so it is an empty pytree whose treedef
     # (hence the jit cache key) is its configuration.

@@ -20,11 +20,11 @@ import os
 import tempfile
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _xla
 from ._base import Solution
 from .hybrid import MAPSONMDS
 from .pso import AbstractSwarm, SwarmState
@@ -53,17 +53,14 @@ def _fingerprint(solver, lower, upper, key) -> str:
     return h.hexdigest()
 
 
-@eqx.filter_jit
 def _init(swarm, flat, lower, upper, args, key, x0):
     return swarm.init_state(flat, lower, upper, args, key, x0)
 
 
-@eqx.filter_jit
 def _advance(swarm, flat, lower, upper, args, state, start, length, hook):
     return swarm.advance(state, flat, lower, upper, args, start, length, hook)
 
 
-@eqx.filter_jit
 def _finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, hook):
     sol = swarm.finish(state, evals, f_best)
     if isinstance(solver, MAPSONMDS):
@@ -133,7 +130,8 @@ def _load(path: Path, fingerprint: str, dtype):
     )
 
 
-def run_checkpointed(solver, flat, lower, upper, args, key, x0, hook, path, every: int) -> Solution:
+def run_checkpointed(solver, flat, lower, upper, args, key, x0, hook, path, every: int,
+                     options=()) -> Solution:
     """Drive ``solver`` in chunks of ``every`` generations, checkpointing to ``path``."""
     swarm = _swarm_of(solver)
     if isinstance(solver, MAPSONMDS):
@@ -146,17 +144,18 @@ def run_checkpointed(solver, flat, lower, upper, args, key, x0, hook, path, ever
     if path.exists():
         done, state, evals, f_best = _load(path, fp, lower.dtype)
     else:
-        state = _init(swarm, flat, lower, upper, args, k_global, x0)
+        state = _xla.filter_jit(_init, options)(swarm, flat, lower, upper, args, k_global, x0)
         done, evals, f_best = 0, state.num_evals[None], state.gbest_f[None]
         _save(path, fp, done, state, evals, f_best, impl)
     total = swarm.num_generations
     while done < total:
         length = min(every, total - done)
-        state, (ev, fb) = _advance(
+        state, (ev, fb) = _xla.filter_jit(_advance, options)(
             swarm, flat, lower, upper, args, state, jnp.asarray(done, jnp.int32), length, hook
         )
         evals = jnp.concatenate([evals, ev])
         f_best = jnp.concatenate([f_best, fb])
         done += length
         _save(path, fp, done, state, evals, f_best, impl)
-    return _finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, hook)
+    finish = _xla.filter_jit(_finish, options)
+    return finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, hook)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ._base import AbstractSolver, Solution, check_positive_int
 from .progress import ProgressHook, TqdmProgress, register
+from .. import _xla
 from .sharding import Layout, resolve_devices, shard_keys
 
 
@@ -222,14 +223,16 @@ def _progress(progress, solver):
     return ctx()
 
 
-@eqx.filter_jit
 def _run(solver, flat, lower, upper, args, key, x0, hook):
     return solver.run(flat, lower, upper, args, key, x0, hook)
 
 
-@eqx.filter_jit
 def _run_many(solver, flat, lower, upper, args, keys, x0, hook):
     return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0, hook))(keys)
+
+
+def _platform(layout: Layout | None) -> str:
+    return layout.devices[0].platform if layout is not None else jax.default_backend()
 
 
 def _unravel_solution(sol: Solution, flat: _Flat, batched: bool) -> Solution:
@@ -253,6 +256,7 @@ def minimise(
     devices=None,
     checkpoint=None,
     checkpoint_every: int = 50,
+    compiler_options="auto",
 ) -> Solution:
     """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
 
@@ -282,6 +286,10 @@ def minimise(
             and returns exactly the uninterrupted run's result for the same key (swarm
             solvers and MAPSO–NMDS only; see :mod:`jaxfric.optim.checkpoint`).
         checkpoint_every: generations per chunk.
+        compiler_options: XLA options for this run's executable only (never global):
+            ``"auto"`` (default; on CPU, 512-bit vectors and XLA's older fusion code
+            generator, measured faster for the swarms, see :mod:`jaxfric._xla`),
+            ``None`` (XLA's defaults) or a dict of XLA option names to values.
 
     Returns:
         A :class:`Solution`.
@@ -293,6 +301,7 @@ def minimise(
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     key = _check_key(key)
     layout = resolve_devices(devices)
+    options = _xla.resolve(compiler_options, "solver", _platform(layout))
     if layout is not None:
         flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
     if checkpoint is not None:
@@ -302,10 +311,12 @@ def minimise(
         check_positive_int("checkpoint_every", checkpoint_every)
     with _progress(progress, solver) as hook:
         if checkpoint is None:
-            sol = _run(solver, flat, lower, upper, args, key, x0, hook)
+            run = _xla.filter_jit(_run, options)
+            sol = run(solver, flat, lower, upper, args, key, x0, hook)
         else:
             sol = run_checkpointed(
-                solver, flat, lower, upper, args, key, x0, hook, checkpoint, checkpoint_every
+                solver, flat, lower, upper, args, key, x0, hook, checkpoint, checkpoint_every,
+                options,
             )
         jax.block_until_ready(sol)
     return _unravel_solution(sol, flat, batched=False)
@@ -322,6 +333,7 @@ def minimise_many(
     dtype=None,
     progress=None,
     devices=None,
+    compiler_options="auto",
 ) -> Solution:
     """Independent runs of :func:`minimise`, one per key, in one vmapped jitted call.
 
@@ -332,6 +344,7 @@ def minimise_many(
     ``devices``: ``None`` (default) lays the runs out over every device when there
     are several (the batch is padded to a multiple of the device count and the
     padding dropped); ``False`` keeps them on one device; or a sequence of devices.
+    ``compiler_options`` as in :func:`minimise`.
 
     Under ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]``
     still counts the evaluations the algorithm asked for, but XLA computes both
@@ -340,9 +353,11 @@ def minimise_many(
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = _check_key(keys, "keys", batch=True)
-    keys, n = shard_keys(keys, resolve_devices(devices))
+    layout = resolve_devices(devices)
+    options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    keys, n = shard_keys(keys, layout)
     with _progress(progress, solver) as hook:
-        sol = _run_many(solver, flat, lower, upper, args, keys, x0, hook)
+        sol = _xla.filter_jit(_run_many, options)(solver, flat, lower, upper, args, keys, x0, hook)
         jax.block_until_ready(sol)
     if keys.shape[0] != n:
         sol = jax.tree_util.tree_map(lambda a: a[:n], sol)

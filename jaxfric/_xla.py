@@ -1,0 +1,136 @@
+"""Per-computation XLA compiler options for jaxfric's own jitted entry points.
+
+jaxfric never touches JAX's global configuration or ``XLA_FLAGS``. What it does
+instead is compile its *own* jitted calls (:func:`jaxfric.minimise`,
+:func:`jaxfric.minimise_many`, :func:`jaxfric.identify`'s stages, the models' eager
+``simulate_batch``) with ``jax.jit(..., compiler_options=...)``: options that hold
+for that one executable and nothing else. On CPU two options are used, chosen by
+measurement on the development machine (2-core AMD EPYC with AVX-512;
+``benchmarks/compiler_options.py`` re-measures them side by side):
+
+``xla_cpu_prefer_vector_width = 512``
+    XLA's CPU default is 256-bit vectors. On a CPU with AVX-512 the batched Elman
+    rollout (64 candidates × 30 neurons × 1600 samples) ran 1.5× faster in both
+    float32 and float64 with outputs bit-identical; where the CPU has no 512-bit
+    registers LLVM uses the widest it has, so the option is harmless there.
+``xla_cpu_use_fusion_emitters = False``  (optimiser runs only)
+    XLA's newer fusion code generator emits slower code for the many tiny
+    fusions of MAPSO's 3×3 self-learning loop: MAPSO on 30-D Rosenbrock ran
+    1.6–1.8× faster with the older one and compiled faster; PSO and Nelder–Mead
+    were unchanged. It made the rollout alone 20–30 % slower, so the models'
+    eager rollouts keep the default.
+
+On other platforms (GPU, TPU) nothing is passed. Every entry point takes
+``compiler_options=``: ``"auto"`` (the default, the above), ``None`` (XLA's own
+defaults) or a dict of XLA debug options passed as given.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+
+AUTO = "auto"
+
+#: Options for the CPU backend, per kind of computation (see the module docstring).
+CPU_OPTIONS: dict[str, dict[str, Any]] = {
+    "solver": {"xla_cpu_prefer_vector_width": 512, "xla_cpu_use_fusion_emitters": False},
+    "rollout": {"xla_cpu_prefer_vector_width": 512},
+}
+
+
+def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[str, Any]:
+    """The XLA options jaxfric compiles ``kind`` (``"solver"`` or ``"rollout"``) with.
+
+    ``platform`` defaults to JAX's default backend; off the CPU the answer is ``{}``.
+    Use it to compile your own code the way jaxfric does, e.g.
+    ``jax.jit(f, compiler_options=jaxfric.compiler_options("rollout"))``.
+    """
+    if kind not in CPU_OPTIONS:
+        raise ValueError(f"kind must be one of {sorted(CPU_OPTIONS)}, got {kind!r}")
+    if platform is None:
+        platform = jax.default_backend()
+    return dict(CPU_OPTIONS[kind]) if platform == "cpu" else {}
+
+
+def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, Any], ...]:
+    """Validate a user's ``compiler_options=`` and freeze it into a hashable tuple.
+
+    ``"auto"`` → :func:`compiler_options`; ``None`` or ``False`` → no options; a
+    mapping of option names (str) to bool/int/float/str values → those, as given
+    (checked by XLA on a trivial program first, see :func:`check_known`). Raises
+    ``ValueError`` for anything else, before the real computation is traced.
+    """
+    if isinstance(value, str) and value == AUTO:
+        opts = compiler_options(kind, platform)
+    elif value is None or value is False:
+        opts = {}
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            if not isinstance(k, str) or not k:
+                raise ValueError(f"compiler_options keys must be XLA option names, got {k!r}")
+            if not isinstance(v, (bool, int, float, str)):
+                raise ValueError(
+                    f"compiler_options[{k!r}] must be a bool, int, float or str, "
+                    f"got {type(v).__name__}"
+                )
+        opts = value
+        check_known(tuple(sorted(opts.items())))
+    else:
+        raise ValueError(
+            "compiler_options must be 'auto', None or a dict of XLA option names to "
+            f"values, got {value!r}"
+        )
+    return tuple(sorted(opts.items()))
+
+
+def _top_level() -> bool:
+    """True when no JAX transformation is tracing: ``compiler_options`` may only be
+    given to a top-level jit (inside a caller's jit, vmap or grad the caller's
+    compilation decides). Unknown JAX internals → ``False`` (no options, still correct)."""
+    try:
+        from jax._src.core import trace_state_clean
+    except ImportError:  # pragma: no cover - a future JAX moved it
+        return False
+    return bool(trace_state_clean())
+
+
+def filter_jit(fn: Callable, options: tuple[tuple[str, Any], ...]) -> Callable:
+    """``eqx.filter_jit(fn)`` compiled with ``options`` (a :func:`resolve` tuple) when
+    called at top level; a plain ``eqx.filter_jit(fn)`` under a transformation.
+
+    One wrapper per (function, options), so each keeps its own compilation cache.
+    """
+    return _filter_jit(fn, options if _top_level() else ())
+
+
+@functools.lru_cache(maxsize=None)
+def _filter_jit(fn, options):
+    return eqx.filter_jit(fn, compiler_options=dict(options) or None)
+
+
+def jit(fn: Callable, options: tuple[tuple[str, Any], ...]) -> Callable:
+    """As :func:`filter_jit` with ``jax.jit``: for functions of arrays and static-only
+    modules, where equinox's per-call filtering is not needed."""
+    return _jit(fn, options if _top_level() else ())
+
+
+@functools.lru_cache(maxsize=None)
+def _jit(fn, options):
+    return jax.jit(fn, compiler_options=dict(options) or None)
+
+
+@functools.lru_cache(maxsize=64)
+def check_known(options: tuple[tuple[str, Any], ...]) -> None:
+    """Compile a trivial program with ``options`` so an unknown option name or a
+    value of the wrong type fails at once with ``ValueError``, before the real
+    (long) compilation. Cached: each distinct set is checked once per process."""
+    if not options:
+        return
+    try:
+        jax.jit(lambda: 0, compiler_options=dict(options)).lower().compile()
+    except Exception as e:  # XlaRuntimeError: INVALID_ARGUMENT: No such compile option
+        raise ValueError(f"XLA rejected compiler_options {dict(options)!r}: {e}") from None
