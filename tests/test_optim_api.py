@@ -172,3 +172,25 @@ def test_bad_input_raises_clear_valueerror(over, words):
 def test_minimise_many_needs_a_batch_of_keys():
     with pytest.raises(ValueError, match="batch of keys"):
         jf.minimise_many(quad, SMALL["pso"], BOUNDS, args=TARGET, keys=jax.random.key(0))
+
+
+def test_output_check_is_cached_per_signature_but_still_catches_new_shapes():
+    """minimise traces fn once per signature to check its output (not on every call),
+    and a new args shape is a new signature, so a bad output is still caught."""
+    traces = []
+
+    def fn(y, a):
+        traces.append(1)
+        return jnp.sum((y - 1.0) ** 2) * a
+
+    solver = jf.PSO(num_particles=4, num_generations=2)
+    lo, hi = -np.ones(3, np.float32), np.ones(3, np.float32)
+    jf.minimise(fn, solver, (lo, hi), args=jnp.float32(1.0), key=jax.random.key(0))
+    first = len(traces)  # the output check and the compilation
+    for k in range(3):
+        jf.minimise(fn, solver, (lo, hi), args=jnp.float32(2.0 + k), key=jax.random.key(k))
+    assert len(traces) == first
+    with pytest.raises(ValueError, match="must return a floating-point scalar, got \\(2,\\)"):
+        jf.minimise(fn, solver, (lo, hi), args=jnp.ones(2, jnp.float32), key=jax.random.key(0))
+    with pytest.raises(ValueError, match="must return a floating-point scalar"):
+        jf.minimise(lambda y, a: y, solver, (lo, hi), args=jnp.float32(1.0), key=jax.random.key(0))

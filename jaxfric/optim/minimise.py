@@ -133,17 +133,39 @@ def prepare_bounds(bounds, dtype=None):
     )
 
 
-def _prepare(fn, solver, bounds, args, y0, dtype):
-    if not callable(fn):
-        raise ValueError(f"fn must be callable fn(y, args), got {type(fn).__name__}")
-    if not isinstance(solver, AbstractSolver):
-        raise ValueError(
-            f"solver must be a jaxfric solver (PSO, MAPSO, NelderMead, MAPSONMDS, ...), "
-            f"got {type(solver).__name__}"
-        )
-    solver.check()
-    lower, upper, treedef, shapes = prepare_bounds(bounds, dtype)
-    flat = _Flat(fn, treedef, shapes)
+#: Signatures (objective, search vector, shapes and dtypes of ``args``) whose output
+#: was already checked: the check traces ``fn`` (about 2 ms), which would otherwise
+#: be paid by every call of :func:`minimise`.
+_CHECKED: dict = {}
+_CHECKED_MAX = 256
+
+
+def _signature(flat, lower, args):
+    """A hashable key for the output check, or ``None`` when ``args`` holds leaves
+    that are neither arrays nor Python scalars (then the check is not cached)."""
+    leaves, treedef = jtu.tree_flatten(args)
+    sig = []
+    for leaf in leaves:
+        if hasattr(leaf, "shape") and hasattr(leaf, "dtype"):
+            sig.append((tuple(leaf.shape), str(leaf.dtype), getattr(leaf, "weak_type", None)))
+        elif isinstance(leaf, (bool, int, float, complex)):
+            sig.append(type(leaf))  # traced by eval_shape: only the type matters
+        else:
+            return None
+    try:
+        key = (flat, lower.shape, str(lower.dtype), treedef, tuple(sig))
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _check_output(flat, lower, args):
+    """``fn(y, args)`` must return a floating scalar: checked by tracing (eval_shape)
+    once per signature, before any compilation."""
+    key = _signature(flat, lower, args)
+    if key is not None and key in _CHECKED:
+        return
     try:
         out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
     except Exception as e:
@@ -158,6 +180,24 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
             f"fn(y, args) must return a floating-point scalar, got {desc} "
             f"{getattr(out, 'dtype', '')}".rstrip()
         )
+    if key is not None:
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.pop(next(iter(_CHECKED)))
+        _CHECKED[key] = True
+
+
+def _prepare(fn, solver, bounds, args, y0, dtype):
+    if not callable(fn):
+        raise ValueError(f"fn must be callable fn(y, args), got {type(fn).__name__}")
+    if not isinstance(solver, AbstractSolver):
+        raise ValueError(
+            f"solver must be a jaxfric solver (PSO, MAPSO, NelderMead, MAPSONMDS, ...), "
+            f"got {type(solver).__name__}"
+        )
+    solver.check()
+    lower, upper, treedef, shapes = prepare_bounds(bounds, dtype)
+    flat = _Flat(fn, treedef, shapes)
+    _check_output(flat, lower, args)
     x0 = None
     if y0 is not None:
         y_leaves, y_def = _as_float_leaves(y0, "y0")
