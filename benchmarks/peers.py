@@ -1002,16 +1002,21 @@ and are not re-measured by this script.
 - **MAPSO** (§1) runs, per generation, one 100-agent lattice step and sGen = 10 self-learning
   steps of 9 agents (after an 8-agent start): 11 sequential steps per 198 evaluations,
   against PSO's one step per 100. A 9-agent step is a handful of arithmetic, so its time is
-  XLA's per-kernel cost: *probe* (profiler): each self-learning step ran as 24 kernels (8
-  copies of the loop state, 16 fusions) at about 0.4 µs each, and the self-learning took
-  two thirds of a generation. Throw-away variants that did not help, all *probe*: unrolling
-  the self-learning loop (2–4× slower: XLA then fuses across steps and recomputes them),
-  packing the inner state into one array (12 % slower), a constant-index gather instead of
-  the four rolls (no change), a select chain instead of argmin for the best neighbour (25 %
-  slower). XLA's older kernel emitters (`XLA_FLAGS=--xla_cpu_use_fusion_emitters=false`, a
-  process-wide flag the library does not set) made MAPSO 1.6× faster and PSO 1.5× slower.
-  Meeting 3× on a function this cheap needs the self-learning step in a few kernels, which
-  XLA's CPU fusion does not produce from this program.
+  XLA's per-kernel cost: *probe* (profiler): each self-learning step runs as about 24 kernels
+  (8 copies of the loop state, 15 fusions, a counter add), and the self-learning takes two
+  thirds of a generation. Since 0.3.0 jaxfric compiles its runs with XLA's older fusion
+  emitters on CPU (`compiler_options`, a per-computation option, not a global flag), whose
+  code for these tiny fusions is faster: MAPSO 1.4–1.8× faster, PSO unchanged
+  (`compiler_options.md`). Throw-away variants that did not help, all *probe*: unrolling the
+  self-learning loop (2–4× slower, also with the older emitters: XLA then fuses across steps
+  and recomputes them; an optimization barrier between unrolled steps was slower still),
+  packing the inner state into three arrays (no change with the older emitters, 12 % slower
+  with the new ones), a constant-index gather instead of the four rolls (no change), a select
+  chain instead of argmin (25 % slower), and further XLA CPU options (region-analysis copy
+  insertion, the concurrency-optimised scheduler, fast min/max, optimisation level 1,
+  128/512-bit vectors: within noise). Meeting 3× on a function this cheap needs the
+  self-learning step in a few kernels, which XLA's CPU fusion does not produce from this
+  program; batching seeds amortises the per-kernel cost (the vmapped rows).
 - **Small ENN batches** (§5): XLA's code for a (30, 9) context state ran 2–3× slower per
   element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
   which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a
@@ -1020,19 +1025,20 @@ and are not re-measured by this script.
   selects: every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for
   the slowest run. The `lax.map` diagnostic row runs the same seeds one after another inside
   one jitted call.
-- **Scan efficiency depends on the machine's load** (§5): the recurrence-free ceiling kernels
-  are large fusions that XLA splits over both cores of this machine when they are free, while
-  a scan step (30 × 64 numbers) is too small to split. Pinned to one core
-  (`taskset -c 0 python benchmarks/peers.py --sections 5 --tag 1core`, committed as
-  `peers_1core.md`) the same scan ran in the same time and reached 77 % of the ceiling in
-  both dtypes; on a loaded machine the ceiling gets one core too (76 % in the 0.1.0 run).
+- **Scan efficiency** (§5): the scan and the recurrence-free ceiling kernels are compiled
+  alike, with the library's rollout options (512-bit vectors). Before 0.3.0 both used XLA's
+  defaults, and the ceiling's large fusions split over both cores of an idle machine while a
+  scan step (30 × 64 numbers) cannot, which held the ratio at 47–61 % on 2 cores and 77 %
+  pinned to one (`peers_1core.md`, 0.2.0). With 512-bit vectors the scan step gains more
+  than the ceiling, which is bound by memory and the second core.
 - **float64 ENN rollouts** (§2): a float64 step costs about twice a float32 one. Not because
   of `tanh` alone: *probe*, XLA's float64 `tanh` over a large array ran at NumPy's speed or
   better, and a float64 scan with `tanh` replaced by a multiply cost 85 % of the real one;
-  unroll 1–8, a dot for the output sum and an expm1-based `tanh` were no faster. NumPy's time
-  is mostly per-step Python overhead that does not depend on the dtype, so the float64 ratios
-  are the smaller ones and sit near the 5× / 100× thresholds. float32 (identify's default
-  unless x64 is enabled) meets both with margin.
+  unroll 1–8, a dot for the output sum and an expm1-based `tanh` were no faster. 512-bit
+  vectors (0.3.0's rollout option, on CPUs that have them) made it 1.4–1.5× faster. NumPy's
+  time is mostly per-step Python overhead that does not depend on the dtype, so the float64
+  ratios are the smaller ones and the per-candidate-loop ratio sits near its 100× threshold.
+  float32 (identify's default unless x64 is enabled) meets both with margin.
 - **Compile time** (§4): one XLA compilation of the whole MAPSO–NMDS run dominates (the
   jit(_run) program; the other ~20 compiles are tiny eager operations of about 0.05 s each).
   The ENN rollout is inlined at every evaluation site of that program (initial swarm, main
