@@ -165,7 +165,9 @@ def figure(rows, path):
     fig, ax = plt.subplots(figsize=(8, 0.45 * len(rows) + 1.2))
     y = np.arange(len(rows))
     s = [r["speedup"] for r in rows]
-    ax.barh(y, s, color=["tab:green" if v >= 1 else "tab:red" for v in s])
+    # Within ±5 % is within this shared machine's noise: grey.
+    ax.barh(y, s, color=["tab:green" if v >= 1.05 else "tab:red" if v <= 0.95 else "tab:grey"
+                         for v in s])
     ax.axvline(1.0, color="k", lw=0.8)
     ax.set_yticks(y, [r["workload"] for r in rows], fontsize=8)
     ax.invert_yaxis()

@@ -1,8 +1,8 @@
 """Optimiser throughput against the peers users would otherwise pick, same run.
 
-30-D Rosenbrock, 100 agents: jaxfric PSO and MAPSO (10×10 lattice) against
-pyswarms' GlobalBestPSO (numpy, vectorised objective); jaxfric Nelder–Mead against
-``scipy.optimize.minimize(method="Nelder-Mead")``. Function evaluations per second,
+30-D Rosenbrock (``--function`` picks another test function), 100 agents: jaxfric
+PSO and MAPSO (10×10 lattice) against pyswarms' GlobalBestPSO (numpy, vectorised
+objective); jaxfric Nelder–Mead against ``scipy.optimize.minimize(method="Nelder-Mead")``. Function evaluations per second,
 median over ``--repeats`` timed runs after one warm-up (compile time reported
 apart). Batched rows run ``--seeds`` independent jaxfric runs in one vmapped call
 (:func:`jaxfric.minimise_many`), the way Table 1 uses the library.
@@ -11,6 +11,7 @@ Writes ``speed_optim.md`` and ``speed_optim.csv`` to ``--out``.
 
     python benchmarks/speed_optim.py
     python benchmarks/speed_optim.py --dtype float64
+    python benchmarks/speed_optim.py --function ackley   # writes speed_optim_ackley.md
 """
 
 from __future__ import annotations
@@ -31,6 +32,28 @@ def rosen_batch(X):
     return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
 
 
+def ackley_batch(X):
+    d = X.shape[1]
+    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
+            - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / d) + 20.0 + np.e)
+
+
+def griewank_batch(X):
+    i = np.sqrt(np.arange(1, X.shape[1] + 1))
+    return 1.0 + np.sum(X * X, axis=1) / 4000.0 - np.prod(np.cos(X / i), axis=1)
+
+
+#: NumPy versions (a batch of rows at once) for the peers; checked against jaxfric's at start.
+NUMPY_BATCH = {
+    "rosenbrock": rosen_batch,
+    "ackley": ackley_batch,
+    "griewank": griewank_batch,
+    "sphere": lambda X: np.sum(X * X, axis=1),
+    "schwefel": lambda X: np.sum(np.abs(X), axis=1) + np.prod(np.abs(X), axis=1),
+    "rastrigin": lambda X: np.sum(X * X - 10.0 * np.cos(2 * np.pi * X) + 10.0, axis=1),
+}
+
+
 def median_time(fn, repeats):
     times = []
     for _ in range(repeats):
@@ -42,6 +65,7 @@ def median_time(fn, repeats):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--function", choices=sorted(NUMPY_BATCH), default="rosenbrock")
     p.add_argument("--dim", type=int, default=30)
     p.add_argument("--agents", type=int, default=100)
     p.add_argument("--generations", type=int, default=500)
@@ -64,8 +88,13 @@ def main(argv=None):
     if side * side != a.agents:
         p.error("--agents must be a perfect square (MAPSO's lattice)")
     dt = np.dtype(a.dtype)
-    lo, hi = F.get("rosenbrock").bounds(a.dim, dt)
-    obj = F.objective("rosenbrock")
+    lo, hi = F.get(a.function).bounds(a.dim, dt)
+    obj = F.objective(a.function)
+    f_batch = NUMPY_BATCH[a.function]
+    probe = np.random.default_rng(1).uniform(lo, hi, (4, a.dim)).astype(np.float64)
+    with jax.enable_x64(True):  # the NumPy version must be the same function
+        ref = np.asarray(jax.vmap(lambda x: obj(x, None))(jnp.asarray(probe, jnp.float64)))
+    np.testing.assert_allclose(f_batch(probe), ref, rtol=1e-9, atol=1e-9)
     rows = []
 
     def jax_row(label, solver, batched=False):
@@ -107,7 +136,7 @@ def main(argv=None):
             a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
             bounds=(lo.astype(float), hi.astype(float)), velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]),
         )
-        return opt.optimize(rosen_batch, a.generations, verbose=False)
+        return opt.optimize(f_batch, a.generations, verbose=False)
 
     run = median_time(pyswarms_once, a.repeats)
     best = pyswarms_once()[0]
@@ -119,8 +148,10 @@ def main(argv=None):
     x0 = np.random.default_rng(0).uniform(lo, hi)
     opts = dict(maxfev=a.nm_evals, maxiter=10 * a.nm_evals, xatol=0.0, fatol=0.0, adaptive=True)
 
+    scalar = scipy.optimize.rosen if a.function == "rosenbrock" else (lambda x: float(f_batch(x[None])[0]))
+
     def scipy_nm():
-        return scipy.optimize.minimize(scipy.optimize.rosen, x0, method="Nelder-Mead", options=opts)
+        return scipy.optimize.minimize(scalar, x0, method="Nelder-Mead", options=opts)
 
     res = scipy_nm()
     run = median_time(scipy_nm, max(1, a.repeats // 2))
@@ -135,7 +166,8 @@ def main(argv=None):
         r["ratio_vs_peer"] = r["evals_per_s"] / ref
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    stem = "speed_optim" + (f"_{a.tag}" if a.tag else "")
+    stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
+            + (f"_{a.tag}" if a.tag else ""))
     with open(out / f"{stem}.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
@@ -144,7 +176,7 @@ def main(argv=None):
     lines = [
         "# Optimiser throughput against peers",
         "",
-        f"{a.dim}-D Rosenbrock, {a.agents} agents, {a.generations} generations, {a.dtype}; "
+        f"{a.dim}-D {a.function}, {a.agents} agents, {a.generations} generations, {a.dtype}; "
         f"Nelder–Mead budget {a.nm_evals} evaluations. Median of {a.repeats} timed runs after a "
         "warm-up; every row measured in the same run. Ratio: evaluations per second over the "
         "peer's (pyswarms for swarms, scipy for Nelder–Mead). Best f is not comparable across "
