@@ -478,7 +478,7 @@ def write_markdown(out, rows, files, meta):
           for n in neurons}
     if len(tr) == 3:
         mono = tr[neurons[2]] <= tr[neurons[1]] <= tr[neurons[0]]
-        add(f"- Neuron study, training MSE after BFGS: "
+        add("- Neuron study, training MSE after BFGS: "
             + ", ".join(f"N = {n}: {tr[n]:.3f} %" for n in neurons)
             + (" — decreasing with N, as the paper's (§12 (b))." if mono else
                " — not monotone in N at this number of keys (§12 (b) expects it)."))

@@ -7,7 +7,6 @@ import textwrap
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 

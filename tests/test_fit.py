@@ -6,7 +6,6 @@ Fits are built directly from known parameters (no optimisation), so this file is
 
 from __future__ import annotations
 
-import io
 import json
 import os
 

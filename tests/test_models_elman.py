@@ -28,7 +28,6 @@ def numpy_elman(theta, u, n, output_bias=False):
 
 def numpy_elman_full(p, u):
     """Independent loop implementation of §2.3 (classic Elman, full context matrix)."""
-    n = len(p["w"])
     c = np.array(p["c0"], float)
     y = []
     for uk in u:

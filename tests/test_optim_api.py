@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import jaxfric as jf
-from jaxfric import functions as F
 
 SMALL = {
     "pso": jf.PSO(num_particles=9, num_generations=15),

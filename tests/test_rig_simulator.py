@@ -192,7 +192,7 @@ def test_custom_reference_and_open_loop_command():
 
     command = np.where(t < 2.0, 0.2, -0.2)
     rec = rig.simulate(rig.Rig(), jax.random.key(0), command=command, **SHORT)
-    x, v = np.asarray(rec.x_true), np.asarray(rec.velocity)
+    v = np.asarray(rec.velocity)
     assert np.all(v[32:250] > 0.001) and np.all(v[300:] < -0.001)
     # the spool follows the command with its first-order lag
     np.testing.assert_allclose(np.asarray(rec.valve)[32:250], 0.2, atol=1e-3)

@@ -31,7 +31,7 @@ from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise
 from ._data import Record, as_record
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
-from ._refine import GradientRefinement, as_refinement, refine_impl, result_name
+from ._refine import as_refinement, refine_impl, result_name
 from ._timing import Stopwatch
 
 #: Defaults applied when a model is given by *name* (explicit options win).

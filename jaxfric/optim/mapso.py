@@ -234,7 +234,6 @@ class MAPSO(AbstractSwarm):
         """Self-learning around gBest (§3.4): returns (best position, fitness, evals)."""
         side = self.sl_size
         s = side * side
-        dim = g.shape[0]
         if self.sl_mode == "multiplicative":
             cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u0)
         else:

@@ -16,9 +16,9 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from .. import _xla
 from ._base import AbstractSolver, Solution, check_positive_int
 from .progress import ProgressHook, TqdmProgress, register
-from .. import _xla
 from .sharding import Layout, resolve_devices, shard_keys
 
 
