@@ -103,7 +103,7 @@ class Sizes:
     slow_repeats: int = 5
     seeds: int = 8
     functions: tuple = ("rosenbrock", "ackley")
-    nm_lax_map: bool = True  # diagnostic row: seeds through lax.map instead of vmap
+    nm_vmap: bool = True  # diagnostic row: Nelder-Mead seeds through vmap instead of lax.map
     batched_mapso: bool = True
     batched_nm: bool = True
     overhead_row: bool = True  # diagnostic row: minimise()'s fixed cost per call
@@ -128,7 +128,7 @@ def quick_sizes() -> Sizes:
                         nelder_mead=jf.NelderMead(max_steps=60, max_evals=60))
     return Sizes(
         dim=10, agents=16, generations=20, nm_evals=300, repeats=2, slow_repeats=1, seeds=2,
-        functions=("rosenbrock",), nm_lax_map=False, batched_mapso=False, batched_nm=False,
+        functions=("rosenbrock",), nm_vmap=False, batched_mapso=False, batched_nm=False,
         overhead_row=False, hybrid_compile=False, stage_diagnostics=False, e2e_rounds=1,
         neurons=4, id_samples=400,
         id_solver=tiny, hybrid=tiny, lugre_loop_candidates=4, scan_samples=400, scan_rounds=3,
@@ -324,7 +324,6 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
     import pyswarms as ps
     import scipy.optimize as so
 
-    from jaxfric.optim.minimise import _prepare
 
     P, D, G, NM = sz.agents, sz.dim, sz.generations, sz.nm_evals
     side = int(round(math.sqrt(P)))
@@ -353,10 +352,10 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
                 return {"evals": int(s.stats["num_evals"]), "f": [float(s.f)]}
             return once
 
-        def jf_batch(solver):
+        def jf_batch(solver, batching="auto"):
             def once(r):
                 keys = jax.random.split(jax.random.key(2000 + r), sz.seeds)
-                s = jf.minimise_many(obj, solver, (lo, hi), keys=keys)
+                s = jf.minimise_many(obj, solver, (lo, hi), keys=keys, batching=batching)
                 return {"evals": int(np.sum(s.stats["num_evals"])), "f": np.asarray(s.f, float).tolist()}
             return once
 
@@ -405,22 +404,16 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
             cases.insert(3, Case(f"jaxfric MAPSO, {sz.seeds} seeds vmapped", jf_batch(mapso), max_rounds=slow,
                                  meta=dict(kind="mapso_batch", peer="pyswarms")))
         if sz.batched_nm:
-            cases.insert(len(cases) - 1, Case(f"jaxfric Nelder-Mead, {sz.seeds} seeds vmapped (minimise_many)",
+            cases.insert(len(cases) - 1, Case(f"jaxfric Nelder-Mead, {sz.seeds} seeds (minimise_many: lax.map on one CPU)",
                                               jf_batch(nm), max_rounds=slow, meta=dict(kind="nm_batch", peer="scipy_nm")))
         if sz.overhead_row and fname == sz.functions[0]:
             one_gen = jf.PSO(num_particles=P, num_generations=1)
             cases.append(Case("(diagnostic) jaxfric PSO with 1 generation: minimise()'s fixed cost per call",
                               jf_single(one_gen), meta=dict(kind="overhead")))
-        if sz.nm_lax_map and fname == sz.functions[0]:
-            flat, l_, u_, _ = _prepare(obj, nm, (lo, hi), None, None, None)
-            mapped = jax.jit(lambda keys: jax.lax.map(lambda k: nm.run(flat, l_, u_, None, k), keys))
-
-            def nm_map_once(r):
-                s = jax.block_until_ready(mapped(jax.random.split(jax.random.key(2000 + r), sz.seeds)))
-                return {"evals": int(np.sum(s.stats["num_evals"])), "f": np.asarray(s.f, float).tolist()}
-
-            cases.insert(len(cases) - 1 - int(sz.overhead_row), Case(f"(diagnostic) jaxfric Nelder-Mead, {sz.seeds} seeds via lax.map",
-                                 nm_map_once, max_rounds=slow, meta=dict(kind="nm_map", peer="scipy_nm")))
+        if sz.nm_vmap and fname == sz.functions[0]:
+            cases.insert(len(cases) - 1 - int(sz.overhead_row),
+                         Case(f"(diagnostic) jaxfric Nelder-Mead, {sz.seeds} seeds vmapped (batching='vmap')",
+                              jf_batch(nm, "vmap"), max_rounds=slow, meta=dict(kind="nm_vmap", peer="scipy_nm")))
         run_round_robin(cases, sz.repeats)
         rates = {}
         for c in cases:
@@ -1021,10 +1014,12 @@ and are not re-measured by this script.
   element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
   which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a
   default ENN identification's run time.
-- **Batched Nelder–Mead** (`minimise_many`) vmaps the while loop, so its conditionals become
-  selects: every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for
-  the slowest run. The `lax.map` diagnostic row runs the same seeds one after another inside
-  one jitted call.
+- **Batched Nelder–Mead**: vmapping the while loop turns its conditionals into selects, so
+  every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for the slowest
+  run (the `batching='vmap'` diagnostic row). Since 0.3.0 `minimise_many` runs Nelder–Mead's
+  keys one after another inside the same compiled call (`lax.map`) on a single CPU device,
+  which also makes each run bit-identical to `minimise` with its key; several devices still
+  get the vmapped, sharded layout.
 - **Scan efficiency** (§5): the scan and the recurrence-free ceiling kernels are compiled
   alike, with the library's rollout options (512-bit vectors). Before 0.3.0 both used XLA's
   defaults, and the ceiling's large fusions split over both cores of an idle machine while a

@@ -271,6 +271,33 @@ def _run_many(solver, flat, lower, upper, args, keys, x0, hook):
     return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0, hook))(keys)
 
 
+def _run_many_map(solver, flat, lower, upper, args, keys, x0, hook):
+    return jax.lax.map(lambda k: solver.run(flat, lower, upper, args, k, x0, hook), keys)
+
+
+BATCHING = ("auto", "vmap", "map")
+
+
+def _batching(batching, solver, layout: Layout | None) -> str:
+    """``"vmap"`` or ``"map"`` for :func:`minimise_many` (see its docstring)."""
+    if batching not in BATCHING:
+        raise ValueError(f"batching must be one of {BATCHING}, got {batching!r}")
+    if batching == "map" and layout is not None:
+        raise ValueError(
+            "batching='map' runs the keys one after another on one device; with several "
+            "devices pass devices=False, or batching='vmap' to lay the runs out over them"
+        )
+    if batching == "auto":
+        # A vmapped Nelder-Mead computes both sides of every branch (the shrink's n
+        # evaluations each step); on one CPU running the keys in turn is faster
+        # (peers.md §1). Swarms batch their evaluations well, so they keep vmap.
+        from .nelder_mead import NelderMead
+
+        one_cpu = layout is None and _platform(layout) == "cpu"
+        return "map" if one_cpu and isinstance(solver, NelderMead) else "vmap"
+    return batching
+
+
 def _platform(layout: Layout | None) -> str:
     return layout.devices[0].platform if layout is not None else jax.default_backend()
 
@@ -374,30 +401,38 @@ def minimise_many(
     progress=None,
     devices=None,
     compiler_options="auto",
+    batching="auto",
 ) -> Solution:
-    """Independent runs of :func:`minimise`, one per key, in one vmapped jitted call.
+    """Independent runs of :func:`minimise`, one per key, in one jitted call.
 
     ``keys`` is a batch of PRNG keys (``jax.random.split(key, n)``). Every field of
     the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
-    equals ``minimise(..., key=keys[i])`` up to floating-point reassociation.
+    equals ``minimise(..., key=keys[i])`` up to floating-point reassociation (bit for
+    bit with ``batching="map"``).
     ``progress`` as in :func:`minimise` (reports arrive once per run and step).
     ``devices``: ``None`` (default) lays the runs out over every device when there
     are several (the batch is padded to a multiple of the device count and the
     padding dropped); ``False`` keeps them on one device; or a sequence of devices.
     ``compiler_options`` as in :func:`minimise`.
 
-    Under ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]``
-    still counts the evaluations the algorithm asked for, but XLA computes both
-    branches (the shrink's ``n`` evaluations every step), so batched Nelder–Mead runs
-    cost more per step than single ones.
+    ``batching``: ``"vmap"`` runs the keys side by side (one batched evaluation of
+    every run's candidates per step; runs can be laid out over devices);
+    ``"map"`` runs them one after another inside the same compiled call (``lax.map``;
+    one device); ``"auto"`` (default) picks ``"map"`` for :class:`NelderMead` on a
+    single CPU device and ``"vmap"`` otherwise. Under ``vmap`` Nelder–Mead's
+    conditionals become selects: ``stats["num_evals"]`` still counts the evaluations
+    the algorithm asked for, but XLA computes both branches (the shrink's ``n``
+    evaluations every step), which made 8 vmapped runs on 30-D Rosenbrock about 1.5×
+    slower than the same runs mapped (benchmarks/results/peers.md §1).
     """
     flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = _check_key(keys, "keys", batch=True)
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    run = _run_many_map if _batching(batching, solver, layout) == "map" else _run_many
     keys, n = shard_keys(keys, layout)
     with _progress(progress, solver) as hook:
-        sol = _xla.filter_jit(_run_many, options)(solver, flat, lower, upper, args, keys, x0, hook)
+        sol = _xla.filter_jit(run, options)(solver, flat, lower, upper, args, keys, x0, hook)
         jax.block_until_ready(sol)
     if keys.shape[0] != n:
         sol = jax.tree_util.tree_map(lambda a: a[:n], sol)
