@@ -26,6 +26,14 @@ def _check_v_eps(v_eps: float) -> None:
         raise ValueError(f"v_eps must be positive (m/s), got {v_eps}")
 
 
+def _columns(model, thetas, velocity):
+    """A static model's inputs for broadcasting: physical parameters as ``(P, 1)``
+    columns and the velocity as a ``(1, T)`` row (dtypes promoted by ``_prepare``)."""
+    thetas, v = model._prepare(thetas, velocity)
+    p = {k: x[:, None] for k, x in model.to_physical(thetas).items()}
+    return p, v[None, :]
+
+
 class Coulomb(AbstractPhysicalModel):
     """Coulomb + viscous friction ``F = Fc tanh(v / v_eps) + sigma2 v``.
 
@@ -58,11 +66,10 @@ class Coulomb(AbstractPhysicalModel):
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
         del dt
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        f = p["Fc"] * jnp.tanh(v[None, :] / jnp.asarray(self.v_eps, v.dtype))
+        p, vv = _columns(self, thetas, velocity)
+        f = p["Fc"] * jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
         if self.viscous:
-            f = f + p["sigma2"] * v[None, :]
+            f = f + p["sigma2"] * vv
         return f
 
 
@@ -115,9 +122,7 @@ class Stribeck(AbstractPhysicalModel):
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
         del dt
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
+        p, vv = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
-        vv = v[None, :]
         g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
-        return jnp.tanh(vv / jnp.asarray(self.v_eps, v.dtype)) * g + p["sigma2"] * vv
+        return jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype)) * g + p["sigma2"] * vv
