@@ -1005,7 +1005,8 @@ and are not re-measured by this script.
   and recomputes them; an optimization barrier between unrolled steps was slower still),
   packing the inner state into three arrays (no change with the older emitters, 12 % slower
   with the new ones), a constant-index gather instead of the four rolls (no change), a select
-  chain instead of argmin (25 % slower), and further XLA CPU options (region-analysis copy
+  chain instead of argmin (25 % slower with the new emitters, within noise with the older
+  ones), and further XLA CPU options (region-analysis copy
   insertion, the concurrency-optimised scheduler, fast min/max, optimisation level 1,
   128/512-bit vectors: within noise). Meeting 3× on a function this cheap needs the
   self-learning step in a few kernels, which XLA's CPU fusion does not produce from this
