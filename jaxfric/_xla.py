@@ -88,15 +88,17 @@ def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, A
     return tuple(sorted(opts.items()))
 
 
+try:  # private, but the only way to ask "is anything tracing?"; see _top_level
+    from jax._src.core import trace_state_clean as _trace_state_clean
+except ImportError:  # pragma: no cover - a future JAX moved it
+    _trace_state_clean = None
+
+
 def _top_level() -> bool:
     """True when no JAX transformation is tracing: ``compiler_options`` may only be
     given to a top-level jit (inside a caller's jit, vmap or grad the caller's
     compilation decides). Unknown JAX internals → ``False`` (no options, still correct)."""
-    try:
-        from jax._src.core import trace_state_clean
-    except ImportError:  # pragma: no cover - a future JAX moved it
-        return False
-    return bool(trace_state_clean())
+    return _trace_state_clean is not None and bool(_trace_state_clean())
 
 
 def filter_jit(fn: Callable, options: tuple[tuple[str, Any], ...]) -> Callable:
