@@ -125,3 +125,143 @@ def test_rollout_under_transformations():
     assert jax.eval_shape(lambda t: el.simulate_batch(t, u), th).shape == (3, 50)
     g = jax.grad(lambda t: jnp.sum(el.simulate(t, u) ** 2))(th[0])
     assert g.shape == th[0].shape and bool(jnp.all(jnp.isfinite(g)))
+
+
+# ---------------------------------------------------------------- single-kernel loops
+def _lowered_text(solver, fn, dim, options, many=False):
+    """StableHLO of minimise's (or minimise_many's) executable for these options."""
+    from jaxfric.optim.minimise import _prepare, _run, _run_many
+
+    lo, hi = F.get("rosenbrock").bounds(dim, np.float32)
+    flat, lower, upper, x0 = _prepare(fn, solver, (lo, hi), None, None, None)
+    opts = _xla.resolve(options, "solver", "cpu")
+    if many:
+        keys = jax.random.split(jax.random.key(0), 2)
+        return _xla.filter_jit(_run_many, opts).lower(
+            solver, flat, lower, upper, None, keys, x0, None).as_text()
+    return _xla.filter_jit(_run, opts).lower(
+        solver, flat, lower, upper, None, jax.random.key(0), x0, None).as_text()
+
+
+SMALL_CALL = "xla_cpu_small_call"
+
+
+def test_single_kernel_marks_mapso_self_learning_only_when_asked():
+    s = jf.MAPSO(lattice_size=3, num_generations=3)
+    fn = F.objective("rosenbrock")
+    assert dict(_xla.resolve("auto", "solver", "cpu"))[_xla.SINGLE_KERNEL] is True
+    assert _xla.SINGLE_KERNEL not in dict(_xla.resolve("auto", "solver", "gpu"))
+    assert _xla.SINGLE_KERNEL not in dict(_xla.resolve("auto", "rollout", "cpu"))
+    assert SMALL_CALL in _lowered_text(s, fn, 6, "auto")
+    assert SMALL_CALL not in _lowered_text(s, fn, 6, None)
+    off = {**jf.compiler_options("solver", "cpu"), _xla.SINGLE_KERNEL: False}
+    assert SMALL_CALL not in _lowered_text(s, fn, 6, off)
+    # vmapped runs stay plain (batched, the loop gained nothing and outgrew one kernel)
+    assert SMALL_CALL not in _lowered_text(s, fn, 6, "auto", many=True)
+    # PSO has no such loop
+    assert SMALL_CALL not in _lowered_text(jf.PSO(num_particles=4, num_generations=2), fn, 6,
+                                           "auto")
+    with pytest.raises(ValueError, match="must be True or False"):
+        _xla.resolve({_xla.SINGLE_KERNEL: "yes"}, "solver")
+
+
+def _marked(fn, *args):
+    with _xla._single_kernel_enabled(True):
+        return SMALL_CALL in jax.jit(lambda *a: _xla.single_kernel(fn, *a)).lower(*args).as_text()
+
+
+def test_single_kernel_declines_what_it_cannot_or_should_not_compile():
+    x = jnp.linspace(-1.0, 1.0, 12).reshape(3, 4)
+    assert _marked(lambda a: jnp.sum(jnp.cos(a) * a, axis=1), x)
+    assert _marked(lambda a: jax.lax.scan(lambda c, r: (c + jnp.tanh(r), c), a[0], a)[1], x)
+    # operations XLA's one-kernel emitter cannot compile (jax 0.10)
+    assert not _marked(lambda a: jnp.sort(a, axis=1), x)
+    assert not _marked(lambda a: a @ a.T, x)
+    assert not _marked(lambda a: a.at[jnp.array([0, 2])].add(1.0), x)
+    assert not _marked(lambda a: jnp.linalg.solve(a[:, :3] + 3 * jnp.eye(3), a[:, 3]), x)
+    assert not _marked(lambda a: jax.lax.while_loop(lambda c: c[0, 0] < 5, lambda c: c + 1, a), x)
+    # too much work: a long scan (like a friction-model rollout)
+    long = jnp.ones((3, 200_000))
+    assert not _marked(lambda a: jax.lax.scan(lambda c, r: (c * 0.5 + r, c), a[:, 0], a.T)[1],
+                       long)
+    # and nothing is marked unless a jaxfric entry point enabled it
+    plain = jax.jit(lambda a: _xla.single_kernel(lambda b: b * 2.0, a)).lower(x).as_text()
+    assert SMALL_CALL not in plain
+    assert _xla._work(jax.make_jaxpr(lambda a: jnp.sort(a))(x).jaxpr) == float("inf")
+
+
+@pytest.mark.parametrize("fname", ["rosenbrock", "ackley", "griewank", "schwefel"])
+def test_single_kernel_changes_speed_not_the_run(fname):
+    """With and without the one-kernel self-learning loop: the same run, up to the
+    order XLA sums in (float32), with the same evaluation count."""
+    lo, hi = F.get(fname).bounds(8, np.float32)
+    s = jf.MAPSO(lattice_size=4, num_generations=6)
+    off = {**jf.compiler_options("solver"), _xla.SINGLE_KERNEL: False}
+    a = jf.minimise(F.objective(fname), s, (lo, hi), key=jax.random.key(2))
+    b = jf.minimise(F.objective(fname), s, (lo, hi), key=jax.random.key(2),
+                    compiler_options=off)
+    np.testing.assert_allclose(a.history.f, b.history.f, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(a.value, b.value, rtol=1e-5, atol=1e-6)
+    assert int(a.stats["num_evals"]) == int(b.stats["num_evals"]) == s.evaluations()
+
+
+def test_single_kernel_float64():
+    lo, hi = F.get("rosenbrock").bounds(5, np.float64)
+    s = jf.MAPSO(lattice_size=3, num_generations=8)
+    off = {**jf.compiler_options("solver"), _xla.SINGLE_KERNEL: False}
+    with jax.enable_x64(True):
+        a = jf.minimise(F.objective("rosenbrock"), s, (lo, hi), key=jax.random.key(4))
+        b = jf.minimise(F.objective("rosenbrock"), s, (lo, hi), key=jax.random.key(4),
+                        compiler_options=off)
+        assert a.value.dtype == jnp.float64
+    np.testing.assert_allclose(a.history.f, b.history.f, rtol=1e-12)
+
+
+def test_single_kernel_falls_back_when_xla_cannot_compile_it(monkeypatch):
+    """Should XLA fail to compile a marked loop, the run is compiled again without
+    the marks, the failure remembered (not retried), and the result is the plain run's."""
+    # Let sort through the pre-check: XLA's one-kernel emitter has no sort (jax 0.10).
+    monkeypatch.setattr(_xla, "_SINGLE_KERNEL_PRIMITIVES",
+                        _xla._SINGLE_KERNEL_PRIMITIVES | {"sort"})
+
+    def fn(y, args):
+        return jnp.sum(jnp.sort(y) ** 2 * jnp.arange(1.0, y.shape[0] + 1))
+
+    lo, hi = F.get("sphere").bounds(4, np.float32)
+    s = jf.MAPSO(lattice_size=3, num_generations=4)
+    opts = _xla.resolve("auto", "solver", "cpu")
+    from jaxfric.optim.minimise import _run
+
+    compiled = _xla.filter_jit(_run, opts)
+    before = len(compiled.failed)
+    a = jf.minimise(fn, s, (lo, hi), key=jax.random.key(0))
+    assert len(compiled.failed) == before + 1  # it was tried, failed, and remembered
+    again = jf.minimise(fn, s, (lo, hi), key=jax.random.key(0))
+    assert len(compiled.failed) == before + 1
+    b = jf.minimise(fn, s, (lo, hi), key=jax.random.key(0),
+                    compiler_options={**jf.compiler_options("solver"), _xla.SINGLE_KERNEL: False})
+    for sol in (again, b):
+        np.testing.assert_array_equal(sol.history.f, a.history.f)
+        np.testing.assert_array_equal(sol.value, a.value)
+
+
+def test_fallback_only_for_compiler_failures(monkeypatch):
+    """Other errors pass through; an emitter failure switches to the plain executable."""
+    calls = []
+
+    class Fake:
+        def __init__(self, exc):
+            self.exc = exc
+
+        def __call__(self, *a, **k):
+            calls.append(self.exc)
+            raise self.exc
+
+    c = _xla._Compiled(lambda x: x, ((_xla.SINGLE_KERNEL, True),), False)
+    c.jitted = Fake(jax.errors.JaxRuntimeError("UNIMPLEMENTED: Fusion kind not implemented on CPU"))
+    assert float(c(jnp.float32(3.0))) == 3.0
+    assert float(c(jnp.float32(4.0))) == 4.0  # same signature: not retried
+    assert len(calls) == 1
+    c.jitted = Fake(jax.errors.JaxRuntimeError("INTERNAL: something else"))
+    with pytest.raises(jax.errors.JaxRuntimeError, match="something else"):
+        c(jnp.zeros(3))

@@ -267,6 +267,7 @@ def _run(solver, flat, lower, upper, args, key, x0, hook):
     return solver.run(flat, lower, upper, args, key, x0, hook)
 
 
+@_xla.no_single_kernel  # batched, the loop gained nothing and outgrew one CPU kernel
 def _run_many(solver, flat, lower, upper, args, keys, x0, hook):
     return jax.vmap(lambda k: solver.run(flat, lower, upper, args, k, x0, hook))(keys)
 
@@ -370,6 +371,7 @@ def minimise(
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
     if layout is not None:
+        options = _xla.without_single_kernel(options)  # keep the sharded program plain
         flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
     if checkpoint is not None:
         from .checkpoint import _swarm_of, run_checkpointed
@@ -430,6 +432,8 @@ def minimise_many(
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
     run = _run_many_map if _batching(batching, solver, layout) == "map" else _run_many
+    if layout is not None:
+        options = _xla.without_single_kernel(options)
     keys, n = shard_keys(keys, layout)
     with _progress(progress, solver) as hook:
         sol = _xla.filter_jit(run, options)(solver, flat, lower, upper, args, keys, x0, hook)
