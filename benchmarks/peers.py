@@ -1008,9 +1008,18 @@ and are not re-measured by this script.
   chain instead of argmin (25 % slower with the new emitters, within noise with the older
   ones), and further XLA CPU options (region-analysis copy
   insertion, the concurrency-optimised scheduler, fast min/max, optimisation level 1,
-  128/512-bit vectors: within noise). Meeting 3× on a function this cheap needs the
-  self-learning step in a few kernels, which XLA's CPU fusion does not produce from this
-  program; batching seeds amortises the per-kernel cost (the vmapped rows).
+  128/512-bit vectors: within noise). Since 0.4.0 the self-learning loop is compiled as
+  one kernel on CPU (`jaxfric._xla.single_kernel`: a call carrying XLA's
+  `xla_cpu_small_call` attribute, the mechanism of XLA's own small-while-loop pass), for
+  single runs of objectives that qualify: 1.2–1.45× faster on the 30-D test functions
+  (`compiler_options.md`, with and without it in one run). What remains per generation: the
+  100-agent lattice step is still ~45 kernels, 13 of them copies of the loop state that XLA
+  inserts around the carried arrays (*probe*: materialising the random numbers inside the
+  step instead of carrying them did not help), and the one-kernel code XLA emits for the
+  self-learning loop is mostly scalar. Compiling the whole generation as one kernel was no
+  faster (*probe*), and vmapped runs gain nothing from it (*probe*: 0.99–1.08× for 8 seeds),
+  so they keep the plain program. Batching seeds amortises the per-kernel cost instead (the
+  vmapped rows).
 - **Small ENN batches** (§5): XLA's code for a (30, 9) context state ran 2–3× slower per
   element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
   which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a

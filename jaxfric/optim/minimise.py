@@ -355,9 +355,10 @@ def minimise(
             solvers and MAPSO–NMDS only; see :mod:`jaxfric.optim.checkpoint`).
         checkpoint_every: generations per chunk.
         compiler_options: XLA options for this run's executable only (never global):
-            ``"auto"`` (default; on CPU, 512-bit vectors and XLA's older fusion code
-            generator, measured faster for the swarms, see :mod:`jaxfric._xla`),
-            ``None`` (XLA's defaults) or a dict of XLA option names to values.
+            ``"auto"`` (default; on CPU, 512-bit vectors, XLA's older fusion code
+            generator and MAPSO's self-learning loop as one kernel, measured faster for
+            the swarms, see :mod:`jaxfric._xla`), ``None`` (XLA's defaults) or a dict of
+            XLA option names to values (plus ``"jaxfric_single_kernel_loops": bool``).
 
     Returns:
         A :class:`Solution`.
