@@ -299,7 +299,8 @@ def single_kernel(fn: Callable, *args):
     """``fn(*args)``, traced as one XLA:CPU kernel when the enclosing jaxfric entry
     point enabled it (:data:`SINGLE_KERNEL`) and ``fn`` qualifies: only primitives the
     one-kernel emitter handles and at most :data:`SINGLE_KERNEL_MAX_WORK` element
-    operations. Otherwise a plain call. Same values either way."""
+    operations. Otherwise a plain call. The same computation either way; the one
+    kernel may sum in another order, so values agree to rounding."""
     if not _SINGLE_KERNEL_ON.get():
         return fn(*args)
     if _work(jax.make_jaxpr(fn)(*args).jaxpr) > SINGLE_KERNEL_MAX_WORK:
