@@ -82,6 +82,7 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
     """The XLA options jaxfric compiles ``kind`` (``"solver"`` or ``"rollout"``) with.
 
     ``platform`` defaults to JAX's default backend; off the CPU the answer is ``{}``.
+    Options the installed XLA does not know are left out (:func:`supported`).
     Use it to compile your own code the way jaxfric does, e.g.
     ``jax.jit(f, compiler_options=jaxfric.compiler_options("rollout"))``.
     """
@@ -89,21 +90,24 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
         raise ValueError(f"kind must be one of {sorted(CPU_OPTIONS)}, got {kind!r}")
     if platform is None:
         platform = jax.default_backend()
-    return dict(CPU_OPTIONS[kind]) if platform == "cpu" else {}
+    if platform != "cpu":
+        return {}
+    return dict(supported(tuple(sorted(CPU_OPTIONS[kind].items())), platform))
 
 
 def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, Any], ...]:
     """Validate a user's ``compiler_options=`` and freeze it into a hashable tuple.
 
-    ``"auto"`` → :func:`compiler_options` (plus :data:`SINGLE_KERNEL` for optimiser
-    runs on CPU); ``None`` or ``False`` → no options; a mapping of option names (str)
+    ``"auto"`` → :func:`compiler_options`, less any option this XLA does not know
+    (:func:`supported`), plus :data:`SINGLE_KERNEL` for optimiser runs on CPU; ``None`` or ``False`` → no options; a mapping of option names (str)
     to bool/int/float/str values → those, as given (checked by XLA on a trivial
     program first, see :func:`check_known`). Raises
     ``ValueError`` for anything else, before the real computation is traced.
     """
     if isinstance(value, str) and value == AUTO:
+        platform = platform or jax.default_backend()
         opts = compiler_options(kind, platform)
-        if kind == "solver" and (platform or jax.default_backend()) == "cpu":
+        if kind == "solver" and platform == "cpu":
             opts[SINGLE_KERNEL] = True
     elif value is None or value is False:
         opts = {}
@@ -307,6 +311,33 @@ def single_kernel(fn: Callable, *args):
         return fn(*args)
     with set_xla_metadata(xla_cpu_small_call="true", inlineable="false"):
         return jax.jit(fn)(*args)
+
+
+@functools.lru_cache(maxsize=None)
+def supported(options: tuple[tuple[str, Any], ...], platform: str) -> tuple[tuple[str, Any], ...]:
+    """The subset of ``options`` that this XLA accepts on ``platform``.
+
+    ``"auto"`` must never make a run fail: XLA versions add and remove options (jax
+    0.11's XLA no longer has ``xla_cpu_use_fusion_emitters``, and rejects the whole
+    compilation if it is passed). Each option is tried once per process on a trivial
+    program compiled for ``platform``; the ones XLA rejects are left out, and the
+    computation is then compiled as if they had never been chosen.
+    """
+    if not options:
+        return ()
+    try:
+        device = jax.devices(platform)[0]
+    except RuntimeError:  # no such platform in this process: nothing to compile for
+        return ()
+    x = jax.device_put(0.0, device)
+    kept = []
+    for name, value in options:
+        try:
+            jax.jit(lambda y: y + 1.0, compiler_options={name: value}).lower(x).compile()
+        except Exception:  # XlaRuntimeError: INVALID_ARGUMENT: No such compile option
+            continue
+        kept.append((name, value))
+    return tuple(kept)
 
 
 @functools.lru_cache(maxsize=64)

@@ -11,11 +11,20 @@ from jaxfric import _xla
 from jaxfric import functions as F
 
 
+def _xla_accepts(name, value):
+    try:
+        _xla.check_known(((name, value),))
+        return True
+    except ValueError:
+        return False
+
+
 def test_auto_options_are_cpu_only():
-    assert jf.compiler_options("solver", "cpu") == {
-        "xla_cpu_prefer_vector_width": 512,
-        "xla_cpu_use_fusion_emitters": False,
-    }
+    # Every chosen option this XLA knows is passed; the others are left out (jax 0.11's
+    # XLA no longer has xla_cpu_use_fusion_emitters).
+    for kind in ("solver", "rollout"):
+        expected = {k: v for k, v in _xla.CPU_OPTIONS[kind].items() if _xla_accepts(k, v)}
+        assert jf.compiler_options(kind, "cpu") == expected
     assert jf.compiler_options("rollout", "cpu") == {"xla_cpu_prefer_vector_width": 512}
     assert jf.compiler_options("solver", "gpu") == {}
     assert jf.compiler_options("rollout", "tpu") == {}
@@ -32,11 +41,28 @@ def test_resolve_freezes_and_validates():
     assert _xla.resolve(False, "solver") == ()
     assert _xla.resolve("auto", "solver", "gpu") == ()
     assert dict(_xla.resolve("auto", "rollout", "cpu")) == {"xla_cpu_prefer_vector_width": 512}
-    given = {"xla_cpu_use_fusion_emitters": True, "xla_cpu_prefer_vector_width": 256}
+    given = {"xla_cpu_enable_fast_math": False, "xla_cpu_prefer_vector_width": 256}
     frozen = _xla.resolve(given, "solver")
     assert frozen == tuple(sorted(given.items()))
-    assert given == {"xla_cpu_use_fusion_emitters": True, "xla_cpu_prefer_vector_width": 256}
+    assert given == {"xla_cpu_enable_fast_math": False, "xla_cpu_prefer_vector_width": 256}
     hash(frozen)
+
+
+def test_auto_leaves_out_options_this_xla_does_not_know(monkeypatch):
+    """'auto' never fails a run because XLA dropped an option jaxfric chose (as jax
+    0.11's XLA dropped xla_cpu_use_fusion_emitters); a user's explicit dict still does."""
+    chosen = {"xla_cpu_prefer_vector_width": 512, "xla_cpu_no_such_option_jaxfric": True}
+    monkeypatch.setitem(_xla.CPU_OPTIONS, "solver", chosen)
+    assert jf.compiler_options("solver", "cpu") == {"xla_cpu_prefer_vector_width": 512}
+    assert dict(_xla.resolve("auto", "solver", "cpu")) == {
+        "xla_cpu_prefer_vector_width": 512, _xla.SINGLE_KERNEL: True}
+    lo, hi = F.get("sphere").bounds(3, np.float32)
+    sol = jf.minimise(F.objective("sphere"), jf.PSO(num_particles=8, num_generations=5),
+                      (lo, hi), key=jax.random.key(0))
+    assert np.isfinite(float(sol.f))
+    with pytest.raises(ValueError, match="XLA rejected compiler_options"):
+        _xla.resolve(chosen, "solver")
+    assert _xla.supported(tuple(chosen.items()), "no_such_platform") == ()
 
 
 @pytest.mark.parametrize(
