@@ -34,12 +34,12 @@ output by O(1) -- while with |r| <= 1 none were. Two correct implementations
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractFrictionModel
+from ._scan import time_scan
 
 __all__ = ["Elman", "ElmanFull"]
 
@@ -55,6 +55,11 @@ def _check_positive(name: str, value: float, upper: float | None = None) -> None
     if not np.isfinite(value) or value <= 0.0 or (upper is not None and value >= upper):
         rng = f"(0, {upper})" if upper is not None else "(0, inf)"
         raise ValueError(f"{name} must lie in {rng}, got {value!r}")
+
+
+def _check_unroll(unroll) -> None:
+    if unroll is not None and (isinstance(unroll, bool) or int(unroll) < 1):
+        raise ValueError(f"unroll must be None or >= 1, got {unroll}")
 
 
 class Elman(AbstractFrictionModel):
@@ -81,7 +86,8 @@ class Elman(AbstractFrictionModel):
         alpha_max: alpha in [0, alpha_max] (default 0.99, keeps contexts stable).
         c0_bound: |c0| <= this (default 1); also the bound of |b_o|.
         unroll: ``lax.scan`` unroll factor of the time loop; ``None`` (default)
-            picks the fastest measured: 2 for float32, 1 for float64.
+            picks the fastest measured: on the CPU 2 for float32 and 1 for float64,
+            on a GPU or other accelerator 32 (``jaxfric.models._scan``).
 
     All quantities are dimensionless (scaled data, see :class:`Scaler`).
     """
@@ -104,8 +110,7 @@ class Elman(AbstractFrictionModel):
         _check_positive("output_weight_bound", self.output_weight_bound)
         _check_positive("alpha_max", self.alpha_max, upper=1.0)
         _check_positive("c0_bound", self.c0_bound)
-        if self.unroll is not None and (isinstance(self.unroll, bool) or int(self.unroll) < 1):
-            raise ValueError(f"unroll must be None or >= 1, got {self.unroll}")
+        _check_unroll(self.unroll)
 
     _BLOCKS = ("w", "r", "b", "v", "alpha", "c0")
 
@@ -190,11 +195,8 @@ class Elman(AbstractFrictionModel):
             h = jnp.tanh(w * uk + r * c + b)
             return alpha * c + h, jnp.sum((v * h).reshape(shape), axis=0)
 
-        unroll = self.unroll
-        if unroll is None:
-            unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2
-        _, y = jax.lax.scan(step, c0, u, unroll=unroll)
-        y = y.T
+        cpu_unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2
+        y = time_scan(step, c0, u, cpu_unroll, self.unroll).T
         if self.output_bias:
             y = y + p["b_o"][:, None]
         return y
@@ -215,7 +217,9 @@ class ElmanFull(AbstractFrictionModel):
     ``weight_bound`` for |w|, |b| (default 5); ``context_bound`` for |W_c|
     (default 1: each hidden unit sums N context terms, so a smaller box keeps
     the pre-activations in the same range); ``output_weight_bound`` for |v|
-    (default 2); ``c0_bound`` for |c0| and |b_o| (default 1). Dimensionless.
+    (default 2); ``c0_bound`` for |c0| and |b_o| (default 1); ``unroll`` of the
+    time loop (default ``None``: 1 on the CPU, 32 on a GPU, as for :class:`Elman`).
+    Dimensionless.
     """
 
     neurons: int = eqx.field(default=30, static=True)
@@ -225,6 +229,7 @@ class ElmanFull(AbstractFrictionModel):
     context_bound: float = eqx.field(default=1.0, static=True)
     output_weight_bound: float = eqx.field(default=2.0, static=True)
     c0_bound: float = eqx.field(default=1.0, static=True)
+    unroll: int | None = eqx.field(default=None, static=True)
 
     needs_scaling = True
 
@@ -232,6 +237,7 @@ class ElmanFull(AbstractFrictionModel):
         _check_neurons(self.neurons)
         for name in ("weight_bound", "context_bound", "output_weight_bound", "c0_bound"):
             _check_positive(name, getattr(self, name))
+        _check_unroll(self.unroll)
 
     def _sizes(self) -> list[tuple[str, int]]:
         n = self.neurons
@@ -323,8 +329,7 @@ class ElmanFull(AbstractFrictionModel):
             h = jnp.tanh(w * uk + jnp.einsum("pij,pj->pi", Wc, c) + b)
             return h, jnp.sum(v * h, axis=-1)
 
-        _, y = jax.lax.scan(step, c0, u)
-        y = y.T
+        y = time_scan(step, c0, u, 1, self.unroll).T
         if self.output_bias:
             y = y + p["b_o"][:, None]
         return y

@@ -14,7 +14,8 @@ reading of sampled data) the equation is linear, so it is integrated exactly:
 This is unconditionally stable and, under the hold assumption, free of
 discretisation error. Everything that depends on v only (a_k, the decay and
 the gain) is computed vectorised before a ``lax.scan`` whose body is one
-multiply-add per candidate.
+multiply-add per candidate (on a GPU an associative scan of the same
+recurrence, ``jaxfric.models._scan.linear_recurrence``).
 
 Units: velocity in m/s, friction in N, ``dt`` in s; parameters in SI units
 (sigma0 N/m, sigma1 and sigma2 N s/m, Fc and Fs N, vs m/s).
@@ -23,11 +24,11 @@ Units: velocity in m/s, friction in N, ``dt`` in s; parameters in SI units
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._physical import AbstractPhysicalModel, as_range, stribeck_curve
+from ._scan import linear_recurrence
 
 __all__ = ["LuGre", "Dahl", "bristle_friction"]
 
@@ -76,13 +77,7 @@ def bristle_friction(
     gain = v * dt * _phi(x)
     z0 = jnp.sign(v[:, 0]) * g[:, 0] / sigma0[:, 0]
 
-    def step(z, coeffs):
-        d, c = coeffs
-        return d * z + c, z
-
-    # (T, P) scan inputs: candidates on the fast axis, as in the Elman rollout.
-    _, z = jax.lax.scan(step, z0, (decay.T, gain.T))
-    z = z.T
+    z = linear_recurrence(decay, gain, z0)
     return sigma0 * z + sigma1 * (v - a * z) + sigma2 * v
 
 
