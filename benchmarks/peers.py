@@ -38,7 +38,8 @@ Usage::
 
     python benchmarks/peers.py                 # full run (~6 min on a loaded 2-core CPU)
     python benchmarks/peers.py --quick         # tiny sizes, smoke test (~25 s CPU, < 1 min wall)
-    python benchmarks/peers.py --tag gpu       # on a GPU machine: writes peers_gpu.*
+    python benchmarks/peers.py --tag gpu --sections 1,2,3,4,5 --e2e-rounds 1 \
+        --no-stage-diagnostics                 # on a GPU machine: writes peers_gpu.*
 
 Writes ``peers[_TAG].md``, ``peers[_TAG].csv`` and ``peers[_TAG].png`` to ``--out``
 (default ``benchmarks/results``).
@@ -403,14 +404,16 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
         if sz.batched_mapso:
             cases.insert(3, Case(f"jaxfric MAPSO, {sz.seeds} seeds vmapped", jf_batch(mapso), max_rounds=slow,
                                  meta=dict(kind="mapso_batch", peer="pyswarms")))
+        one_cpu = jax.default_backend() == "cpu" and jax.device_count() == 1
         if sz.batched_nm:
-            cases.insert(len(cases) - 1, Case(f"jaxfric Nelder-Mead, {sz.seeds} seeds (minimise_many: lax.map on one CPU)",
+            how = "lax.map on one CPU" if one_cpu else "vmapped"
+            cases.insert(len(cases) - 1, Case(f"jaxfric Nelder-Mead, {sz.seeds} seeds (minimise_many: {how})",
                                               jf_batch(nm), max_rounds=slow, meta=dict(kind="nm_batch", peer="scipy_nm")))
         if sz.overhead_row and fname == sz.functions[0]:
             one_gen = jf.PSO(num_particles=P, num_generations=1)
             cases.append(Case("(diagnostic) jaxfric PSO with 1 generation: minimise()'s fixed cost per call",
                               jf_single(one_gen), meta=dict(kind="overhead")))
-        if sz.nm_vmap and fname == sz.functions[0]:
+        if sz.nm_vmap and one_cpu and fname == sz.functions[0]:  # elsewhere 'auto' is vmap
             cases.insert(len(cases) - 1 - int(sz.overhead_row),
                          Case(f"(diagnostic) jaxfric Nelder-Mead, {sz.seeds} seeds vmapped (batching='vmap')",
                               jf_batch(nm, "vmap"), max_rounds=slow, meta=dict(kind="nm_vmap", peer="scipy_nm")))
@@ -972,7 +975,8 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
     a("    python benchmarks/peers.py                  # the full benchmark (about 6 min on a loaded 2-core CPU)")
     a("    python benchmarks/peers.py --quick          # tiny sizes, a smoke test of every section")
     a("    python benchmarks/peers.py --out DIR        # write peers.md/csv/png elsewhere")
-    a("    python benchmarks/peers.py --tag gpu        # on a GPU machine: peers_gpu.md/csv/png")
+    a("    python benchmarks/peers.py --tag gpu --sections 1,2,3,4,5 --e2e-rounds 1 --no-stage-diagnostics")
+    a("                                                 # on a GPU machine: peers_gpu.md/csv/png")
     a("")
     a("The NumPy, pyswarms and scipy rows always run on the CPU; the jaxfric rows run on JAX's default "
       "device. When a GPU is available, run with `--tag gpu` and put `peers_gpu.md` beside this file: "
@@ -1117,8 +1121,18 @@ def main(argv=None) -> int:
     p.add_argument("--tag", default="", help="suffix of the output files, e.g. gpu -> peers_gpu.md")
     p.add_argument("--sections", default="1,2,3,4,5,A",
                    help="comma-separated subset of 1,2,3,4,5,A (3 and 4 run together)")
+    p.add_argument("--e2e-rounds", type=int, default=None,
+                   help="§3: jaxfric and scipy runs each (default 2; 1 on a GPU to save time)")
+    p.add_argument("--no-stage-diagnostics", action="store_true",
+                   help="§3: skip timing identify's stages one by one")
     a = p.parse_args(argv)
     sz = quick_sizes() if a.quick else Sizes()
+    if a.e2e_rounds is not None:
+        if a.e2e_rounds < 1:
+            p.error("--e2e-rounds must be >= 1")
+        sz.e2e_rounds = a.e2e_rounds
+    if a.no_stage_diagnostics:
+        sz.stage_diagnostics = False
     wanted = set(a.sections.split(","))
     t_start = time.perf_counter()
     load_start = load_now()

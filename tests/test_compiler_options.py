@@ -145,9 +145,12 @@ def test_rollout_under_transformations():
     th = jnp.asarray(np.random.default_rng(1).uniform(lo, hi, (3, el.num_params)), jnp.float32)
     u = jnp.linspace(-1.0, 1.0, 50)
     eager = el.simulate_batch(th, u)
-    np.testing.assert_allclose(jax.jit(lambda t: el.simulate_batch(t, u))(th), eager, rtol=1e-6)
-    np.testing.assert_allclose(jax.jit(lambda: el.simulate_batch(th, u))(), eager, rtol=1e-6)
-    np.testing.assert_allclose(jax.vmap(lambda t: el.simulate(t, u))(th), eager, rtol=1e-6)
+    # On a GPU the eager and jitted programs fuse differently: float32 rounding (7e-6
+    # relative was seen on an H100) that the recurrence carries forward.
+    rtol = 1e-6 if jax.default_backend() == "cpu" else 1e-4
+    np.testing.assert_allclose(jax.jit(lambda t: el.simulate_batch(t, u))(th), eager, rtol=rtol)
+    np.testing.assert_allclose(jax.jit(lambda: el.simulate_batch(th, u))(), eager, rtol=rtol)
+    np.testing.assert_allclose(jax.vmap(lambda t: el.simulate(t, u))(th), eager, rtol=rtol)
     assert jax.eval_shape(lambda t: el.simulate_batch(t, u), th).shape == (3, 50)
     g = jax.grad(lambda t: jnp.sum(el.simulate(t, u) ** 2))(th[0])
     assert g.shape == th[0].shape and bool(jnp.all(jnp.isfinite(g)))
@@ -243,6 +246,8 @@ def test_single_kernel_float64():
     np.testing.assert_allclose(a.history.f, b.history.f, rtol=1e-12)
 
 
+@pytest.mark.skipif(jax.default_backend() != "cpu",
+                    reason="the one-kernel loop is an XLA:CPU mechanism; minimise runs on this backend")
 def test_single_kernel_falls_back_when_xla_cannot_compile_it(monkeypatch):
     """Should XLA fail to compile a marked loop, the run is compiled again without
     the marks, the failure remembered (not retried), and the result is the plain run's."""

@@ -48,10 +48,13 @@ def test_parallel_linear_recurrence_matches_a_loop(t, x64):
         np.testing.assert_allclose(np.asarray(par), ref, atol=tol * scale, rtol=0)
 
 
-def test_default_linear_recurrence_is_the_sequential_loop_on_cpu():
+def test_default_linear_recurrence_is_the_platforms_own_form():
+    """The sequential loop on the CPU, the associative scan on other platforms."""
     decay, gain, z0 = _coefficients(np.random.default_rng(0), 3, 100, jnp.float32)
+    own = (_scan.linear_recurrence_sequential if jax.default_backend() == "cpu"
+           else _scan.linear_recurrence_parallel)
     assert jnp.array_equal(jax.jit(_scan.linear_recurrence)(decay, gain, z0),
-                           _scan.linear_recurrence_sequential(decay, gain, z0))
+                           jax.jit(own)(decay, gain, z0))
 
 
 @pytest.mark.parametrize("model", [LuGre(), Dahl()], ids=["lugre", "dahl"])
