@@ -1054,7 +1054,15 @@ and are not re-measured by this script.
   lattice, self-learning start and steps, Nelder–Mead start, reflection, second point,
   shrink), each a separate scan loop for LLVM; the same hybrid on Rosenbrock compiles in
   about half the time. Compile time also grows with the machine's load. New data of the same
-  shapes never recompile (last column of §4)."""
+  shapes never recompile (last column of §4).
+- **On a GPU** (a `--tag gpu` run): every step of a loop is at least one kernel launch, about
+  10 µs on the H100 of `peers_gpu.md`. Work that goes one small step at a time is bound by
+  that: a single Nelder–Mead run (§1, about scipy's speed), `identify` (§3, whose Nelder–Mead
+  stage evaluates one rollout at a time) and the scan efficiency (§5, whose recurrence-free
+  ceiling runs all time steps in parallel). Since 0.5.0 the models' time loops are chosen per
+  platform (`jaxfric/models/_scan.py`): Elman unrolls 32 steps there (the §5 diagnostic rows
+  show unroll 1–8 at 3–28 ms against the default's 1.6 ms), LuGre and Dahl use an associative
+  scan. Batches are where a GPU pays: `benchmarks/scaling.py --tag gpu`."""
 
 
 def solver_text(sz: Sizes) -> str:

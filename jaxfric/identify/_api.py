@@ -253,6 +253,12 @@ def identify(
     [−1, 1]-scaled data for the networks, divided by the friction variance for
     physical models (so J = training MSE % / 100 there).
 
+    Devices: the run goes where JAX puts it. One identification is mostly sequential (its
+    Nelder–Mead stage evaluates one rollout at a time), so on a GPU every step is a kernel
+    launch: the default ENN fit took 42 s on an H100 against 8–10 s on a 2-core CPU
+    (``benchmarks/results/peers_gpu.md``). For a single fit on a GPU machine, use
+    ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
+
     Returns:
         a :class:`jaxfric.Fit`.
 
