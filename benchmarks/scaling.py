@@ -35,7 +35,6 @@ Writes ``scaling[_TAG].md``, ``.csv`` and ``.png`` to ``--out`` (default
 from __future__ import annotations
 
 import argparse
-import csv
 import logging
 import os
 import platform
@@ -52,6 +51,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import speed_optim  # noqa: E402  (NumPy Rosenbrock for pyswarms)
+from peers import load_now, write_csv  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
@@ -160,13 +160,13 @@ def rollout_rows(a, log) -> list[dict]:
     for c in a.candidates:
         th = rng.uniform(lo, hi, (c, elman.num_params)).astype(np.float32)
         thj = jnp.asarray(th)
-        first, med, out = timed(lambda r: sim(thj, uj), a.repeats)
+        first, med, out = timed(lambda r, thj=thj: sim(thj, uj), a.repeats)
         log(f"  jaxfric Elman.simulate_batch  C {c:7d}: {c / med:10.3g} rollouts/s")
         rows.append(row("rollout", "jaxfric Elman.simulate_batch (lax.scan)", c, c, first, med,
                         neuron_steps_per_s=c * NEURONS * SAMPLES / med))
         if c <= a.numpy_max:
             th64 = th.astype(np.float64)
-            first, med, ref = timed(lambda r: elman_rollout_vectorised(th64, u, NEURONS, dtype=np.float32),
+            first, med, ref = timed(lambda r, th64=th64: elman_rollout_vectorised(th64, u, NEURONS, dtype=np.float32),
                                     max(1, min(a.repeats, 5)))
             # Same model: the first samples agree before chaotic networks separate.
             np.testing.assert_allclose(np.asarray(out)[:8, :20], ref[:8, :20], rtol=1e-3, atol=1e-3)
@@ -185,7 +185,7 @@ def to_markdown(rows, meta) -> str:
          "",
          f"Machine: {meta['machine']}; JAX devices: {meta['devices']}; jax {jax.__version__}, numpy "
          f"{np.__version__}, Python {platform.python_version()}. Load average (1 min) at start "
-         f"{meta['load_start']}, at end {meta['load_end']}; wall time {meta['wall'] / 60:.1f} min.",
+         f"{meta['load_start']:.1f}, at end {meta['load_end']:.1f}; wall time {meta['wall'] / 60:.1f} min.",
          ""]
     peer = next((r for r in rows if r["kind"] == "peer"), None)
 
@@ -257,22 +257,6 @@ def plot(rows, path: Path, meta) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-def write_csv(rows, path: Path) -> None:
-    keys = sorted({k for r in rows for k in r}, key=lambda k: (k not in rows[0], k))
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
-def load_now() -> str:
-    try:
-        return f"{os.getloadavg()[0]:.1f}"
-    except OSError:  # pragma: no cover - platform without getloadavg
-        return "?"
 
 
 def main(argv=None) -> int:
