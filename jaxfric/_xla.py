@@ -98,10 +98,10 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
 def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, Any], ...]:
     """Validate a user's ``compiler_options=`` and freeze it into a hashable tuple.
 
-    ``"auto"`` → :func:`compiler_options`, less any option this XLA does not know
-    (:func:`supported`), plus :data:`SINGLE_KERNEL` for optimiser runs on CPU; ``None`` or ``False`` → no options; a mapping of option names (str)
-    to bool/int/float/str values → those, as given (checked by XLA on a trivial
-    program first, see :func:`check_known`). Raises
+    ``"auto"`` → :func:`compiler_options` (which leaves out options this XLA does not
+    know), plus :data:`SINGLE_KERNEL` for optimiser runs on CPU; ``None`` or ``False`` →
+    no options; a mapping of option names (str) to bool/int/float/str values → those, as
+    given (checked by XLA on a trivial program first, see :func:`check_known`). Raises
     ``ValueError`` for anything else, before the real computation is traced.
     """
     if isinstance(value, str) and value == AUTO:
