@@ -299,15 +299,33 @@ def _work(jaxpr) -> float:
     return total
 
 
+def _scan_lengths(jaxpr) -> list[int]:
+    """Lengths of every ``scan`` in ``jaxpr``, nested ones included."""
+    out = []
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name == "scan":
+            out.append(int(eqn.params["length"]))
+        for sub in jex_core.jaxprs_in_params(eqn.params):
+            out += _scan_lengths(getattr(sub, "jaxpr", sub))
+    return out
+
+
 def single_kernel(fn: Callable, *args):
     """``fn(*args)``, traced as one XLA:CPU kernel when the enclosing jaxfric entry
     point enabled it (:data:`SINGLE_KERNEL`) and ``fn`` qualifies: only primitives the
-    one-kernel emitter handles and at most :data:`SINGLE_KERNEL_MAX_WORK` element
-    operations. Otherwise a plain call. The same computation either way; the one
-    kernel may sum in another order, so values agree to rounding."""
+    one-kernel emitter handles, at most :data:`SINGLE_KERNEL_MAX_WORK` element
+    operations, and a loop to gain from: some scan of length >= 1 and none of length 0.
+    The last rule is not only about speed. ``MAPSO(sl_generations=0)``, whose
+    self-learning then holds no loop, aborted the whole process inside XLA:CPU (jax
+    0.10: "Check failed: slice_to_buffer_table_index_.empty()"). An abort cannot be
+    caught, so the fall-back of :class:`_Compiled` cannot help there. Otherwise a plain
+    call. The same computation either way; the one kernel may sum in another order, so
+    values agree to rounding."""
     if not _SINGLE_KERNEL_ON.get():
         return fn(*args)
-    if _work(jax.make_jaxpr(fn)(*args).jaxpr) > SINGLE_KERNEL_MAX_WORK:
+    jaxpr = jax.make_jaxpr(fn)(*args).jaxpr
+    lengths = _scan_lengths(jaxpr)
+    if not lengths or min(lengths) < 1 or _work(jaxpr) > SINGLE_KERNEL_MAX_WORK:
         return fn(*args)
     with set_xla_metadata(xla_cpu_small_call="true", inlineable="false"):
         return jax.jit(fn)(*args)

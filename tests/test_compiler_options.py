@@ -1,6 +1,11 @@
 """Per-computation XLA options (jaxfric/_xla.py): validation, platform choice, and that
 the options change speed only, never results."""
 
+import os
+import subprocess
+import sys
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -194,27 +199,69 @@ def test_single_kernel_marks_mapso_self_learning_only_when_asked():
         _xla.resolve({_xla.SINGLE_KERNEL: "yes"}, "solver")
 
 
+def test_single_kernel_needs_a_loop():
+    """A function with no loop, or only a zero-length one, is never marked: MAPSO with
+    sl_generations=0 aborted the whole process inside XLA:CPU when it was (0.4.0)."""
+    x = jnp.ones(5)
+    assert not _marked(lambda y: y * 2.0 + 1.0, x)
+    assert not _marked(lambda y: jax.lax.scan(lambda c, _: (c * 2.0, c), y, None, length=0)[0], x)
+    assert _marked(lambda y: jax.lax.scan(lambda c, _: (c * 2.0, c), y, None, length=1)[0], x)
+    s0 = jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=0)
+    assert SMALL_CALL not in _lowered_text(s0, F.objective("rosenbrock"), 6, "auto")
+    assert SMALL_CALL in _lowered_text(eqx.tree_at(lambda m: m.sl_generations, s0, 1),
+                                       F.objective("rosenbrock"), 6, "auto")
+
+
+def test_mapso_without_self_learning_generations_runs_with_auto_options():
+    """End to end, in a subprocess (a regression aborts the process, not just the test):
+    MAPSO(sl_generations=0) with the default options runs and equals XLA's defaults."""
+    script = (
+        "import jax, numpy as np, jaxfric as jf\n"
+        "from jaxfric import functions as F\n"
+        "lo, hi = F.get('rosenbrock').bounds(30, np.float32)\n"
+        "s = jf.MAPSO(lattice_size=5, num_generations=20, sl_generations=0)\n"
+        "a = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0))\n"
+        "b = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0),"
+        " compiler_options=None)\n"
+        "print('RESULT', float(a.f), float(b.f), int(a.stats['num_evals']), s.evaluations())\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    fa, fb, evals, expected = proc.stdout.split("RESULT")[1].split()
+    assert np.isfinite(float(fa)) and float(fa) == float(fb)
+    assert int(evals) == int(expected)
+
+
 def _marked(fn, *args):
     with _xla._single_kernel_enabled(True):
         return SMALL_CALL in jax.jit(lambda *a: _xla.single_kernel(fn, *a)).lower(*args).as_text()
 
 
+def _in_loop(f):
+    """``f`` (shape-preserving) applied twice in a scan: a loop, so the primitives inside
+    are the only thing that decides whether it is marked."""
+    return lambda a: jax.lax.scan(lambda c, _: (f(c), None), a, None, length=2)[0]
+
+
 def test_single_kernel_declines_what_it_cannot_or_should_not_compile():
     x = jnp.linspace(-1.0, 1.0, 12).reshape(3, 4)
-    assert _marked(lambda a: jnp.sum(jnp.cos(a) * a, axis=1), x)
+    assert _marked(_in_loop(lambda a: a * jnp.sum(jnp.cos(a) * a, axis=1, keepdims=True)), x)
     assert _marked(lambda a: jax.lax.scan(lambda c, r: (c + jnp.tanh(r), c), a[0], a)[1], x)
     # operations XLA's one-kernel emitter cannot compile (jax 0.10)
-    assert not _marked(lambda a: jnp.sort(a, axis=1), x)
-    assert not _marked(lambda a: a @ a.T, x)
-    assert not _marked(lambda a: a.at[jnp.array([0, 2])].add(1.0), x)
-    assert not _marked(lambda a: jnp.linalg.solve(a[:, :3] + 3 * jnp.eye(3), a[:, 3]), x)
-    assert not _marked(lambda a: jax.lax.while_loop(lambda c: c[0, 0] < 5, lambda c: c + 1, a), x)
+    assert not _marked(_in_loop(lambda a: jnp.sort(a, axis=1)), x)
+    assert not _marked(_in_loop(lambda a: (a @ a.T) @ a), x)
+    assert not _marked(_in_loop(lambda a: a.at[jnp.array([0, 2])].add(1.0)), x)
+    assert not _marked(_in_loop(
+        lambda a: a + jnp.linalg.solve(a[:, :3] + 3 * jnp.eye(3), a[:, 3])[:, None]), x)
+    assert not _marked(_in_loop(
+        lambda a: jax.lax.while_loop(lambda c: c[0, 0] < 5, lambda c: c + 1, a)), x)
     # too much work: a long scan (like a friction-model rollout)
     long = jnp.ones((3, 200_000))
     assert not _marked(lambda a: jax.lax.scan(lambda c, r: (c * 0.5 + r, c), a[:, 0], a.T)[1],
                        long)
     # and nothing is marked unless a jaxfric entry point enabled it
-    plain = jax.jit(lambda a: _xla.single_kernel(lambda b: b * 2.0, a)).lower(x).as_text()
+    plain = jax.jit(lambda a: _xla.single_kernel(_in_loop(lambda b: b * 2.0), a)).lower(x).as_text()
     assert SMALL_CALL not in plain
     assert _xla._work(jax.make_jaxpr(lambda a: jnp.sort(a))(x).jaxpr) == float("inf")
 
