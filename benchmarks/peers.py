@@ -82,6 +82,8 @@ from jaxfric.identify._objective import cost_data  # noqa: E402
 from jaxfric.identify._timing import Stopwatch  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
+from jaxfric.optim.minimise import _batching  # noqa: E402
+from jaxfric.optim.sharding import resolve_devices  # noqa: E402
 
 TARGETS = {
     "pso": 3.0,  # PSO and MAPSO evals/s >= 3x pyswarms
@@ -404,7 +406,8 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
         if sz.batched_mapso:
             cases.insert(3, Case(f"jaxfric MAPSO, {sz.seeds} seeds vmapped", jf_batch(mapso), max_rounds=slow,
                                  meta=dict(kind="mapso_batch", peer="pyswarms")))
-        one_cpu = jax.default_backend() == "cpu" and jax.device_count() == 1
+        # What minimise_many's batching="auto" picks for Nelder-Mead here (not re-derived).
+        one_cpu = _batching("auto", nm, resolve_devices(None)) == "map"
         if sz.batched_nm:
             how = "lax.map on one CPU" if one_cpu else "vmapped"
             cases.insert(len(cases) - 1, Case(f"jaxfric Nelder-Mead, {sz.seeds} seeds (minimise_many: {how})",
