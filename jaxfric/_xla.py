@@ -25,19 +25,26 @@ One more CPU measure is jaxfric's own, not an XLA option:
 
 single-kernel loops (optimiser runs only; :data:`SINGLE_KERNEL`)
     XLA:CPU runs a program as a sequence of small compiled kernels, each costing a
-    fraction of a microsecond to dispatch. MAPSO's self-learning (§3.4: 10 generations
-    of a 3×3 lattice, each ~24 kernels over 9 agents) spends most of its time there.
-    :func:`single_kernel` marks such a loop so that XLA compiles it, whole, into one
-    kernel (a ``call`` with XLA's ``xla_cpu_small_call`` attribute, which XLA's own
-    small-while-loop pass uses, and ``inlineable="false"`` so it survives): MAPSO on
-    the 30-D test functions ran 1.2–1.45× faster. The one kernel may sum in another
-    order, so runs agree with the plain program to rounding, not always to the bit
-    (each is reproducible on its own). It is
-    used only where it pays and compiles: a single run (not vmapped, not sharded),
-    an objective built from elementwise, reduction, slicing and loop primitives, and
-    at most :data:`SINGLE_KERNEL_MAX_WORK` element operations per call (the Elman
-    rollouts are far above it, and ran no faster). Should XLA still fail to compile
-    it, the run is compiled again without (:class:`_Compiled`).
+    fraction of a microsecond to dispatch. A swarm generation on 100 agents is a few
+    dozen such kernels over a few thousand numbers, and MAPSO's self-learning (§3.4:
+    10 generations of a 3×3 lattice, each ~24 kernels over 9 agents) is almost nothing
+    but dispatch. :func:`single_kernel_loop` marks a swarm's whole generation loop, and
+    :func:`single_kernel` MAPSO's self-learning loop where the whole run is too large
+    for one kernel, so that XLA compiles the loop, whole, into one kernel (a ``call``
+    with XLA's ``xla_cpu_small_call`` attribute, which XLA's own small-while-loop pass
+    uses, and ``inlineable="false"`` so it survives). On the 30-D test functions with
+    100 agents a whole run got 1.2–1.4x faster for MAPSO (over the self-learning
+    kernel alone, itself worth 1.2–1.45x) and 1.3–1.9x for PSO. A one-kernel program
+    may sum in another order, so runs agree with the plain program to rounding, not
+    always to the bit (each is reproducible on its own). It is used only where it pays
+    and compiles: a single run (not vmapped, not sharded), an objective built from
+    elementwise, reduction, slicing and loop primitives, and small enough: for the
+    self-learning loop at most :data:`SINGLE_KERNEL_MAX_WORK` element operations per
+    call, for a whole swarm loop at most :data:`SINGLE_KERNEL_LOOP_MAX_WORK` per
+    generation, a population of at most :data:`SINGLE_KERNEL_LOOP_MAX_ELEMENTS`
+    coordinates and no larger arrays than four times that (the Elman rollouts are far
+    above these, and ran no faster). Should XLA still fail to compile it, the run is
+    compiled again without (:class:`_Compiled`).
 
 On other platforms (GPU, TPU) nothing is passed. Every entry point takes
 ``compiler_options=``: ``"auto"`` (the default, the above), ``None`` (XLA's own
@@ -70,6 +77,20 @@ SINGLE_KERNEL = "jaxfric_single_kernel_loops"
 #: for MAPSO's self-learning on Rosenbrock up to D = 100 (0.9e6 operations), 1.4× at
 #: D = 300 (2.8e6) and 1.0× on Ackley at D = 300 (2.6e6).
 SINGLE_KERNEL_MAX_WORK = 1_000_000
+
+#: Most element operations (as :data:`SINGLE_KERNEL_MAX_WORK`, but for one iteration) a
+#: :func:`single_kernel_loop` may have. Measured on the development machine, whole swarm
+#: runs as one kernel against the plain program (30-D Rosenbrock and Ackley, 10–400
+#: agents, D = 10–300): 1.15–2.3x faster up to about 1.5e6 operations per generation
+#: (MAPSO on a 10×10 lattice at D = 30), no faster or slower beyond about 3e6.
+SINGLE_KERNEL_LOOP_MAX_WORK = 2_000_000
+
+#: Largest population (agents × coordinates) a :func:`single_kernel_loop` may have.
+#: Beyond it XLA:CPU splits a generation's larger operations across threads, which one
+#: kernel cannot hold: XLA then logs "Compute function stack is not empty" and builds
+#: the plain program after all (PSO from 100 × 45 on, both dtypes), compiling twice for
+#: nothing.
+SINGLE_KERNEL_LOOP_MAX_ELEMENTS = 4096
 
 #: Options for the CPU backend, per kind of computation (see the module docstring).
 CPU_OPTIONS: dict[str, dict[str, Any]] = {
@@ -272,14 +293,15 @@ _SINGLE_KERNEL_PRIMITIVES = frozenset("""
     reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or reduce_xor
     argmin argmax cumsum cummax cummin cumprod cumlogsumexp
     scan cond pjit jit closed_call core_call custom_jvp_call custom_vjp_call remat
-    checkpoint
+    checkpoint random_unwrap
 """.split())
 
 
-def _work(jaxpr) -> float:
+def _work(jaxpr, per_iteration: bool = False) -> float:
     """Element operations of ``jaxpr`` (sum of output sizes; a scan's body times its
     length, a cond's dearest branch), or ``inf`` if it holds a primitive outside
-    :data:`_SINGLE_KERNEL_PRIMITIVES`."""
+    :data:`_SINGLE_KERNEL_PRIMITIVES`. With ``per_iteration``, scans at the top level
+    (not inside another scan) count their body once: the work of one iteration."""
     total = 0.0
     for eqn in jaxpr.eqns:
         name = eqn.primitive.name
@@ -289,14 +311,23 @@ def _work(jaxpr) -> float:
         subs = [getattr(j, "jaxpr", j) for j in jex_core.jaxprs_in_params(eqn.params)]
         if not subs:
             continue
-        inner = [_work(j) for j in subs]
-        if name == "cond":
-            total += max(inner)
-        elif name == "scan":
-            total += eqn.params["length"] * sum(inner)
+        if name == "scan":
+            total += (1 if per_iteration else eqn.params["length"]) * sum(_work(j) for j in subs)
+        elif name == "cond":
+            total += max(_work(j, per_iteration) for j in subs)
         else:
-            total += sum(inner)
+            total += sum(_work(j, per_iteration) for j in subs)
     return total
+
+
+def _largest(jaxpr) -> int:
+    """Elements of the largest array any equation of ``jaxpr`` (nested ones included)
+    produces."""
+    sizes = [0]
+    for eqn in jaxpr.eqns:
+        sizes += [math.prod(getattr(v.aval, "shape", ())) for v in eqn.outvars]
+        sizes += [_largest(getattr(j, "jaxpr", j)) for j in jex_core.jaxprs_in_params(eqn.params)]
+    return max(sizes)
 
 
 def _scan_lengths(jaxpr) -> list[int]:
@@ -321,14 +352,34 @@ def single_kernel(fn: Callable, *args):
     caught, so the fall-back of :class:`_Compiled` cannot help there. Otherwise a plain
     call. The same computation either way; the one kernel may sum in another order, so
     values agree to rounding."""
+    return _mark(fn, args, SINGLE_KERNEL_MAX_WORK, per_iteration=False)
+
+
+def single_kernel_loop(fn: Callable, *args, elements: int):
+    """As :func:`single_kernel` for a function that is one long loop (a swarm's
+    generations), with limits that fit it: one iteration of its top-level scans may
+    have at most :data:`SINGLE_KERNEL_LOOP_MAX_WORK` element operations; ``elements``
+    (a swarm's ``P·D`` coordinates) must be at most
+    :data:`SINGLE_KERNEL_LOOP_MAX_ELEMENTS` and no array in the loop more than four
+    times that (an objective's own intermediates, e.g. ``P × samples`` residuals)."""
+    if elements > SINGLE_KERNEL_LOOP_MAX_ELEMENTS:
+        return fn(*args)
+    return _mark(fn, args, SINGLE_KERNEL_LOOP_MAX_WORK, per_iteration=True,
+                 max_array=4 * SINGLE_KERNEL_LOOP_MAX_ELEMENTS)
+
+
+def _mark(fn: Callable, args, max_work: float, per_iteration: bool,
+          max_array: float = math.inf):
     if not _SINGLE_KERNEL_ON.get():
         return fn(*args)
     jaxpr = jax.make_jaxpr(fn)(*args).jaxpr
     lengths = _scan_lengths(jaxpr)
-    if not lengths or min(lengths) < 1 or _work(jaxpr) > SINGLE_KERNEL_MAX_WORK:
+    if (not lengths or min(lengths) < 1 or _work(jaxpr, per_iteration) > max_work
+            or _largest(jaxpr) > max_array):
         return fn(*args)
+    # Loops marked inside fn would nest one kernel in another: trace them plain.
     with set_xla_metadata(xla_cpu_small_call="true", inlineable="false"):
-        return jax.jit(fn)(*args)
+        return jax.jit(no_single_kernel(fn))(*args)
 
 
 @functools.lru_cache(maxsize=None)

@@ -2,6 +2,7 @@
 the options change speed only, never results."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -180,21 +181,36 @@ def _lowered_text(solver, fn, dim, options, many=False):
 SMALL_CALL = "xla_cpu_small_call"
 
 
-def test_single_kernel_marks_mapso_self_learning_only_when_asked():
+def _marked_calls(text):
+    """Names of the functions called with the one-kernel mark, outermost first."""
+    return re.findall(r"call @(\w+)\(.*" + SMALL_CALL, text)
+
+
+def test_single_kernel_marks_swarm_loops_only_when_asked():
     s = jf.MAPSO(lattice_size=3, num_generations=3)
     fn = F.objective("rosenbrock")
     assert dict(_xla.resolve("auto", "solver", "cpu"))[_xla.SINGLE_KERNEL] is True
     assert _xla.SINGLE_KERNEL not in dict(_xla.resolve("auto", "solver", "gpu"))
     assert _xla.SINGLE_KERNEL not in dict(_xla.resolve("auto", "rollout", "cpu"))
-    assert SMALL_CALL in _lowered_text(s, fn, 6, "auto")
+    # a small swarm: the whole generation loop is one kernel, with self-learning
+    # inside it traced plain (one kernel is never nested in another)
+    text = _lowered_text(s, fn, 6, "auto")
+    assert _marked_calls(text)[0] == "loop"
+    assert "call @run(" not in text
     assert SMALL_CALL not in _lowered_text(s, fn, 6, None)
     off = {**jf.compiler_options("solver", "cpu"), _xla.SINGLE_KERNEL: False}
     assert SMALL_CALL not in _lowered_text(s, fn, 6, off)
     # vmapped runs stay plain (batched, the loop gained nothing and outgrew one kernel)
     assert SMALL_CALL not in _lowered_text(s, fn, 6, "auto", many=True)
-    # PSO has no such loop
-    assert SMALL_CALL not in _lowered_text(jf.PSO(num_particles=4, num_generations=2), fn, 6,
-                                           "auto")
+    pso = jf.PSO(num_particles=4, num_generations=2)
+    assert _marked_calls(_lowered_text(pso, fn, 6, "auto"))[0] == "loop"
+    # too much work per generation for one kernel: MAPSO keeps only self-learning's
+    # loop as one kernel, PSO has nothing left to mark
+    big = jf.MAPSO(lattice_size=20, num_generations=2)
+    marked = _marked_calls(_lowered_text(big, fn, 100, "auto"))
+    assert marked[0] == "run" and "loop" not in marked
+    assert SMALL_CALL not in _lowered_text(jf.PSO(num_particles=400, num_generations=2), fn,
+                                           100, "auto")
     with pytest.raises(ValueError, match="must be True or False"):
         _xla.resolve({_xla.SINGLE_KERNEL: "yes"}, "solver")
 
@@ -266,19 +282,72 @@ def test_single_kernel_declines_what_it_cannot_or_should_not_compile():
     assert _xla._work(jax.make_jaxpr(lambda a: jnp.sort(a))(x).jaxpr) == float("inf")
 
 
-@pytest.mark.parametrize("fname", ["rosenbrock", "ackley", "griewank", "schwefel"])
-def test_single_kernel_changes_speed_not_the_run(fname):
-    """With and without the one-kernel self-learning loop: the same run, up to the
-    order XLA sums in (float32), with the same evaluation count."""
+def _loop_marked(fn, *args, elements):
+    with _xla._single_kernel_enabled(True):
+        return SMALL_CALL in jax.jit(
+            lambda *a: _xla.single_kernel_loop(fn, *a, elements=elements)).lower(*args).as_text()
+
+
+def test_single_kernel_loop_limits():
+    """Whole swarm loops: the work limit is per iteration, the population and every
+    array in the loop are bounded, and the total length does not matter."""
+    f = lambda a: jax.lax.scan(lambda c, _: (jnp.sin(c) * 2.0, None), a, None, length=100)[0]
+    jp = jax.make_jaxpr(f)(jnp.ones(50)).jaxpr
+    once, total = _xla._work(jp, per_iteration=True), _xla._work(jp)
+    assert total - 50 == pytest.approx(100 * (once - 50))  # 50: the scan's own output
+    assert _xla._largest(jax.make_jaxpr(lambda a: jnp.outer(a, a).sum())(jnp.ones(30)).jaxpr) == 900
+    x = jnp.ones((10, 8))
+    step = _in_loop(lambda a: a * 0.5 + 1.0)
+    assert _loop_marked(step, x, elements=x.size)
+    assert not _loop_marked(step, x, elements=_xla.SINGLE_KERNEL_LOOP_MAX_ELEMENTS + 1)
+    wide = _in_loop(lambda a: a + jnp.sum(jnp.broadcast_to(a[:, :, None], (10, 8, 300)) ** 2, 2))
+    assert not _loop_marked(wide, x, elements=x.size)  # a 24 000-element intermediate
+    long = lambda a: jax.lax.scan(lambda c, _: (c * 0.5 + 1.0, None), a, None, length=100_000)[0]
+    assert _loop_marked(long, x, elements=x.size)
+    assert not _marked(long, x)  # single_kernel's limit is on the whole call's work
+
+
+@pytest.mark.parametrize("fname, solver", [
+    ("rosenbrock", jf.MAPSO(lattice_size=4, num_generations=6)),
+    ("ackley", jf.MAPSO(lattice_size=4, num_generations=6)),
+    ("griewank", jf.MAPSO(lattice_size=4, num_generations=6)),
+    ("schwefel", jf.MAPSO(lattice_size=4, num_generations=6)),
+    ("rosenbrock", jf.PSO(num_particles=9, num_generations=12)),
+    ("ackley", jf.PSO(num_particles=9, num_generations=12)),
+])
+def test_single_kernel_changes_speed_not_the_run(fname, solver):
+    """With and without one-kernel loops: the same run, up to the order XLA sums in
+    (float32), with the same evaluation count."""
     lo, hi = F.get(fname).bounds(8, np.float32)
-    s = jf.MAPSO(lattice_size=4, num_generations=6)
     off = {**jf.compiler_options("solver"), _xla.SINGLE_KERNEL: False}
-    a = jf.minimise(F.objective(fname), s, (lo, hi), key=jax.random.key(2))
-    b = jf.minimise(F.objective(fname), s, (lo, hi), key=jax.random.key(2),
+    a = jf.minimise(F.objective(fname), solver, (lo, hi), key=jax.random.key(2))
+    b = jf.minimise(F.objective(fname), solver, (lo, hi), key=jax.random.key(2),
                     compiler_options=off)
     np.testing.assert_allclose(a.history.f, b.history.f, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(a.value, b.value, rtol=1e-5, atol=1e-6)
-    assert int(a.stats["num_evals"]) == int(b.stats["num_evals"]) == s.evaluations()
+    assert int(a.stats["num_evals"]) == int(b.stats["num_evals"]) == solver.evaluations()
+
+
+def test_large_swarms_compile_once_without_xla_warnings():
+    """In a subprocess (XLA logs to the process's stderr): a PSO whose generation XLA
+    would split across threads (100 x 45) is left plain, so XLA neither warns
+    "Compute function stack is not empty" nor compiles the run twice; MAPSO on its
+    10x10 lattice at D = 30 and PSO at 100 x 40 are one kernel, also without a warning."""
+    script = (
+        "import jax, numpy as np, jaxfric as jf\n"
+        "from jaxfric import functions as F\n"
+        "for s, d in [(jf.PSO(num_particles=100, num_generations=3), 45),\n"
+        "             (jf.PSO(num_particles=100, num_generations=3), 40),\n"
+        "             (jf.MAPSO(lattice_size=10, num_generations=3), 30)]:\n"
+        "    lo, hi = F.get('rosenbrock').bounds(d, np.float32)\n"
+        "    r = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0))\n"
+        "    print('RESULT', float(r.f))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("RESULT") == 3
+    assert "Compute function stack" not in proc.stderr
 
 
 def test_single_kernel_float64():

@@ -298,7 +298,10 @@ class MAPSO(AbstractSwarm):
         a = jnp.argmin(state.pbest_f)
 
         def put(arr, val):
-            return jnp.where(better, arr.at[a].set(val), arr)
+            # arr[a] = val if better: an in-place dynamic_update_slice (a scatter would
+            # keep the loop out of one CPU kernel, and a select of two arrays copies one)
+            keep = jax.lax.dynamic_index_in_dim(arr, a, 0, keepdims=False)
+            return jax.lax.dynamic_update_index_in_dim(arr, jnp.where(better, val, keep), a, 0)
 
         return eqx.tree_at(
             lambda s: (s.x, s.f, s.pbest, s.pbest_f, s.gbest, s.gbest_f, s.num_evals),

@@ -14,6 +14,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from .. import _xla
+
 from ._base import (
     AbstractSolver,
     History,
@@ -148,10 +150,15 @@ class AbstractSwarm(AbstractSolver):
                 progress.emit(0, i + 1, s.num_evals, s.gbest_f)
             return (s, u_next), (s.num_evals, s.gbest_f)
 
-        start = jnp.asarray(start, jnp.int32)
-        gens = start + jnp.arange(length, dtype=jnp.int32)
-        (state, _), out = jax.lax.scan(body, (state, self.draw(state.key, start, state.x)), gens)
-        return state, out
+        def loop(state, start):
+            gens = start + jnp.arange(length, dtype=jnp.int32)
+            init = (state, self.draw(state.key, start, state.x))
+            (state, _), out = jax.lax.scan(body, init, gens)
+            return state, out
+
+        # On CPU the whole loop as one kernel, where the objective allows (see _xla).
+        return _xla.single_kernel_loop(loop, state, jnp.asarray(start, jnp.int32),
+                                       elements=state.x.size)
 
     def finish(self, state: SwarmState, evals, f_best) -> Solution:
         """The :class:`Solution` of a finished run; ``evals``/``f_best`` hold the
