@@ -237,8 +237,10 @@ def main(argv=None):
         "Swarms: 100 agents, PSO 500 generations, MAPSO the same evaluation budget. "
         "'Same result': best value within 1e-4 and equal evaluation count (swarms), "
         "bit-identical outputs (rollouts). 'Single-kernel': time without the "
-        "single-kernel loops over time with them (only MAPSO has such a loop; on the "
-        "other rows it measures noise).",
+        "single-kernel loops over time with them: single PSO and MAPSO runs of this "
+        "size are one kernel each, MAPSO's self-learning loop is one where the whole "
+        "run is not (the vmapped row has none; there and on Nelder-Mead it measures "
+        "noise).",
         "",
         f"Machine: {platform.machine()}, {len(jax.devices())} device(s), "
         f"AVX-512: {'yes' if 'avx512f' in flags else 'no'}; jax {jax.__version__}. "

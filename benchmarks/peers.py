@@ -1019,14 +1019,24 @@ and are not re-measured by this script.
   one kernel on CPU (`jaxfric._xla.single_kernel`: a call carrying XLA's
   `xla_cpu_small_call` attribute, the mechanism of XLA's own small-while-loop pass), for
   single runs of objectives that qualify: 1.2–1.45× faster on the 30-D test functions
-  (`compiler_options.md`, with and without it in one run). What remains per generation: the
-  100-agent lattice step is still ~45 kernels, 13 of them copies of the loop state that XLA
-  inserts around the carried arrays (*probe*: materialising the random numbers inside the
-  step instead of carrying them did not help), and the one-kernel code XLA emits for the
-  self-learning loop is mostly scalar. Compiling the whole generation as one kernel was no
-  faster (*probe*), and vmapped runs gain nothing from it (*probe*: 0.99–1.08× for 8 seeds),
-  so they keep the plain program. Batching seeds amortises the per-kernel cost instead (the
-  vmapped rows).
+  (`compiler_options.md`, with and without it in one run). Compiling one *generation* as
+  one kernel was no faster (*probe*, 0.4.0). Since 0.6.0 the whole *run* (the scan over
+  generations) is one kernel for swarms small enough (`jaxfric._xla.single_kernel_loop`:
+  at most 4096 coordinates and 2e6 element operations per generation; 100 agents at D = 30
+  qualify), which removes the per-generation kernel dispatch and loop bookkeeping as well:
+  MAPSO 1.2–1.4× and PSO 1.3–1.9× faster than 0.5.0 on 30-D Rosenbrock and Ackley (*probe*,
+  interleaved in one process; `compiler_options.md` re-measures it). What remains is
+  arithmetic in XLA's one-kernel code, which is partly scalar: *probe*, a MAPSO generation
+  on the 10×10 lattice takes about 55 µs (the lattice step about 30 µs, of which
+  competition about 14 µs; self-learning about 25 µs), a PSO generation about 14 µs.
+  Throw-away variants that did not help inside the one kernel (*probe*): optimization
+  barriers on the competition or PSO output (XLA recomputes that chain in several
+  consumers), unrolling the self-learning loop, a compare-select tournament instead of
+  argmin, in-bounds gathers, and XLA's newer fusion emitters (20 % slower). Vmapped runs
+  keep the plain program (8 seeds: 24 000 coordinates); batching seeds amortises the
+  per-kernel cost instead (the vmapped rows). The single-run MAPSO ratio also moves with
+  pyswarms' own speed, which differed by up to 25 % between processes on this machine
+  (*probe*: 45–57 ms for the same run).
 - **Small ENN batches** (§5): XLA's code for a (30, 9) context state ran 2–3× slower per
   element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
   which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a
