@@ -291,8 +291,10 @@ def _loop_marked(fn, *args, elements):
 def test_single_kernel_loop_limits():
     """Whole swarm loops: the work limit is per iteration, the population and every
     array in the loop are bounded, and the total length does not matter."""
-    f = lambda a: jax.lax.scan(lambda c, _: (jnp.sin(c) * 2.0, None), a, None, length=100)[0]
-    jp = jax.make_jaxpr(f)(jnp.ones(50)).jaxpr
+    def hundred(a):
+        return jax.lax.scan(lambda c, _: (jnp.sin(c) * 2.0, None), a, None, length=100)[0]
+
+    jp = jax.make_jaxpr(hundred)(jnp.ones(50)).jaxpr
     once, total = _xla._work(jp, per_iteration=True), _xla._work(jp)
     assert total - 50 == pytest.approx(100 * (once - 50))  # 50: the scan's own output
     assert _xla._largest(jax.make_jaxpr(lambda a: jnp.outer(a, a).sum())(jnp.ones(30)).jaxpr) == 900
@@ -302,7 +304,9 @@ def test_single_kernel_loop_limits():
     assert not _loop_marked(step, x, elements=_xla.SINGLE_KERNEL_LOOP_MAX_ELEMENTS + 1)
     wide = _in_loop(lambda a: a + jnp.sum(jnp.broadcast_to(a[:, :, None], (10, 8, 300)) ** 2, 2))
     assert not _loop_marked(wide, x, elements=x.size)  # a 24 000-element intermediate
-    long = lambda a: jax.lax.scan(lambda c, _: (c * 0.5 + 1.0, None), a, None, length=100_000)[0]
+    def long(a):
+        return jax.lax.scan(lambda c, _: (c * 0.5 + 1.0, None), a, None, length=100_000)[0]
+
     assert _loop_marked(long, x, elements=x.size)
     assert not _marked(long, x)  # single_kernel's limit is on the whole call's work
 

@@ -15,7 +15,6 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .. import _xla
-
 from ._base import (
     AbstractSolver,
     History,
