@@ -228,6 +228,15 @@ def test_single_kernel_needs_a_loop():
                                        F.objective("rosenbrock"), 6, "auto")
 
 
+def _run_script(script):
+    """Run ``script`` in a fresh CPU-only Python process (an XLA abort or log line stays
+    there); fail with its stderr unless it exits cleanly."""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc
+
+
 def test_mapso_without_self_learning_generations_runs_with_auto_options():
     """End to end, in a subprocess (a regression aborts the process, not just the test):
     MAPSO(sl_generations=0) with the default options runs and equals XLA's defaults."""
@@ -241,9 +250,7 @@ def test_mapso_without_self_learning_generations_runs_with_auto_options():
         " compiler_options=None)\n"
         "print('RESULT', float(a.f), float(b.f), int(a.stats['num_evals']), s.evaluations())\n"
     )
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = _run_script(script)
     fa, fb, evals, expected = proc.stdout.split("RESULT")[1].split()
     assert np.isfinite(float(fa)) and float(fa) == float(fb)
     assert int(evals) == int(expected)
@@ -347,9 +354,7 @@ def test_large_swarms_compile_once_without_xla_warnings():
         "    r = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0))\n"
         "    print('RESULT', float(r.f))\n"
     )
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = _run_script(script)
     assert proc.stdout.count("RESULT") == 3
     assert "Compute function stack" not in proc.stderr
 
