@@ -245,7 +245,7 @@ def _phi_np(x):
 
 
 def lugre_numpy_per_step(p, v, dt, dtype=np.float64):
-    """REFERENCE (NumPy) LuGre exact-ZOH rollout, ALGORITHMS.md §8.2 — everything
+    """REFERENCE (NumPy) LuGre exact-ZOH rollout, docs/algorithms.md §8.2 — everything
     recomputed at every step inside the time loop (how MATLAB code would run it),
     vectorised over candidates. ``p``: physical parameters, each ``(P,)``."""
     s0, s1, s2, fc, fs, vs = (np.asarray(p[k], dtype) for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))

@@ -1,6 +1,6 @@
 """Rollout speed: batched JAX Elman (and LuGre) against NumPy baselines.
 
-Workload of the paper's fit (ALGORITHMS.md §1, §2.2): an Elman network with 30
+Workload of the paper's fit (docs/algorithms.md §1, §2.2): an Elman network with 30
 neurons (180 parameters), 1600 training samples, 64 candidates per call (one
 swarm generation). Measured in one process, compile time apart, medians over
 repeats:

@@ -4,7 +4,7 @@ Every function builds a new :class:`~matplotlib.figure.Figure` and returns it; n
 calls ``plt.show`` or picks a backend (the CLI selects Agg, notebooks keep theirs),
 so the caller decides whether to show, save or close it.
 
-Figures (paper numbering from ALGORITHMS.md §1):
+Figures (paper numbering from docs/algorithms.md §1):
 
 - :func:`plot_data` -- velocity and computed friction against time, with the
   training/validation split marked (the paper's Figs 9-10);

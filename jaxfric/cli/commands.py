@@ -142,7 +142,7 @@ def cmd_demo(args, argv) -> int:
     source = (f"Simulated low-speed press rig (jaxfric.rig.Rig(), seed {args.seed}): bore {cyl.bore:g} m, rod "
               f"{cyl.rod:g} m, moving mass {cyl.mass:g} kg; measured position, chamber pressures and load "
               "with sensor noise, then the paper's pipeline: zero-phase Butterworth 5 Hz, velocity and "
-              "acceleration by differentiation, friction by force balance (ALGORITHMS.md §7).")
+              "acceleration by differentiation, friction by force balance (docs/algorithms.md §7).")
     python = _python_snippet(args, list(fits), [
         f"data_key, fit_key = jax.random.split(jax.random.key({args.seed}))",
         "r = rig.Rig()",

@@ -112,7 +112,7 @@ Set JAXFRIC_DEBUG=1 (or pass --debug) to see tracebacks instead of one-line erro
 """
 
 DEMO_EPILOG = """\
-The demo reproduces the paper end to end on the synthetic rig (ALGORITHMS.md §1, §7):
+The demo reproduces the paper end to end on the synthetic rig (docs/algorithms.md §1, §7):
 2000 samples at 128 Hz, 5 Hz Butterworth, friction by force balance, first 1600 samples
 for estimation and the last 400 for validation; ENN (30 neurons, 180 parameters) and
 LuGre (6 parameters), both fitted by MAPSO -> Nelder-Mead.
@@ -135,7 +135,7 @@ Two kinds of CSV file (header row with column names; columns may also be 0-based
   raw rig channels          --x-col, --p1-col, --p2-col, --load-col, --time-col (or --dt)
                             and the cylinder: --bore, --rod [m], --mass [kg]; the channels
                             are low-pass filtered (--cutoff), x is differentiated and the
-                            friction follows from the force balance (ALGORITHMS.md §7)
+                            friction follows from the force balance (docs/algorithms.md §7)
 
 Units: give each channel's unit by name or as a factor to SI (a negative factor flips a
 sign), e.g. --x-unit mm --pressure-unit bar --time-unit ms, or --load-unit -1.
