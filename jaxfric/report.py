@@ -23,8 +23,6 @@ Fits are duck-typed (see :mod:`jaxfric.plot`): the writer needs ``predict``, and
 from __future__ import annotations
 
 import datetime as _dt
-import json
-import math
 import os
 import platform
 import re
@@ -35,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from . import plot as _plot
+from .files import TEMP_SUFFIX, atomic_write, atomic_write_bytes, atomic_write_text, jsonable, write_json
 from .metrics import METRIC_FORMULAS, friction_metrics
 
 __all__ = [
@@ -53,42 +52,15 @@ __all__ = [
 FIGURES = ("data.png", "friction_velocity.png", "error.png", "convergence.png")
 """Figures every report holds, besides one ``fit_<model>.png`` per model."""
 
-TEMP_PATTERNS = (".*.jaxfric-tmp", ".jaxfric-fit-*.tmp")
+TEMP_PATTERNS = (f".*{TEMP_SUFFIX}", ".jaxfric-fit-*.tmp")
 """Globs of the temporary files of an unfinished write (ours, and ``Fit.save``'s)."""
 
 WINDOWS = ("train", "valid", "all")
 
 
 # ------------------------------------------------------------------ atomic files
-def _temp_name(path: Path) -> Path:
-    return path.with_name(f".{path.name}.{os.getpid()}.jaxfric-tmp")
-
-
-def _atomic(path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp)`` then move ``tmp`` onto ``path``; the temporary goes on failure."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temp_name(path)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise
-    return path
-
-
-def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file + ``os.replace``)."""
-    return _atomic(path, lambda tmp: tmp.write_bytes(data))
-
-
-def atomic_write_text(path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+# One implementation for the package (jaxfric.files); the names stay importable from here.
+_atomic = atomic_write
 
 
 def save_figure(fig, path, *, dpi: int = 110) -> Path:
@@ -174,24 +146,8 @@ def fit_num_params(fit) -> int | None:
 
 
 def _jsonable(x):
-    """Best-effort conversion to JSON types (arrays to lists, numpy scalars to floats)."""
-    if isinstance(x, Mapping):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (str, bool)) or x is None:
-        return x
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(float(x)) else str(float(x))
-    try:
-        arr = np.asarray(x)
-    except Exception:
-        return repr(x)
-    if arr.dtype.kind in "fiub":
-        return _jsonable(arr.tolist()) if arr.ndim else _jsonable(arr.item())
-    return repr(x)
+    """JSON types for results.json (non-finite floats as text, so it stays standard JSON)."""
+    return jsonable(x, finite=True)
 
 
 def fit_dict(fit) -> dict:
@@ -372,7 +328,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         "figures": figs,
         "notes": list(notes or []),
     }
-    done(atomic_write_text(out / "results.json", json.dumps(_jsonable(results), indent=2) + "\n"))
+    done(write_json(out / "results.json", results))
     text = _markdown(results, rows, fits, python=python, extra_files=extra_files or {})
     done(atomic_write_text(out / "report.md", text))
     return {"files": written, "rows": rows, "table": format_table(rows)}

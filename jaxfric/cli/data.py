@@ -9,11 +9,12 @@ signals and resample irregular time stamps.
 
 from __future__ import annotations
 
-import os
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from jaxfric.files import column_index, read_rows
 
 from .errors import UserError
 from .units import unit_factor
@@ -32,7 +33,11 @@ class Table:
         it has no empty or NaN cell (other columns may: they are not used)."""
         spec = str(spec).strip()
         if spec in self.header:
-            return self._checked(self.data[:, self.header.index(spec)], spec, option)
+            try:
+                i = column_index(self.header, spec, path=self.path, what=option)
+            except ValueError as err:
+                raise UserError(f"{option}: {err}") from None
+            return self._checked(self.data[:, i], spec, option)
         try:
             i = int(spec)
         except ValueError:
@@ -61,55 +66,43 @@ def read_table(path: str, *, delimiter: str | None = ",", skip_rows: int = 0) ->
     """Read a delimited text file with an optional header row (detected: a first line that is
     not all numbers). ``#`` starts a comment line. Raises :class:`UserError` for a missing or
     unreadable file, no data rows, ragged rows or non-numeric values."""
-    if not os.path.exists(path):
-        raise UserError(f"file not found: {path}")
-    if os.path.isdir(path):
-        raise UserError(f"{path} is a folder, not a data file")
     if skip_rows < 0:
         raise UserError(f"--skip-rows must be >= 0, got {skip_rows}")
     sep = _delimiter(delimiter)
     try:
-        with open(path, encoding="utf-8-sig") as fh:
-            lines = [ln.strip() for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
-    except UnicodeDecodeError:
-        raise UserError(f"{path} is not a text (CSV) file") from None
-    except OSError as e:
-        raise UserError(f"cannot read {path}: {e.strerror}") from None
-    if not lines:
+        rows = [cells for _, cells in read_rows(path, delimiter=sep, comments="#")]
+    except ValueError as err:
+        raise UserError(str(err)) from None
+    if not rows:
         raise UserError(f"{path} is empty")
-
-    def split(line):
-        return [c.strip().strip('"').strip("'") for c in (line.split(sep) if sep else line.split())]
-
-    first = split(lines[0])
+    first = rows[0]
     if len(first) == 1:
         for other, name in ((",", "','"), (";", "';'"), ("\t", "tab"), (None, "whitespace")):
-            if other != sep and len(lines[0].split(other)) > 1:
+            if other != sep and len(first[0].split(other)) > 1:
                 raise UserError(f"{path}: only one column found with --delimiter {delimiter!r}; the lines look "
                                 f"{name}-separated (is --delimiter right?)")
     header: list[str] = []
     try:
         [float(c) for c in first]
     except ValueError:
-        header, lines = first, lines[1:]
-    lines = lines[skip_rows:]
-    if not lines:
+        header, rows = first, rows[1:]
+    rows = rows[skip_rows:]
+    if not rows:
         raise UserError(f"{path} has no data rows")
-    rows = []
+    values = []
     width = len(header) if header else None
-    for n, line in enumerate(lines, start=1):
-        cells = split(line)
+    for n, cells in enumerate(rows, start=1):
         if width is None:
             width = len(cells)
         if len(cells) != width:
             raise UserError(f"{path}: data row {n} has {len(cells)} columns, expected {width}"
                             + (" (is --delimiter right?)" if len(cells) == 1 else ""))
         try:
-            rows.append([float(c) if c != "" else np.nan for c in cells])
+            values.append([float(c) if c != "" else np.nan for c in cells])
         except ValueError:
             bad = next(c for c in cells if not _is_number(c))
             raise UserError(f"{path}: data row {n} holds a non-number {bad!r}") from None
-    return Table(path=path, header=header, data=np.asarray(rows, dtype=np.float64))
+    return Table(path=path, header=header, data=np.asarray(values, dtype=np.float64))
 
 
 def _is_number(text: str) -> bool:
