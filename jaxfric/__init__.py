@@ -13,25 +13,60 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-from . import functions, metrics, models, rig
-from ._xla import compiler_options
-from .fit import Fit, load_fit
-from .identify import GradientRefinement, identify
-from .metrics import friction_metrics
-from .models import Coulomb, Dahl, Elman, ElmanFull, LuGre, Stribeck
-from .optim import (
-    MAPSO,
-    MAPSONMDS,
-    PSO,
-    RESULTS,
-    History,
-    NelderMead,
-    Solution,
-    mapso_nmds,
-    minimise,
-    minimise_many,
-)
-from .rig import FrictionData
+import importlib as _importlib
+import sys as _sys
+import types as _types
+
+# Names are imported on first use (PEP 562), so ``import jaxfric`` -- and with it
+# ``jaxfric --help`` -- does not pay for importing JAX (about 2 s) before it is needed.
+# name -> module that defines it ("" = the name is a submodule of its own)
+_LAZY = {
+    "functions": "", "metrics": "", "models": "", "rig": "", "files": "",
+    "compiler_options": "._xla",
+    "Fit": ".fit", "load_fit": ".fit",
+    "GradientRefinement": ".identify", "identify": ".identify",
+    "friction_metrics": ".metrics",
+    "Coulomb": ".models", "Dahl": ".models", "Elman": ".models", "ElmanFull": ".models",
+    "LuGre": ".models", "Stribeck": ".models",
+    "MAPSO": ".optim", "MAPSONMDS": ".optim", "PSO": ".optim", "RESULTS": ".optim",
+    "History": ".optim", "NelderMead": ".optim", "Solution": ".optim", "mapso_nmds": ".optim",
+    "minimise": ".optim", "minimise_many": ".optim",
+    "FrictionData": ".rig",
+}
+
+
+def __getattr__(name: str):
+    try:
+        where = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'jaxfric' has no attribute {name!r}") from None
+    if where == "":
+        value = _importlib.import_module(f".{name}", __name__)
+    else:
+        value = getattr(_importlib.import_module(where, __name__), name)
+    if name != "identify":
+        globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _Package(_types.ModuleType):
+    """``jaxfric.identify`` is the function even after the ``jaxfric.identify`` subpackage
+    is imported (the import system then sets the package attribute to the subpackage)."""
+
+    @property
+    def identify(self):
+        return _importlib.import_module(".identify", __name__).identify
+
+    @identify.setter
+    def identify(self, value):  # the import system's assignment of the subpackage
+        pass
+
+
+_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "Coulomb",
@@ -52,6 +87,7 @@ __all__ = [
     "Stribeck",
     "compiler_options",
     "friction_metrics",
+    "files",
     "functions",
     "identify",
     "load_fit",

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import KEPT, UserError
-from .fitting import budget_for, build_model, check_models, fit_all, solver_expression
+from .fitting import check_models, fit_all
+from .spec import FitSpec
 
 
 def _say(args):
@@ -78,29 +79,26 @@ def _save_fit_now(out: Path):
 
 def _settings(args, fits) -> dict:
     """Budgets, seeds and options of the run, for report.md and results.json."""
-    from .fitting import build_solver, describe_solver
+    from .fitting import describe_solver
 
     s = {"seed": args.seed, "float64": bool(args.x64), "quick": bool(args.quick),
          "gradient refinement": getattr(args, "refine", "none")}
     for name in fits:
-        model = build_model(name, args)
-        s[f"{name}: solver"] = describe_solver(build_solver(args.solver, model, budget_for(args)), model)
-    if any(n.startswith("elman") for n in fits):
-        s["neurons"] = args.neurons
+        spec = FitSpec.from_args(name, args)
+        model = spec.build_model()
+        s[f"{name}: solver"] = describe_solver(spec.build_solver(model), model)
+        if getattr(model, "neurons", None) is not None:
+            s["neurons"] = model.neurons
     return s
 
 
 def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
-    """Python that repeats the command's fits (shown under "Reproduce" in report.md)."""
-    lines = ["import jax", "import jaxfric as jf", "from jaxfric import rig",
-             "from jaxfric.identify import identify", "", *data_lines]
-    refine = getattr(args, "refine", "none")
+    """Python that repeats the command's fits (shown under "Reproduce" in report.md): each
+    fit is its :class:`~jaxfric.cli.spec.FitSpec`'s repr, run on the same data and key."""
+    lines = ["import jax", "from jaxfric import rig", "from jaxfric.cli.spec import FitSpec", "",
+             *data_lines]
     for name in names:
-        model = build_model(name, args)
-        opts = f", model_options={{'neurons': {args.neurons}}}" if name.startswith("elman") else ""
-        solver = solver_expression(args.solver, model, budget_for(args))
-        ref = f", refine={refine!r}" if refine != "none" else ""
-        lines.append(f"fit_{name} = identify({name!r}, data, solver={solver}, key={key_expr}{opts}{ref})")
+        lines.append(f"fit_{name} = {FitSpec.from_args(name, args)!r}.identify(data, key={key_expr})")
     return "\n".join(lines)
 
 
@@ -184,7 +182,7 @@ def cmd_identify(args, argv) -> int:
     fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out), notes=notes)
     python = _python_snippet(args, list(fits), [
         f"# data: {desc}, as a jaxfric.rig.FrictionData (see jaxfric.rig.load_friction_pairs /",
-        f"# load_measurements + estimate_friction), train_fraction={args.train_fraction}",
+        f"# load_measurements + estimate_friction), train_fraction={data.n_train / data.n_samples:.6g}",
         "data = ..."], f"jax.random.key({args.seed})")
     return _finish(args, out, data, fits, title=f"jaxfric identify: {Path(args.file).name}",
                    source=desc[0].upper() + desc[1:] + ".", argv=argv, notes=notes, python=python,
@@ -246,6 +244,19 @@ def benchmarks_dir() -> Path:
     return Path(jaxfric.__file__).resolve().parents[1] / "benchmarks"
 
 
+def bench_arguments(argv: list[str]) -> list[str]:
+    """A ``--quick`` run without ``--out`` writes to ``benchmarks/results/quick/``.
+
+    The committed ``benchmarks/results/`` hold full runs; a smoke test must not overwrite
+    them (the rule of ``benchmarks/_harness.results_dir``, applied here too so it holds
+    for every script ``jaxfric bench`` runs).
+    """
+    has_out = any(a == "--out" or a.startswith("--out=") for a in argv)
+    if "--quick" in argv and not has_out:
+        return [*argv, "--out", str(benchmarks_dir() / "results" / "quick")]
+    return argv
+
+
 def cmd_bench(args, argv) -> int:
     """Import ``benchmarks/<name>.py`` by path and call its ``main(argv)``."""
     path = benchmarks_dir() / f"{args.name}.py"
@@ -262,7 +273,7 @@ def cmd_bench(args, argv) -> int:
         main = getattr(module, "main", None)
         if not callable(main):
             raise UserError(f"{path} has no main(argv) function")
-        status = main(list(args.args))
+        status = main(bench_arguments(list(args.args)))
     finally:
         sys.argv[0] = old_argv0
     return 0 if status is None else int(status)

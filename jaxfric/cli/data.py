@@ -113,6 +113,19 @@ def _is_number(text: str) -> bool:
         return text == ""
 
 
+def _given(**options) -> dict:
+    """The options the user gave; the rest keep the library's defaults (never copied here)."""
+    return {k: v for k, v in options.items() if v is not None}
+
+
+def _with_defaults(fn, options: dict) -> dict:
+    """``options`` completed with ``fn``'s own keyword defaults (for describing the run)."""
+    import inspect
+
+    params = inspect.signature(fn).parameters
+    return {**{k: p.default for k, p in params.items() if p.default is not inspect.Parameter.empty}, **options}
+
+
 def _time_column(table: Table, args) -> np.ndarray:
     """Time stamps [s] from ``--time-col`` (with ``--time-unit``) or ``--dt``."""
     if args.time_col is not None and args.dt is not None:
@@ -166,7 +179,7 @@ def identification_data(args):
         scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit"),
                  "friction": unit_factor("force", args.friction_unit, "--friction-unit")}
         data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale,
-                                    train_fraction=args.train_fraction)
+                                    **_given(train_fraction=args.train_fraction))
         desc = (f"velocity/friction pairs from {args.file} (velocity column {args.velocity_col!r}, "
                 f"friction column {args.friction_col!r})")
         return data, desc, notes
@@ -196,10 +209,11 @@ def identification_data(args):
     scale = {"x": unit_factor("length", args.x_unit, "--x-unit"), "p1": p_unit, "p2": p_unit,
              "load": unit_factor("force", args.load_unit, "--load-unit")}
     meas, notes = _load_quietly(rig.load_measurements, cols, scale=scale, fill=fill)
-    data = rig.estimate_friction(meas, bore=args.bore, rod=args.rod, mass=args.mass, gravity=args.gravity,
-                                 cutoff=args.cutoff, train_fraction=args.train_fraction)
-    desc = (f"raw rig channels from {args.file} through the pipeline (Butterworth {args.cutoff:g} Hz, "
-            f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, gravity {args.gravity:g} m/s^2)")
+    options = _given(gravity=args.gravity, cutoff=args.cutoff, train_fraction=args.train_fraction)
+    data = rig.estimate_friction(meas, bore=args.bore, rod=args.rod, mass=args.mass, **options)
+    used = _with_defaults(rig.estimate_friction, options)
+    desc = (f"raw rig channels from {args.file} through the pipeline (Butterworth {used['cutoff']:g} Hz, "
+            f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, gravity {used['gravity']:g} m/s^2)")
     return data, desc, notes
 
 

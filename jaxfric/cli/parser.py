@@ -193,7 +193,8 @@ def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
     g.add_argument("--model", "--models", dest="models", type=model_list, default=default_models,
                    metavar="NAMES", help="comma-separated friction models: elman, elman_full, lugre, dahl, "
                    "stribeck, coulomb")
-    g.add_argument("--neurons", type=positive_int, default=30, help="hidden neurons of the Elman network")
+    g.add_argument("--neurons", type=positive_int, default=None,
+                   help="hidden neurons of the Elman network (default: the model's, 30)")
     g.add_argument("--solver", choices=SOLVERS, default="mapso-nmds", help="optimiser")
     g.add_argument("--generations", type=positive_int, default=None, metavar="G",
                    help="budget: swarm generations (for nelder-mead: its step cap); default depends on "
@@ -259,11 +260,13 @@ def build_parser() -> Parser:
     g.add_argument("--bore", type=positive_float, metavar="M", help="piston (bore) diameter [m]")
     g.add_argument("--rod", type=nonnegative_float, metavar="M", help="rod diameter [m] (0: no rod)")
     g.add_argument("--mass", type=nonnegative_float, metavar="KG", help="moving mass [kg]")
-    g.add_argument("--gravity", type=float, default=0.0, metavar="M/S2",
-                   help="gravity component along -x [m/s^2] (0 for a horizontal axis)")
-    g.add_argument("--cutoff", type=positive_float, default=5.0, metavar="HZ", help="Butterworth low-pass cutoff [Hz]")
-    i.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
-                   help="leading fraction of the record used for estimation; the rest validates")
+    g.add_argument("--gravity", type=float, default=None, metavar="M/S2",
+                   help="gravity component along -x [m/s^2] (default: the pipeline's, 0: a horizontal axis)")
+    g.add_argument("--cutoff", type=positive_float, default=None, metavar="HZ",
+                   help="Butterworth low-pass cutoff [Hz] (default: the pipeline's, 5 Hz as in the paper)")
+    i.add_argument("--train-fraction", type=fraction, default=None, metavar="F",
+                   help="leading fraction of the record used for estimation; the rest validates "
+                   "(default: the library's, 0.8 as in the paper)")
     _fitting(i, default_models="elman,lugre")
     _common(i)
 

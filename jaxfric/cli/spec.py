@@ -1,0 +1,111 @@
+"""One specification object per fit: command-line arguments -> :class:`FitSpec` -> the library.
+
+The command line holds no copy of a library default. Every field left ``None`` means
+"what the library chooses": the solver starts from :func:`jaxfric.identify.default_solver`
+for the model (lattice size, generations, Nelder–Mead budget) and a budget the user gave
+replaces only that field. ``repr(spec)`` is the report's "Reproduce" line: evaluating it
+with ``from jaxfric.cli.spec import FitSpec`` and calling :meth:`FitSpec.identify` repeats
+the fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+#: ``--quick``: a smoke-test budget (the same programs compile, so it also warms the cache).
+QUICK_GENERATIONS = 3
+QUICK_NM_EVALS = 200
+
+SOLVERS = ("mapso-nmds", "mapso", "pso", "nelder-mead")
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """What one fit asks of :func:`jaxfric.identify`.
+
+    Args:
+        model: a :func:`jaxfric.models.get` name (``"elman"``, ``"lugre"``, ...).
+        neurons: hidden neurons of the Elman networks (``None``: the model's default).
+        solver: ``"mapso-nmds"`` (the library's default solver), ``"mapso"``, ``"pso"``
+            or ``"nelder-mead"``.
+        generations: swarm generations (Nelder–Mead alone: its step cap); ``None`` keeps
+            the library's choice.
+        nm_evals: Nelder–Mead evaluation budget; ``None`` keeps the library's choice.
+        refine: gradient refinement after the search (``"none"`` = off).
+        seed: the key is ``jax.random.key(seed)`` unless a key is passed to :meth:`identify`.
+    """
+
+    model: str
+    neurons: int | None = None
+    solver: str = "mapso-nmds"
+    generations: int | None = None
+    nm_evals: int | None = None
+    refine: str = "none"
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; choose from {', '.join(SOLVERS)}")
+
+    @classmethod
+    def from_args(cls, name: str, args) -> FitSpec:
+        """The specification of model ``name`` from parsed ``demo``/``identify`` arguments."""
+        generations, nm_evals = args.generations, args.nm_evals
+        if args.quick:
+            generations = generations or QUICK_GENERATIONS
+            nm_evals = nm_evals or QUICK_NM_EVALS
+        neurons = args.neurons if name in ("elman", "elman_full") else None
+        return cls(model=name, neurons=neurons, solver=args.solver, generations=generations,
+                   nm_evals=nm_evals, refine=getattr(args, "refine", "none"), seed=args.seed)
+
+    @property
+    def model_options(self) -> dict | None:
+        return {"neurons": self.neurons} if self.neurons is not None else None
+
+    @property
+    def default_budget(self) -> bool:
+        return self.generations is None and self.nm_evals is None
+
+    def build_model(self):
+        """The model ``identify`` builds for this name (its named defaults + options)."""
+        from jaxfric.identify._api import resolve_model  # the model identify() builds from a name
+
+        return resolve_model(self.model, self.model_options)
+
+    def build_solver(self, model=None):
+        """The optimiser; ``None`` when ``identify``'s default solver is used unchanged."""
+        import jaxfric as jf
+        from jaxfric.identify import default_solver
+
+        if self.solver == "mapso-nmds" and self.default_budget:
+            return None
+        model = self.build_model() if model is None else model
+        base = default_solver(model)
+        g, nm = self.generations, self.nm_evals
+        if self.solver == "mapso-nmds":
+            mapso = base.mapso if g is None else dataclasses.replace(base.mapso, num_generations=g)
+            local = base.nelder_mead if nm is None else dataclasses.replace(base.nelder_mead, max_evals=nm)
+            return dataclasses.replace(base, mapso=mapso, nelder_mead=local)
+        if self.solver == "mapso":
+            return base.mapso if g is None else dataclasses.replace(base.mapso, num_generations=g)
+        if self.solver == "pso":
+            return jf.PSO() if g is None else jf.PSO(num_generations=g)
+        changes = {k: v for k, v in (("max_steps", g), ("max_evals", nm)) if v is not None}
+        return dataclasses.replace(base.nelder_mead, **changes)
+
+    def identify(self, data, *, key=None, progress=None):
+        """``jaxfric.identify(model, data, ...)`` as this specification says."""
+        import inspect
+
+        import jax
+
+        from jaxfric.identify import identify
+
+        kwargs = {"solver": self.build_solver(), "model_options": self.model_options,
+                  "key": jax.random.key(self.seed) if key is None else key}
+        if self.refine != "none":
+            kwargs["refine"] = self.refine
+        if progress is not None and "progress" in inspect.signature(identify).parameters:
+            kwargs["progress"] = progress
+        return identify(self.model, data, **kwargs)

@@ -1,0 +1,147 @@
+"""What a new user meets first: fast --help, smoke runs that keep the committed
+results, and a command line that passes its arguments to the library without copying
+the library's defaults (issue 20.9, 20.11; issue 19.4)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ------------------------------------------------------------------ 20.11: --help
+@pytest.mark.parametrize("command", [[], ["demo"], ["identify"], ["predict"], ["bench"]])
+def test_help_answers_without_importing_jax(command):
+    code = ("import sys\n"
+            "from jaxfric.cli import main\n"
+            f"status = main({command!r} + ['--help'])\n"
+            "assert status == 0, status\n"
+            "print('JAX_IMPORTED' if 'jax' in sys.modules else 'NO_JAX')\n")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "usage: jaxfric" in proc.stdout
+    assert proc.stdout.strip().endswith("NO_JAX"), [m for m in proc.stdout.splitlines()[-1:]]
+
+
+def test_lazy_package_keeps_public_names():
+    import jaxfric as jf
+
+    for name in jf.__all__:
+        assert getattr(jf, name) is not None, name
+    import jaxfric.identify  # noqa: F401 - the subpackage import must not shadow the function
+
+    assert callable(jf.identify) and jf.identify.__name__ == "identify"
+    with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
+        jf.nonsense  # noqa: B018
+
+
+# ---------------------------------------------------- 20.9: quick runs write elsewhere
+FAKE_BENCH = '''
+import argparse
+from pathlib import Path
+
+def main(argv):
+    p = argparse.ArgumentParser()
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    a = p.parse_args(argv)
+    Path(a.out).mkdir(parents=True, exist_ok=True)
+    (Path(a.out) / "table1.md").write_text("quick" if a.quick else "full")
+    return 0
+'''
+
+
+def test_bench_quick_never_overwrites_committed_results(tmp_path, monkeypatch):
+    from jaxfric.cli import main
+
+    bench = tmp_path / "benchmarks"
+    (bench / "results").mkdir(parents=True)
+    (bench / "table1.py").write_text(FAKE_BENCH)
+    committed = bench / "results" / "table1.md"
+    committed.write_text("committed full-run numbers")
+    monkeypatch.setenv("JAXFRIC_BENCHMARKS", str(bench))
+    assert main(["bench", "table1", "--quick"]) == 0
+    assert committed.read_text() == "committed full-run numbers"
+    assert (bench / "results" / "quick" / "table1.md").read_text() == "quick"
+    # an explicit --out is the user's choice
+    assert main(["bench", "table1", "--quick", "--out", str(tmp_path / "mine")]) == 0
+    assert (tmp_path / "mine" / "table1.md").read_text() == "quick"
+    assert committed.read_text() == "committed full-run numbers"
+
+
+def test_harness_results_dir_rule(tmp_path):
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import _harness
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    assert _harness.results_dir(tmp_path / "x") == tmp_path / "x"
+    assert _harness.QUICK_RESULTS.parent == _harness.RESULTS
+    assert _harness.RESULTS.name == "results" and _harness.QUICK_RESULTS.name == "quick"
+    ignored = (ROOT / ".gitignore").read_text().splitlines()
+    assert "/benchmarks/results/quick/" in ignored
+
+
+# ------------------------------------------------------ 19.4: one specification object
+def _args(*argv):
+    from jaxfric.cli.parser import build_parser
+
+    return build_parser().parse_args(["demo", *argv])
+
+
+def test_cli_solver_budgets_are_the_librarys():
+    from jaxfric.cli.spec import FitSpec
+    from jaxfric.identify import default_solver
+
+    for name in ("lugre", "elman"):
+        spec = FitSpec.from_args(name, _args("--models", name, "--solver", "mapso"))
+        model = spec.build_model()
+        # LuGre with --solver mapso ran 300 generations while identify's default runs 200
+        assert spec.build_solver(model) == default_solver(model).mapso
+    spec = FitSpec.from_args("lugre", _args("--models", "lugre", "--solver", "nelder-mead"))
+    model = spec.build_model()
+    assert spec.build_solver(model) == default_solver(model).nelder_mead
+    spec = FitSpec.from_args("lugre", _args("--models", "lugre", "--generations", "7"))
+    solver = spec.build_solver(spec.build_model())
+    base = default_solver(spec.build_model())
+    assert solver.mapso.num_generations == 7
+    assert solver.mapso.lattice_size == base.mapso.lattice_size
+    assert solver.nelder_mead == base.nelder_mead
+    assert FitSpec.from_args("lugre", _args("--models", "lugre")).build_solver() is None
+
+
+def test_cli_copies_no_library_default():
+    import inspect
+
+    import jaxfric as jf
+    from jaxfric import rig
+    from jaxfric.cli.parser import build_parser
+    from jaxfric.cli.spec import FitSpec
+
+    args = _args()
+    assert args.neurons is None
+    spec = FitSpec.from_args("elman", args)
+    assert spec.build_model().neurons == jf.Elman().neurons
+    ident = build_parser().parse_args(["identify", "f.csv"])
+    for option in ("cutoff", "gravity", "train_fraction"):
+        assert getattr(ident, option) is None, option
+        assert option in inspect.signature(rig.estimate_friction).parameters
+
+
+def test_reproduce_line_is_the_specification_repr():
+    from jaxfric.cli.commands import _python_snippet
+    from jaxfric.cli.spec import FitSpec
+
+    args = _args("--models", "lugre,elman", "--quick", "--seed", "4")
+    specs = [FitSpec.from_args(n, args) for n in ("lugre", "elman")]
+    for spec in specs:
+        assert eval(repr(spec), {"FitSpec": FitSpec}) == spec
+    text = _python_snippet(args, ["lugre", "elman"], ["data = ..."], "fit_key")
+    for spec in specs:
+        assert f"{spec!r}.identify(data, key=fit_key)" in text
