@@ -1,8 +1,8 @@
-"""Plain-NumPy Elman rollouts, the baselines for the rollout speed benchmark.
+"""Plain-NumPy baselines the benchmarks time jaxfric against (not part of the library).
 
-They implement the same recursion as :class:`jaxfric.models.Elman`
-(ALGORITHMS.md §2.2, parameter layout ``[w | r | b | v | alpha | c0] (+ b_o)``)
-without JAX, so ``benchmarks/rollout_speed.py`` can compare like with like:
+Elman rollouts implement the same recursion as :class:`jaxfric.models.Elman`
+(docs/algorithms.md §2.2, parameter layout ``[w | r | b | v | alpha | c0] (+ b_o)``)
+without JAX, so ``benchmarks/rollout_speed.py`` and ``scaling.py`` compare like with like:
 
 - :func:`elman_rollout_vectorised`: a Python loop over time, NumPy-vectorised
   over candidates and neurons (the usual "numpy PSO" way to score a swarm);
@@ -11,14 +11,29 @@ without JAX, so ``benchmarks/rollout_speed.py`` can compare like with like:
 
 Both compute in ``dtype`` (float64 by default, float32 for a like-for-like
 comparison with JAX's default precision), return ``(P, T)`` arrays, and are
-tested against the JAX rollout.
+tested against the JAX rollout (``tests/test_baselines.py``).
+
+LuGre rollouts (exact zero-order-hold update, docs/algorithms.md §8.2), for
+``benchmarks/peers.py`` section 2: :func:`lugre_numpy_per_step` (everything recomputed
+inside the time loop, as MATLAB code would run it), :func:`lugre_numpy_hoisted` (the
+v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_loop`
+(scalar Python, one candidate at a time).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["elman_rollout_loop", "elman_rollout_vectorised", "unpack_elman"]
+__all__ = [
+    "elman_rollout_loop",
+    "elman_rollout_vectorised",
+    "lugre_numpy_hoisted",
+    "lugre_numpy_per_step",
+    "lugre_python_loop",
+    "unpack_elman",
+]
 
 
 def unpack_elman(thetas, neurons: int, output_bias: bool = False, dtype=np.float64) -> dict[str, np.ndarray]:
@@ -63,3 +78,66 @@ def elman_rollout_loop(thetas, velocity, neurons: int, output_bias: bool = False
             c = alpha * c + h
         y[i] += p["b_o"][i]
     return y
+
+
+def _phi_np(x):
+    small = x < 1e-8
+    xs = np.where(small, 1.0, x)
+    return np.where(small, 1.0 - 0.5 * x, -np.expm1(-xs) / xs)
+
+
+def lugre_numpy_per_step(p, v, dt, dtype=np.float64):
+    """REFERENCE (NumPy) LuGre exact-ZOH rollout, docs/algorithms.md §8.2 — everything
+    recomputed at every step inside the time loop (how MATLAB code would run it),
+    vectorised over candidates. ``p``: physical parameters, each ``(P,)``."""
+    s0, s1, s2, fc, fs, vs = (np.asarray(p[k], dtype) for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
+    v = np.asarray(v, dtype)
+    dt = dtype(dt)
+    g0 = fc + (fs - fc) * np.exp(-(np.abs(v[0]) / vs) ** 2)
+    z = np.sign(v[0]) * g0 / s0
+    out = np.empty((s0.shape[0], v.shape[0]), dtype)
+    for k in range(v.shape[0]):
+        vk = v[k]
+        g = fc + (fs - fc) * np.exp(-(np.abs(vk) / vs) ** 2)
+        a = s0 * np.abs(vk) / g
+        x = a * dt
+        out[:, k] = s0 * z + s1 * (vk - a * z) + s2 * vk
+        z = np.exp(-x) * z + vk * dt * _phi_np(x)
+    return out
+
+
+def lugre_numpy_hoisted(p, v, dt, dtype=np.float64):
+    """REFERENCE (NumPy) LuGre, the coefficients that depend on v only computed
+    vectorised over (P, T) first; the time loop is one multiply-add (jaxfric's layout)."""
+    s0, s1, s2, fc, fs, vs = (np.asarray(p[k], dtype)[:, None] for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
+    v = np.asarray(v, dtype)[None, :]
+    dt = dtype(dt)
+    g = fc + (fs - fc) * np.exp(-(np.abs(v) / vs) ** 2)
+    a = s0 * np.abs(v) / g
+    x = a * dt
+    decay, gain = np.exp(-x), v * dt * _phi_np(x)
+    z = np.empty_like(g)
+    z[:, 0] = np.sign(v[0, 0]) * g[:, 0] / s0[:, 0]
+    for k in range(v.shape[1] - 1):
+        z[:, k + 1] = decay[:, k] * z[:, k] + gain[:, k]
+    return s0 * z + s1 * (v - a * z) + s2 * v
+
+
+def lugre_python_loop(p, v, dt):
+    """REFERENCE (scalar Python/`math`) LuGre, one candidate at a time, float64."""
+    v = [float(x) for x in v]
+    P = len(p["sigma0"])
+    out = np.empty((P, len(v)))
+    for i in range(P):
+        s0, s1, s2, fc, fs, vs = (float(p[k][i]) for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
+        g0 = fc + (fs - fc) * math.exp(-(abs(v[0]) / vs) ** 2)
+        z = math.copysign(1.0, v[0]) * g0 / s0 if v[0] != 0 else 0.0
+        row = out[i]
+        for k, vk in enumerate(v):
+            g = fc + (fs - fc) * math.exp(-(abs(vk) / vs) ** 2)
+            a = s0 * abs(vk) / g
+            x = a * dt
+            row[k] = s0 * z + s1 * (vk - a * z) + s2 * vk
+            phi = 1.0 - 0.5 * x if x < 1e-8 else -math.expm1(-x) / x
+            z = math.exp(-x) * z + vk * dt * phi
+    return out

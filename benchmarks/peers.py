@@ -42,7 +42,7 @@ Usage::
         --no-stage-diagnostics                 # on a GPU machine: writes peers_gpu.*
 
 Writes ``peers[_TAG].md``, ``peers[_TAG].csv`` and ``peers[_TAG].png`` to ``--out``
-(default ``benchmarks/results``).
+(default ``benchmarks/results``; ``benchmarks/results/quick`` with ``--quick``).
 """
 
 from __future__ import annotations
@@ -60,9 +60,8 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -72,7 +71,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import rollout_speed  # noqa: E402  (section 2 ENN rows)
-import speed_optim  # noqa: E402  (NumPy Rosenbrock; appendix)
+import speed_optim  # noqa: E402  (NumPy test functions; appendix)
+from _harness import Case, add_output_arguments, render, results_dir, run_round_robin, write_csv  # noqa: E402
+from baselines import lugre_numpy_hoisted, lugre_numpy_per_step, lugre_python_loop  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
@@ -140,46 +141,6 @@ def quick_sizes() -> Sizes:
 
 
 # --------------------------------------------------------------------- timing
-@dataclass
-class Case:
-    """One implementation timed round-robin: ``once(r) -> dict`` (blocks until done)."""
-
-    label: str
-    once: Callable
-    x64: bool = False
-    max_rounds: int | None = None
-    per_round: int = 1  # calls timed together per round (their mean is one sample)
-    meta: dict = field(default_factory=dict)
-    first: float = 0.0
-    times: list = field(default_factory=list)
-    results: list = field(default_factory=list)
-
-    @property
-    def median(self) -> float:
-        return statistics.median(self.times)
-
-
-def run_round_robin(cases: list[Case], rounds: int) -> None:
-    """Warm every case once (its first call: compile + run), then time each case in
-    turn, once per round (``per_round`` calls averaged into one sample), so load from
-    other processes hits all alike."""
-    for c in cases:
-        with jax.enable_x64(c.x64):
-            t0 = time.perf_counter()
-            c.once(-1)
-            c.first = time.perf_counter() - t0
-    for r in range(rounds):
-        for c in cases:
-            if c.max_rounds is not None and r >= c.max_rounds:
-                continue
-            with jax.enable_x64(c.x64):
-                t0 = time.perf_counter()
-                for _ in range(c.per_round):
-                    res = c.once(r)
-                c.times.append((time.perf_counter() - t0) / c.per_round)
-            c.results.append(res)
-
-
 class CompileSpans:
     """Sum of jax.monitoring compile spans by phase (trace, lower, XLA compile), this thread."""
 
@@ -227,80 +188,6 @@ class RowCounter:
         return self.fn(rows)
 
 
-# --------------------------------------------------------- NumPy references
-def ackley_batch(X):
-    """Ackley on rows of ``X`` (same constants as :func:`jaxfric.functions.ackley`)."""
-    d = X.shape[1]
-    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
-            - np.exp(np.sum(np.cos(2.0 * np.pi * X), axis=1) / d) + 20.0 + np.e)
-
-
-NUMPY_BATCH = {"rosenbrock": speed_optim.rosen_batch, "ackley": ackley_batch}
-
-
-def _phi_np(x):
-    small = x < 1e-8
-    xs = np.where(small, 1.0, x)
-    return np.where(small, 1.0 - 0.5 * x, -np.expm1(-xs) / xs)
-
-
-def lugre_numpy_per_step(p, v, dt, dtype=np.float64):
-    """REFERENCE (NumPy) LuGre exact-ZOH rollout, docs/algorithms.md §8.2 — everything
-    recomputed at every step inside the time loop (how MATLAB code would run it),
-    vectorised over candidates. ``p``: physical parameters, each ``(P,)``."""
-    s0, s1, s2, fc, fs, vs = (np.asarray(p[k], dtype) for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
-    v = np.asarray(v, dtype)
-    dt = dtype(dt)
-    g0 = fc + (fs - fc) * np.exp(-(np.abs(v[0]) / vs) ** 2)
-    z = np.sign(v[0]) * g0 / s0
-    out = np.empty((s0.shape[0], v.shape[0]), dtype)
-    for k in range(v.shape[0]):
-        vk = v[k]
-        g = fc + (fs - fc) * np.exp(-(np.abs(vk) / vs) ** 2)
-        a = s0 * np.abs(vk) / g
-        x = a * dt
-        out[:, k] = s0 * z + s1 * (vk - a * z) + s2 * vk
-        z = np.exp(-x) * z + vk * dt * _phi_np(x)
-    return out
-
-
-def lugre_numpy_hoisted(p, v, dt, dtype=np.float64):
-    """REFERENCE (NumPy) LuGre, the coefficients that depend on v only computed
-    vectorised over (P, T) first; the time loop is one multiply-add (jaxfric's layout)."""
-    s0, s1, s2, fc, fs, vs = (np.asarray(p[k], dtype)[:, None] for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
-    v = np.asarray(v, dtype)[None, :]
-    dt = dtype(dt)
-    g = fc + (fs - fc) * np.exp(-(np.abs(v) / vs) ** 2)
-    a = s0 * np.abs(v) / g
-    x = a * dt
-    decay, gain = np.exp(-x), v * dt * _phi_np(x)
-    z = np.empty_like(g)
-    z[:, 0] = np.sign(v[0, 0]) * g[:, 0] / s0[:, 0]
-    for k in range(v.shape[1] - 1):
-        z[:, k + 1] = decay[:, k] * z[:, k] + gain[:, k]
-    return s0 * z + s1 * (v - a * z) + s2 * v
-
-
-def lugre_python_loop(p, v, dt):
-    """REFERENCE (scalar Python/`math`) LuGre, one candidate at a time, float64."""
-    v = [float(x) for x in v]
-    P = len(p["sigma0"])
-    out = np.empty((P, len(v)))
-    for i in range(P):
-        s0, s1, s2, fc, fs, vs = (float(p[k][i]) for k in ("sigma0", "sigma1", "sigma2", "Fc", "Fs", "vs"))
-        g0 = fc + (fs - fc) * math.exp(-(abs(v[0]) / vs) ** 2)
-        z = math.copysign(1.0, v[0]) * g0 / s0 if v[0] != 0 else 0.0
-        row = out[i]
-        for k, vk in enumerate(v):
-            g = fc + (fs - fc) * math.exp(-(abs(vk) / vs) ** 2)
-            a = s0 * abs(vk) / g
-            x = a * dt
-            row[k] = s0 * z + s1 * (vk - a * z) + s2 * vk
-            phi = 1.0 - 0.5 * x if x < 1e-8 else -math.expm1(-x) / x
-            z = math.exp(-x) * z + vk * dt * phi
-    return out
-
-
 # ------------------------------------------------------------------- helpers
 def fmt(x, spec=".3g"):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
@@ -340,7 +227,7 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
 
     for fname in sz.functions:
         log(f"[1] {fname}: {D}-D, {P} agents, budget {budget} evaluations")
-        tf, obj, fb = F.get(fname), F.objective(fname), NUMPY_BATCH[fname]
+        tf, obj, fb = F.get(fname), F.objective(fname), speed_optim.NUMPY_BATCH[fname]
         lo, hi = tf.bounds(D, np.float32)
         lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
         vmax = 0.2 * float(hi64[0] - lo64[0])
@@ -971,7 +858,7 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
     a("")
     a("## Known limits")
     a("")
-    a(KNOWN_LIMITS)
+    a(render("peers_limits.md.in").rstrip("\n"))
     a("")
     a("## Re-running")
     a("")
@@ -987,95 +874,6 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
       "accelerator. Compare ratios only within one file (one run, one machine).")
     a("")
     return "\n".join(L)
-
-
-KNOWN_LIMITS = """\
-Mechanisms behind the misses, with the rows of this run that show them. Figures marked
-*probe* were measured while writing this benchmark with throw-away variants of library code
-and are not re-measured by this script.
-
-- **Swarm random numbers** (§1): threefry was most of a cheap swarm generation on CPU. Since
-  0.2.0 every generation's numbers are a counter hash keyed by (run key, generation, stream)
-  and drawn one generation ahead (`jaxfric.optim._base.counter_uniform`), which made
-  single-run PSO about 2.2× and MAPSO about 2× faster (`benchmarks/speed_optim.py` before and
-  after, quiet machine).
-- **MAPSO** (§1) runs, per generation, one 100-agent lattice step and sGen = 10 self-learning
-  steps of 9 agents (after an 8-agent start): 11 sequential steps per 198 evaluations,
-  against PSO's one step per 100. A 9-agent step is a handful of arithmetic, so its time is
-  XLA's per-kernel cost: *probe* (profiler): each self-learning step runs as about 24 kernels
-  (8 copies of the loop state, 15 fusions, a counter add), and the self-learning takes two
-  thirds of a generation. Since 0.3.0 jaxfric compiles its runs with XLA's older fusion
-  emitters on CPU (`compiler_options`, a per-computation option, not a global flag), whose
-  code for these tiny fusions is faster: MAPSO 1.4–1.8× faster, PSO unchanged
-  (`compiler_options.md`). Throw-away variants that did not help, all *probe*: unrolling the
-  self-learning loop (2–4× slower, also with the older emitters: XLA then fuses across steps
-  and recomputes them; an optimization barrier between unrolled steps was slower still),
-  packing the inner state into three arrays (no change with the older emitters, 12 % slower
-  with the new ones), a constant-index gather instead of the four rolls (no change), a select
-  chain instead of argmin (25 % slower with the new emitters, within noise with the older
-  ones), and further XLA CPU options (region-analysis copy
-  insertion, the concurrency-optimised scheduler, fast min/max, optimisation level 1,
-  128/512-bit vectors: within noise). Since 0.4.0 the self-learning loop is compiled as
-  one kernel on CPU (`jaxfric._xla.single_kernel`: a call carrying XLA's
-  `xla_cpu_small_call` attribute, the mechanism of XLA's own small-while-loop pass), for
-  single runs of objectives that qualify: 1.2–1.45× faster on the 30-D test functions
-  (`compiler_options.md`, with and without it in one run). Compiling one *generation* as
-  one kernel was no faster (*probe*, 0.4.0). Since 0.6.0 the whole *run* (the scan over
-  generations) is one kernel for swarms small enough (`jaxfric._xla.single_kernel_loop`:
-  at most 4096 coordinates and 2e6 element operations per generation; 100 agents at D = 30
-  qualify), which removes the per-generation kernel dispatch and loop bookkeeping as well:
-  MAPSO 1.2–1.4× and PSO 1.3–1.9× faster than 0.5.0 on 30-D Rosenbrock and Ackley (*probe*,
-  interleaved in one process; `compiler_options.md` re-measures it). What remains is
-  arithmetic in XLA's one-kernel code, which is partly scalar: *probe*, a MAPSO generation
-  on the 10×10 lattice takes about 55 µs (the lattice step about 30 µs, of which
-  competition about 14 µs; self-learning about 25 µs), a PSO generation about 14 µs.
-  Throw-away variants that did not help inside the one kernel (*probe*): optimization
-  barriers on the competition or PSO output (XLA recomputes that chain in several
-  consumers), unrolling the self-learning loop, a compare-select tournament instead of
-  argmin, in-bounds gathers, and XLA's newer fusion emitters (20 % slower). Vmapped runs
-  keep the plain program (8 seeds: 24 000 coordinates); batching seeds amortises the
-  per-kernel cost instead (the vmapped rows). The single-run MAPSO ratio also moves with
-  pyswarms' own speed, which differed by up to 25 % between processes on this machine
-  (*probe*: 45–57 ms for the same run).
-- **Small ENN batches** (§5): XLA's code for a (30, 9) context state ran 2–3× slower per
-  element than for (30, 64); since 0.2.0 the rollout carries the context as one flat vector,
-  which made 9–25 candidates 1.4–3× faster (bit-identical output) and roughly halved a
-  default ENN identification's run time.
-- **Batched Nelder–Mead**: vmapping the while loop turns its conditionals into selects, so
-  every step pays the shrink branch's n evaluations (PEERS.md §1.6) and waits for the slowest
-  run (the `batching='vmap'` diagnostic row). Since 0.3.0 `minimise_many` runs Nelder–Mead's
-  keys one after another inside the same compiled call (`lax.map`) on a single CPU device,
-  which also makes each run bit-identical to `minimise` with its key; several devices still
-  get the vmapped, sharded layout.
-- **Scan efficiency** (§5): the scan and the recurrence-free ceiling kernels are compiled
-  alike, with the library's rollout options (512-bit vectors). Before 0.3.0 both used XLA's
-  defaults, and the ceiling's large fusions split over both cores of an idle machine while a
-  scan step (30 × 64 numbers) cannot, which held the ratio at 47–61 % on 2 cores and 77 %
-  pinned to one (`peers_1core.md`, 0.2.0). With 512-bit vectors the scan step gains more
-  than the ceiling, which is bound by memory and the second core.
-- **float64 ENN rollouts** (§2): a float64 step costs about twice a float32 one. Not because
-  of `tanh` alone: *probe*, XLA's float64 `tanh` over a large array ran at NumPy's speed or
-  better, and a float64 scan with `tanh` replaced by a multiply cost 85 % of the real one;
-  unroll 1–8, a dot for the output sum and an expm1-based `tanh` were no faster. 512-bit
-  vectors (0.3.0's rollout option, on CPUs that have them) made it 1.4–1.5× faster. NumPy's
-  time is mostly per-step Python overhead that does not depend on the dtype, so the float64
-  ratios are the smaller ones and the per-candidate-loop ratio sits near its 100× threshold.
-  float32 (identify's default unless x64 is enabled) meets both with margin.
-- **Compile time** (§4): one XLA compilation of the whole MAPSO–NMDS run dominates (the
-  jit(_run) program; the other ~20 compiles are tiny eager operations of about 0.05 s each).
-  The ENN rollout is inlined at every evaluation site of that program (initial swarm, main
-  lattice, self-learning start and steps, Nelder–Mead start, reflection, second point,
-  shrink), each a separate scan loop for LLVM; the same hybrid on Rosenbrock compiles in
-  about half the time. Compile time also grows with the machine's load. New data of the same
-  shapes never recompile (last column of §4).
-- **On a GPU** (a `--tag gpu` run): every step of a loop is at least one kernel launch, about
-  10 µs on the H100 of `peers_gpu.md`. Work that goes one small step at a time is bound by
-  that: a single Nelder–Mead run (§1, about scipy's speed), `identify` (§3, whose Nelder–Mead
-  stage evaluates one rollout at a time) and the scan efficiency (§5, whose recurrence-free
-  ceiling runs all time steps in parallel). Since 0.5.0 the models' time loops are chosen per
-  platform (`jaxfric/models/_scan.py`): Elman unrolls 32 steps there (the §5 diagnostic rows
-  show unroll 1–8 at 3–28 ms against the default's 1.6 ms), LuGre and Dahl use an associative
-  scan. Batches are where a GPU pays: `benchmarks/scaling.py --tag gpu`."""
 
 
 def solver_text(sz: Sizes) -> str:
@@ -1121,24 +919,10 @@ def plot(tgts, path: Path) -> None:
     plt.close(fig)
 
 
-def write_csv(rows, path: Path) -> None:
-    keys: list[str] = []
-    for r in rows:
-        for k in r:
-            if k not in keys:
-                keys.append(k)
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    p.add_argument("--quick", action="store_true", help="tiny sizes, every section (smoke test)")
-    p.add_argument("--out", type=Path, default=HERE / "results", help="output folder")
+    add_output_arguments(p, "tiny sizes, every section (smoke test; written to results/quick/)")
     p.add_argument("--tag", default="", help="suffix of the output files, e.g. gpu -> peers_gpu.md")
     p.add_argument("--sections", default="1,2,3,4,5,A",
                    help="comma-separated subset of 1,2,3,4,5,A (3 and 4 run together)")
@@ -1196,7 +980,7 @@ def main(argv=None) -> int:
                if not a.quick else f"a {sz.id_samples}-sample LuGre-generated record, a tiny MAPSO–NMDS.")),
     )
     tgts = targets(rows)
-    a.out.mkdir(parents=True, exist_ok=True)
+    a.out = results_dir(a.out, quick=a.quick)
     stem = "peers" + (f"_{a.tag}" if a.tag else "")
     write_csv(rows, a.out / f"{stem}.csv")
     (a.out / f"{stem}.md").write_text(to_markdown(rows, tgts, meta, appendix))

@@ -10,7 +10,7 @@ repeats:
   as the library's own jits are (and once with XLA's defaults); ``vmap(Elman.simulate)`` (routed to ``simulate_batch``
   by a custom batching rule, what a vmapping optimiser gets); and JAX's default
   batching of a single-candidate scan, for comparison;
-- :func:`jaxfric.models.reference_numpy.elman_rollout_vectorised` (Python time
+- :func:`baselines.elman_rollout_vectorised` (Python time
   loop, NumPy over candidates) and ``elman_rollout_loop`` (Python loops over
   candidates and time), float64;
 - LuGre (6 parameters, exact ZOH update), same sizes, float32 and float64.
@@ -38,7 +38,7 @@ import numpy as np
 
 import jaxfric as jf
 from jaxfric.models import Elman, LuGre
-from jaxfric.models.reference_numpy import elman_rollout_loop, elman_rollout_vectorised
+from baselines import elman_rollout_loop, elman_rollout_vectorised
 
 NEURONS, SAMPLES, CANDIDATES, FS = 30, 1600, 64, 128.0
 NP_VEC = "NumPy vectorised over candidates"

@@ -15,7 +15,7 @@ NumPy peers measured in the same run on this machine's CPU:
    1600 samples, float32, compiled as jaxfric's own rollouts are.
 4. **Peers** (always on the CPU): pyswarms ``GlobalBestPSO`` (one run, 100 particles,
    the same PSO settings as ``peers.py``) and the NumPy ENN rollout vectorised over
-   candidates (``reference_numpy.elman_rollout_vectorised``) at each C up to
+   candidates (``baselines.elman_rollout_vectorised``) at each C up to
    ``--numpy-max``.
 
 Every point: the first call (compile + run) apart, then the median of ``--repeats``
@@ -56,7 +56,7 @@ from peers import load_now, write_csv  # noqa: E402
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
-from jaxfric.models.reference_numpy import elman_rollout_vectorised  # noqa: E402
+from baselines import elman_rollout_vectorised  # noqa: E402
 
 DIM, NEURONS, SAMPLES, FS = 30, 30, 1600, 128.0
 

@@ -1,13 +1,18 @@
-"""The NumPy Elman baselines used by benchmarks/rollout_speed.py equal the JAX rollout."""
+"""The NumPy baselines of benchmarks/ (benchmarks/baselines.py) equal the JAX rollouts."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 
 from jaxfric.models import Elman
-from jaxfric.models.reference_numpy import elman_rollout_loop, elman_rollout_vectorised, unpack_elman
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from baselines import elman_rollout_loop, elman_rollout_vectorised, unpack_elman  # noqa: E402
 
 
 @pytest.mark.parametrize("output_bias", [False, True])
@@ -41,3 +46,24 @@ def test_numpy_rollouts_in_float32():
         y = fn(thetas, u, 4, dtype=np.float32)
         assert y.dtype == np.float32
         np.testing.assert_allclose(y, y_jax, atol=1e-4)
+
+
+def test_numpy_lugre_rollouts_equal_jax():
+    import jax.numpy as jnp
+
+    from baselines import lugre_numpy_hoisted, lugre_numpy_per_step, lugre_python_loop
+    from jaxfric.models import LuGre
+
+    model = LuGre()
+    lower, upper = model.bounds()
+    rng = np.random.default_rng(3)
+    th = rng.uniform(lower, upper, (3, model.num_params))
+    v = 0.01 * np.sin(np.linspace(0, 8, 200)) + 0.004 * np.sin(np.linspace(0, 21, 200))
+    dt = 1.0 / 128.0
+    with jax.enable_x64(True):
+        phys = {k: np.asarray(x, np.float64) for k, x in model.to_physical(jnp.asarray(th)).items()}
+        ref = np.asarray(model.simulate_batch(jnp.asarray(th), jnp.asarray(v), dt))
+    tol = dict(rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    np.testing.assert_allclose(lugre_numpy_per_step(phys, v, dt), ref, **tol)
+    np.testing.assert_allclose(lugre_numpy_hoisted(phys, v, dt), ref, **tol)
+    np.testing.assert_allclose(lugre_python_loop(phys, v, dt), ref, **tol)

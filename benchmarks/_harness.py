@@ -1,0 +1,140 @@
+"""What every benchmark script shares: where results go, timing, tables, templates.
+
+* :func:`results_dir` — the one rule for output folders: ``--out`` when given; otherwise
+  ``benchmarks/results/`` for a full run and ``benchmarks/results/quick/`` (git-ignored)
+  for a ``--quick`` smoke run, so a smoke test never overwrites the committed numbers.
+  :func:`add_output_arguments` adds ``--quick`` and ``--out`` with that rule.
+* :class:`Case` / :func:`run_round_robin` — time implementations side by side, in turn,
+  medians over rounds, so load from other processes on a shared machine hits all alike;
+  :func:`median_time` for a single function.
+* :func:`write_csv` / :func:`markdown_table` — result rows as CSV and as a Markdown table.
+* :func:`render` — report prose lives in ``benchmarks/templates/*.md.in`` files
+  (:class:`string.Template` ``$fields``), not in f-strings inside the measuring code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import statistics
+import string
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+QUICK_RESULTS = RESULTS / "quick"
+TEMPLATES = HERE / "templates"
+
+
+def results_dir(out=None, *, quick: bool = False) -> Path:
+    """The output folder: ``out`` if given, else ``results/quick/`` or ``results/`` (created)."""
+    path = Path(out) if out is not None else (QUICK_RESULTS if quick else RESULTS)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def add_output_arguments(parser: argparse.ArgumentParser, quick_help: str = "tiny sizes (smoke test)") -> None:
+    """``--quick`` and ``--out`` (default: :func:`results_dir`'s rule, resolved after parsing)."""
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--out", type=Path, default=None,
+                        help=f"output folder (default {RESULTS}, or {QUICK_RESULTS} with --quick)")
+
+
+# --------------------------------------------------------------------------- timing
+@dataclass
+class Case:
+    """One implementation timed round-robin: ``once(r) -> result`` (blocks until done)."""
+
+    label: str
+    once: Callable
+    x64: bool = False
+    max_rounds: int | None = None
+    per_round: int = 1  # calls timed together per round (their mean is one sample)
+    meta: dict = field(default_factory=dict)
+    first: float = 0.0
+    times: list = field(default_factory=list)
+    results: list = field(default_factory=list)
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.times)
+
+
+def run_round_robin(cases: list[Case], rounds: int) -> None:
+    """Warm every case once (its first call: compile + run), then time each case in
+    turn, once per round (``per_round`` calls averaged into one sample)."""
+    import jax
+
+    for c in cases:
+        with jax.enable_x64(c.x64):
+            t0 = time.perf_counter()
+            c.once(-1)
+            c.first = time.perf_counter() - t0
+    for r in range(rounds):
+        for c in cases:
+            if c.max_rounds is not None and r >= c.max_rounds:
+                continue
+            with jax.enable_x64(c.x64):
+                t0 = time.perf_counter()
+                for _ in range(c.per_round):
+                    res = c.once(r)
+                c.times.append((time.perf_counter() - t0) / c.per_round)
+            c.results.append(res)
+
+
+def median_time(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> float:
+    """Median wall time [s] of ``fn()`` over ``repeats`` calls after ``warmup`` calls.
+
+    ``fn`` must block until its work is done (``jax.block_until_ready`` on its output)."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+# --------------------------------------------------------------------------- tables
+def _columns(rows) -> list[str]:
+    keys: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in keys:
+                keys.append(k)
+    return keys
+
+
+def write_csv(rows, path: Path, *, float_format: str = ".6g") -> Path:
+    """Rows (dicts; the union of their keys in first-seen order) as a CSV file."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=_columns(rows), lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (format(v, float_format) if isinstance(v, float) else v) for k, v in r.items()})
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(buf.getvalue())
+    return path
+
+
+def markdown_table(rows, columns: list[str] | None = None, *, headers: list[str] | None = None,
+                   fmt: Callable[[object], str] = str) -> str:
+    """A GitHub Markdown table of ``rows`` (dicts) over ``columns`` (default: all keys)."""
+    columns = columns or _columns(rows)
+    headers = headers or columns
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |")
+    return "\n".join(lines)
+
+
+def render(template: str, **fields) -> str:
+    """``benchmarks/templates/<template>`` with its ``$fields`` substituted (all required)."""
+    text = (TEMPLATES / template).read_text(encoding="utf-8")
+    return string.Template(text).substitute(**fields)
