@@ -1,4 +1,10 @@
-"""Every notebook in notebooks/ runs top to bottom with the small budget.
+"""Every notebook in notebooks/ is built from its plain-text source and runs top to bottom
+with the small budget.
+
+The sources are jupytext percent-format files (``notebooks/01_test_functions.py`` ...);
+edit those, then rebuild the committed notebooks without outputs::
+
+    jupytext --to ipynb notebooks/0*.py
 
 Kernels get ``JAXFRIC_NOTEBOOK_BUDGET=small`` and share JAX's persistent compilation
 cache with the command-line tests of the same session (an environment variable of the
@@ -29,6 +35,18 @@ def test_there_are_three_notebooks_without_outputs():
         for cell in nb.cells:
             if cell.cell_type == "code":
                 assert not cell.outputs and cell.execution_count is None, f"{path.name} is committed with outputs"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_is_built_from_its_percent_source(path):
+    jupytext = pytest.importorskip("jupytext", reason="needs jupytext (pip install jaxfric[test])")
+    source = path.with_suffix(".py")
+    assert source.is_file(), f"{source.name} (the notebook's source) is missing"
+    built = jupytext.read(source)
+    committed = nbformat.read(path, as_version=4)
+    cells = [(c.cell_type, c.source) for c in committed.cells]
+    assert cells == [(c.cell_type, c.source) for c in built.cells], (
+        f"{path.name} differs from {source.name}: run 'jupytext --to ipynb notebooks/{source.name}'")
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
