@@ -171,25 +171,65 @@ def plot_data(data, *, title: str | None = None) -> Figure:
     return fig
 
 
-def plot_friction_velocity(data, fits=None, *, title: str | None = None) -> Figure:
+def _binned(v, y, edges) -> tuple[np.ndarray, np.ndarray]:
+    """Median of ``y`` in each velocity bin of ``edges`` (bins with fewer than 3 samples dropped)."""
+    idx = np.digitize(v, edges) - 1
+    centres, medians = [], []
+    for b in range(edges.size - 1):
+        sel = idx == b
+        if np.count_nonzero(sel) >= 3:
+            centres.append(0.5 * (edges[b] + edges[b + 1]))
+            medians.append(float(np.median(y[sel])))
+    return np.asarray(centres), np.asarray(medians)
+
+
+def _thinned(n: int, max_points: int) -> np.ndarray:
+    """Indices of at most ``max_points`` samples, evenly spread over ``n`` (all when fewer)."""
+    if n <= max_points:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, max_points).round().astype(int))
+
+
+def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_points: int = 2000,
+                           bins: int = 60) -> Figure:
     """Friction against velocity: the hysteresis loops of the record.
 
     Training samples are drawn in blue, validation samples in orange. With
     ``fits`` (one fit, a sequence, or a mapping label -> fit) the models'
-    predictions are overlaid as lines.
+    predictions are drawn on top of the measurements.
+
+    A long or noisy record (more than ``max_points`` samples, e.g. a real recording at
+    1 kHz) would bury everything under a cloud of dots: its samples are then thinned
+    to ``max_points`` evenly spread ones drawn faintly, the measured friction is also
+    shown as its median in ``bins`` velocity bins, and each model as the median of its
+    prediction in the same bins, so the curves stay readable.
     """
     v = _np(data.velocity)
     f = _np(data.friction)
     n = _n_train(data)
     scale, unit = velocity_unit(v)
+    dense = v.size > max_points
+    keep = _thinned(v.size, max_points)
+    dots = dict(ms=2.0, alpha=0.35 if dense else 1.0, zorder=1, rasterized=dense)
     fig = Figure(figsize=(6.5, 5), layout="constrained")
     ax = fig.subplots()
-    ax.plot(v[:n] * scale, f[:n], ".", ms=2.0, color="tab:blue", label="measured, training")
-    if n < v.size:
-        ax.plot(v[n:] * scale, f[n:], ".", ms=2.0, color="tab:orange", label="measured, validation")
+    train, valid = keep[keep < n], keep[keep >= n]
+    thin_note = f" ({keep.size} of {v.size} samples)" if dense else ""
+    ax.plot(v[train] * scale, f[train], ".", color="tab:blue", label="measured, training" + thin_note, **dots)
+    if valid.size:
+        ax.plot(v[valid] * scale, f[valid], ".", color="tab:orange", label="measured, validation", **dots)
+    edges = np.linspace(v.min(), v.max(), bins + 1) if dense and v.max() > v.min() else None
+    if edges is not None:
+        c, m = _binned(v, f, edges)
+        ax.plot(c * scale, m, "o-", ms=3, lw=1.4, color="0.15", zorder=3, label="measured, binned median")
     if fits is not None:
         for i, (label, fit) in enumerate(_as_fit_items(fits)):
-            ax.plot(v * scale, predict_on(fit, data), "-", lw=0.9, color=f"C{i + 2}", label=label)
+            y_hat = predict_on(fit, data)
+            if edges is not None:
+                c, m = _binned(v, y_hat, edges)
+                ax.plot(c * scale, m, "-", lw=2.0, color=f"C{i + 2}", zorder=4, label=f"{label} (binned median)")
+            else:
+                ax.plot(v * scale, y_hat, "-", lw=1.2, color=f"C{i + 2}", zorder=4, label=label)
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.axvline(0.0, color="0.6", lw=0.6)
     ax.set_xlabel(f"piston velocity [{unit}]")
@@ -238,20 +278,35 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     return fig
 
 
+def _max_window(data, n: int) -> tuple[slice, str]:
+    """Where the error figure quotes MAX |e|: the validation window; without one, the
+    record after its start-up transient (the first 5 %, where a free run's initial state
+    and the zero-phase filter's edges dominate)."""
+    n_train = _n_train(data)
+    if 0 < n_train < n:
+        return slice(n_train, n), "validation"
+    skip = n // 20
+    return slice(skip, n), f"after the first {skip} samples"
+
+
 def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | None = None) -> Figure:
     """Error curves ``F - F_hat`` [N] of one or several fits against time.
 
     ``fits``: one fit, a sequence of fits, or a mapping label -> fit (or -> prediction
     array). The validation window is shaded; the legend gives each model's MAX
-    error |e| over the whole record.
+    error |e| over the validation window (the paper's MAX, docs/algorithms.md §6), or,
+    without one, over the record after its start-up transient: a spike in the first
+    samples would otherwise be the number quoted.
     """
     t = _time(data)
     y = _np(data.friction)
+    window, where = _max_window(data, y.size)
     fig = Figure(figsize=(9, 4.2), layout="constrained")
     ax = fig.subplots()
     for i, (label, fit) in enumerate(_as_fit_items(fits, labels)):
         e = y - predict_on(fit, data)
-        ax.plot(t, e, lw=0.9, color=f"C{i}", label=f"{label} (MAX |e| = {np.max(np.abs(e)):.3g} N)")
+        ax.plot(t, e, lw=0.9, color=f"C{i}",
+                label=f"{label} (MAX |e| {where} = {np.max(np.abs(e[window])):.3g} N)")
     ax.axhline(0.0, color="0.4", lw=0.6)
     _mark_split(ax, data)
     ax.set_xlabel("time [s]")

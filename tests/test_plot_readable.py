@@ -1,0 +1,69 @@
+"""Figures stay readable on real, noisy records (issue 20.15)."""
+
+import numpy as np
+import pytest
+
+from jaxfric import plot
+from jaxfric.rig import FrictionData
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    """A 1 kHz-like record: 20 000 samples of noisy velocity and friction."""
+    rng = np.random.default_rng(0)
+    t = np.arange(20_000) / 1000.0
+    v = 0.05 * np.sin(2 * np.pi * 0.5 * t) + 0.004 * rng.normal(size=t.size)
+    f = 30 * np.tanh(v / 2e-3) + 200 * v + 3.0 * rng.normal(size=t.size)
+    return FrictionData.from_arrays(v, f, 1e-3, n_train=16_000)
+
+
+def _points(ax, marker="."):
+    return sum(len(line.get_xdata()) for line in ax.get_lines() if line.get_marker() == marker)
+
+
+def test_friction_velocity_thins_dense_points_and_draws_models_on_top(noisy):
+    model = 30 * np.tanh(np.asarray(noisy.velocity) / 2e-3) + 200 * np.asarray(noisy.velocity)
+    fig = plot.plot_friction_velocity(noisy, {"model": model}, max_points=2000, bins=50)
+    ax = fig.axes[0]
+    assert _points(ax) <= 2000  # not 20 000 dots
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    curve = lines["model (binned median)"]
+    dots = [line for line in ax.get_lines() if line.get_marker() == "."]
+    assert all(curve.get_zorder() > d.get_zorder() for d in dots)
+    assert len(curve.get_xdata()) <= 50
+    # the binned model curve is the model's median per bin: compare with a direct computation
+    v = np.asarray(noisy.velocity)
+    edges = np.linspace(v.min(), v.max(), 51)
+    k = len(curve.get_xdata()) // 2
+    centre = curve.get_xdata()[k] / 1e3  # plotted in mm/s
+    b = int(np.searchsorted(edges, centre)) - 1
+    sel = (v >= edges[b]) & (v < edges[b + 1])
+    assert curve.get_ydata()[k] == pytest.approx(np.median(model[sel]))
+
+
+def test_friction_velocity_short_record_keeps_every_sample():
+    t = np.arange(400) / 128.0
+    v = 0.01 * np.sin(2 * np.pi * 0.4 * t)
+    d = FrictionData.from_arrays(v, 300 * np.tanh(v / 1e-3), 1 / 128.0, n_train=320)
+    fig = plot.plot_friction_velocity(d, {"m": np.asarray(d.friction)})
+    assert _points(fig.axes[0]) == 400
+
+
+def test_error_figure_quotes_the_validation_max_not_the_start_up_transient(noisy):
+    y = np.asarray(noisy.friction)
+    pred = y - 0.5
+    pred[:50] -= 400.0  # start-up transient of a free run
+    pred[17_000] -= 7.0  # the largest validation error
+    fig = plot.plot_error({"model": pred}, noisy)
+    text = fig.axes[0].get_legend().get_texts()[0].get_text()
+    assert "MAX |e| validation = 7.5 N" in text, text
+
+
+def test_error_figure_without_validation_skips_the_transient():
+    t = np.arange(1000) / 100.0
+    v = np.sin(t)
+    d = FrictionData.from_arrays(v, 10 * np.tanh(v), 0.01, n_train=1000)
+    pred = np.asarray(d.friction) - 1.0
+    pred[:20] -= 50.0
+    text = plot.plot_error({"m": pred}, d).axes[0].get_legend().get_texts()[0].get_text()
+    assert "after the first 50 samples = 1 N" in text, text
