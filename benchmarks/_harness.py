@@ -138,3 +138,23 @@ def render(template: str, **fields) -> str:
     """``benchmarks/templates/<template>`` with its ``$fields`` substituted (all required)."""
     text = (TEMPLATES / template).read_text(encoding="utf-8")
     return string.Template(text).substitute(**fields)
+
+
+def render_blocks(template: str) -> Callable[..., str]:
+    """A template of named blocks (``@@ name`` lines start each), for a report built piece
+    by piece: ``block = render_blocks("peers.md.in"); block("intro", quick_flag="")``."""
+    text = (TEMPLATES / template).read_text(encoding="utf-8")
+    blocks: dict[str, list[str]] = {}
+    name = None
+    for line in text.splitlines():
+        if line.startswith("@@ "):
+            name = line[3:].strip()
+            blocks[name] = []
+        elif name is not None:
+            blocks[name].append(line)
+    templates = {k: string.Template("\n".join(v).strip("\n")) for k, v in blocks.items()}
+
+    def block(name: str, **fields) -> str:
+        return templates[name].substitute(**fields)
+
+    return block
