@@ -213,7 +213,8 @@ def identification_data(args):
     data = rig.estimate_friction(meas, bore=args.bore, rod=args.rod, mass=args.mass, **options)
     used = _with_defaults(rig.estimate_friction, options)
     desc = (f"raw rig channels from {args.file} through the pipeline (Butterworth {used['cutoff']:g} Hz, "
-            f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, gravity {used['gravity']:g} m/s^2)")
+            f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, "
+            + (f"gravity {used['gravity']:g} m/s^2)" if used["gravity"] is not None else "no gravity term)"))
     return data, desc, notes
 
 
