@@ -18,8 +18,8 @@ repeats:
 Targets (issue 4): batched JAX ENN >= 5x the NumPy vectorised rollout and
 >= 100x the per-candidate loop.
 
-Usage: ``python benchmarks/rollout_speed.py [--quick] [--out PATH]``. Writes a
-Markdown table (default ``benchmarks/results/rollout_speed.md``).
+Usage: ``python benchmarks/rollout_speed.py [--quick] [--out DIR]``. Writes a
+Markdown table ``rollout_speed.md`` to ``DIR`` (default ``benchmarks/results/``; ``results/quick/`` with ``--quick``).
 """
 
 from __future__ import annotations
@@ -195,15 +195,16 @@ def to_markdown(rows: list[dict], quick: bool) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv=None) -> None:
+    from _harness import add_output_arguments, results_dir
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer repeats (smoke test)")
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "rollout_speed.md")
-    args = parser.parse_args()
+    add_output_arguments(parser, "fewer repeats (smoke test; written to results/quick/)")
+    args = parser.parse_args(argv)
     rows = run(quick=args.quick)
     text = to_markdown(rows, args.quick)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    out = results_dir(args.out, quick=args.quick) / "rollout_speed.md"
+    out.write_text(text)
     print(text)
 
 
