@@ -145,3 +145,20 @@ def test_reproduce_line_is_the_specification_repr():
     text = _python_snippet(args, ["lugre", "elman"], ["data = ..."], "fit_key")
     for spec in specs:
         assert f"{spec!r}.identify(data, key=fit_key)" in text
+
+
+# ------------------------------------------------------- 20.14: the quick subset
+def test_slow_tests_are_marked_and_exist():
+    """``-m "not slow"`` leaves out the long tests; every listed one still exists (a renamed
+    test would silently fall back into the quick subset)."""
+    import ast
+
+    from conftest import SLOW_TESTS
+
+    assert SLOW_TESTS
+    for nodeid in SLOW_TESTS:
+        path, name = nodeid.split("::")
+        tree = ast.parse((ROOT / path).read_text())
+        names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+        assert name in names, nodeid
+    assert "slow:" in (ROOT / "pyproject.toml").read_text()
