@@ -71,6 +71,20 @@ SLOW_TESTS = {
     "tests/test_cli.py::test_saved_fit_predicts_the_same_through_the_cli",
     "tests/test_cli.py::test_identify_raw_rig_channels_runs_the_pipeline",
     "tests/test_cli.py::test_ctrl_c_exits_130_and_says_what_was_kept",
+    # each executes a notebook in a kernel (the percent sources are checked by a fast test)
+    "tests/test_notebooks.py::test_notebook_runs_with_the_small_budget",
+    "tests/test_notebooks.py::test_real_recordings_notebook_skips_without_data",
+    # compile several solver programs each, or run subprocesses
+    "tests/test_compiler_options.py::test_options_change_speed_not_results",
+    "tests/test_compiler_options.py::test_large_swarms_compile_once_without_xla_warnings",
+    "tests/test_compiler_options.py::test_minimise_many_takes_options",
+    "tests/test_compiler_options.py::test_single_kernel_falls_back_when_xla_cannot_compile_it",
+    "tests/test_compiler_options.py::test_single_kernel_float64",
+    "tests/test_compiler_options.py::test_single_kernel_changes_speed_not_the_run",
+    "tests/test_compiler_options.py::test_mapso_without_self_learning_generations_runs_with_auto_options",
+    "tests/test_reliability.py::test_lugre_with_overflowing_parameters_is_never_reported_as_best",
+    "tests/test_reliability.py::test_identify_never_reports_nan_or_inf",
+    "tests/test_reliability.py::test_interrupted_identify_exits_130_and_says_what_was_kept",
 }
 
 
