@@ -52,18 +52,16 @@ import numpy as np
 from IPython.display import Markdown, display
 
 import jaxfric as jf
+from jaxfric.cli.spec import FitSpec
 from jaxfric import plot
 from jaxfric import report, rig
 
 
 # %%
 def solver_for(name):
-    """The small budget (the same solver as `jaxfric --quick`), else None: the library default
-    (MAPSO-NMDS sized for the model, see jaxfric.identify.default_solver)."""
-    if SMALL:
-        return jf.mapso_nmds(lattice_size=8 if name.startswith("elman") else 5,
-                             num_generations=3, nm_max_evals=200)
-    return None
+    """`jaxfric --quick`'s solver (the library's default for the model, budget cut to 3
+    generations and 200 Nelder-Mead evaluations) when SMALL, else None: the default itself."""
+    return FitSpec(name, generations=3, nm_evals=200).build_solver() if SMALL else None
 
 
 # %% [markdown]
