@@ -40,8 +40,8 @@ from jaxfric.fit import Fit
 from jaxfric.identify import _api as identify_api
 
 ROOT = Path(__file__).resolve().parents[1]
-# the module, not the function that jaxfric.optim re-exports under the same name
-minimise_module = importlib.import_module("jaxfric.optim.minimise")
+# the driver module (every compiled optimiser run goes through its _run / _run_many)
+minimise_module = importlib.import_module("jaxfric.optim.driver")
 
 
 # ----------------------------------------------------------------- guards
