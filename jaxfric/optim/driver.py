@@ -273,6 +273,7 @@ def _batching(batching, proto, layout: Layout | None) -> str:
     """``"vmap"`` or ``"map"`` for :func:`minimise_many` (see its docstring)."""
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {BATCHING}, got {batching!r}")
+    proto = as_protocol(proto)
     if batching == "map" and layout is not None:
         raise ValueError(
             "batching='map' runs the keys one after another on one device; with several "

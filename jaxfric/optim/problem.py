@@ -85,7 +85,7 @@ def _scipy_bounds(bounds):
         )
     if as_pairs_ok:
         return (pairs[:, 0], pairs[:, 1])
-    return bounds
+    return (pairs[0], pairs[1])
 
 
 def prepare_bounds(bounds, dtype=None):
