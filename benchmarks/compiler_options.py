@@ -1,9 +1,8 @@
 """jaxfric's per-computation XLA options against XLA's defaults, side by side.
 
 Every workload is compiled several times in this one process: with
-``compiler_options="auto"`` (what jaxfric uses on CPU: see ``jaxfric/_xla.py``),
-for optimiser runs also with "auto" less jaxfric's single-kernel loops (the XLA
-options alone), and with ``compiler_options=None`` (XLA's defaults); then timed
+``compiler_options="auto"`` (what jaxfric uses on CPU: see ``jaxfric/_xla.py``)
+and with ``compiler_options=None`` (XLA's defaults); then timed
 round-robin so that load from other processes hits all alike. Medians over the
 rounds; the first call (compile + run) is reported apart. Results must agree: the
 script checks that the variants reach the same best value within 1e-4 and the same
@@ -33,15 +32,12 @@ import jaxfric as jf
 from jaxfric import _xla
 from jaxfric import functions as F
 
-NO_SINGLE = "auto without single-kernel loops"
+NO_SINGLE = "auto without single-kernel loops"  # 0.6.0's variant; the loops are gone (0.7.0)
 
 
 def _variants(kind):
     """(label, compiler_options) pairs timed for a workload of ``kind``."""
-    v = [("auto", "auto")]
-    if kind == "solver":
-        v.append((NO_SINGLE, {**jf.compiler_options("solver"), _xla.SINGLE_KERNEL: False}))
-    return v + [("XLA defaults", None)]
+    return [("auto", "auto"), ("XLA defaults", None)]
 
 
 def _swarm_cases(dim, agents, generations, seeds):

@@ -84,7 +84,7 @@ from jaxfric.identify._objective import cost_data  # noqa: E402
 from jaxfric.identify._timing import Stopwatch  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
-from jaxfric.optim.minimise import _batching  # noqa: E402
+from jaxfric.optim.driver import _batching  # noqa: E402
 from jaxfric.optim.sharding import resolve_devices  # noqa: E402
 
 PROSE = render_blocks("peers.md.in")  # the report's explanatory text, apart from the measuring code

@@ -30,7 +30,7 @@ _LAZY = {
     "LuGre": ".models", "Stribeck": ".models",
     "MAPSO": ".optim", "MAPSONMDS": ".optim", "PSO": ".optim", "RESULTS": ".optim",
     "History": ".optim", "NelderMead": ".optim", "Solution": ".optim", "mapso_nmds": ".optim",
-    "minimise": ".optim", "minimise_many": ".optim",
+    "minimise": ".optim", "minimise_many": ".optim", "chain": ".optim",
     "FrictionData": ".rig",
 }
 
@@ -85,6 +85,7 @@ __all__ = [
     "RESULTS",
     "Solution",
     "Stribeck",
+    "chain",
     "compiler_options",
     "friction_metrics",
     "files",

@@ -52,7 +52,7 @@ def run_cache_size():
     """Number of compilations cached for ``minimise``'s single-run executable (with the
     default ``compiler_options``): a test counts recompilations with it."""
     from jaxfric import _xla
-    from jaxfric.optim.minimise import _run
+    from jaxfric.optim.driver import _run
 
     def size():
         return _xla.filter_jit(_run, _xla.resolve("auto", "solver"))._cached._cache_size()

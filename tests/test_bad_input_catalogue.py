@@ -40,8 +40,8 @@ from jaxfric.fit import Fit
 from jaxfric.identify import _api as identify_api
 
 ROOT = Path(__file__).resolve().parents[1]
-# the module, not the function that jaxfric.optim re-exports under the same name
-minimise_module = importlib.import_module("jaxfric.optim.minimise")
+# the driver module (every compiled optimiser run goes through its _run / _run_many)
+minimise_module = importlib.import_module("jaxfric.optim.driver")
 
 
 # ----------------------------------------------------------------- guards
@@ -275,9 +275,34 @@ API_CASES = [
     ),
     ("minimise/progress-bad", lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, progress="yes"), ValueError,
      ["progress must be None, True (a tqdm bar) or a callable"]),
-    ("minimise/checkpoint-nelder-mead",
-     lambda f: jf.minimise(counted, jf.NelderMead(), (LO, HI), key=KEY, checkpoint=f["folder"] / "c.npz"),
-     ValueError, ["checkpoint works with swarm solvers", "NelderMead"]),
+    # (0.6.0 refused checkpoints for Nelder-Mead; every solver checkpoints now:
+    # tests/test_checkpoint.py)
+    # ------------------------------------------------------------ issue 20: 2, 3, 7, 8
+    ("minimise/dtype-float16",
+     lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, dtype=np.float16), ValueError,
+     ["dtype float16 is too narrow", "float32 or float64"]),
+    ("minimise/budget-overflows-int32-counter",
+     lambda f: jf.minimise(counted, jf.PSO(num_particles=100_000, num_generations=30_000), (LO, HI), key=KEY),
+     ValueError, ["3,000,100,000 objective evaluations", "int32", "jax.enable_x64(True)"]),
+    ("minimise/key-three-words",
+     lambda f: jf.minimise(counted, PSO, (LO, HI), key=np.array([1, 2, 3], np.uint32)), ValueError,
+     ["raw uint32 array of shape (3,)", "a raw key has 2 words"]),
+    ("minimise/key-bool", lambda f: jf.minimise(counted, PSO, (LO, HI), key=True), ValueError,
+     ["key must be a JAX PRNG key (or an int seed)", "bool"]),
+    ("minimise_many/keys-int", lambda f: jf.minimise_many(counted, PSO, (LO, HI), keys=8), ValueError,
+     ["keys must be a batch of keys", "not an int"]),
+    ("minimise/bounds-two-pairs-ambiguous",
+     lambda f: jf.minimise(counted, PSO, [(-1.0, 1.0), (2.0, 3.0)], key=KEY), ValueError,
+     ["are ambiguous", "scipy.optimize.Bounds"]),
+    ("minimise/y0-population-for-nelder-mead",
+     lambda f: jf.minimise(counted, jf.NelderMead(), (LO, HI), key=KEY, y0=np.full((2, 3), 0.5)),
+     ValueError, ["this solver takes one start"]),
+    ("minimise/warm-start-not-a-solution",
+     lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, warm_start={"x": 1}), ValueError,
+     ["warm_start must be a Solution"]),
+    ("minimise/stall-zero",
+     lambda f: jf.minimise(counted, jf.PSO(stall_generations=0), (LO, HI), key=KEY), ValueError,
+     ["stall_generations must be >= 1"]),
     ("minimise/checkpoint-every-zero",
      lambda f: jf.minimise(counted, PSO, (LO, HI), key=KEY, checkpoint=f["folder"] / "c.npz", checkpoint_every=0),
      ValueError, ["checkpoint_every must be >= 1"]),
@@ -653,3 +678,68 @@ def test_command_line_rejects_bad_input_in_one_line(cli_runs, files, tmp_path, m
     written = [p for p in Path(cwd).rglob("*") if p.is_file()]
     assert not written, f"files written before the error: {written}"
     assert stdout == ""
+
+
+# ------------------------------------------------ issue 20: behaviour that must be right
+def test_checkpoint_for_another_objective_or_data_is_refused(tmp_path):
+    """Issue 20.1: 0.6.0 resumed a checkpoint written for another objective or other
+    args (reporting f = 0.019 where the objective gives 3.5)."""
+    path = tmp_path / "c.ckpt"
+    jf.minimise(lambda y, a: jnp.sum((y - a) ** 2), PSO, (LO, HI), args=jnp.full(3, 0.2), key=KEY,
+                checkpoint=path, checkpoint_every=1)
+    with pytest.raises(ValueError, match="the objective changed"):
+        jf.minimise(lambda y, a: jnp.sum(jnp.abs(y - a)) + 3.0, PSO, (LO, HI), args=jnp.full(3, 0.2),
+                    key=KEY, checkpoint=path)
+    with pytest.raises(ValueError, match="the args changed"):
+        jf.minimise(lambda y, a: jnp.sum((y - a) ** 2), PSO, (LO, HI), args=jnp.full(3, 0.7), key=KEY,
+                    checkpoint=path)
+
+
+def test_float16_bounds_and_data_search_correctly():
+    """Issue 20.2: float16 bounds search in float32 (in float16 the draws overflowed and
+    the swarm stalled), and an objective returning float16 is taken as it is."""
+    lo, hi = np.full(3, -2.0, np.float16), np.full(3, 2.0, np.float16)
+    data = jnp.asarray([0.25, -0.5, 1.0], jnp.float16)
+    sol = jf.minimise(lambda y, a: jnp.sum((y.astype(jnp.float16) - a) ** 2), jf.PSO(num_generations=60),
+                      (lo, hi), args=data, key=KEY)
+    assert sol.value.dtype == jnp.float32
+    np.testing.assert_allclose(sol.value, np.asarray(data, np.float32), atol=2e-2)
+
+
+def test_large_budgets_count_in_int64_under_x64():
+    """Issue 20.3: under 64-bit mode the counters are int64, so budgets of 2**31 and
+    more are accepted (checked on the counter, not by running them)."""
+    from jaxfric.optim._base import count_dtype
+    from jaxfric.optim.driver import _check_budget
+
+    big = jf.PSO(num_particles=100_000, num_generations=30_000)
+    with jax.enable_x64(True):
+        assert count_dtype() == jnp.int64
+        _check_budget(big, 3)  # no error
+        sol = jf.minimise(counted, jf.PSO(num_particles=4, num_generations=2), (LO, HI), key=KEY,
+                          dtype=np.float32)
+        assert sol.stats["num_evals"].dtype == jnp.int64 and sol.value.dtype == jnp.float32
+
+
+def test_scipy_style_bounds_are_read_as_scipy_reads_them():
+    """Issue 20.8: a sequence of (lo, hi) pairs, or scipy.optimize.Bounds, is one pair per
+    parameter; the result lies in the box the user meant."""
+    import scipy.optimize
+
+    pairs = [(-1.0, 1.0), (2.0, 3.0), (0.0, 5.0)]
+    for bounds in (pairs, scipy.optimize.Bounds([-1.0, 2.0, 0.0], [1.0, 3.0, 5.0])):
+        sol = jf.minimise(lambda y, a: jnp.sum(y**2), PSO, bounds, key=KEY)
+        v = np.asarray(sol.value)
+        assert np.all(v >= [-1.0, 2.0, 0.0]) and np.all(v <= [1.0, 3.0, 5.0])
+    # two pairs that are a valid box only one way are read that way
+    sol = jf.minimise(lambda y, a: jnp.sum(y**2), PSO, ([0.0, 0.0], [1.0, 1.0]), key=KEY)
+    assert np.all(np.asarray(sol.value) >= 0.0)
+
+
+def test_one_key_rule():
+    """Issue 20.7 / 20.12: int seeds (and numpy integer scalars such as np.uint32(3)) are
+    accepted everywhere a key is, as identify does: key=3 is jax.random.key(3)."""
+    a = jf.minimise(counted, PSO, (LO, HI), key=3)
+    b = jf.minimise(counted, PSO, (LO, HI), key=np.uint32(3))
+    c = jf.minimise(counted, PSO, (LO, HI), key=jax.random.key(3))
+    assert float(a.f) == float(b.f) == float(c.f)

@@ -7,6 +7,7 @@ import textwrap
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -17,6 +18,9 @@ BOUNDS = F.get("rastrigin").bounds(5, np.float32)
 OBJ = F.objective("rastrigin")
 SOLVERS = {
     "pso": jf.PSO(num_particles=9, num_generations=40),
+    "nm": jf.NelderMead(max_steps=60),
+    "chain_pso_nm": jf.chain(jf.PSO(num_particles=9, num_generations=12), jf.NelderMead(max_steps=40),
+                             num_starts=2),
     "hybrid": jf.mapso_nmds(lattice_size=3, num_generations=40, sl_generations=2, nm_max_steps=60),
 }
 
@@ -59,11 +63,9 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
     assert proc.returncode == 17, proc.stderr[-2000:]
     assert path.exists()
     assert not list(tmp_path.glob("*.tmp")), "a temporary file was left behind"
-    with np.load(path) as z:
-        import json
+    from jaxfric.optim.checkpoint import read_meta
 
-        meta = json.loads(bytes(z["__meta__"]).decode())
-    assert meta["generations_done"] == 21
+    assert read_meta(path)["steps_done"] == 21
     solver = SOLVERS["hybrid"]
     resumed = jf.minimise(OBJ, solver, BOUNDS, key=jax.random.key(11), checkpoint=path, checkpoint_every=7)
     full = jf.minimise(OBJ, solver, BOUNDS, key=jax.random.key(11))
@@ -78,8 +80,45 @@ def test_checkpoint_refuses_other_runs_and_corruption(tmp_path):
     path.write_bytes(path.read_bytes()[:100])
     with pytest.raises(ValueError, match="unreadable or corrupted"):
         jf.minimise(OBJ, SOLVERS["pso"], BOUNDS, key=jax.random.key(1), checkpoint=path)
-    with pytest.raises(ValueError, match="swarm solvers"):
-        jf.minimise(OBJ, jf.NelderMead(), BOUNDS, key=jax.random.key(1), checkpoint=tmp_path / "nm.npz")
     with pytest.raises(ValueError, match="checkpoint_every"):
         jf.minimise(OBJ, SOLVERS["pso"], BOUNDS, key=jax.random.key(1), checkpoint=tmp_path / "x.npz",
                     checkpoint_every=0)
+
+
+def _shifted(y, shift):
+    return jnp.sum((y - shift) ** 2)
+
+
+def _other(y, shift):
+    return jnp.sum(jnp.abs(y - shift))
+
+
+@pytest.mark.parametrize("change", ["objective", "args", "bounds", "solver", "dtype"])
+def test_resume_for_another_problem_is_refused(change, tmp_path):
+    """Issue 15 item 2 / issue 20 item 1: a checkpoint is refused, naming what differs,
+    for another objective, other args, other bounds, another solver or dtype."""
+    path = tmp_path / "c.ckpt"
+    lo, hi = np.full(3, -2.0, np.float32), np.full(3, 2.0, np.float32)
+    shift = jnp.array([0.1, 0.2, 0.3], jnp.float32)
+    pso = jf.PSO(num_particles=4, num_generations=6)
+    jf.minimise(_shifted, pso, (lo, hi), args=shift, key=jax.random.key(0), checkpoint=path,
+                checkpoint_every=2)
+    kw = dict(fn=_shifted, solver=pso, bounds=(lo, hi), args=shift, dtype=None)
+    kw.update({"objective": dict(fn=_other), "args": dict(args=shift + 1.0),
+               "bounds": dict(bounds=(lo, hi + 1.0)), "solver": dict(solver=jf.PSO(num_particles=4, num_generations=7)),
+               "dtype": dict(bounds=(lo.astype(np.float64), hi.astype(np.float64)))}[change])
+    with jax.enable_x64(change == "dtype"):
+        with pytest.raises(ValueError, match=f"different run: the {change} changed"):
+            jf.minimise(kw["fn"], kw["solver"], kw["bounds"], args=kw["args"], key=jax.random.key(0),
+                        checkpoint=path, dtype=kw["dtype"])
+
+
+def test_checkpoint_has_the_users_permissions_and_no_temporary_file(tmp_path):
+    old = os.umask(0o022)
+    try:
+        path = tmp_path / "p.ckpt"
+        jf.minimise(OBJ, SOLVERS["pso"], BOUNDS, key=jax.random.key(1), checkpoint=path, checkpoint_every=20)
+    finally:
+        os.umask(old)
+    assert (path.stat().st_mode & 0o777) == 0o644
+    assert not list(tmp_path.glob("*.tmp"))

@@ -1,4 +1,4 @@
-"""The swarms' counter-based random numbers (``jaxfric.optim._base.counter_uniform``).
+"""The swarms' counter-based random numbers (``jaxfric.optim.rng.counter_uniform``).
 
 Checked against scipy's distribution tests, not against stored values: uniform on
 [0, 1), no correlation between neighbouring counters, generations, streams or keys,
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from jaxfric.optim._base import counter_seed, counter_uniform
+from jaxfric.optim.rng import counter_seed, counter_uniform
 
 N = 200_000
 

@@ -1,16 +1,26 @@
-"""Derivative-free optimisers: PSO, MAPSO, Nelder–Mead and the MAPSO–NMDS hybrid."""
+"""Derivative-free optimisers: PSO, MAPSO, Nelder–Mead, two-stage chains (MAPSO–NMDS),
+one driver (``minimise``, ``minimise_many``) and the step protocol they share."""
 
-from ._base import RESULTS, AbstractSolver, History, Solution
+from ._base import RESULTS, AbstractIterativeSolver, AbstractSolver, History, Solution
+from .chain import AbstractChain, Chain, ChainState, chain
+from .driver import minimise, minimise_many
 from .hybrid import MAPSONMDS, mapso_nmds
 from .mapso import MAPSO
-from .minimise import minimise, minimise_many
 from .nelder_mead import NelderMead, NelderMeadState
+from .optx_adapter import OptxMinimiser, OptxState
 from .progress import ProgressHook, RecordingProgress, TqdmProgress
-from .pso import PSO, SwarmState
+from .pso import PSO
+from .swarm import AbstractSwarm, AskTellState, SwarmState
 
 __all__ = [
     "RESULTS",
+    "AbstractChain",
+    "AbstractIterativeSolver",
     "AbstractSolver",
+    "AbstractSwarm",
+    "AskTellState",
+    "Chain",
+    "ChainState",
     "History",
     "Solution",
     "MAPSO",
@@ -18,11 +28,14 @@ __all__ = [
     "mapso_nmds",
     "NelderMead",
     "NelderMeadState",
+    "OptxMinimiser",
+    "OptxState",
     "PSO",
     "ProgressHook",
     "RecordingProgress",
     "TqdmProgress",
     "SwarmState",
+    "chain",
     "minimise",
     "minimise_many",
 ]

@@ -9,7 +9,6 @@ fitness are mapped to ``+inf`` so they can never be reported as the best.
 from __future__ import annotations
 
 import abc
-import math
 from typing import Any, Callable
 
 import equinox as eqx
@@ -46,7 +45,7 @@ class History(eqx.Module):
     @classmethod
     def empty(cls, size: int, dtype) -> "History":
         return cls(
-            evals=jnp.zeros((size,), jnp.int32),
+            evals=jnp.zeros((size,), count_dtype()),
             f=jnp.full((size,), jnp.inf, dtype),
             length=jnp.array(0, jnp.int32),
             stride=jnp.array(1, jnp.int32),
@@ -57,7 +56,7 @@ class History(eqx.Module):
     def from_arrays(cls, evals, f) -> "History":
         n = evals.shape[0]
         return cls(
-            evals=evals.astype(jnp.int32),
+            evals=evals.astype(count_dtype()),
             f=f,
             length=jnp.array(n, jnp.int32),
             stride=jnp.array(1, jnp.int32),
@@ -87,6 +86,17 @@ class History(eqx.Module):
         length = jnp.where(full, (size + 1) // 2, length)
         stride = jnp.where(full, self.stride * 2, self.stride)
         return History(evals, f, length, stride, self.counter + 1)
+
+    def close(self, num_evals, f_best) -> "History":
+        """Record the run's last ``(num_evals, f_best)`` whatever the stride, so the
+        history always ends at the reported result (no-op if it is already there)."""
+        last = jnp.maximum(self.length - 1, 0)
+        missing = (self.length == 0) | (self.evals[last] != num_evals) | (self.f[last] != f_best)
+        forced = History(self.evals, self.f, self.length, jnp.ones_like(self.stride),
+                         jnp.zeros_like(self.counter)).record(num_evals, f_best)
+        forced = eqx.tree_at(lambda h: (h.stride, h.counter), forced,
+                             (jnp.maximum(forced.stride, self.stride), self.counter + 1))
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(missing, a, b), forced, self)
 
     def filled(self) -> "History":
         """Pad entries past ``length`` with the last valid entry."""
@@ -130,13 +140,33 @@ class Solution(eqx.Module):
         stats: ``{"num_steps": generations or NM steps, "num_evals": exact number
             of objective evaluations}``.
         history: :class:`History` of best ``f`` against evaluations.
+        state: the solver's final state (``None`` for solutions built elsewhere):
+            pass the solution back as ``minimise(..., warm_start=solution)`` to
+            continue the run with a larger budget.
     """
+
+    def __repr__(self):  # issue 20 item 12: show what was found, not array shapes
+        try:
+            f = np.asarray(self.f)
+            value = jax.tree_util.tree_map(np.asarray, self.value)
+            evals = np.asarray(self.stats.get("num_evals"))
+            code = np.asarray(self.result._value)
+            names = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+            res = names.get(int(code), str(code)) if code.ndim == 0 else code
+            with np.printoptions(precision=6, threshold=20, edgeitems=3):
+                return (f"Solution(value={value!r}, f={f!r}, num_evals={evals!r}, "
+                        f"result={res})")
+        except Exception:  # under tracing: fall back to equinox's structural repr
+            return eqx.Module.__repr__(self)
+
+    __str__ = __repr__
 
     value: Any
     f: Float[Array, ""]
     result: RESULTS
     stats: dict[str, Array]
     history: History
+    state: Any = None
 
     @property
     def success(self):
@@ -179,64 +209,7 @@ def linear_inertia(i, num, w_max, w_min):
     return w_max - (w_max - w_min) * i / jnp.maximum(num, 1)
 
 
-_GOLDEN = 0x9E3779B9  # 2^32 / golden ratio: the Weyl increment of the counter
-
-
-def _fmix32(h):
-    """MurmurHash3's 32-bit finaliser: a bijection with full avalanche."""
-    h = h ^ (h >> 16)
-    h = h * jnp.uint32(0x85EBCA6B)
-    h = h ^ (h >> 13)
-    h = h * jnp.uint32(0xC2B2AE35)
-    return h ^ (h >> 16)
-
-
-def counter_seed(key, *words):
-    """Two 32-bit seed words from a PRNG key and integer ``words`` (generation, stream).
-
-    No random-number generator runs: the key's raw words (themselves threefry output)
-    and the words are folded through :func:`_fmix32`. Different ``words`` give
-    unrelated seeds, so a swarm draws generation ``i``'s numbers from
-    ``counter_seed(key, i, stream)`` without splitting or advancing the key; a run
-    resumed at generation ``i`` therefore draws what the uninterrupted run drew.
-    """
-    a = jnp.uint32(0x243F6A88)
-    b = jnp.uint32(0x85A308D3)
-    data = jax.random.key_data(key).reshape(-1).astype(jnp.uint32)
-    for w in [data[j] for j in range(data.shape[0])] + [jnp.asarray(w).astype(jnp.uint32) for w in words]:
-        a = _fmix32(a ^ w)
-        b = _fmix32(b + w * jnp.uint32(_GOLDEN))
-    return a, b
-
-
-def counter_uniform(seed, shape, dtype):
-    """``U[0, 1)`` numbers from a counter-based hash keyed by ``seed`` (:func:`counter_seed`).
-
-    Element ``c`` is ``fmix32(fmix32(c·φ ⊕ a) + b)`` (``φ`` the golden-ratio
-    increment), scaled to 24 bits for float32 and combined from two such words to
-    53 bits for float64. Unlike ``jax.random`` (threefry: 20 rounds per word, on CPU
-    a loop of its own inside the generation loop) these are a few integer operations
-    that XLA fuses into the arithmetic that uses them. Swarm steps on CPU spent most
-    of their time in threefry (PEERS.md §b). Because XLA fuses the hash into *every*
-    consumer, recomputing it in each, swarms draw generation ``i + 1``'s numbers
-    while running generation ``i`` and carry them through the loop
-    (:meth:`~jaxfric.optim.pso.AbstractSwarm.advance`), which stores them once. The
-    hash passes the moment, bucket and correlation checks in ``tests/test_rng.py``;
-    it is not meant for cryptography.
-    """
-    dtype = jnp.dtype(dtype)
-    a, b = seed
-    n = math.prod(shape)
-    wide = dtype.itemsize > 4
-    c = jnp.arange(n * (2 if wide else 1), dtype=jnp.uint32)
-    h = _fmix32(_fmix32((c * jnp.uint32(_GOLDEN)) ^ a) + b)
-    if wide:
-        hi = (h[0::2] >> 5).astype(dtype)  # 27 bits
-        lo = (h[1::2] >> 6).astype(dtype)  # 26 bits
-        u = (hi * 67108864.0 + lo) * (1.0 / 9007199254740992.0)
-    else:
-        u = (h >> 8).astype(dtype) * (1.0 / 16777216.0)
-    return u.reshape(shape)
+from .rng import counter_seed, counter_uniform  # noqa: E402,F401  (moved; old import path)
 
 
 def uniform_in_box(key, shape, lower, upper):
@@ -254,18 +227,22 @@ def result_from_f(f_best):
 
 
 # -------------------------------------------------------------------- solver contract
+def count_dtype():
+    """Integer dtype of evaluation counters: int64 when JAX runs with 64-bit types
+    (``jax.enable_x64``), else int32 (the driver then refuses budgets of 2³¹ or more
+    before running, instead of letting a count wrap negative)."""
+    return jax.dtypes.canonicalize_dtype(jnp.int64)
+
+
 class AbstractSolver(eqx.Module):
-    """What :func:`jaxfric.minimise` needs from a solver.
+    """Nominal base of every jaxfric solver: hyperparameter checks and progress totals.
 
-    ``run`` receives an objective on a flat parameter vector, the box bounds as
-    1-D arrays of one floating dtype, a PRNG key, an optional start ``x0`` and an
-    optional :class:`~jaxfric.optim.progress.ProgressHook`; it returns a
-    :class:`Solution` whose ``value`` is the flat vector. It must be pure and
-    traceable: ``minimise`` jits it, and ``minimise_many`` vmaps it over keys.
+    A solver runs under :func:`jaxfric.minimise` either through jaxfric's step
+    protocol (:class:`AbstractIterativeSolver`) or, for an ``optx.AbstractMinimiser``
+    such as :class:`~jaxfric.NelderMead`, through optimistix's own ``init / step /
+    terminate / postprocess`` (the driver adapts it, see
+    :mod:`jaxfric.optim.optx_adapter`).
     """
-
-    @abc.abstractmethod
-    def run(self, fn: Callable, lower, upper, args, key, x0=None, progress=None) -> Solution: ...
 
     def progress_totals(self) -> tuple[int | None, int | None]:
         """(global generations, local step cap) for a progress display."""
@@ -273,6 +250,88 @@ class AbstractSolver(eqx.Module):
 
     def check(self) -> None:
         """Raise ``ValueError`` on invalid hyperparameters (before any tracing)."""
+
+    def steps_for(self, n: int) -> int | None:
+        """Most steps of a run on ``n`` parameters (``None``: not known)."""
+        return None
+
+
+class AbstractIterativeSolver(AbstractSolver):
+    """jaxfric's step protocol (optimistix's ``AbstractIterativeSolver`` shape, on a box).
+
+    Every method is pure and traceable; the objective ``fn(x, args) -> scalar`` takes
+    the flat parameter vector ``x`` (the driver flattens pytree bounds), ``lower`` and
+    ``upper`` are 1-D arrays of one floating dtype, and ``State`` is a pytree of arrays
+    (it is what :func:`jaxfric.minimise` checkpoints). :func:`jaxfric.minimise` runs::
+
+        state = solver.init(fn, lower, upper, args, key, x0)
+        while not solver.terminate(fn, lower, upper, args, state)[0]:
+            state = solver.step(fn, lower, upper, args, state)
+        done, result = solver.terminate(fn, lower, upper, args, state)
+        solution = solver.postprocess(fn, lower, upper, args, state, result)
+
+    and records ``solver.best(state)[1]`` against ``solver.num_evals(state)`` after
+    every step (the :class:`History`), reports progress from ``solver.progress(state)``
+    and checkpoints ``state``.
+    """
+
+    @abc.abstractmethod
+    def init(self, fn: Callable, lower, upper, args, key, x0=None):
+        """The evaluated first state (``x0``: an optional start inside the box)."""
+
+    @abc.abstractmethod
+    def step(self, fn: Callable, lower, upper, args, state):
+        """One iteration (a generation, a simplex step, ...)."""
+
+    @abc.abstractmethod
+    def terminate(self, fn: Callable, lower, upper, args, state):
+        """``(done, result)``: a boolean scalar and an ``optimistix.RESULTS``."""
+
+    @abc.abstractmethod
+    def postprocess(self, fn: Callable, lower, upper, args, state, result) -> Solution:
+        """The :class:`Solution` (flat ``value``; the driver adds the history)."""
+
+    @abc.abstractmethod
+    def best(self, state) -> tuple[Array, Array]:
+        """``(x, f)``: the best point so far and its (NaN-safe) value."""
+
+    @abc.abstractmethod
+    def num_evals(self, state) -> Array:
+        """Objective evaluations spent so far."""
+
+    def max_steps(self, n: int) -> int:
+        """Most ``step`` calls a run on ``n`` parameters can take (the driver's cap)."""
+        steps = self.steps_for(n)
+        return int(steps) if steps is not None else 2**31 - 1
+
+    def max_evaluations(self, n: int) -> int | None:
+        """Most objective evaluations of a run (``None`` if unknown): checked by the
+        driver against the evaluation counter's range before running."""
+        return None
+
+    def num_stages(self) -> int:
+        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chain.chain`
+        has 2). The driver runs each in a loop of its own, so batched runs never pay
+        for one stage's step while in another."""
+        return 1
+
+    def stage(self, state) -> Array:
+        """The stage ``state`` is in (``0 .. num_stages() − 1``)."""
+        return jnp.array(0, jnp.int32)
+
+    def step_stage(self, fn: Callable, lower, upper, args, state, stage: int):
+        """:meth:`step`, for a ``state`` known to be in stage ``stage`` (static)."""
+        return self.step(fn, lower, upper, args, state)
+
+    def continued(self, state):
+        """``state`` of a finished run, ready to go on under this solver's (larger)
+        budget (``minimise(..., warm_start=solution)``)."""
+        return state
+
+    def progress(self, state) -> tuple[Array, Array]:
+        """``(phase, step)`` for a progress display: phase 0 a global (swarm) stage,
+        phase 1 a local (Nelder–Mead) stage; ``step`` counts within the phase."""
+        return jnp.array(0, jnp.int32), jnp.array(0, jnp.int32)
 
 
 def check_positive_int(name: str, value, minimum: int = 1) -> None:

@@ -1,72 +1,156 @@
-"""Checkpoint and resume for long swarm runs (PSO, MAPSO, MAPSO–NMDS).
+"""Checkpoint and resume for any solver, owned by the driver.
 
-The global phase advances in chunks of ``every`` generations, each chunk one
-jitted call; after each chunk the swarm state and the history so far are written
-to one ``.npz`` file atomically (a temporary file, then ``os.replace``), so an
-interrupt never leaves a half-written checkpoint. Calling
-:func:`jaxfric.minimise` again with the same ``checkpoint`` path resumes from the
-last completed chunk and returns exactly what the uninterrupted run returns for
-the same key: a chunked run performs the same operations in the same order.
+The run advances in chunks of ``every`` steps, each chunk one call of the driver's
+compiled ``_run``; after each chunk the loop's carry (solver state, history, steps) is
+written with equinox's serialisation (``eqx.tree_serialise_leaves``) after a one-line
+JSON header, to a temporary file that then replaces the checkpoint (``os.replace``), so
+an interrupt never leaves a half-written file. Files get the user's usual permissions
+(``0o666 & ~umask``). Calling :func:`jaxfric.minimise` again with the same path resumes
+from the last completed chunk and returns exactly what the uninterrupted run returns:
+a chunked run performs the same steps, in the same order, with the same compiled loop.
 
-A checkpoint records what it belongs to (solver, bounds, key, dtype); resuming it
-with anything else raises ``ValueError`` instead of silently mixing runs.
+The header records a fingerprint of the problem, checked on resume, each part with its
+own message (issue 15 item 2, issue 20 item 1): the objective (qualified name and a
+hash of its code, constants and closure values), the bounds, the ``args`` (tree
+structure and a hash of every value), the solver (its repr: every hyperparameter), the
+key and the search dtype.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
 import tempfile
+import types
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 import numpy as np
 
-from .. import _xla
-from ._base import Solution
-from .hybrid import MAPSONMDS
-from .pso import AbstractSwarm, SwarmState
-
 FORMAT = "jaxfric-checkpoint"
-VERSION = 2  # 2: swarms draw counter-based numbers per generation (0.2.0)
+VERSION = 3  # 3: the driver's carry, equinox serialisation (0.7.0)
+MAGIC = b"JAXFRIC-CHECKPOINT\n"
 
 
-def _swarm_of(solver):
-    if isinstance(solver, AbstractSwarm):
-        return solver
-    if isinstance(solver, MAPSONMDS):
-        return solver.mapso
-    raise ValueError(
-        "checkpoint works with swarm solvers (PSO, MAPSO, MAPSONMDS), "
-        f"not {type(solver).__name__}"
-    )
+# ------------------------------------------------------------------ fingerprint
+def _hash_value(h, x, depth=0):
+    """Feed ``x`` into ``h``: arrays by dtype, shape and bytes; code by its bytecode,
+    constants and names; containers recursively; anything else by type and repr."""
+    if depth > 6:
+        h.update(type(x).__qualname__.encode())
+        return
+    if isinstance(x, types.CodeType):
+        h.update(x.co_code)
+        h.update(repr(x.co_names).encode())
+        for c in x.co_consts:
+            _hash_value(h, c, depth + 1)
+    elif isinstance(x, (types.FunctionType, types.MethodType)):
+        f = getattr(x, "__func__", x)
+        h.update(f"{f.__module__}.{f.__qualname__}".encode())
+        _hash_value(h, f.__code__, depth + 1)
+        for cell in f.__closure__ or ():
+            try:
+                _hash_value(h, cell.cell_contents, depth + 1)
+            except ValueError:  # an empty cell
+                pass
+        _hash_value(h, f.__defaults__, depth + 1)
+    elif isinstance(x, functools.partial):
+        _hash_value(h, (x.func, x.args, x.keywords), depth + 1)
+    elif isinstance(x, (tuple, list)):
+        h.update(f"{type(x).__name__}{len(x)}".encode())
+        for v in x:
+            _hash_value(h, v, depth + 1)
+    elif isinstance(x, dict):
+        for k in sorted(x, key=repr):
+            h.update(repr(k).encode())
+            _hash_value(h, x[k], depth + 1)
+    elif isinstance(x, eqx.Module):
+        leaves, treedef = jtu.tree_flatten(x)
+        h.update(str(treedef).encode())
+        for v in leaves:
+            _hash_value(h, v, depth + 1)
+        call = getattr(type(x), "__call__", None)
+        if isinstance(call, types.FunctionType):
+            _hash_value(h, call, depth + 1)
+    elif hasattr(x, "shape") and hasattr(x, "dtype"):
+        if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+            x = jax.random.key_data(x)
+        a = np.asarray(x)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.tobytes())
+    elif callable(x) and not isinstance(x, type):
+        h.update(type(x).__qualname__.encode())
+        _hash_value(h, getattr(type(x), "__call__", None), depth + 1)
+        _hash_value(h, getattr(x, "__dict__", {}), depth + 1)
+    else:
+        h.update(f"{type(x).__qualname__}:{x!r}".encode())
 
 
-def _fingerprint(solver, lower, upper, key) -> str:
+def _digest(x) -> str:
     h = hashlib.sha256()
-    h.update(repr(solver).encode())
-    h.update(np.asarray(lower).tobytes() + np.asarray(upper).tobytes())
-    h.update(str(np.asarray(lower).dtype).encode())
-    h.update(np.asarray(jax.random.key_data(key)).tobytes())
+    _hash_value(h, x)
     return h.hexdigest()
 
 
-def _init(swarm, flat, lower, upper, args, key, x0):
-    return swarm.init_state(flat, lower, upper, args, key, x0)
+def fingerprint(flat, solver, lower, upper, args, key) -> dict:
+    """What a checkpoint belongs to, part by part (hex digests and readable names)."""
+    fn = flat.fn
+    name = getattr(fn, "__qualname__", type(fn).__qualname__)
+    return {
+        "objective": _digest(fn),
+        "objective_name": f"{getattr(fn, '__module__', '?')}.{name}",
+        "parameter structure": _digest((str(flat.treedef), flat.shapes)),
+        "bounds": _digest((np.asarray(lower), np.asarray(upper))),
+        "args": _digest((str(jtu.tree_structure(args)), jtu.tree_leaves(args))),
+        "solver": _digest(repr(solver)),
+        "key": _digest(key),
+        "dtype": str(np.asarray(lower).dtype),
+    }
 
 
-def _advance(swarm, flat, lower, upper, args, state, start, length, hook):
-    return swarm.advance(state, flat, lower, upper, args, start, length, hook)
+def _refuse(path, meta_fp: dict, fp: dict):
+    for part in ("dtype", "objective", "args", "bounds", "parameter structure", "solver",
+                 "key"):
+        if meta_fp.get(part) != fp[part]:
+            extra = ""
+            if part == "objective":
+                extra = (f" (written for {meta_fp.get('objective_name')}, now "
+                         f"{fp['objective_name']}; an edited function counts as another)")
+            if part == "dtype":
+                extra = f" ({meta_fp.get('dtype')} vs {fp['dtype']})"
+            raise ValueError(
+                f"checkpoint {path} belongs to a different run: the {part} changed{extra}; "
+                "delete it or choose another path"
+            )
 
 
-def _finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, hook):
-    sol = swarm.finish(state, evals, f_best)
-    if isinstance(solver, MAPSONMDS):
-        k_local = jax.random.split(key)[1]
-        sol = solver.local_phase(flat, lower, upper, args, k_local, sol, state, hook)
-    return sol
+# ---------------------------------------------------------------- serialisation
+def _is_key(x) -> bool:
+    return hasattr(x, "dtype") and jnp.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def _raw(tree):
+    """Typed PRNG keys as their raw words (what a file can hold)."""
+    return jtu.tree_map(lambda x: jax.random.key_data(x) if _is_key(x) else x, tree)
+
+
+def _raw_like(tree):
+    def one(x):
+        if _is_key(x):
+            return jax.eval_shape(jax.random.key_data, x)
+        return jax.ShapeDtypeStruct(x.shape, x.dtype) if hasattr(x, "shape") else x
+
+    return jtu.tree_map(one, tree)
+
+
+def _typed(raw, like, impl):
+    return jtu.tree_map(
+        lambda r, x: jax.random.wrap_key_data(r, impl=impl) if _is_key(x) else r, raw, like)
 
 
 def _umask() -> int:
@@ -75,21 +159,15 @@ def _umask() -> int:
     return mask
 
 
-def _save(path: Path, fingerprint: str, done: int, state: SwarmState, evals, f_best, impl):
-    leaves = {
-        "x": state.x, "v": state.v, "f": state.f, "pbest": state.pbest,
-        "pbest_f": state.pbest_f, "gbest": state.gbest, "gbest_f": state.gbest_f,
-        "num_evals": state.num_evals, "key": jax.random.key_data(state.key),
-        "hist_evals": evals, "hist_f": f_best,
-    }
-    meta = dict(format=FORMAT, version=VERSION, fingerprint=fingerprint,
-                generations_done=int(done), key_impl=impl)
+def save(path: Path, meta: dict, carry) -> None:
+    """Write ``carry`` after a JSON header, atomically, with the user's permissions."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, __meta__=np.frombuffer(json.dumps(meta).encode(), np.uint8),
-                     **{k: np.asarray(v) for k, v in leaves.items()})
+            fh.write(MAGIC)
+            fh.write(json.dumps(meta).encode() + b"\n")
+            eqx.tree_serialise_leaves(fh, _raw(carry))
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
         os.replace(tmp, path)
     except BaseException:
@@ -98,12 +176,24 @@ def _save(path: Path, fingerprint: str, done: int, state: SwarmState, evals, f_b
         raise
 
 
-def _load(path: Path, fingerprint: str, dtype):
+def read_meta(path) -> dict:
+    """The header of a checkpoint (format, version, fingerprint, steps done)."""
+    with open(path, "rb") as fh:
+        if fh.readline() != MAGIC:
+            raise ValueError(f"{path} is not a jaxfric checkpoint (unreadable or corrupted)")
+        return json.loads(fh.readline().decode())
+
+
+def load(path: Path, fp: dict, like):
+    """The carry stored in ``path``, after checking it belongs to this problem."""
     try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(bytes(z["__meta__"]).decode())
-            data = {k: z[k] for k in z.files if k != "__meta__"}
-    except Exception as e:
+        meta = read_meta(path)
+    except ValueError as e:
+        if "not a jaxfric checkpoint" in str(e):
+            raise ValueError(f"checkpoint {path} is unreadable or corrupted: "
+                             "not a jaxfric checkpoint") from None
+        raise ValueError(f"checkpoint {path} is unreadable or corrupted: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
         raise ValueError(f"checkpoint {path} is unreadable or corrupted: {e}") from None
     if meta.get("format") != FORMAT:
         raise ValueError(f"{path} is not a jaxfric checkpoint")
@@ -112,50 +202,39 @@ def _load(path: Path, fingerprint: str, dtype):
             f"checkpoint {path} has format version {meta.get('version')}, "
             f"this jaxfric reads version {VERSION}"
         )
-    if meta.get("fingerprint") != fingerprint:
-        raise ValueError(
-            f"checkpoint {path} belongs to a different run (solver, bounds, key or dtype "
-            "differ); delete it or choose another path"
-        )
-    key = jax.random.wrap_key_data(jnp.asarray(data["key"]), impl=meta["key_impl"])
-    state = SwarmState(
-        x=jnp.asarray(data["x"], dtype), v=jnp.asarray(data["v"], dtype),
-        f=jnp.asarray(data["f"], dtype), pbest=jnp.asarray(data["pbest"], dtype),
-        pbest_f=jnp.asarray(data["pbest_f"], dtype), gbest=jnp.asarray(data["gbest"], dtype),
-        gbest_f=jnp.asarray(data["gbest_f"], dtype),
-        num_evals=jnp.asarray(data["num_evals"], jnp.int32), key=key,
-    )
-    return int(meta["generations_done"]), state, jnp.asarray(data["hist_evals"]), jnp.asarray(
-        data["hist_f"], dtype
-    )
+    _refuse(path, meta.get("fingerprint", {}), fp)
+    try:
+        with open(path, "rb") as fh:
+            fh.readline()
+            fh.readline()
+            raw = eqx.tree_deserialise_leaves(fh, _raw_like(like))
+    except Exception as e:
+        raise ValueError(f"checkpoint {path} is unreadable or corrupted: {e}") from None
+    return meta, _typed(raw, like, meta["key_impl"])
 
 
-def run_checkpointed(solver, flat, lower, upper, args, key, x0, hook, path, every: int,
-                     options=()) -> Solution:
-    """Drive ``solver`` in chunks of ``every`` generations, checkpointing to ``path``."""
-    swarm = _swarm_of(solver)
-    if isinstance(solver, MAPSONMDS):
-        k_global = jax.random.split(key)[0]
-    else:
-        k_global = key
-    path = Path(path)
-    fp = _fingerprint(solver, lower, upper, key)
-    impl = str(jax.random.key_impl(key))
+def run_checkpointed(run, proto, flat, lower, upper, args, key, x0, hook, warm,
+                     path: Path, every: int):
+    """Drive ``run`` (the driver's compiled ``_run``) in chunks of ``every`` steps,
+    checkpointing the carry to ``path`` after each."""
+    fp = fingerprint(flat, proto, lower, upper, args, key)
+    meta = dict(format=FORMAT, version=VERSION, fingerprint=fp,
+                key_impl=str(jax.random.key_impl(key)) if _is_key(jnp.asarray(key)) else "threefry2x32")
+    carry, done = None, 0
     if path.exists():
-        done, state, evals, f_best = _load(path, fp, lower.dtype)
-    else:
-        state = _xla.filter_jit(_init, options)(swarm, flat, lower, upper, args, k_global, x0)
-        done, evals, f_best = 0, state.num_evals[None], state.gbest_f[None]
-        _save(path, fp, done, state, evals, f_best, impl)
-    total = swarm.num_generations
-    while done < total:
-        length = min(every, total - done)
-        state, (ev, fb) = _xla.filter_jit(_advance, options)(
-            swarm, flat, lower, upper, args, state, jnp.asarray(done, jnp.int32), length, hook
-        )
-        evals = jnp.concatenate([evals, ev])
-        f_best = jnp.concatenate([f_best, fb])
-        done += length
-        _save(path, fp, done, state, evals, f_best, impl)
-    finish = _xla.filter_jit(_finish, options)
-    return finish(solver, swarm, flat, lower, upper, args, key, state, evals, f_best, hook)
+        from .driver import _begin
+
+        like = eqx.filter_eval_shape(_begin, proto, flat, lower, upper, args, key, x0, warm)
+        stored, carry = load(path, fp, like)
+        done = int(stored["steps_done"])
+        carry = eqx.tree_at(lambda c: c.steps, carry, jnp.asarray(done, jnp.int32))
+    while True:
+        carry, sol = run(proto, flat, lower, upper, args, key, x0, hook, carry, warm,
+                         jnp.asarray(done + every, jnp.int32))
+        new_done = int(carry.steps)
+        finished = new_done < done + every
+        if new_done != done or not path.exists():
+            save(path, {**meta, "steps_done": new_done}, carry)
+        if finished:
+            return sol
+        done = new_done

@@ -19,15 +19,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import _xla
-from ._base import (
-    check_positive_int,
-    check_range,
-    counter_seed,
-    counter_uniform,
-    linear_inertia,
-)
-from .pso import AbstractSwarm, SwarmState, init_swarm, pso_move, update_bests
+from ._base import check_positive_int, check_range, count_dtype, linear_inertia
+from .pso import pso_move
+from .rng import counter_seed, counter_uniform
+from .swarm import AbstractSwarm, SwarmState, drive, update_bests
 
 
 def lattice_neighbours(values, side: int):
@@ -133,6 +128,7 @@ class MAPSO(AbstractSwarm):
         evaluate_replaced: evaluate a replaced agent before its PSO move so its
             personal best can improve (costs up to ``Lsize²`` more evaluations per
             generation; by default the PSO move follows at once and is evaluated).
+        stall_generations, function_tolerance: optional early stop, as in :class:`PSO`.
 
     Evaluations per generation: ``Lsize² + (sLsize² − 1) + sLsize²·sGen`` (123 with
     the defaults), plus ``Lsize²`` if ``evaluate_replaced``; see :meth:`evaluations`.
@@ -155,10 +151,12 @@ class MAPSO(AbstractSwarm):
     reset_velocity_on_replace: bool = False
     evaluate_replaced: bool = False
     zero_velocity_at_bounds: bool = True
+    stall_generations: int | None = None
+    function_tolerance: float = 1e-6
 
     def check(self):
         check_positive_int("lattice_size", self.lattice_size)
-        check_positive_int("num_generations", self.num_generations)
+        self.check_swarm()
         check_positive_int("sl_size", self.sl_size)
         check_positive_int("sl_generations", self.sl_generations, minimum=0)
         check_range("po", self.po, 0.0, 1.0)
@@ -190,9 +188,9 @@ class MAPSO(AbstractSwarm):
         """U(0, 1) numbers one agent needs per lattice generation (competition + PSO)."""
         return 3 * dim + 3
 
-    def _lattice_generation(self, state: SwarmState, u, f_batch, side, lower, upper, w,
-                            social_mode):
-        """Competition then PSO move on one lattice (main lattice or self-learning).
+    def _lattice_generation(self, state: SwarmState, u, side, lower, upper, w, social_mode):
+        """Competition then PSO move on one lattice (main lattice or self-learning), as
+        a generator of evaluation batches (see :mod:`jaxfric.optim.swarm`).
 
         ``u`` (agents × :meth:`random_width`) holds all of this generation's random
         numbers, drawn by the caller in one call.
@@ -211,7 +209,8 @@ class MAPSO(AbstractSwarm):
         evals = state.num_evals
         state = eqx.tree_at(lambda s: s.v, state, v)
         if self.evaluate_replaced:
-            f_rep = jnp.where(lost, f_batch(x), state.f)
+            f_x = yield x
+            f_rep = jnp.where(lost, f_x, state.f)
             state = update_bests(state, x, f_rep)
             evals = evals + num
         if social_mode == "lbest":
@@ -227,47 +226,46 @@ class MAPSO(AbstractSwarm):
             r, x, state.v, state.pbest, social, w, self.c1, self.c2, vmax,
             lower, upper, self.zero_velocity_at_bounds,
         )
-        f = f_batch(x)
+        f = yield x
         state = eqx.tree_at(lambda s: (s.v, s.num_evals), state, (v, evals + num))
         return update_bests(state, x, f)
 
-    def _self_learning(self, u0, u_inner, g, g_f, f_batch, lower, upper):
-        """Self-learning around gBest (§3.4): returns (best position, fitness, evals)."""
+    def _self_learning(self, u0, u_inner, g, g_f, lower, upper, f_batch=None):
+        """Self-learning around gBest (§3.4), a generator: returns (best position,
+        fitness, evaluations). With a JAX objective (``f_batch``) the ``sGen`` inner
+        generations are one ``lax.scan``; driven by ``ask``/``tell`` they are a
+        Python loop over the same generation."""
         side = self.sl_size
         s = side * side
         if self.sl_mode == "multiplicative":
             cand = g * (1.0 - self.sl_radius + 2.0 * self.sl_radius * u0)
         else:
             cand = g + (2.0 * u0 - 1.0) * self.sl_radius * (upper - lower)
-        # sL_11 = g; the others perturbed and clipped (concatenate, not .at[0].set:
-        # a scatter would keep the loop out of one CPU kernel, see _xla.single_kernel)
+        # sL_11 = g; the others perturbed and clipped
         cand = jnp.concatenate([g[None], jnp.clip(cand[1:], lower, upper)])
+        f_rest = yield cand[1:]
+        f = jnp.concatenate([g_f[None], f_rest])
+        i = jnp.argmin(f)
+        inner = SwarmState(
+            x=cand, v=jnp.zeros_like(cand), f=f, pbest=cand, pbest_f=f,
+            gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, count_dtype()), key=None,
+        )
 
-        def run(cand, g_f, u_inner):
-            f = jnp.concatenate([g_f[None], f_batch(cand[1:])])
-            i = jnp.argmin(f)
-            inner = SwarmState(
-                x=cand, v=jnp.zeros_like(cand), f=f, pbest=cand, pbest_f=f,
-                gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, jnp.int32), key=None,
-            )
+        def generation(st, j, uj):
+            w = linear_inertia(j, self.sl_generations - 1, self.w_max, self.w_min)
+            return self._lattice_generation(st, uj, side, lower, upper, w, "gbest")
 
+        if f_batch is not None:
             def body(st, xs):
-                j, uj = xs
-                w = linear_inertia(j, self.sl_generations - 1, self.w_max, self.w_min)
-                st = self._lattice_generation(st, uj, f_batch, side, lower, upper, w, "gbest")
-                return st, None
+                return drive(generation(st, *xs), f_batch), None
 
             inner, _ = jax.lax.scan(body, inner, (jnp.arange(self.sl_generations), u_inner))
-            return inner.gbest, inner.gbest_f, inner.num_evals
-
-        # Ten tiny sequential generations: on CPU one kernel beats ~24 per generation.
-        return _xla.single_kernel(run, cand, g_f, u_inner)
+        else:
+            for j in range(self.sl_generations):
+                inner = yield from generation(inner, jnp.asarray(j, jnp.int32), u_inner[j])
+        return inner.gbest, inner.gbest_f, inner.num_evals
 
     # ------------------------------------------------------------- solver protocol
-    def init(self, f_batch, lower, upper, key, x0=None):
-        vmax = self.vmax_fraction * (upper - lower)
-        return init_swarm(key, f_batch, self.num_agents, lower, upper, vmax, x0)
-
     def draw(self, key, i, x):
         """Generation ``i``'s numbers: the main lattice's (agents × :meth:`random_width`),
         self-learning's perturbation ``u0`` (sLsize² × D) and its inner lattice's
@@ -282,24 +280,24 @@ class MAPSO(AbstractSwarm):
         inner = counter_uniform(counter_seed(key, i, 2), (self.sl_generations, s, width), dt)
         return main, u0, inner
 
-    def step(self, state, f_batch, lower, upper, i, u):
-        u, u0, u_inner = u
-        w = linear_inertia(i, self.num_generations - 1, self.w_max, self.w_min)
-        state = self._lattice_generation(
-            state, u, f_batch, self.lattice_size, lower, upper, w, self.social
+    def generation(self, state, lower, upper, f_batch=None):
+        u, u0, u_inner = state.u
+        w = linear_inertia(state.generation, self.num_generations - 1, self.w_max, self.w_min)
+        state = yield from self._lattice_generation(
+            state, u, self.lattice_size, lower, upper, w, self.social
         )
         if self.sl_size * self.sl_size <= 1:
             return state
-        g, g_f, evals = self._self_learning(
-            u0, u_inner, state.gbest, state.gbest_f, f_batch, lower, upper
+        g, g_f, evals = yield from self._self_learning(
+            u0, u_inner, state.gbest, state.gbest_f, lower, upper, f_batch
         )
         better = g_f < state.gbest_f
         # The agent whose memory is gBest takes the self-learned agent's place.
         a = jnp.argmin(state.pbest_f)
 
         def put(arr, val):
-            # arr[a] = val if better: an in-place dynamic_update_slice (a scatter would
-            # keep the loop out of one CPU kernel, and a select of two arrays copies one)
+            # arr[a] = val if better, as an in-place dynamic_update_slice (a select of
+            # two arrays would copy one)
             keep = jax.lax.dynamic_index_in_dim(arr, a, 0, keepdims=False)
             return jax.lax.dynamic_update_index_in_dim(arr, jnp.where(better, val, keep), a, 0)
 
@@ -316,3 +314,4 @@ class MAPSO(AbstractSwarm):
                 state.num_evals + evals,
             ),
         )
+

@@ -41,15 +41,20 @@ class ProgressHook(eqx.Module):
     every_generation: int = eqx.field(static=True, default=1)
     every_step: int = eqx.field(static=True, default=50)
 
-    def emit(self, phase: int, step, evals, f_best):
-        """Report ``(step, evals, f_best)`` when ``step`` is a multiple of the period."""
-        every = self.every_generation if phase == 0 else self.every_step
+    def emit(self, phase, step, evals, f_best, force: bool = False):
+        """Report ``(step, evals, f_best)`` when ``step`` is a multiple of the phase's
+        period, or always with ``force`` (a stage's last step, so displays end there)."""
+        phase = jnp.asarray(phase, jnp.int32)
         step = jnp.asarray(step)
+        every = jnp.where(phase == 0, self.every_generation, self.every_step)
 
         def call():
             jax.debug.callback(_dispatch, self.token, phase, step, evals, f_best)
 
-        jax.lax.cond(step % every == 0, call, lambda: None)
+        if force:
+            call()
+        else:
+            jax.lax.cond(step % every == 0, call, lambda: None)
 
 
 class register:
@@ -93,9 +98,16 @@ class TqdmProgress:
         self.best = float("inf")
         self.start = time.perf_counter()
 
+    def _finish_bar(self):
+        """A stage that ended early (stall, tolerance, budget) ends its bar at 100 %."""
+        if self.bar.total is not None and self.bar.n < self.bar.total:
+            self.bar.total = self.bar.n
+            self.bar.refresh()
+        self.bar.close()
+
     def __call__(self, phase, step, evals, f_best):
         if phase != self.phase:
-            self.bar.close()
+            self._finish_bar()
             self.phase = phase
             self.bar = self._tqdm(
                 total=self.local_total, unit="step",
@@ -107,7 +119,7 @@ class TqdmProgress:
         self.bar.set_postfix(best=f"{self.best:.4g}", evals=evals, refresh=False)
 
     def close(self):
-        self.bar.close()
+        self._finish_bar()
 
 
 class RecordingProgress:

@@ -1,0 +1,256 @@
+"""Two-stage solvers: a global search, then a local one from its best point(s)
+(docs/algorithms.md §5.1: ``θ_G = global(J, bounds)``, ``θ* = local(J, start=θ_G)``).
+
+:func:`chain` builds one from any global solver (PSO, MAPSO, ...) and any local one
+(:class:`~jaxfric.NelderMead` or another ``optimistix`` minimiser);
+:class:`~jaxfric.MAPSONMDS` is the paper's instance. The run's key is split once,
+``k_global, k_local = jax.random.split(key)``, as in jaxfric 0.6.0, so MAPSO–NMDS gives
+0.6.0's values for the same key.
+
+The chain is two *stages* of the step protocol: the driver runs stage 0 (global steps)
+in one loop and stage 1 (local steps) in the next, so batched runs never compute one
+stage's step while in the other. With ``num_starts = k`` the local solver is restarted
+from the ``k`` best personal bests of a swarm, one run after another, and the best
+refined point wins (multi-start local stage).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._base import (
+    RESULTS,
+    AbstractIterativeSolver,
+    History,
+    Solution,
+    check_positive_int,
+)
+from .nelder_mead import NelderMead
+from .optx_adapter import OptxMinimiser, as_protocol
+from .swarm import AbstractSwarm
+
+
+class ChainState(eqx.Module):
+    """``stage`` (0 global, 1 local), the global state, the ``num_starts`` local states
+    (stacked; placeholders until stage 1) and which of them have finished."""
+
+    stage: Any
+    first: Any
+    second: Any
+    second_done: Any
+    key: Any
+
+
+def _index(tree, i):
+    return jax.tree_util.tree_map(lambda a: a[i], tree)
+
+
+def _put(tree, i, leaf_tree):
+    return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
+
+
+class AbstractChain(AbstractIterativeSolver):
+    """A global solver followed by a local one (see the module docstring)."""
+
+    # global_solver, local_solver, num_starts, simplex_from_swarm: fields of Chain;
+    # MAPSONMDS names the first two mapso and nelder_mead
+
+    @property
+    def _global(self) -> AbstractIterativeSolver:
+        return as_protocol(self.global_solver)
+
+    @property
+    def _local(self) -> AbstractIterativeSolver:
+        return as_protocol(self.local_solver)
+
+    def check(self):
+        self._global.check()
+        self._local.check()
+        check_positive_int("num_starts", self.num_starts)
+        if self.num_starts > 1:
+            if not isinstance(self.global_solver, AbstractSwarm):
+                raise ValueError("num_starts > 1 needs a swarm (PSO, MAPSO) as the global solver")
+            if self.num_starts > self.global_solver.num_agents:
+                raise ValueError(
+                    f"num_starts ({self.num_starts}) exceeds the number of agents "
+                    f"({self.global_solver.num_agents})"
+                )
+
+    # ------------------------------------------------------------------ stages
+    def num_stages(self) -> int:
+        return 2
+
+    def stage(self, state):
+        return state.stage
+
+    def _local_options(self, lower, upper, g):
+        """The first simplex sized from the swarm's spread (``simplex_from_swarm``):
+        per-coordinate std of the personal bests, at least ``initial_step``·1e-3 of
+        the box. After a converged global stage the basin is much smaller than the
+        box, so a box-sized simplex first spends many evaluations shrinking."""
+        if not (self.simplex_from_swarm and isinstance(self.global_solver, AbstractSwarm)
+                and isinstance(self.local_solver, NelderMead)):
+            return None
+        spread = jnp.std(g.pbest, axis=0)
+        floor = 1e-3 * self.local_solver.initial_step * (upper - lower)
+        return {"initial_step": jnp.maximum(spread, floor)}
+
+    def _starts(self, g):
+        if self.num_starts == 1:
+            return self._global.best(g)[0][None]
+        return g.pbest[jnp.argsort(g.pbest_f)[: self.num_starts]]
+
+    def _switch(self, fn, lower, upper, args, state: ChainState) -> ChainState:
+        """Start the local stage from the global stage's best point(s)."""
+        g = state.first
+        opts = self._local_options(lower, upper, g)
+        local = self._local
+
+        def one(x0):
+            if isinstance(local, OptxMinimiser):
+                return local.init(fn, lower, upper, args, state.key, x0, options=opts)
+            return local.init(fn, lower, upper, args, state.key, x0)
+
+        starts = self._starts(g)
+        if self.num_starts == 1:
+            second = jax.tree_util.tree_map(lambda a: a[None], one(starts[0]))
+        else:
+            # one after another, as the runs themselves go (lax.map, not vmap)
+            second = jax.lax.map(one, starts)
+        done = jax.vmap(lambda s: self._local.terminate(fn, lower, upper, args, s)[0])(second)
+        return ChainState(jnp.array(1, jnp.int32), g, second, done, state.key)
+
+    # ------------------------------------------------------------- step protocol
+    def init(self, fn, lower, upper, args, key, x0=None):
+        k_global, k_local = jax.random.split(key)
+        g = self._global.init(fn, lower, upper, args, k_global, x0)
+        local_shape = jax.eval_shape(
+            lambda: self._switch(fn, lower, upper, args,
+                                 ChainState(jnp.array(0, jnp.int32), g, None, None, k_local)))
+        zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
+                                       (local_shape.second, local_shape.second_done))
+        state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], k_local)
+        done, _ = self._global.terminate(fn, lower, upper, args, g)
+        return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
+                            lambda s: s, state)
+
+    def step(self, fn, lower, upper, args, state):
+        return jax.lax.cond(state.stage == 0,
+                            lambda s: self.step_stage(fn, lower, upper, args, s, 0),
+                            lambda s: self.step_stage(fn, lower, upper, args, s, 1), state)
+
+    def step_stage(self, fn, lower, upper, args, state, stage: int):
+        """One step of stage ``stage`` (static), which ``state`` is known to be in."""
+        if stage == 0:
+            g = self._global.step(fn, lower, upper, args, state.first)
+            state = eqx.tree_at(lambda s: s.first, state, g)
+            done, _ = self._global.terminate(fn, lower, upper, args, g)
+            return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
+                                lambda s: s, state)
+        local = self._local
+        i = jnp.argmin(state.second_done)  # the first run not yet finished
+        s_i = local.step(fn, lower, upper, args, _index(state.second, i))
+        done_i, _ = local.terminate(fn, lower, upper, args, s_i)
+        return eqx.tree_at(
+            lambda s: (s.second, s.second_done), state,
+            (_put(state.second, i, s_i), state.second_done.at[i].set(done_i)),
+        )
+
+    def terminate(self, fn, lower, upper, args, state):
+        done = (state.stage == 1) & jnp.all(state.second_done)
+        return done, self._result(fn, lower, upper, args, state)
+
+    def _local_best(self, state):
+        xs, fs = jax.vmap(self._local.best)(state.second)
+        i = jnp.argmin(fs)
+        return i, xs[i], fs[i]
+
+    def _result(self, fn, lower, upper, args, state):
+        i, _, _ = self._local_best(state)
+        _, results = jax.vmap(
+            lambda s: self._local.terminate(fn, lower, upper, args, s))(state.second)
+        local = _index(results, i)
+        _, gf = self._global.best(state.first)
+        return RESULTS.where(state.stage == 1, local,
+                             RESULTS.where(jnp.isfinite(gf), RESULTS.successful, RESULTS.nonfinite))
+
+    def best(self, state):
+        gx, gf = self._global.best(state.first)
+        _, lx, lf = self._local_best(state)
+        use_local = (state.stage == 1) & (lf <= gf)
+        return jnp.where(use_local, lx, gx), jnp.where(use_local, lf, gf)
+
+    def num_evals(self, state):
+        local = jnp.sum(jax.vmap(self._local.num_evals)(state.second))
+        g = self._global.num_evals(state.first)
+        return g + jnp.where(state.stage == 1, local, 0).astype(g.dtype)
+
+    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
+        x, f = self.best(state)
+        g_sol = self._global.postprocess(fn, lower, upper, args, state.first,
+                                         self._global.terminate(fn, lower, upper, args,
+                                                                state.first)[1])
+        i, _, _ = self._local_best(state)
+        best_local = _index(state.second, i)
+        local_steps = jnp.where(state.stage == 1, self._local.progress(best_local)[1], 0)
+        return Solution(
+            value=x, f=f, result=result,
+            stats={
+                "num_steps": g_sol.stats["num_steps"] + local_steps.astype(jnp.int32),
+                "num_evals": self.num_evals(state),
+                "num_evals_global": g_sol.stats["num_evals"],
+                "f_global": g_sol.f,
+            },
+            history=History.empty(1, f.dtype), state=state,
+        )
+
+    def max_steps(self, n: int) -> int:
+        return self._global.max_steps(n) + self.num_starts * self._local.max_steps(n)
+
+    def max_evaluations(self, n: int):
+        g, loc = self._global.max_evaluations(n), self._local.max_evaluations(n)
+        return None if g is None or loc is None else g + self.num_starts * loc
+
+    def progress(self, state):
+        _, g_step = self._global.progress(state.first)
+        i = jnp.argmin(state.second_done)
+        _, l_step = self._local.progress(_index(state.second, i))
+        # the step that switched stages is the global stage's last generation
+        local = (state.stage == 1) & ((l_step > 0) | jnp.all(state.second_done))
+        return local.astype(jnp.int32), jnp.where(local, l_step, g_step)
+
+    def progress_totals(self):
+        g, _ = self._global.progress_totals()
+        _, loc = self._local.progress_totals()
+        return g, loc
+
+    def continued(self, state):
+        raise ValueError("a finished two-stage run cannot be continued; warm-start its "
+                         "global solver with the solution's first stage instead")
+
+
+class Chain(AbstractChain):
+    """``chain(global_solver, local_solver)``: see the module docstring.
+
+    Args:
+        global_solver: e.g. :class:`~jaxfric.MAPSO` or :class:`~jaxfric.PSO`.
+        local_solver: e.g. :class:`~jaxfric.NelderMead` (any ``optx.AbstractMinimiser``
+            or jaxfric solver).
+        num_starts: local runs from the ``num_starts`` best personal bests (swarms).
+        simplex_from_swarm: size Nelder–Mead's first simplex from the swarm's spread.
+    """
+
+    global_solver: Any
+    local_solver: Any
+    num_starts: int = 1
+    simplex_from_swarm: bool = True
+
+
+def chain(global_solver, local_solver, *, num_starts: int = 1,
+          simplex_from_swarm: bool = True) -> Chain:
+    """A two-stage solver: ``global_solver``, then ``local_solver`` from its best point."""
+    return Chain(global_solver, local_solver, num_starts, simplex_from_swarm)

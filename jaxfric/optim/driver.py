@@ -1,0 +1,458 @@
+"""The one driver: :func:`minimise` and :func:`minimise_many` own the loop for every
+solver (docs/algorithms.md §5.1 for the two-stage case).
+
+They validate what the user gave *before* tracing, flatten pytree bounds to one vector,
+and run the solver's step protocol (:class:`~jaxfric.optim.AbstractIterativeSolver`;
+an ``optimistix`` minimiser through :mod:`~jaxfric.optim.optx_adapter`) as one jitted
+computation::
+
+    state = init(...)
+    for stage in range(num_stages):            # a chain: global, then local
+        while not done and stage(state) == stage:
+            state = step_stage(..., stage); record history; report progress
+
+In this one place, for every solver: the history of the best value against
+evaluations, progress reports, checkpoint/resume (:mod:`~jaxfric.optim.checkpoint`),
+warm starts, the population split over devices, and ``vmap`` over seeds. Data travel
+in ``args`` (never closures), so new data of the same shapes do not recompile.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import numbers
+from pathlib import Path
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from .. import _xla
+from ._base import AbstractIterativeSolver, History, Solution, check_positive_int, count_dtype
+from .chain import AbstractChain
+from .optx_adapter import OptxMinimiser, as_protocol
+from .problem import _as_float_leaves, _check_output, _Flat, prepare_bounds
+from .progress import ProgressHook, TqdmProgress, register
+from .sharding import Layout, resolve_devices, shard_keys
+from .swarm import AbstractSwarm
+
+#: Most history entries kept (a longer run keeps every 2nd, 4th, ... step).
+HISTORY_SIZE = 4096
+
+
+class Carry(eqx.Module):
+    """What the loop carries (and a checkpoint stores): the solver's state, the
+    history, and the number of steps taken by this call's loop so far."""
+
+    state: Any
+    history: History
+    steps: Any
+
+
+# ------------------------------------------------------------------ validation
+def _prepare(fn, solver, bounds, args, y0, dtype):
+    if not callable(fn):
+        raise ValueError(f"fn must be callable fn(y, args), got {type(fn).__name__}")
+    if isinstance(solver, type) or not isinstance(solver, eqx.Module):
+        raise ValueError(
+            "solver must be a jaxfric solver (PSO, MAPSO, NelderMead, MAPSONMDS, chain(...)) "
+            f"or an optimistix minimiser, got {type(solver).__name__}"
+        )
+    proto = as_protocol(solver)
+    proto.check()
+    lower, upper, treedef, shapes = prepare_bounds(bounds, dtype)
+    flat = _Flat(fn, treedef, shapes)
+    _check_output(flat, lower, args)
+    _check_budget(proto, lower.shape[0])
+    x0 = None if y0 is None else _start(y0, treedef, shapes, lower, upper, proto)
+    return proto, flat, lower, upper, x0
+
+
+def _check_budget(proto: AbstractIterativeSolver, n: int):
+    """The evaluation counter must hold the run's budget (issue 20.3)."""
+    top = int(jnp.iinfo(count_dtype()).max)
+    most = proto.max_evaluations(n)
+    if most is not None and most > top:
+        raise ValueError(
+            f"this run may take {most:,} objective evaluations, more than the {count_dtype()} "
+            f"evaluation counter holds ({top:,}); enable 64-bit counters with "
+            "`with jax.enable_x64(True):` (a float32 search stays float32 with dtype=) "
+            "or lower the budget"
+        )
+
+
+def _start(y0, treedef, shapes, lower, upper, proto):
+    """``y0`` as a flat start ``(D,)``, or for swarms an initial population ``(k, D)``
+    (every leaf with one more leading axis of the same length ``k``)."""
+    y_leaves, y_def = _as_float_leaves(y0, "y0")
+    if y_def != treedef:
+        raise ValueError("y0 must have the same structure and shapes as the bounds")
+    if [a.shape for a in y_leaves] == list(shapes):
+        x0 = np.concatenate([a.ravel() for a in y_leaves])[None]
+    elif all(a.ndim == len(s) + 1 and a.shape[1:] == s for a, s in zip(y_leaves, shapes)) and len(
+        {a.shape[0] for a in y_leaves}
+    ) == 1:
+        k = y_leaves[0].shape[0]
+        x0 = np.concatenate([a.reshape(k, -1) for a in y_leaves], axis=1)
+        agents = _population_size(proto)
+        if agents is None:
+            raise ValueError(
+                "y0 with a leading population axis needs a swarm (PSO, MAPSO, or a chain "
+                "starting with one); this solver takes one start"
+            )
+        if k > agents:
+            raise ValueError(f"y0 holds {k} starts but the swarm has {agents} agents")
+    else:
+        raise ValueError("y0 must have the same structure and shapes as the bounds "
+                         "(or, for swarms, one more leading axis: an initial population)")
+    x0 = jnp.asarray(x0, lower.dtype)
+    if not bool(jnp.all(jnp.isfinite(x0))):
+        raise ValueError("y0 must be finite (found NaN or inf)")
+    outside = np.nonzero(np.asarray(jnp.any((x0 < lower) | (x0 > upper), axis=0)))[0]
+    if outside.size:
+        i = int(outside[0])
+        bad = np.asarray(x0[:, i])
+        v = bad[(bad < float(lower[i])) | (bad > float(upper[i]))][0]
+        raise ValueError(
+            f"y0 lies outside the bounds at {outside.size} parameter(s), first at flat "
+            f"index {i}: {float(v)!r} not in [{float(lower[i])!r}, {float(upper[i])!r}]; "
+            "a start is used as given, never clipped"
+        )
+    return x0[0] if x0.shape[0] == 1 and not _population_size(proto) else x0
+
+
+def _population_size(proto) -> int | None:
+    if isinstance(proto, AbstractSwarm):
+        return proto.num_agents
+    if isinstance(proto, AbstractChain) and isinstance(proto.global_solver, AbstractSwarm):
+        return proto.global_solver.num_agents
+    return None
+
+
+def _check_key(key, name="key", batch=False):
+    """One key (an int seed is accepted, as :func:`jaxfric.identify` does) or, with
+    ``batch``, a non-empty batch of keys; else ``ValueError`` naming the problem."""
+    if key is None:
+        raise ValueError(f"{name} is required: pass jax.random.key(seed) (or an int seed)")
+    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
+        if batch:
+            raise ValueError(f"{name} must be a batch of keys, e.g. "
+                             f"jax.random.split(jax.random.key({int(key)}), 8), not an int")
+        return jax.random.key(int(key))
+    try:
+        k = jnp.asarray(key)
+    except TypeError:
+        raise ValueError(f"{name} must be a JAX PRNG key or an int seed, got "
+                         f"{type(key).__name__}") from None
+    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
+    if not (typed or k.dtype == jnp.uint32):
+        raise ValueError(f"{name} must be a JAX PRNG key (or an int seed), got dtype {k.dtype}")
+    if not typed:
+        if k.ndim == 0 or k.shape[-1] != 2:
+            raise ValueError(
+                f"{name} is a raw uint32 array of shape {k.shape}, but a raw key has 2 words "
+                f"(shape (2,), or (n, 2) for a batch); pass jax.random.key(seed) or an int seed"
+            )
+    key_ndim = k.ndim if typed else k.ndim - 1  # raw uint32 keys carry a trailing axis
+    if not batch and key_ndim != 0:
+        raise ValueError(
+            f"{name} must be one key, got a batch of shape {k.shape}; "
+            "for several runs use minimise_many"
+        )
+    if batch:
+        if key_ndim != 1:
+            raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+        if k.shape[0] == 0:
+            raise ValueError("keys is empty: pass at least one key")
+    return key
+
+
+# ---------------------------------------------------------------------- progress
+def _progress(progress, proto):
+    """``(context manager yielding a hook or None)`` for ``progress=``."""
+    if progress is None or progress is False:
+        return contextlib.nullcontext(None)
+    total, local_total = proto.progress_totals()
+    if progress is True:
+        sink = TqdmProgress(total, local_total)
+    elif callable(progress):
+        sink = progress
+    else:
+        raise ValueError(
+            "progress must be None, True (a tqdm bar) or a callable "
+            f"sink(phase, step, evals, f_best), got {type(progress).__name__}"
+        )
+    every = max(1, (total or 100) // 100)
+
+    @contextlib.contextmanager
+    def ctx():
+        with register(sink) as token:
+            yield ProgressHook(token, every_generation=every, every_step=50)
+
+    return ctx()
+
+
+# -------------------------------------------------------------------- the loop
+def _record(proto, state, history):
+    _, f = proto.best(state)
+    return history.record(proto.num_evals(state), f)
+
+
+def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
+    state = proto.init(flat, lower, upper, args, key, x0) if warm is None else warm
+    size = min(proto.max_steps(lower.shape[0]) + 2, HISTORY_SIZE)  # + the first entry, + room
+    history = _record(proto, state, History.empty(size, lower.dtype))
+    return Carry(state, history, jnp.array(0, jnp.int32))
+
+
+def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry:
+    """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
+
+    def report(c: Carry, force: bool):
+        if hook is not None:
+            phase, step = proto.progress(c.state)
+            hook.emit(phase, step, proto.num_evals(c.state), proto.best(c.state)[1], force)
+
+    for s in range(proto.num_stages()):
+        def cond(c, s=s):
+            done, _ = proto.terminate(flat, lower, upper, args, c.state)
+            return ~done & (proto.stage(c.state) == s) & (c.steps < stop_at)
+
+        def body(c, s=s):
+            state = proto.step_stage(flat, lower, upper, args, c.state, s)
+            c = Carry(state, _record(proto, state, c.history), c.steps + 1)
+            report(c, False)
+            return c
+
+        carry = jax.lax.while_loop(cond, body, carry)
+    report(carry, True)
+    return carry
+
+
+def _end(proto, flat, lower, upper, args, carry: Carry) -> Solution:
+    _, result = proto.terminate(flat, lower, upper, args, carry.state)
+    sol = proto.postprocess(flat, lower, upper, args, carry.state, result)
+    _, f = proto.best(carry.state)
+    history = carry.history.close(proto.num_evals(carry.state), f).filled()
+    return eqx.tree_at(lambda s: s.history, sol, history)
+
+
+#: ``stop_at`` of a run that is not chunked (always an array: one compiled loop for
+#: chunked and whole runs, so they take bit-identical steps)
+NO_STOP = 2**31 - 1
+
+
+def _run(proto, flat, lower, upper, args, key, x0, hook, carry=None, warm=None, stop_at=None):
+    """One compiled call: start (unless ``carry`` continues a chunked run), loop until
+    done or ``stop_at`` steps, and the solution. Returns ``(carry, solution)``."""
+    if carry is None:
+        carry = _begin(proto, flat, lower, upper, args, key, x0, warm)
+    stop_at = jnp.asarray(NO_STOP if stop_at is None else stop_at, jnp.int32)
+    carry = _loop(proto, flat, lower, upper, args, carry, stop_at, hook)
+    return carry, _end(proto, flat, lower, upper, args, carry)
+
+
+def _one(proto, flat, lower, upper, args, key, x0, hook):
+    return _run(proto, flat, lower, upper, args, key, x0, hook)[1]
+
+
+def _run_many(proto, flat, lower, upper, args, keys, x0, hook, batching="vmap"):
+    run = lambda k: _one(proto, flat, lower, upper, args, k, x0, hook)  # noqa: E731
+    if batching == "map":
+        return jax.lax.map(run, keys)
+    return jax.vmap(run)(keys)
+
+
+BATCHING = ("auto", "vmap", "map")
+
+
+def _batching(batching, proto, layout: Layout | None) -> str:
+    """``"vmap"`` or ``"map"`` for :func:`minimise_many` (see its docstring)."""
+    if batching not in BATCHING:
+        raise ValueError(f"batching must be one of {BATCHING}, got {batching!r}")
+    proto = as_protocol(proto)
+    if batching == "map" and layout is not None:
+        raise ValueError(
+            "batching='map' runs the keys one after another on one device; with several "
+            "devices pass devices=False, or batching='vmap' to lay the runs out over them"
+        )
+    if batching == "auto":
+        # A vmapped optimistix minimiser (Nelder-Mead) computes both sides of every
+        # branch; on one CPU running the keys in turn is faster (peers.md §1). Swarms
+        # batch their evaluations well, so they keep vmap.
+        one_cpu = layout is None and _platform(layout) == "cpu"
+        return "map" if one_cpu and isinstance(proto, OptxMinimiser) else "vmap"
+    return batching
+
+
+def _platform(layout: Layout | None) -> str:
+    return layout.devices[0].platform if layout is not None else jax.default_backend()
+
+
+def _unravel_solution(sol: Solution, flat: _Flat, batched: bool) -> Solution:
+    value = jax.vmap(flat.unravel)(sol.value) if batched else flat.unravel(sol.value)
+    return eqx.tree_at(lambda s: s.value, sol, value)
+
+
+def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
+    """The state a warm start continues from, checked against what ``init`` builds."""
+    if not isinstance(warm_start, Solution) or warm_start.state is None:
+        raise ValueError("warm_start must be a Solution returned by jaxfric.minimise")
+    state = warm_start.state
+    expect = eqx.filter_eval_shape(proto.init, flat, lower, upper, args, key, x0)
+    shape = lambda t: [(tuple(a.shape), str(a.dtype)) for a in jtu.tree_leaves(t)]  # noqa: E731
+    if jtu.tree_structure(state) != jtu.tree_structure(expect) or shape(state) != shape(expect):
+        raise ValueError(
+            "warm_start's state does not fit this solver and problem (a different solver "
+            "type, population size, number of parameters or dtype); continue a run with the "
+            "same kind of solver, only a larger budget"
+        )
+    return proto.continued(state)
+
+
+# ----------------------------------------------------------------------- entries
+def minimise(
+    fn: Callable,
+    solver,
+    bounds,
+    *,
+    args: Any = None,
+    key=None,
+    y0=None,
+    dtype=None,
+    progress=None,
+    devices=None,
+    checkpoint=None,
+    checkpoint_every: int = 50,
+    compiler_options="auto",
+    warm_start: Solution | None = None,
+) -> Solution:
+    """Minimise ``fn(y, args)`` over the box ``bounds`` with ``solver``, in one jitted call.
+
+    Args:
+        fn: objective ``fn(y, args) -> scalar``; ``y`` has the structure of the bounds.
+            NaN or inf values count as the worst possible value.
+        solver: a jaxfric solver (:class:`PSO`, :class:`MAPSO`, :class:`NelderMead`,
+            :class:`MAPSONMDS`, :func:`chain`) or any ``optimistix`` minimiser.
+        bounds: ``(lower, upper)`` (arrays or matching pytrees of arrays), a sequence of
+            ``(lo, hi)`` pairs, one per parameter (scipy's form), or
+            ``scipy.optimize.Bounds``. Two pairs of numbers, which read both ways, are
+            refused unless only one reading is a valid box.
+        args: data passed to ``fn``; arrays here do not trigger recompilation.
+        key: a JAX PRNG key (``jax.random.key(0)``) or an int seed (``key=0`` is
+            ``jax.random.key(0)``). Same key, same result.
+        y0: optional start inside the bounds (Nelder–Mead's start; for swarms, agent 0),
+            or for swarms an initial population: every leaf with one more leading axis
+            ``k`` (the first ``k`` agents). A start outside the bounds is an error.
+        dtype: floating dtype of the search (default: that of the bounds, float16 bounds
+            searching in float32, or JAX's default float). float16 is refused.
+        progress: ``True`` for a tqdm bar, a callable ``sink(phase, step, evals, f_best)``
+            (phase 0 = global generations, 1 = local steps), or ``None`` (silent).
+            Reports come from inside the compiled run about every 1 % of the generations
+            and every 50 local steps, and once when each stage ends; a new display never
+            recompiles. A host callback costs time of its own: leave it off for short runs.
+        devices: where to evaluate the population: ``None`` (default) splits it by
+            agents over every device when there are several; ``False`` keeps it on one
+            device; or a sequence of devices.
+        checkpoint: a file path. The run then goes in chunks of ``checkpoint_every``
+            steps and saves its state atomically after each; calling ``minimise`` again
+            with the same path resumes from the last chunk and returns exactly the
+            uninterrupted run's result. Works for every solver. The file records the
+            problem (objective, bounds, args, solver, key, dtype); resuming it for a
+            different problem is refused (see :mod:`jaxfric.optim.checkpoint`).
+        checkpoint_every: steps (generations, simplex steps) per chunk.
+        compiler_options: XLA options for this run's executable only (never global):
+            ``"auto"`` (see :func:`jaxfric.compiler_options`), ``None`` (XLA's
+            defaults) or a dict of XLA option names to values.
+        warm_start: a :class:`Solution` of an earlier run with the same kind of solver:
+            continue it (``solver`` with a larger ``num_generations``, say) instead of
+            starting afresh.
+
+    Returns:
+        A :class:`Solution` (``print`` shows value, f, evaluations and result).
+
+    Raises:
+        ValueError: before any tracing, for invalid bounds, hyperparameters, keys, or an
+            objective that does not return a floating scalar.
+    """
+    proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
+    if warm_start is not None and key is None:
+        key = 0  # unused: the warm state carries its own
+    key = _check_key(key)
+    layout = resolve_devices(devices)
+    options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    if layout is not None:
+        flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
+    warm = None
+    if warm_start is not None:
+        warm = _warm_state(warm_start, proto, flat, lower, upper, args, key, x0)
+    if checkpoint is not None:
+        check_positive_int("checkpoint_every", checkpoint_every)
+    with _progress(progress, proto) as hook:
+        if checkpoint is None:
+            _, sol = _xla.filter_jit(_run, options)(
+                proto, flat, lower, upper, args, key, x0, hook, None, warm)
+        else:
+            from .checkpoint import run_checkpointed
+
+            sol = run_checkpointed(
+                _xla.filter_jit(_run, options), proto, flat, lower, upper, args, key, x0,
+                hook, warm, Path(checkpoint), checkpoint_every,
+            )
+        jax.block_until_ready(sol)
+    return _unravel_solution(sol, flat, batched=False)
+
+
+def minimise_many(
+    fn: Callable,
+    solver,
+    bounds,
+    *,
+    keys,
+    args: Any = None,
+    y0=None,
+    dtype=None,
+    progress=None,
+    devices=None,
+    compiler_options="auto",
+    batching="auto",
+) -> Solution:
+    """Independent runs of :func:`minimise`, one per key, in one jitted call.
+
+    ``keys`` is a batch of PRNG keys (``jax.random.split(key, n)``). Every field of
+    the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
+    equals ``minimise(..., key=keys[i])`` up to floating-point reassociation (bit for
+    bit with ``batching="map"``). Stages run in loops of their own, so a batch of
+    two-stage runs never computes a global step while refining, or the reverse.
+    ``progress`` as in :func:`minimise` (reports arrive once per run and step).
+    ``devices``: ``None`` (default) lays the runs out over every device when there
+    are several (the batch is padded to a multiple of the device count and the
+    padding dropped); ``False`` keeps them on one device; or a sequence of devices.
+    ``compiler_options`` as in :func:`minimise`.
+
+    ``batching``: ``"vmap"`` runs the keys side by side (one batched evaluation of
+    every run's candidates per step; runs can be laid out over devices);
+    ``"map"`` runs them one after another inside the same compiled call (``lax.map``;
+    one device); ``"auto"`` (default) picks ``"map"`` for an optimistix minimiser
+    (:class:`NelderMead`) on a single CPU device and ``"vmap"`` otherwise. Under
+    ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]`` still
+    counts the evaluations the algorithm asked for, but XLA computes both branches,
+    which made 8 vmapped runs on 30-D Rosenbrock about 1.5× slower than the same runs
+    mapped (benchmarks/results/peers.md §1).
+    """
+    proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
+    keys = _check_key(keys, "keys", batch=True)
+    layout = resolve_devices(devices)
+    options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    mode = _batching(batching, proto, layout)
+    keys, n = shard_keys(keys, layout)
+    with _progress(progress, proto) as hook:
+        sol = _xla.filter_jit(_run_many, options)(
+            proto, flat, lower, upper, args, keys, x0, hook, mode)
+        jax.block_until_ready(sol)
+    if keys.shape[0] != n:
+        sol = jax.tree_util.tree_map(lambda a: a[:n], sol)
+    return _unravel_solution(sol, flat, batched=True)

@@ -1,0 +1,231 @@
+"""What a problem is made of, checked before anything is traced: bounds (pytrees, or
+scipy's sequence of ``(lo, hi)`` pairs / ``scipy.optimize.Bounds``), the objective's
+output, starts and keys. Used by the driver (:mod:`jaxfric.optim.driver`)."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+
+from .sharding import Layout
+
+
+class _Flat(eqx.Module):
+    """``fn`` seen through a flat parameter vector (hashable, so jit caches it)."""
+
+    fn: Callable = eqx.field(static=True)
+    treedef: Any = eqx.field(static=True)
+    shapes: tuple = eqx.field(static=True)
+    layout: Layout | None = None
+
+    def unravel(self, x):
+        sizes = [int(np.prod(s)) for s in self.shapes]
+        parts = jnp.split(x, np.cumsum(sizes)[:-1]) if len(sizes) > 1 else [x]
+        leaves = [p.reshape(s) for p, s in zip(parts, self.shapes)]
+        return jtu.tree_unflatten(self.treedef, leaves)
+
+    def __call__(self, x, args):
+        return self.fn(self.unravel(x), args)
+
+
+def _as_float_leaves(tree, name, dtype=None):
+    leaves, treedef = jtu.tree_flatten(tree)
+    if not leaves:
+        raise ValueError(f"{name} is empty")
+    out = []
+    for leaf in leaves:
+        try:
+            a = np.asarray(leaf)
+        except Exception as e:  # pragma: no cover - exotic leaves
+            raise ValueError(f"{name} must contain arrays or numbers: {e}") from None
+        if a.dtype == object or not (
+            np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+        ):
+            raise ValueError(f"{name} must be numeric, got dtype {a.dtype}")
+        out.append(a)
+    return out, treedef
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool) or (
+        isinstance(x, np.ndarray) and x.ndim == 0)
+
+
+def _is_pair(p) -> bool:
+    return isinstance(p, (tuple, list)) and len(p) == 2 and all(_is_number(v) for v in p)
+
+
+def _scipy_bounds(bounds):
+    """scipy's forms as ``(lower, upper)``: ``scipy.optimize.Bounds``, or a sequence of
+    ``(lo, hi)`` pairs, one per parameter (issue 20.8). Two pairs of numbers are
+    ambiguous (``[(a, b), (c, d)]``: two parameters in ``[a, b]`` and ``[c, d]``, or
+    lower ``(a, b)`` and upper ``(c, d)``?); when both readings are valid boxes they are
+    refused, else the valid reading is taken."""
+    if type(bounds).__name__ == "Bounds" and hasattr(bounds, "lb") and hasattr(bounds, "ub"):
+        lb, ub = np.broadcast_arrays(np.asarray(bounds.lb, float), np.asarray(bounds.ub, float))
+        return (np.array(lb), np.array(ub))
+    if not isinstance(bounds, (tuple, list)) or not bounds or not all(_is_pair(p) for p in bounds):
+        return bounds
+    pairs = np.asarray(bounds, dtype=float)
+    if len(bounds) != 2:
+        return (pairs[:, 0], pairs[:, 1])
+    as_pairs_ok = bool(np.all(pairs[:, 0] < pairs[:, 1]))
+    as_lower_upper_ok = bool(np.all(pairs[0] < pairs[1]))
+    if as_pairs_ok and as_lower_upper_ok:
+        raise ValueError(
+            f"bounds {bounds!r} are ambiguous: two (lo, hi) pairs, one per parameter, or "
+            "(lower, upper) of two parameters? Pass (np.array(lower), np.array(upper)) or "
+            "scipy.optimize.Bounds(lower, upper)"
+        )
+    if as_pairs_ok:
+        return (pairs[:, 0], pairs[:, 1])
+    return (pairs[0], pairs[1])
+
+
+def prepare_bounds(bounds, dtype=None):
+    """Validate ``bounds`` (``(lower, upper)`` pytrees, or scipy's forms) and flatten them.
+
+    Returns ``(lower_flat, upper_flat, treedef, shapes)``. Raises ``ValueError``
+    naming the problem: wrong shape of ``bounds``, mismatched structures or shapes,
+    non-finite values, ``lower >= upper``, or no parameters at all.
+    """
+    bounds = _scipy_bounds(bounds)
+    if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
+        raise ValueError(
+            "bounds must be a pair (lower, upper), a sequence of (lo, hi) pairs, one per "
+            "parameter, or scipy.optimize.Bounds"
+        )
+    lo_leaves, lo_def = _as_float_leaves(bounds[0], "lower bound")
+    hi_leaves, hi_def = _as_float_leaves(bounds[1], "upper bound")
+    if lo_def != hi_def:
+        raise ValueError(
+            f"lower and upper bounds have different structures: {lo_def} vs {hi_def}"
+        )
+    shapes = []
+    for i, (lo, hi) in enumerate(zip(lo_leaves, hi_leaves)):
+        if lo.shape != hi.shape:
+            raise ValueError(
+                f"lower and upper bounds have different shapes: {lo.shape} vs {hi.shape}"
+                + (f" (leaf {i})" if len(lo_leaves) > 1 else "")
+            )
+        shapes.append(lo.shape)
+    lower = np.concatenate([a.ravel() for a in lo_leaves])
+    upper = np.concatenate([a.ravel() for a in hi_leaves])
+    if lower.size == 0:
+        raise ValueError("bounds describe zero parameters")
+    if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+        raise ValueError("bounds must be finite (found NaN or inf)")
+    bad = np.nonzero(~(lower < upper))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"every lower bound must be < its upper bound; parameter {i} has "
+            f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({bad.size} such parameter(s))"
+        )
+    if dtype is None:
+        dtype = np.result_type(*[a.dtype for a in lo_leaves + hi_leaves])
+        if not np.issubdtype(dtype, np.floating):
+            dtype = np.float64
+        elif np.dtype(dtype).itemsize < 4:
+            # float16 bounds: search in float32 (issue 20.2: in float16 the velocities and
+            # random draws overflow and the swarm stalls without a word)
+            dtype = np.float32
+    else:
+        try:
+            given = np.dtype(dtype)
+        except TypeError:
+            raise ValueError(f"dtype must be a floating dtype, got {dtype!r}") from None
+        if not np.issubdtype(given, np.floating):
+            raise ValueError(f"dtype must be a floating dtype, got {given}")
+        if given.itemsize < 4:
+            raise ValueError(
+                f"dtype {given} is too narrow for the search (its range and 11-bit precision "
+                "overflow the swarm's velocities and random draws): use float32 or float64"
+            )
+    # float64 bounds search in float32 unless the caller enabled x64 (JAX's rule).
+    dtype = jax.dtypes.canonicalize_dtype(dtype)
+    # The box must survive the cast to the search dtype: no zero widths, no overflow.
+    lo_c, hi_c = lower.astype(dtype), upper.astype(dtype)
+    with np.errstate(over="ignore", invalid="ignore"):
+        width = hi_c - lo_c
+    bad = np.nonzero(~(lo_c < hi_c))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"every lower bound must be < its upper bound in the search dtype {dtype}; "
+            f"parameter {i} has lower={float(lower[i])!r}, upper={float(upper[i])!r}, "
+            f"which are equal in {dtype} (rescale the parameter or use float64)"
+        )
+    if not np.all(np.isfinite(width)):
+        i = int(np.nonzero(~np.isfinite(width))[0][0])
+        raise ValueError(
+            f"upper - lower overflows the search dtype {dtype} for parameter {i} "
+            f"(lower={float(lower[i])!r}, upper={float(upper[i])!r}); rescale it or use float64"
+        )
+    return (
+        jnp.asarray(lo_c, dtype),
+        jnp.asarray(hi_c, dtype),
+        lo_def,
+        tuple(shapes),
+    )
+
+
+#: Signatures (objective, search vector, shapes and dtypes of ``args``) whose output
+#: was already checked: the check traces ``fn`` (about 2 ms), which would otherwise
+#: be paid by every call of :func:`minimise`.
+_CHECKED: dict = {}
+_CHECKED_MAX = 256
+
+
+def _signature(flat, lower, args):
+    """A hashable key for the output check, or ``None`` when ``args`` holds leaves
+    that are neither arrays nor Python scalars (then the check is not cached)."""
+    leaves, treedef = jtu.tree_flatten(args)
+    sig = []
+    for leaf in leaves:
+        if hasattr(leaf, "shape") and hasattr(leaf, "dtype"):
+            sig.append((tuple(leaf.shape), str(leaf.dtype), getattr(leaf, "weak_type", None)))
+        elif isinstance(leaf, (bool, int, float, complex)):
+            sig.append(type(leaf))  # traced by eval_shape: only the type matters
+        else:
+            return None
+    try:
+        key = (flat, lower.shape, str(lower.dtype), treedef, tuple(sig))
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _check_output(flat, lower, args):
+    """``fn(y, args)`` must return a floating scalar: checked by tracing (eval_shape)
+    once per signature, before any compilation."""
+    key = _signature(flat, lower, args)
+    if key is not None and key in _CHECKED:
+        return
+    try:
+        out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+    except Exception as e:
+        raise ValueError(f"calling fn(y, args) on the bounds' shape failed: {e}") from e
+    if not (
+        isinstance(out, jax.ShapeDtypeStruct)
+        and out.shape == ()
+        and jnp.issubdtype(out.dtype, jnp.floating)
+    ):
+        desc = getattr(out, "shape", type(out).__name__)
+        raise ValueError(
+            f"fn(y, args) must return a floating-point scalar, got {desc} "
+            f"{getattr(out, 'dtype', '')}".rstrip()
+        )
+    if key is not None:
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.pop(next(iter(_CHECKED)))
+        _CHECKED[key] = True
+
+

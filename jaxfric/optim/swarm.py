@@ -1,0 +1,302 @@
+"""What every swarm shares: the state, personal/global bests, stall-based stopping,
+warm starts and ``ask / tell`` (docs/algorithms.md §3, §10).
+
+A swarm writes one generation as a Python *generator* that yields each batch of
+candidates it needs evaluated and receives their fitness back (``f = yield X``).
+:meth:`AbstractSwarm.step` feeds it the objective, evaluated on the whole batch at
+once inside the compiled program; :meth:`AbstractSwarm.ask` / :meth:`AbstractSwarm.tell`
+feed it values computed anywhere (a simulator outside JAX), one batch per call. The
+same code therefore defines both, and a run driven by ``ask``/``tell`` visits the
+points :func:`jaxfric.minimise` visits for the same key.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Generator
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ._base import (
+    AbstractIterativeSolver,
+    History,
+    Solution,
+    batch_objective,
+    check_positive_int,
+    check_range,
+    count_dtype,
+    result_from_f,
+    safe_value,
+    uniform_in_box,
+)
+
+Rounds = Generator[Array, Array, Any]
+
+
+class SwarmState(eqx.Module):
+    """Explicit state of a swarm: positions, velocities, fitness, personal and global bests.
+
+    ``generation`` counts generations done; ``u`` holds the random numbers of the next
+    generation (drawn one generation ahead, so they are stored once instead of
+    recomputed in every fused consumer, see :func:`jaxfric.optim.rng.counter_uniform`);
+    ``stall`` counts generations without a relative improvement of more than the
+    solver's ``function_tolerance`` since ``stall_f``.
+    """
+
+    x: Array
+    v: Array
+    f: Array
+    pbest: Array
+    pbest_f: Array
+    gbest: Array
+    gbest_f: Array
+    num_evals: Array
+    key: Any
+    generation: Any = None
+    u: Any = None
+    stall: Any = None
+    stall_f: Any = None
+
+
+def update_bests(state: SwarmState, x, f) -> SwarmState:
+    """Personal bests improve only on strictly lower (finite) fitness; gbest likewise."""
+    better = f < state.pbest_f
+    pbest = jnp.where(better[:, None], x, state.pbest)
+    pbest_f = jnp.where(better, f, state.pbest_f)
+    i = jnp.argmin(pbest_f)
+    improved = pbest_f[i] < state.gbest_f
+    gbest = jnp.where(improved, pbest[i], state.gbest)
+    gbest_f = jnp.where(improved, pbest_f[i], state.gbest_f)
+    return eqx.tree_at(
+        lambda s: (s.x, s.f, s.pbest, s.pbest_f, s.gbest, s.gbest_f),
+        state,
+        (x, f, pbest, pbest_f, gbest, gbest_f),
+    )
+
+
+def first_population(key, num, lower, upper, vmax, x0=None):
+    """Positions ~ U(box), velocities ~ U(±Vmax); the rows of ``x0`` (one start, or a
+    ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``."""
+    kx, kv, key = jax.random.split(key, 3)
+    x = uniform_in_box(kx, (num, lower.shape[0]), lower, upper)
+    if x0 is not None:
+        x0 = jnp.atleast_2d(jnp.clip(x0, lower, upper))
+        x = x.at[: x0.shape[0]].set(x0)
+    v = uniform_in_box(kv, x.shape, -vmax, vmax)
+    return x, v, key
+
+
+def swarm_from(x, v, f, key) -> SwarmState:
+    """The state of an evaluated first population."""
+    i = jnp.argmin(f)
+    return SwarmState(x=x, v=v, f=f, pbest=x, pbest_f=f, gbest=x[i], gbest_f=f[i],
+                      num_evals=jnp.array(x.shape[0], count_dtype()), key=key)
+
+
+def init_swarm(key, f_batch, num, lower, upper, vmax, x0=None) -> SwarmState:
+    """Evaluated first population (kept for callers of 0.6.0's helper)."""
+    x, v, key = first_population(key, num, lower, upper, vmax, x0)
+    return swarm_from(x, v, f_batch(x), key)
+
+
+def drive(rounds: Rounds, evaluate: Callable):
+    """Run a generation's generator to the end, evaluating each batch it yields."""
+    X = next(rounds)
+    while True:
+        try:
+            X = rounds.send(evaluate(X))
+        except StopIteration as stop:
+            return stop.value
+
+
+def replay(rounds: Rounds, told: tuple):
+    """Feed a generator the fitness batches ``told``: ``(next batch, None)`` while it
+    wants more, ``(None, result)`` once it has finished."""
+    X = next(rounds)
+    for f in told:
+        try:
+            X = rounds.send(f)
+        except StopIteration as stop:
+            return None, stop.value
+    return X, None
+
+
+class AskTellState(eqx.Module):
+    """State of a run driven by :meth:`AbstractSwarm.ask` / :meth:`AbstractSwarm.tell`:
+    the swarm (``None`` before the first population is told), the box, the key, the
+    optional start, and the fitness batches told so far within the current generation."""
+
+    swarm: SwarmState | None
+    lower: Array
+    upper: Array
+    key: Any
+    x0: Any = None
+    told: tuple = ()
+
+
+class AbstractSwarm(AbstractIterativeSolver):
+    """A population solver: a fixed number of generations, optionally stopped early.
+
+    Subclasses give ``num_agents``, ``vmax``, ``draw`` (generation ``i``'s random
+    numbers, a pure function of the key and ``i``) and ``generation`` (a generator:
+    yields candidate batches, receives their fitness, returns the new state).
+
+    Early stopping (MATLAB ``particleswarm``'s ``MaxStallIterations`` and
+    ``FunctionTolerance``; off by default, so the paper's fixed ``G`` holds): with
+    ``stall_generations = S`` the run ends once the best value has not improved by more
+    than ``function_tolerance · max(1, |f_best|)`` for ``S`` generations in a row.
+    """
+
+    num_generations: eqx.AbstractVar[int]
+    stall_generations: eqx.AbstractVar[int | None]
+    function_tolerance: eqx.AbstractVar[float]
+
+    # --------------------------------------------------------------- subclass hooks
+    @property
+    def num_agents(self) -> int:
+        raise NotImplementedError
+
+    def vmax(self, lower, upper):
+        return self.vmax_fraction * (upper - lower)
+
+    def draw(self, key, i, x):
+        raise NotImplementedError
+
+    def generation(self, state: SwarmState, lower, upper, f_batch=None) -> Rounds:
+        """Generation ``state.generation`` with its numbers ``state.u``. ``f_batch``
+        (when the objective is JAX) lets inner loops run as ``lax.scan``."""
+        raise NotImplementedError
+
+    def evaluations(self) -> int:
+        raise NotImplementedError
+
+    def check_swarm(self) -> None:
+        check_positive_int("num_generations", self.num_generations)
+        if self.stall_generations is not None:
+            check_positive_int("stall_generations", self.stall_generations)
+        check_range("function_tolerance", self.function_tolerance, 0.0)
+
+    # ------------------------------------------------------------------ generators
+    def first(self, lower, upper, key, x0=None) -> Rounds:
+        x, v, key = first_population(key, self.num_agents, lower, upper,
+                                     self.vmax(lower, upper), x0)
+        f = yield x
+        return self._started(swarm_from(x, v, f, key))
+
+    def _started(self, s: SwarmState) -> SwarmState:
+        zero = jnp.array(0, jnp.int32)
+        return eqx.tree_at(
+            lambda s: (s.generation, s.u, s.stall, s.stall_f), s,
+            (zero, self.draw(s.key, zero, s.x), zero, s.gbest_f),
+            is_leaf=lambda x: x is None,
+        )
+
+    def _advanced(self, s: SwarmState) -> SwarmState:
+        i = s.generation + 1
+        scale = jnp.maximum(1.0, jnp.abs(s.gbest_f))
+        improved = ~(s.gbest_f >= s.stall_f - self.function_tolerance * scale)
+        improved = improved & jnp.isfinite(s.gbest_f)
+        return eqx.tree_at(
+            lambda s: (s.generation, s.u, s.stall, s.stall_f), s,
+            (i, self.draw(s.key, i, s.x), jnp.where(improved, 0, s.stall + 1),
+             jnp.where(improved, s.gbest_f, s.stall_f)),
+        )
+
+    def _next(self, state: SwarmState, lower, upper, f_batch=None) -> Rounds:
+        s = yield from self.generation(state, lower, upper, f_batch)
+        return self._advanced(s)
+
+    # ------------------------------------------------------------- step protocol
+    def init(self, fn, lower, upper, args, key, x0=None) -> SwarmState:
+        return drive(self.first(lower, upper, key, x0), batch_objective(fn, args))
+
+    def step(self, fn, lower, upper, args, state) -> SwarmState:
+        f_batch = batch_objective(fn, args)
+        return drive(self._next(state, lower, upper, f_batch), f_batch)
+
+    def terminate(self, fn, lower, upper, args, state):
+        done = state.generation >= self.num_generations
+        if self.stall_generations is not None:
+            done = done | (state.stall >= self.stall_generations)
+        return done, result_from_f(state.gbest_f)
+
+    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
+        return Solution(
+            value=state.gbest, f=state.gbest_f, result=result,
+            stats={"num_steps": state.generation, "num_evals": state.num_evals},
+            history=History.empty(1, state.gbest_f.dtype), state=state,
+        )
+
+    def best(self, state):
+        return state.gbest, state.gbest_f
+
+    def num_evals(self, state):
+        return state.num_evals
+
+    def max_steps(self, n: int) -> int:
+        return self.num_generations
+
+    def max_evaluations(self, n: int) -> int:
+        return self.evaluations()
+
+    def progress(self, state):
+        return jnp.array(0, jnp.int32), state.generation
+
+    def progress_totals(self):
+        return self.num_generations, None
+
+    def continued(self, state: SwarmState) -> SwarmState:
+        """A finished run's state, ready to run on under this solver's budget (warm
+        start): the stall count restarts, generation ``i`` keeps its random numbers."""
+        zero = jnp.zeros_like(state.stall)
+        return eqx.tree_at(lambda s: (s.stall, s.stall_f), state, (zero, state.gbest_f))
+
+    # ------------------------------------------------------------------- ask / tell
+    def ask_init(self, lower, upper, key, x0=None) -> AskTellState:
+        """Start a run driven from Python (``lower``/``upper``: 1-D arrays)."""
+        lower, upper = jnp.asarray(lower), jnp.asarray(upper)
+        return AskTellState(None, lower, upper, key,
+                            None if x0 is None else jnp.asarray(x0, lower.dtype))
+
+    def _rounds(self, st: AskTellState) -> Rounds:
+        if st.swarm is None:
+            return self.first(st.lower, st.upper, st.key, st.x0)
+        return self._next(st.swarm, st.lower, st.upper)
+
+    def ask(self, st: AskTellState):
+        """``(X, st)``: the candidates (rows) whose fitness :meth:`tell` needs next."""
+        X, _ = _replay_jit(self, st, st.told)
+        return X, st
+
+    def tell(self, st: AskTellState, X, f) -> AskTellState:
+        """Give the fitness ``f`` of the rows ``X`` returned by :meth:`ask` (NaN/inf
+        count as the worst value)."""
+        f = safe_value(jnp.asarray(f, st.lower.dtype))
+        if f.shape != (jnp.shape(X)[0],):
+            raise ValueError(f"tell needs one fitness value per candidate: got shape "
+                             f"{f.shape} for {jnp.shape(X)[0]} candidates")
+        told = st.told + (f,)
+        _, done = _replay_jit(self, st, told)
+        if done is None:
+            return eqx.tree_at(lambda s: s.told, st, told)
+        return AskTellState(done, st.lower, st.upper, st.key, st.x0, ())
+
+    def ask_done(self, st: AskTellState) -> bool:
+        if st.swarm is None:
+            return False
+        return bool(self.terminate(None, st.lower, st.upper, None, st.swarm)[0])
+
+    def ask_result(self, st: AskTellState) -> Solution:
+        """The :class:`Solution` so far (flat ``value``)."""
+        s = st.swarm
+        _, result = self.terminate(None, st.lower, st.upper, None, s)
+        sol = self.postprocess(None, st.lower, st.upper, None, s, result)
+        hist = History.from_arrays(s.num_evals[None], s.gbest_f[None])
+        return eqx.tree_at(lambda t: t.history, sol, hist)
+
+
+@eqx.filter_jit
+def _replay_jit(solver: AbstractSwarm, st: AskTellState, told: tuple):
+    return replay(solver._rounds(st), told)

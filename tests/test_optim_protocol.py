@@ -1,0 +1,222 @@
+"""The step protocol and what the driver adds for every solver (issue 15 items 1–3):
+ask/tell against the compiled run, two-stage chains, stall-based early stopping, warm
+starts (initial population, continuing a run), multi-start local stages, and
+optimistix minimisers through the adapter."""
+
+import io
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+
+import jaxfric as jf
+from jaxfric.optim import AbstractIterativeSolver, OptxMinimiser, TqdmProgress
+
+LO, HI = np.full(2, -2.0, np.float32), np.full(2, 3.0, np.float32)
+TARGET = np.array([0.5, -0.25], np.float32)
+
+
+def separable(y, target):
+    """One addition of two squares: nothing to reassociate, so numpy and XLA agree."""
+    d = y - target
+    return d[0] * d[0] + 10.0 * (d[1] * d[1])
+
+
+def separable_np(X):
+    d = np.asarray(X, np.float32) - TARGET
+    return d[:, 0] * d[:, 0] + np.float32(10.0) * (d[:, 1] * d[:, 1])
+
+
+@pytest.mark.parametrize("solver", [
+    jf.PSO(num_particles=6, num_generations=8),
+    jf.MAPSO(lattice_size=3, num_generations=4, sl_generations=2),
+    jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=2, evaluate_replaced=True),
+], ids=["pso", "mapso", "mapso_evaluate_replaced"])
+def test_ask_tell_from_python_follows_the_compiled_run(solver):
+    """A simulator outside JAX drives the swarm with ask/tell and visits what minimise
+    visits for the same key: the same best point, value and evaluation count."""
+    key = jax.random.key(4)
+    ref = jf.minimise(separable, solver, (LO, HI), args=jnp.asarray(TARGET), key=key)
+    st = solver.ask_init(LO, HI, key)
+    asked = 0
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)
+        asked += X.shape[0]
+        st = solver.tell(st, X, separable_np(X))
+    sol = solver.ask_result(st)
+    assert asked == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(sol.f, ref.f, rtol=1e-5, atol=1e-7)
+
+
+def test_tell_refuses_the_wrong_number_of_values():
+    pso = jf.PSO(num_particles=4, num_generations=2)
+    st = pso.ask_init(LO, HI, jax.random.key(0))
+    X, st = pso.ask(st)
+    with pytest.raises(ValueError, match="one fitness value per candidate"):
+        pso.tell(st, X, np.zeros(3))
+
+
+def test_chain_of_any_global_and_local_solver(counter):
+    """PSO → Nelder–Mead as a chain: exact evaluation count, never worse than its global
+    stage, and MAPSONMDS equals chain(MAPSO, NelderMead) for the same key."""
+    c = jf.chain(jf.PSO(num_particles=6, num_generations=5), jf.NelderMead(max_steps=80))
+    sol = jf.minimise(counter.wrap(separable), c, (LO, HI), args=jnp.asarray(TARGET),
+                      key=jax.random.key(1))
+    jax.block_until_ready(sol)
+    assert int(sol.stats["num_evals"]) == counter.count
+    assert float(sol.f) <= float(sol.stats["f_global"])
+    assert float(sol.f) < 1e-6
+    mapso, nm = jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=2), jf.NelderMead(max_steps=30)
+    a = jf.minimise(separable, jf.MAPSONMDS(mapso=mapso, nelder_mead=nm), (LO, HI),
+                    args=jnp.asarray(TARGET), key=jax.random.key(2))
+    b = jf.minimise(separable, jf.chain(mapso, nm), (LO, HI), args=jnp.asarray(TARGET),
+                    key=jax.random.key(2))
+    assert bool(eqx.tree_equal(a.value, b.value)) and float(a.f) == float(b.f)
+
+
+def test_local_restarts_from_the_best_agents(counter):
+    """num_starts = 3 refines the three best personal bests one after another: the
+    evaluations add up exactly and the result is at least as good as one start."""
+    one = jf.chain(jf.PSO(num_particles=8, num_generations=3), jf.NelderMead(max_steps=25))
+    three = jf.chain(jf.PSO(num_particles=8, num_generations=3), jf.NelderMead(max_steps=25),
+                     num_starts=3)
+    a = jf.minimise(separable, one, (LO, HI), args=jnp.asarray(TARGET), key=jax.random.key(3))
+    b = jf.minimise(counter.wrap(separable), three, (LO, HI), args=jnp.asarray(TARGET),
+                    key=jax.random.key(3))
+    jax.block_until_ready(b)
+    assert int(b.stats["num_evals"]) == counter.count
+    assert int(b.stats["num_evals"]) > int(a.stats["num_evals"])
+    assert float(b.f) <= float(a.f)
+    with pytest.raises(ValueError, match="num_starts > 1 needs a swarm"):
+        jf.minimise(separable, jf.chain(jf.NelderMead(), jf.NelderMead(), num_starts=2), (LO, HI),
+                    args=jnp.asarray(TARGET), key=0)
+
+
+def sphere(y, args):
+    return jnp.sum(y**2)
+
+
+@pytest.mark.parametrize("solver", [
+    jf.PSO(num_particles=10, num_generations=400, stall_generations=10, function_tolerance=1e-3),
+    jf.MAPSO(lattice_size=3, num_generations=400, sl_generations=2, stall_generations=10,
+             function_tolerance=1e-3),
+    jf.chain(jf.PSO(num_particles=10, num_generations=400, stall_generations=10,
+                    function_tolerance=1e-3), jf.NelderMead(max_steps=50)),
+], ids=["pso", "mapso", "chain"])
+def test_stall_stops_early_and_the_rule_holds(solver, counter):
+    """MATLAB's MaxStallIterations/FunctionTolerance: the run ends long before G, the
+    count is exact, and over the last stall window the best improved by no more than
+    the tolerance (checked on the history, one entry per generation)."""
+    sol = jf.minimise(counter.wrap(sphere), solver, (LO, HI), key=jax.random.key(0))
+    jax.block_until_ready(sol)
+    assert int(sol.stats["num_evals"]) == counter.count
+    swarm = solver.global_solver if isinstance(solver, jf.optim.Chain) else solver
+    gens = int(sol.stats["num_steps"]) if swarm is solver else int(sol.state.first.generation)
+    assert 10 <= gens < 400
+    f = np.asarray(sol.history.f)[: gens + 1]
+    window = f[gens - 10], f[gens]
+    assert window[0] - window[1] <= 1e-3 * max(1.0, abs(window[1])) + 1e-12
+    off = eqx.tree_at(lambda s: s.stall_generations, swarm, None)
+    assert int(jf.minimise(sphere, off, (LO, HI), key=jax.random.key(0)).stats["num_steps"]) == 400
+
+
+def test_stall_is_off_by_default():
+    assert jf.PSO().stall_generations is None and jf.MAPSO().stall_generations is None
+
+
+def test_warm_start_continues_a_finished_run():
+    """Continuing a 6-generation PSO under a 10-generation budget runs 4 more
+    generations from the stored state (never worse); the same for MAPSO."""
+    for short, longer, per_gen in [
+        (jf.PSO(num_particles=6, num_generations=6), jf.PSO(num_particles=6, num_generations=10), 6),
+        (jf.MAPSO(lattice_size=3, num_generations=2, sl_generations=1),
+         jf.MAPSO(lattice_size=3, num_generations=4, sl_generations=1), None),
+    ]:
+        first = jf.minimise(sphere, short, (LO, HI), key=jax.random.key(5))
+        more = jf.minimise(sphere, longer, (LO, HI), warm_start=first)
+        assert int(more.stats["num_steps"]) == longer.num_generations
+        assert float(more.f) <= float(first.f)
+        assert int(more.stats["num_evals"]) == longer.evaluations()
+        if per_gen:
+            assert int(more.stats["num_evals"]) - int(first.stats["num_evals"]) == 4 * per_gen
+    with pytest.raises(ValueError, match="does not fit this solver"):
+        jf.minimise(sphere, jf.PSO(num_particles=7, num_generations=10), (LO, HI), warm_start=first)
+    with pytest.raises(ValueError, match="warm_start must be a Solution"):
+        jf.minimise(sphere, jf.PSO(), (LO, HI), warm_start="previous")
+
+
+def test_warm_start_for_nelder_mead_and_chain():
+    nm = jf.NelderMead(max_steps=10)
+    first = jf.minimise(sphere, nm, (LO, HI), key=jax.random.key(0))
+    more = jf.minimise(sphere, jf.NelderMead(max_steps=40), (LO, HI), warm_start=first)
+    assert int(more.stats["num_steps"]) > 10 and float(more.f) <= float(first.f)
+    c = jf.chain(jf.PSO(num_particles=4, num_generations=2), jf.NelderMead(max_steps=5))
+    done = jf.minimise(sphere, c, (LO, HI), key=0)
+    with pytest.raises(ValueError, match="cannot be continued"):
+        jf.minimise(sphere, c, (LO, HI), warm_start=done)
+
+
+def test_initial_population():
+    """y0 with a leading axis seeds the first agents: a population holding the optimum
+    reports it from the first entry of the history on."""
+    pop = np.array([[1.0, 1.0], [0.0, 0.0], [2.0, -1.0]], np.float32)
+    for solver in (jf.PSO(num_particles=6, num_generations=3),
+                   jf.MAPSO(lattice_size=2, num_generations=2, sl_generations=1),
+                   jf.chain(jf.PSO(num_particles=6, num_generations=2), jf.NelderMead(max_steps=5))):
+        sol = jf.minimise(sphere, solver, (LO, HI), key=0, y0=pop)
+        assert float(sol.history.f[0]) == 0.0 and float(sol.f) == 0.0
+    with pytest.raises(ValueError, match="3 starts but the swarm has 2 agents"):
+        jf.minimise(sphere, jf.PSO(num_particles=2), (LO, HI), key=0, y0=pop)
+    with pytest.raises(ValueError, match="this solver takes one start"):
+        jf.minimise(sphere, jf.NelderMead(), (LO, HI), key=0, y0=pop)
+
+
+def test_an_optimistix_minimiser_runs_through_the_adapter():
+    """optx.BFGS through jaxfric's driver equals optx.minimise on the same start."""
+    y0 = jnp.array([1.0, 2.0], jnp.float32)
+    solver = optx.BFGS(rtol=1e-6, atol=1e-6)
+    ref = optx.minimise(sphere, solver, y0, max_steps=1000, throw=False)
+    sol = jf.minimise(sphere, solver, (LO, HI), key=0, y0=y0)
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-6, atol=1e-7)
+    assert isinstance(jf.optim.optx_adapter.as_protocol(solver), OptxMinimiser)
+    assert isinstance(OptxMinimiser(solver), AbstractIterativeSolver)
+
+
+def test_progress_bar_ends_at_100_percent_when_a_stage_stops_early():
+    """Issue 20.10: a swarm stopped by its stall rule, then Nelder–Mead stopped by its
+    tolerance, both end their bars at 100 %."""
+    out = io.StringIO()
+    c = jf.chain(jf.PSO(num_particles=6, num_generations=300, stall_generations=5,
+                        function_tolerance=1e-2), jf.NelderMead(max_steps=2000))
+    sink = TqdmProgress(300, 2000, file=out, ascii=True)
+    jf.minimise(sphere, c, (LO, HI), key=0, progress=sink)
+    text = out.getvalue()
+    bars = [line for line in text.replace("\r", "\n").split("\n") if "it" in line or "%" in line]
+    finals = [b for b in bars if "100%" in b]
+    assert len(finals) >= 2, text[-2000:]
+    assert "Nelder" in finals[-1]
+
+
+def test_print_solution_shows_what_was_found():
+    """Issue 20.12: print(solution) shows value, f, evaluations and the result."""
+    sol = jf.minimise(sphere, jf.PSO(num_particles=4, num_generations=3), (LO, HI), key=0)
+    text = str(sol)
+    import re
+
+    shown = float(re.search(r"\bf=array\(([-0-9.e+]+)", text).group(1))
+    assert shown == pytest.approx(float(sol.f), rel=1e-5)
+    assert "value=array([" in text and "shape" not in text
+    assert "num_evals=array(16" in text and "result=successful" in text
+
+
+def test_int_seed_is_the_same_key():
+    """Issue 20.12: one key rule — an int seed is jax.random.key(seed), as in identify."""
+    pso = jf.PSO(num_particles=4, num_generations=3)
+    a = jf.minimise(sphere, pso, (LO, HI), key=3)
+    b = jf.minimise(sphere, pso, (LO, HI), key=jax.random.key(3))
+    c = jf.minimise(sphere, pso, (LO, HI), key=np.uint32(3))
+    assert bool(eqx.tree_equal(a.value, b.value)) and bool(eqx.tree_equal(a.value, c.value))
