@@ -176,20 +176,24 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     def _first_steps(self, x, lower, upper, options):
         """Signed per-coordinate steps of a first simplex around ``x`` (§5, §5.1)."""
         width = upper - lower
-        finite_box = jnp.all(jnp.isfinite(width))
-        fms = jnp.where(x != 0, self.initial_step * jnp.abs(x), _ZERO_STEP)
+        # fminsearch (and SciPy): component i multiplied by 1 + initial_step, so the step
+        # has the sign of x_i; reversed only where that would leave the box.
+        fms = jnp.where(x != 0, self.initial_step * x, _ZERO_STEP)
+        fms = jnp.where((x + fms > upper) | (x + fms < lower), -fms, fms)
         step_opt = options.get("initial_step") if options else None
+        if step_opt is None and self.initial_simplex == "fminsearch":
+            return fms
         if step_opt is not None:
             step = jnp.broadcast_to(jnp.asarray(step_opt, x.dtype), x.shape)
-        elif self.initial_simplex == "bounds":
-            rel = self.initial_step * jnp.where(jnp.isfinite(width), width, 0.0)
-            step = jnp.where(finite_box, rel, fms)
         else:
-            step = fms
+            step = self.initial_step * jnp.where(jnp.isfinite(width), width, 0.0)
         step = jnp.abs(step)
         step = jnp.where(step == 0, jnp.asarray(_ZERO_STEP, x.dtype), step)
         # Step away from the nearer bound so the vertex stays inside the box.
-        return jnp.where(upper - x >= x - lower, step, -step)
+        step = jnp.where(upper - x >= x - lower, step, -step)
+        if step_opt is None:  # "bounds" without a finite box: fminsearch's rule
+            step = jnp.where(jnp.all(jnp.isfinite(width)), step, fms)
+        return step
 
     @staticmethod
     def _evaluate(fn, unravel, args, X):
