@@ -1,16 +1,21 @@
-"""Nelder–Mead downhill simplex (NMDS, ALGORITHMS.md §5) as an optimistix minimiser.
+"""Nelder–Mead downhill simplex (NMDS, ``docs/algorithms.md §5``) as an optimistix minimiser.
 
 ``optx.NelderMead`` in optimistix 0.1.0 searches a 2-D plane for any dimension ≥ 3
 (degenerate first simplex), expands greedily, and reads best/worst vertices from
-the pre-update simplex (PEERS.md §1.4–1.6). This is a correct replacement that still
-runs through ``optx.minimise``:
+the pre-update simplex. This is a correct replacement that runs through
+``optx.minimise`` like any optimistix minimiser (``has_aux``, pytree ``y0``,
+``throw``, ``jit``, ``vmap``, implicit differentiation of the solution through
+``adjoint=optx.ImplicitAdjoint()``, ``jax_numpy_rank_promotion="raise"``):
 
-* Lagarias et al. (1998) acceptance rules on a simplex kept sorted by value;
+* Lagarias et al. (1998) acceptance rules on a simplex kept sorted by value (§5 steps 1–5);
 * standard coefficients ρ=1, χ=2, γ=½, σ=½ (MATLAB ``fminsearch``), or Gao & Han
   (2012) adaptive ones ρ=1, χ=1+2/n, γ=¾−1/(2n), σ=1−1/n — the default from 10
-  parameters, where the standard ones stall;
+  parameters, where the standard ones stall (§5, high-dimension note);
 * a first simplex scaled from the bounds (or fminsearch's 5 % / 0.00025 rule);
 * bounds by clipping every trial point (as SciPy does), NaN/inf → +inf;
+* the trial points of a step evaluated one after the other (fewest evaluations) or
+  as one batch (``batched_trials``: one call of the objective per step);
+* restarts from its own result with a fresh simplex (``restarts``);
 * exact evaluation counts and a fixed-size history of the best value.
 
 Bounds and an optional per-coordinate first step reach the solver through
@@ -39,22 +44,29 @@ from ._base import (
     uniform_in_box,
 )
 
+_ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
+
 
 class NelderMeadState(eqx.Module):
-    """Simplex sorted by value (``f_simplex[0]`` best), counters and history."""
+    """Simplex sorted by value (``f_simplex[0]`` best), the auxiliary output of the best
+    vertex, restart bookkeeping, counters and history."""
 
     simplex: Array
     f_simplex: Array
+    aux: Any
+    restarts_left: Array
+    f_start: Array  # best value when the current (re)start began (+inf before the first)
     num_evals: Array
     num_reflections: Array
     num_expansions: Array
     num_contractions: Array
     num_shrinks: Array
+    num_restarts: Array
     history: History
 
 
-def _flat_bounds(options, y_flat, unravel_like):
-    """Bounds from ``options`` as flat arrays (infinite when absent)."""
+def _flat_bounds(options, y_flat):
+    """Bounds from ``options`` as flat arrays of ``y_flat``'s shape (infinite when absent)."""
     dtype = y_flat.dtype
 
     def flat(name, fill):
@@ -69,18 +81,33 @@ def _flat_bounds(options, y_flat, unravel_like):
     return flat("lower", -jnp.inf), flat("upper", jnp.inf)
 
 
+def _i32(b):
+    return jnp.asarray(b).astype(jnp.int32)
+
+
+def _take(tree, i):
+    return jax.tree_util.tree_map(lambda a: a[i], tree)
+
+
+def _tree_select(pred, a, b):
+    return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
+
+
 class NelderMead(optx.AbstractMinimiser, AbstractSolver):
-    """Nelder–Mead simplex minimiser (ALGORITHMS.md §5), usable two ways:
+    """Nelder–Mead simplex minimiser (``docs/algorithms.md §5``), usable two ways:
 
     * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)``;
     * ``optx.minimise(fn, NelderMead(), y0, args, options={"lower": lo, "upper": hi},
-      max_steps=..., throw=False)`` (``options`` may also hold ``"initial_step"``, a
-      per-coordinate first step, and ``"progress"``, a ``ProgressHook``).
+      has_aux=..., max_steps=..., throw=...)`` (``options`` may also hold
+      ``"initial_step"``, a per-coordinate first step, and ``"progress"``, a
+      ``ProgressHook``). ``sol.aux`` is the auxiliary output at the best vertex;
+      ``sol.stats`` holds the evaluation and move counts.
 
     Args:
         rtol, atol: stop when every vertex is within ``atol + rtol·|x_best|`` of the best
             vertex (per coordinate) **and** every value within ``atol + rtol·|f_best|``
             of the best value (fminsearch's TolX/TolFun rule).
+        norm: kept for optimistix compatibility (the test above is per coordinate).
         adaptive: Gao–Han coefficients; ``None`` (default) uses them when ``n >= 10``
             (at n = 10 they solve 9/10 Rosenbrock starts against 7/10 for the standard ones).
         initial_simplex: ``"bounds"`` — vertex ``i`` steps ``initial_step·(upper_i −
@@ -88,10 +115,19 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             ``"fminsearch"`` — steps of ``initial_step·|x_i|`` (0.00025 where
             ``x_i = 0``). ``"bounds"`` falls back to ``"fminsearch"`` without bounds.
         initial_step: see above (0.05).
-        max_steps: iteration cap used by :func:`jaxfric.minimise` (``None``: 200·n,
-            SciPy's and fminsearch's default).
+        max_steps: iteration cap used by :func:`jaxfric.minimise` (``None``:
+            ``200·n·(1 + restarts)``, SciPy's and fminsearch's default per (re)start).
         max_evals: optional evaluation budget; the run stops once it is spent.
         history_size: entries of the fixed-size history.
+        batched_trials: evaluate reflection, expansion and both contractions of a step
+            as one batch of 4 (one call of the objective per step) instead of the
+            sequential rule (reflection, then at most one more point). The simplex moves
+            exactly as with the sequential rule; ``num_evals`` counts the 4 points actually
+            evaluated, so at a fixed evaluation budget it takes fewer steps.
+        restarts: after convergence, start again up to this many times from the best
+            vertex with a fresh first simplex (the rule above, at the new point) — what
+            ``fminsearch`` users do by calling it again on its own result. A restart that
+            ends without improving the best value stops the run (another would repeat it).
     """
 
     rtol: float = 1e-8
@@ -103,6 +139,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     max_steps: int | None = None
     max_evals: int | None = None
     history_size: int = 256
+    batched_trials: bool = False
+    restarts: int = 0
 
     def check(self):
         check_range("rtol", self.rtol, 0.0)
@@ -118,140 +156,206 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         if self.max_evals is not None:
             check_positive_int("max_evals", self.max_evals)
         check_positive_int("history_size", self.history_size, minimum=2)
+        check_positive_int("restarts", self.restarts, minimum=0)
+        if not isinstance(self.batched_trials, bool):
+            raise ValueError(f"batched_trials must be True or False, got {self.batched_trials!r}")
 
     def coefficients(self, n: int):
-        """(ρ, χ, γ, σ): standard, or Gao–Han adaptive for dimension ``n``."""
+        """(ρ, χ, γ, σ): standard, or Gao–Han adaptive for dimension ``n`` (§5)."""
         adaptive = (n >= 10) if self.adaptive is None else self.adaptive
         if adaptive:
             return 1.0, 1.0 + 2.0 / n, 0.75 - 1.0 / (2.0 * n), 1.0 - 1.0 / n
         return 1.0, 2.0, 0.5, 0.5
 
     def steps_for(self, n: int) -> int:
-        return self.max_steps if self.max_steps is not None else 200 * n
+        if self.max_steps is not None:
+            return self.max_steps
+        return 200 * n * (1 + self.restarts)
+
+    # ------------------------------------------------------------------ pieces
+    def _first_steps(self, x, lower, upper, options):
+        """Signed per-coordinate steps of a first simplex around ``x`` (§5, §5.1)."""
+        width = upper - lower
+        # fminsearch (and SciPy): component i multiplied by 1 + initial_step, so the step
+        # has the sign of x_i; reversed only where that would leave the box.
+        fms = jnp.where(x != 0, self.initial_step * x, _ZERO_STEP)
+        fms = jnp.where((x + fms > upper) | (x + fms < lower), -fms, fms)
+        step_opt = options.get("initial_step") if options else None
+        if step_opt is None and self.initial_simplex == "fminsearch":
+            return fms
+        if step_opt is not None:
+            step = jnp.broadcast_to(jnp.asarray(step_opt, x.dtype), x.shape)
+        else:
+            step = self.initial_step * jnp.where(jnp.isfinite(width), width, 0.0)
+        step = jnp.abs(step)
+        step = jnp.where(step == 0, jnp.asarray(_ZERO_STEP, x.dtype), step)
+        # Step away from the nearer bound so the vertex stays inside the box.
+        step = jnp.where(upper - x >= x - lower, step, -step)
+        if step_opt is None:  # "bounds" without a finite box: fminsearch's rule
+            step = jnp.where(jnp.all(jnp.isfinite(width)), step, fms)
+        return step
+
+    @staticmethod
+    def _evaluate(fn, unravel, args, X):
+        """Objective and aux at the rows of ``X``, as one batch; NaN/inf → +inf."""
+        f, aux = jax.vmap(lambda x: fn(unravel(x), args))(X)
+        return safe_value(f), aux
+
+    def _converged(self, state):
+        S, F = state.simplex, state.f_simplex
+        x_tol = self.atol + self.rtol * jnp.abs(S[0])
+        x_ok = jnp.all(jnp.abs(S[1:] - S[0][None]) <= x_tol[None])
+        f_ok = jnp.all(jnp.abs(F[1:] - F[0]) <= self.atol + self.rtol * jnp.abs(F[0]))
+        return x_ok & f_ok
+
+    def _restart_due(self, state):
+        return (
+            self._converged(state)
+            & (state.restarts_left > 0)
+            & (state.f_simplex[0] < state.f_start)
+        )
 
     # ------------------------------------------------------------ optimistix protocol
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         x0, unravel = ravel_pytree(y)
-        n = x0.shape[0]
-        lower, upper = _flat_bounds(options, x0, y)
+        lower, upper = _flat_bounds(options, x0)
         x0 = jnp.clip(x0, lower, upper)
-        width = upper - lower
-        finite_box = jnp.all(jnp.isfinite(width))
-        step_opt = options.get("initial_step") if options else None
-        if step_opt is not None:
-            step = jnp.broadcast_to(jnp.asarray(step_opt, x0.dtype), x0.shape)
-        elif self.initial_simplex == "bounds":
-            rel = self.initial_step * jnp.where(jnp.isfinite(width), width, 0.0)
-            fms = jnp.where(x0 != 0, self.initial_step * jnp.abs(x0), 0.00025)
-            step = jnp.where(finite_box, rel, fms)
-        else:
-            step = jnp.where(x0 != 0, self.initial_step * jnp.abs(x0), 0.00025)
-        # Step away from the nearer bound so the vertex stays inside the box.
-        up_room = upper - x0
-        down_room = x0 - lower
-        step = jnp.where(up_room >= down_room, step, -step)
-        step = jnp.where(step == 0, jnp.asarray(0.00025, x0.dtype), step)
+        step = self._first_steps(x0, lower, upper, options)
         simplex = jnp.concatenate([x0[None], x0[None] + jnp.diag(step)])
-        simplex = jnp.clip(simplex, lower, upper)
-        f = jax.vmap(lambda x: safe_value(fn(unravel(x), args)[0]))(simplex)
+        simplex = jnp.clip(simplex, lower[None], upper[None])
+        f, aux = self._evaluate(fn, unravel, args, simplex)
         order = jnp.argsort(f)
         zero = jnp.array(0, jnp.int32)
         hist = History.empty(self.history_size, f.dtype)
-        num_evals = jnp.array(n + 1, jnp.int32)
+        num_evals = jnp.array(x0.shape[0] + 1, jnp.int32)
         return NelderMeadState(
             simplex=simplex[order],
             f_simplex=f[order],
+            aux=_take(aux, order[0]),
+            restarts_left=jnp.array(self.restarts, jnp.int32),
+            f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
             num_reflections=zero,
             num_expansions=zero,
             num_contractions=zero,
             num_shrinks=zero,
+            num_restarts=zero,
             history=hist.record(num_evals, f[order][0]),
         )
 
     def step(self, fn, y, args, options, state, tags):
+        """One Lagarias step (§5 steps 1–5), or a restart when one is due."""
         _, unravel = ravel_pytree(y)
         S, F = state.simplex, state.f_simplex
         n = S.shape[1]
-        lower, upper = _flat_bounds(options, S[0], y)
+        lower, upper = _flat_bounds(options, S[0])
         rho, chi, gamma, sigma = self.coefficients(n)
+        restart = self._restart_due(state)
 
-        def f(x):
-            return safe_value(fn(unravel(x), args)[0])
+        def one(x):
+            return self._evaluate(fn, unravel, args, x[None])
+
+        def skip(k):
+            aux = jax.tree_util.tree_map(
+                lambda a: jnp.zeros((k,) + jnp.shape(a), jnp.result_type(a)), state.aux
+            )
+            return jnp.full((k,), jnp.inf, F.dtype), aux
 
         best, worst = S[0], S[-1]
         f_best, f_second, f_worst = F[0], F[-2], F[-1]
         centroid = (jnp.sum(S, axis=0) - worst) / n
         d = centroid - worst
-        x_r = jnp.clip(centroid + rho * d, lower, upper)
-        f_r = f(x_r)
+        # Reflection x̄ + ρd, expansion x̄ + ρχd, outside contraction x̄ + ργd,
+        # inside contraction x̄ − γd.
+        coef = jnp.asarray([rho, rho * chi, rho * gamma, -gamma], S.dtype)
+        trials = jnp.clip(centroid[None] + coef[:, None] * d[None], lower[None], upper[None])
+
+        if self.batched_trials:
+            f_t, aux_t = jax.lax.cond(restart, lambda _: skip(4), lambda X: self._evaluate(fn, unravel, args, X), trials)
+            f_r, aux_r = f_t[0], _take(aux_t, 0)
+        else:
+            f_1, aux_1 = jax.lax.cond(restart, lambda _: skip(1), one, trials[0])
+            f_r, aux_r = f_1[0], _take(aux_1, 0)
 
         expand = f_r < f_best
         accept_r = (f_r >= f_best) & (f_r < f_second)
         outside = (f_r >= f_second) & (f_r < f_worst)
-        # Expansion x̄ + ρχd, outside contraction x̄ + ργd or inside contraction x̄ − γd:
-        # one trial point whose coefficient depends on the case.
-        coef = jnp.where(expand, rho * chi, jnp.where(outside, rho * gamma, -gamma))
-        x_2 = jnp.clip(centroid + coef.astype(d.dtype) * d, lower, upper)
-        f_2 = jax.lax.cond(
-            accept_r, lambda x: jnp.asarray(jnp.inf, F.dtype), f, x_2
-        )
+        second = jnp.where(expand, 1, jnp.where(outside, 2, 3))
+        x_2 = trials[second]
+        need_2 = ~restart & ~accept_r
+        if self.batched_trials:
+            f_2, aux_2 = f_t[second], _take(aux_t, second)
+            trial_evals = jnp.where(restart, 0, 4)
+        else:
+            f_2v, aux_2v = jax.lax.cond(need_2, one, lambda _: skip(1), x_2)
+            f_2, aux_2 = f_2v[0], _take(aux_2v, 0)
+            trial_evals = jnp.where(restart, 0, 1 + _i32(need_2))
+
         # Lagarias rules: greedy minimisation on expansion, then contractions.
         take_e = expand & (f_2 < f_r)
         oc_ok = outside & (f_2 <= f_r)
         ic_ok = ~expand & ~accept_r & ~outside & (f_2 < f_worst)
-        shrink = ~expand & ~accept_r & ~oc_ok & ~ic_ok
-        x_new = jnp.where(take_e | oc_ok | ic_ok, x_2, x_r)
-        f_new = jnp.where(take_e | oc_ok | ic_ok, f_2, f_r)
+        take_2 = take_e | oc_ok | ic_ok
+        shrink = ~restart & ~expand & ~accept_r & ~oc_ok & ~ic_ok
+        x_new = jnp.where(take_2, x_2, trials[0])
+        f_new = jnp.where(take_2, f_2, f_r)
+        aux_new = _tree_select(take_2, aux_2, aux_r)
 
-        def do_shrink(_):
-            pts = best + sigma * (S[1:] - best)
-            return jnp.concatenate([best[None], pts]), jnp.concatenate(
-                [f_best[None], jax.vmap(f)(pts)]
+        # A shrink and a restart both replace every vertex but the best: one batch of n.
+        fresh = best[None] + jnp.diag(self._first_steps(best, lower, upper, options))
+        shrunk = best[None] + sigma * (S[1:] - best[None])
+        pts = jnp.clip(jnp.where(restart, fresh, shrunk), lower[None], upper[None])
+
+        def do_batch(_):
+            f_p, aux_p = self._evaluate(fn, unravel, args, pts)
+            i = jnp.argmin(f_p)
+            return (
+                jnp.concatenate([best[None], pts]),
+                jnp.concatenate([f_best[None], f_p]),
+                f_p[i],
+                _take(aux_p, i),
             )
 
         def do_replace(_):
-            return S.at[-1].set(x_new), F.at[-1].set(f_new)
+            return S.at[-1].set(x_new), F.at[-1].set(f_new), f_new, aux_new
 
-        S2, F2 = jax.lax.cond(shrink, do_shrink, do_replace, None)
+        S2, F2, f_cand, aux_cand = jax.lax.cond(shrink | restart, do_batch, do_replace, None)
         order = jnp.argsort(F2)  # stable: an old vertex wins ties against a new one
         S2, F2 = S2[order], F2[order]
-        num_evals = (
-            state.num_evals
-            + 1
-            + (~accept_r).astype(jnp.int32)
-            + shrink.astype(jnp.int32) * n
-        )
-        i32 = lambda b: b.astype(jnp.int32)
+        aux_best = _tree_select(f_cand < f_best, aux_cand, state.aux)
+        num_evals = state.num_evals + trial_evals + _i32(shrink | restart) * n
         new_state = NelderMeadState(
             simplex=S2,
             f_simplex=F2,
+            aux=aux_best,
+            restarts_left=state.restarts_left - _i32(restart),
+            f_start=jnp.where(restart, f_best, state.f_start),
             num_evals=num_evals,
-            num_reflections=state.num_reflections + i32(accept_r | (expand & ~take_e)),
-            num_expansions=state.num_expansions + i32(take_e),
-            num_contractions=state.num_contractions + i32(oc_ok | ic_ok),
-            num_shrinks=state.num_shrinks + i32(shrink),
+            num_reflections=state.num_reflections
+            + _i32(~restart & (accept_r | (expand & ~take_e))),
+            num_expansions=state.num_expansions + _i32(take_e),
+            num_contractions=state.num_contractions + _i32(oc_ok | ic_ok),
+            num_shrinks=state.num_shrinks + _i32(shrink),
+            num_restarts=state.num_restarts + _i32(restart),
             history=state.history.record(num_evals, F2[0]),
         )
         hook = options.get("progress") if options else None
         if hook is not None:
             hook.emit(1, new_state.history.counter, num_evals, F2[0])
-        return unravel(S2[0]), new_state, None
+        return unravel(S2[0]), new_state, aux_best
 
     def terminate(self, fn, y, args, options, state, tags):
-        S, F = state.simplex, state.f_simplex
-        x_ok = jnp.all(jnp.abs(S[1:] - S[0]) <= self.atol + self.rtol * jnp.abs(S[0]))
-        f_ok = jnp.all(jnp.abs(F[1:] - F[0]) <= self.atol + self.rtol * jnp.abs(F[0]))
-        nonfinite = ~jnp.isfinite(F[0])
+        converged = self._converged(state) & ~self._restart_due(state)
+        nonfinite = ~jnp.isfinite(state.f_simplex[0])
         over_budget = (
             state.num_evals >= self.max_evals if self.max_evals is not None else False
         )
-        done = (x_ok & f_ok) | nonfinite | over_budget
+        done = converged | nonfinite | over_budget
         result = RESULTS.where(
             nonfinite,
             RESULTS.nonfinite,
             RESULTS.where(
-                over_budget & ~(x_ok & f_ok),
+                over_budget & ~converged,
                 RESULTS.nonlinear_max_steps_reached,
                 RESULTS.successful,
             ),
@@ -266,8 +370,11 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             "num_expansions": state.num_expansions,
             "num_contractions": state.num_contractions,
             "num_shrinks": state.num_shrinks,
+            "num_restarts": state.num_restarts,
         }
-        return unravel(state.simplex[0]), aux, stats
+        # The best vertex and its aux (``aux`` from the loop is the same unless the
+        # loop never stepped, when it is optimistix's zeros).
+        return unravel(state.simplex[0]), state.aux, stats
 
     # ----------------------------------------------------------- jaxfric protocol
     def progress_totals(self):
