@@ -35,6 +35,9 @@ class Record:
     friction: np.ndarray
     dt: float
     n_train: int
+    #: Chamber pressures [Pa] when the data carry them (docs/algorithms.md §13.1).
+    p1: np.ndarray | None = None
+    p2: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -185,4 +188,9 @@ def as_record(data, train=None) -> Record:
             "velocity is constant over the training window; a friction model cannot be "
             "identified from it"
         )
-    return Record(velocity=velocity, friction=friction, dt=dt, n_train=n_train)
+    pressures = {name: _channel(name, getattr(data, name)) for name in ("p1", "p2")
+                 if getattr(data, name, None) is not None}
+    for name, arr in pressures.items():
+        if arr.shape != velocity.shape:
+            raise ValueError(f"{name} has {arr.shape[0]} samples but velocity has {n}")
+    return Record(velocity=velocity, friction=friction, dt=dt, n_train=n_train, **pressures)
