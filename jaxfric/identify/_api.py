@@ -225,6 +225,9 @@ def identify(
             (Elman: ``context_weight_bound=1``) unless ``model_options`` override them.
         data: a ``jaxfric.rig.FrictionData`` (or any object with ``.velocity`` [m/s],
             ``.friction`` [N], ``.dt`` [s] and ``.n_train``) or ``(velocity, friction, dt)``.
+            Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that
+            name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`); such a model
+            on data without them raises ``ValueError`` before any optimisation.
         solver: any jaxfric solver; default :func:`default_solver` (the paper's
             MAPSO–NMDS). ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.

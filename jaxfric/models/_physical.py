@@ -267,8 +267,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
             out[phys] = out[_ratio_base(phys)] * x
         return {name: out[name] for name in self.physical_names}
 
-    def from_physical(self, **params) -> Array:
-        """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
+    def _check_physical_names(self, params: dict) -> None:
         missing = set(self.physical_names) - set(params)
         extra = set(params) - set(self.physical_names)
         if missing or extra:
@@ -276,6 +275,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                 f"{type(self).__name__}.from_physical needs exactly {self.physical_names}; "
                 f"missing {sorted(missing)}, unexpected {sorted(extra)}"
             )
+
+    def from_physical(self, **params) -> Array:
+        """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
+        self._check_physical_names(params)
         cols = []
         for _, phys, kind in self._coords:
             p = jnp.asarray(params[phys])

@@ -145,13 +145,7 @@ class GMS(AbstractPhysicalModel):
 
     def from_physical(self, **params) -> Array:
         """Physical parameters (:attr:`physical_names`; the alphas must sum to 1) -> ``theta``."""
-        missing = set(self.physical_names) - set(params)
-        extra = set(params) - set(self.physical_names)
-        if missing or extra:
-            raise ValueError(
-                f"GMS.from_physical needs exactly {self.physical_names}; "
-                f"missing {sorted(missing)}, unexpected {sorted(extra)}"
-            )
+        self._check_physical_names(params)
         n = self.num_elements
         cols = [jnp.asarray(params[name]) for name in self.physical_names]
         cols = jnp.broadcast_arrays(*cols)
