@@ -308,3 +308,19 @@ def test_registry_and_data_bounds_of_new_options():
     j = c.param_names.index("f_cfr")
     level = np.median(pr[0] + pr[1])
     assert c.bounds()[1][j] * level == pytest.approx(1.2 * np.percentile(np.abs(F), 95))
+
+
+@pytest.mark.parametrize("model", [LuGre(asymmetric=True, offset=True), models.GMS(num_elements=2),
+                                   Cylinder(offset=True)], ids=lambda m: type(m).__name__)
+def test_new_models_survive_fit_save_and_load(tmp_path, model):
+    """Saved fits rebuild the model with its options and predict bit-identically."""
+    lower, upper = model.bounds()
+    theta = 0.5 * (lower + upper)
+    v = reversal_profile(200)
+    pr = _pressures(v.size)
+    fit = jaxfric.Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=DT,
+                      n_train=150, n_samples=200, metrics={})
+    fit.save(tmp_path / "fit.npz")
+    back = jaxfric.load_fit(tmp_path / "fit.npz")
+    assert back.model == model and back.model.param_names == model.param_names
+    np.testing.assert_array_equal(back.predict(v, inputs=pr), fit.predict(v, inputs=pr))
