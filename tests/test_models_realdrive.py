@@ -324,3 +324,15 @@ def test_new_models_survive_fit_save_and_load(tmp_path, model):
     back = jaxfric.load_fit(tmp_path / "fit.npz")
     assert back.model == model and back.model.param_names == model.param_names
     np.testing.assert_array_equal(back.predict(v, inputs=pr), fit.predict(v, inputs=pr))
+
+
+def test_unidentifiable_viscous_slope_at_one_speed_per_direction():
+    """Triangular strokes (one speed each way, as the pneumatic seal records) cannot separate
+    the viscous slope from the Coulomb level once levels are per direction or offset."""
+    t = np.arange(3000) * DT
+    one_speed = np.where(np.sin(2 * np.pi * 0.5 * t) > 0, 0.008, -0.012)
+    assert set(Coulomb(asymmetric=True).unidentifiable(one_speed)) == {"sigma2_pos", "sigma2_neg"}
+    assert Coulomb(offset=True).unidentifiable(one_speed) == ("sigma2",)
+    assert Coulomb().unidentifiable(one_speed) == ()  # +-Fc + sigma2 v at two speeds: 2 equations
+    levels = np.repeat([0.02, -0.05, 0.1, -0.12, 0.06, -0.03], 500)  # trapezoid-like plateaus
+    assert Coulomb(asymmetric=True, offset=True).unidentifiable(levels) == ("F_off",)

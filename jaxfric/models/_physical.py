@@ -181,6 +181,10 @@ LOW_SPEED = 0.02
 #: Fewer low-speed samples than this fraction of the record, and the parameters
 #: that only low speeds excite are reported as not determined by the data.
 MIN_LOW_SPEED_FRACTION = 0.02
+#: Sliding samples (|v| > 0.2 max|v|) of one direction whose speeds span less than this
+#: ((95th - 5th percentile) / median) are "one speed" [D]: the pneumatic O-ring records
+#: (triangular strokes) span 22-24 %, the EMPS trapezoids several-fold.
+ONE_SPEED_SPREAD = 0.3
 
 
 class AbstractPhysicalModel(AbstractFrictionModel):
@@ -303,7 +307,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         sigma0, sigma1; Dahl's sigma0; GMS's k_i, C) and the Stribeck-dip ones
         (Fs, vs, delta) are reported; a ``_pos`` (``_neg``) level is reported
         when no sample moves faster than that threshold in the positive
-        (negative) direction; ``F_off`` is reported whenever the model has both an
+        (negative) direction; viscous coefficients are reported when the record
+        slides at one speed (relative spread of |v| below ``ONE_SPEED_SPREAD``) in
+        the direction they act in (asymmetric), or in both directions with an
+        offset (symmetric: then 2 levels fix 3 unknowns); ``F_off`` is reported whenever the model has both an
         offset and direction-dependent Coulomb levels (the three are not separable
         from sliding data). The fit may still return values for them: they
         are then set by the search box or by effects they were not meant for.
@@ -328,6 +335,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                 "F_off", "with direction-dependent Coulomb levels a constant offset shifts "
                 "Fc_pos up and Fc_neg down alike: sliding data fix only Fc_pos + F_off and "
                 "Fc_neg - F_off (the split comes from standstill samples and the search box)"))
+        out += self._one_speed(v)
         for sfx, sign in (("_pos", 1.0), ("_neg", -1.0)):
             if not np.any(sign * v > thr):
                 for name in self.physical_names:
@@ -336,6 +344,31 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                         out.append(Unidentifiable(name, f"no sample moves in the {direction} direction "
                                                   f"faster than {thr:.3g} m/s"))
         return tuple(out)
+
+    def _one_speed(self, v: np.ndarray) -> list[Unidentifiable]:
+        speed = np.abs(v)
+        sliding = speed > 0.2 * speed.max()
+        spread = {}
+        for sfx, sign in (("_pos", 1.0), ("_neg", -1.0)):
+            s = speed[sliding & (sign * v > 0)]
+            if s.size:
+                lo, mid, hi = np.percentile(s, [5.0, 50.0, 95.0])
+                spread[sfx] = (hi - lo) / mid
+        names = [n for n in self.physical_names if self._group(n) == "sigma2"]
+        out = []
+        for name in names:
+            sfx = name[len("sigma2"):]
+            if sfx:
+                flagged = sfx in spread and spread[sfx] < ONE_SPEED_SPREAD
+            else:
+                flagged = ("F_off" in self.physical_names and bool(spread)
+                           and max(spread.values()) < ONE_SPEED_SPREAD)
+            if flagged:
+                worst = spread[sfx] if sfx else max(spread.values())
+                out.append(Unidentifiable(name, (
+                    f"the record slides at one speed (|v| spans {worst:.0%} of its median, "
+                    f"< {ONE_SPEED_SPREAD:.0%}): a viscous slope and a Coulomb level fit it alike")))
+        return out
 
     def _group(self, phys: str) -> str:
         """The family of a physical parameter for :meth:`unidentifiable` (``Fc_pos`` -> ``Fc``)."""
