@@ -336,3 +336,26 @@ def test_unidentifiable_viscous_slope_at_one_speed_per_direction():
     assert Coulomb().unidentifiable(one_speed) == ()  # +-Fc + sigma2 v at two speeds: 2 equations
     levels = np.repeat([0.02, -0.05, 0.1, -0.12, 0.06, -0.03], 500)  # trapezoid-like plateaus
     assert Coulomb(asymmetric=True, offset=True).unidentifiable(levels) == ("F_off",)
+
+
+def test_inputs_from_a_record_are_checked_by_the_model_that_needs_them():
+    n = 50
+    v = np.linspace(-0.01, 0.01, n)
+    p1 = np.full(n, 3e5)
+    p1[7] = np.nan
+    data = jaxfric.rig.FrictionData.from_arrays(v, np.tanh(v / 1e-3), DT, p1=np.full(n, 3e5),
+                                                p2=np.full(n, 1e5))
+    np.testing.assert_array_equal(Cylinder().inputs_from(data), np.stack([np.full(n, 3e5), np.full(n, 1e5)]))
+    assert Coulomb().inputs_from(data) is None
+    from jaxfric.identify import as_record
+
+    bad = as_record((v, np.tanh(v / 1e-3), DT))
+    with pytest.raises(ValueError, match="p1, p2"):
+        Cylinder().inputs_from(bad)
+    import dataclasses
+
+    bad = dataclasses.replace(bad, p1=p1, p2=np.full(n, 1e5))
+    with pytest.raises(ValueError, match="p1 holds NaN"):
+        Cylinder().inputs_from(bad)
+    with pytest.raises(ValueError, match="expected 60"):
+        Cylinder().inputs_from(data, 60)
