@@ -118,11 +118,12 @@ def _check_velocity(velocity, dtype) -> jax.Array:
     return jnp.asarray(velocity, dtype)
 
 
-def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt) -> jax.Array:
+def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
     """Free-run friction [N] of ``model`` at ``theta`` for ``velocity`` [m/s] (§2.4):
     scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
     :class:`Scaler` pair, or ``(None, None)`` for SI-unit models). Computed in
-    ``theta``'s dtype."""
+    ``theta``'s dtype. ``inputs``: the ``(C, T)`` measured channels of a model with
+    ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others."""
     theta = jnp.asarray(theta)
     dtype = theta.dtype
     v = _check_velocity(velocity, dtype)
@@ -130,10 +131,12 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt) -> jax.A
         raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
     dt = jnp.asarray(dt, dtype)
     model = rollout_model(model)
+    if inputs is not None and model.input_names:
+        inputs = jnp.asarray(inputs, dtype)
     if model.needs_scaling:
         sv, sf = scalers
-        return sf.unscale(model.simulate(theta, sv.scale(v), dt))
-    return model.simulate(theta, v, dt)
+        return sf.unscale(model.simulate(theta, sv.scale(v), dt, inputs))
+    return model.simulate(theta, v, dt, inputs)
 
 
 class Fit:
@@ -203,17 +206,19 @@ class Fit:
             return data
         return jax.random.wrap_key_data(data, impl=self.key_impl)
 
-    def predict(self, velocity, dt=None) -> jax.Array:
+    def predict(self, velocity, dt=None, inputs=None) -> jax.Array:
         """Free-run friction prediction [N] for a velocity record [m/s] (§2.4).
 
         The model state starts from its initial condition at the first sample
         (learned ``c0`` for the Elman network, the steady state for LuGre); the
         velocity is scaled with the training-window scaler and the output mapped
-        back to newtons. ``dt`` defaults to the identification record's.
+        back to newtons. ``dt`` defaults to the identification record's. ``inputs``:
+        the ``(C, T)`` channels named by ``model.input_names`` (e.g. ``[p1, p2]`` in
+        Pa for :class:`jaxfric.models.Cylinder`); ignored by the other models.
         """
         dt = self.dt if dt is None else dt
         return predict(self.model, self.theta, (self.velocity_scaler, self.friction_scaler),
-                       velocity, dt)
+                       velocity, dt, inputs)
 
     # --------------------------------------------------------------- report
     def to_dict(self, include_theta: bool = True) -> dict[str, Any]:

@@ -417,7 +417,7 @@ API_CASES = [
      ["velocity is empty"]),
     ("models/velocity-2d", lambda f: jf.Coulomb().simulate(np.ones(2), V[:, None]), ValueError,
      ["velocity must be a 1-D time series"]),
-    ("models/get-unknown", lambda f: models.get("gms"), ValueError, ["unknown friction model 'gms'", "valid names"]),
+    ("models/get-unknown", lambda f: models.get("gms2"), ValueError, ["unknown friction model 'gms2'", "valid names"]),
     ("models/check-theta-nan", lambda f: jf.LuGre().check_theta(np.full(6, np.nan)), ValueError,
      ["non-finite values"]),
     ("models/data-bounds-zero-friction", lambda f: jf.LuGre().with_data_bounds(V, np.zeros(N)), ValueError,

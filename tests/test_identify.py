@@ -293,7 +293,7 @@ def _good():
          ["theta", "non-finite"]),
         (lambda v, f: dict(data=(v, f, DT), model="lugre", theta0=[7, 3, 3, 100, 1.5]),
          ["theta", "6 parameters"]),
-        (lambda v, f: dict(data=(v, f, DT), model="gms"), ["unknown friction model", "lugre"]),
+        (lambda v, f: dict(data=(v, f, DT), model="gms2"), ["unknown friction model", "lugre"]),
         (lambda v, f: dict(data=(v, f, DT), solver="mapso"), ["solver", "jaxfric solver"]),
         (lambda v, f: dict(data=(v, f, DT), refine="adam"), ["refine"]),
         (lambda v, f: dict(data=(v, f, DT), key=None), ["key"]),

@@ -11,7 +11,9 @@ from jaxfric import models
 from jaxfric.models import AbstractFrictionModel, Scaler, check_theta
 
 SMALL = {"elman": dict(neurons=3), "elman_full": dict(neurons=3)}
-NAMES = ("elman", "elman_full", "lugre", "dahl", "coulomb", "stribeck")
+NAMES = ("elman", "elman_full", "lugre", "dahl", "coulomb", "stribeck", "gms")
+#: Models that also need measured inputs (chamber pressures): tested in test_models_realdrive.py.
+REGISTRY = NAMES + ("cylinder",)
 
 
 def make(name):
@@ -19,14 +21,14 @@ def make(name):
 
 
 def test_registry_lists_all_models():
-    assert models.available() == NAMES
+    assert models.available() == REGISTRY
     assert isinstance(models.get("LuGre"), models.LuGre)
     assert isinstance(models.get("elman-full"), models.ElmanFull)
     assert models.get("elman", neurons=20).num_params == 120
 
 
 def test_registry_unknown_name_lists_valid_names():
-    with pytest.raises(ValueError, match="valid names: elman, elman_full, lugre, dahl, coulomb, stribeck"):
+    with pytest.raises(ValueError, match="valid names: elman, elman_full, lugre, dahl, coulomb, stribeck, gms, cylinder"):
         models.get("gms2")
     with pytest.raises(ValueError):
         models.get(3)

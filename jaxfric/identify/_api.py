@@ -225,6 +225,9 @@ def identify(
             (Elman: ``context_weight_bound=1``) unless ``model_options`` override them.
         data: a ``jaxfric.rig.FrictionData`` (or any object with ``.velocity`` [m/s],
             ``.friction`` [N], ``.dt`` [s] and ``.n_train``) or ``(velocity, friction, dt)``.
+            Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that
+            name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`); such a model
+            on data without them raises ``ValueError`` before any optimisation.
         solver: any jaxfric solver; default :func:`default_solver` (the paper's
             MAPSO–NMDS). ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.
@@ -272,8 +275,10 @@ def identify(
     with Stopwatch() as total:
         record = as_record(data, train)
         model = resolve_model(model, model_options)
+        inputs = model.inputs_from(record, record.n_samples)  # fails early if a channel is missing
         if data_bounds:
-            model = model.with_data_bounds(record.train_velocity, record.train_friction)
+            model = model.with_data_bounds(record.train_velocity, record.train_friction,
+                                           None if inputs is None else inputs[:, : record.n_train])
         if solver is None:
             solver = default_solver(model)
         if not isinstance(solver, AbstractSolver):
@@ -304,7 +309,8 @@ def identify(
         stages = _stages(sol, solver)
         timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
         theta = sol.value
-        metrics = _window_metrics(predict(model, theta, scalers, record.velocity, record.dt), record)
+        metrics = _window_metrics(
+            predict(model, theta, scalers, record.velocity, record.dt, inputs), record)
         stages[-1].update(_stage_mse(metrics))
 
         if settings_refine is not None:
@@ -314,7 +320,7 @@ def identify(
                 out = jax.block_until_ready(run_refine(settings_refine, cost, theta, lo, hi, data_j))
             theta = out.theta
             metrics = _window_metrics(
-                predict(model, theta, scalers, record.velocity, record.dt), record)
+                predict(model, theta, scalers, record.velocity, record.dt, inputs), record)
             stages.append({
                 "stage": settings_refine.method,
                 "J": float(out.f),

@@ -35,6 +35,9 @@ class Record:
     friction: np.ndarray
     dt: float
     n_train: int
+    #: Chamber pressures [Pa] when the data carry them (docs/algorithms.md §13.1).
+    p1: np.ndarray | None = None
+    p2: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -185,4 +188,8 @@ def as_record(data, train=None) -> Record:
             "velocity is constant over the training window; a friction model cannot be "
             "identified from it"
         )
-    return Record(velocity=velocity, friction=friction, dt=dt, n_train=n_train)
+    # Checked by the model that uses them (AbstractFrictionModel.inputs_from), so a bad
+    # channel no model needs does not stop the run.
+    pressures = {name: np.asarray(getattr(data, name), dtype=np.float64) for name in ("p1", "p2")
+                 if getattr(data, name, None) is not None}
+    return Record(velocity=velocity, friction=friction, dt=dt, n_train=n_train, **pressures)

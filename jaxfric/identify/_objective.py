@@ -33,13 +33,16 @@ class CostData(eqx.Module):
 
     ``u``: model input over the training window (scaled, or m/s);
     ``y``: target over the training window (scaled, or N);
-    ``dt``: sample time [s] (0-d); ``inv_norm``: the constant ``c`` above (0-d).
+    ``dt``: sample time [s] (0-d); ``inv_norm``: the constant ``c`` above (0-d);
+    ``inputs``: the model's measured channels over the training window
+    (``model.input_names``, e.g. chamber pressures) or ``None``.
     """
 
     u: Array
     y: Array
     dt: Array
     inv_norm: Array
+    inputs: Array | None = None
 
 
 class OutputErrorCost(eqx.Module):
@@ -49,12 +52,12 @@ class OutputErrorCost(eqx.Module):
 
     def residuals(self, theta, data: CostData) -> Array:
         """Residual vector ``r`` with ``Σ r² = J`` (for least-squares refinement)."""
-        y_hat = self.model.simulate(theta, data.u, data.dt)
+        y_hat = self.model.simulate(theta, data.u, data.dt, data.inputs)
         scale = jnp.sqrt(data.inv_norm / data.y.shape[0])
         return (data.y - y_hat) * scale
 
     def __call__(self, theta, data: CostData) -> Array:
-        y_hat = self.model.simulate(theta, data.u, data.dt)
+        y_hat = self.model.simulate(theta, data.u, data.dt, data.inputs)
         e = data.y - y_hat
         return jnp.mean(e * e) * data.inv_norm
 
@@ -89,9 +92,11 @@ def cost_data(model, record: Record, scalers, dtype) -> CostData:
     else:
         u, y = v, f
         inv_norm = 1.0 / float(np.var(f))
+    inputs = model.inputs_from(record, record.n_samples)
     return CostData(
         u=jnp.asarray(u, dtype),
         y=jnp.asarray(y, dtype),
         dt=jnp.asarray(record.dt, dtype),
         inv_norm=jnp.asarray(inv_norm, dtype),
+        inputs=None if inputs is None else jnp.asarray(inputs[:, : record.n_train], dtype),
     )

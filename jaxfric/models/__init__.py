@@ -1,4 +1,4 @@
-"""Friction models for jaxfric (ALGORITHMS.md §2 and §8).
+"""Friction models for jaxfric (docs/algorithms.md §2, §8 and §13.1).
 
 Every model implements :class:`AbstractFrictionModel`: a flat search vector
 ``theta`` with :meth:`~AbstractFrictionModel.bounds`, named physical
@@ -7,29 +7,38 @@ rollout ``simulate(theta, velocity, dt)`` / ``simulate_batch(thetas, velocity, d
 
 Black-box models (``needs_scaling = True``: :class:`Elman`, :class:`ElmanFull`)
 are fitted on data scaled with :class:`Scaler`; physical models (:class:`LuGre`,
-:class:`Dahl`, :class:`Coulomb`, :class:`Stribeck`) work in SI units.
+:class:`Dahl`, :class:`Coulomb`, :class:`Stribeck`, :class:`GMS`,
+:class:`Cylinder`) work in SI units. ``asymmetric=True`` / ``offset=True`` give
+Coulomb, Stribeck, LuGre and Dahl direction-dependent levels and an output offset
+(§13.1); :class:`Cylinder` needs the chamber pressures as ``inputs``
+(``model.input_names``). ``model.unidentifiable(record)`` names the parameters a
+record may not determine.
 """
 
 from __future__ import annotations
 
-from ._base import AbstractFrictionModel, check_theta, friction_scales
+from ._base import AbstractFrictionModel, Unidentifiable, check_theta, friction_scales
 from ._physical import AbstractPhysicalModel, DEFAULT_RANGES, data_ranges, stribeck_curve
 from ._scaling import Scaler
 from .elman import Elman, ElmanFull
+from .gms import GMS
 from .lugre import Dahl, LuGre, bristle_friction
-from .static import Coulomb, Stribeck
+from .static import Coulomb, Cylinder, Stribeck
 
 __all__ = [
     "AbstractFrictionModel",
     "AbstractPhysicalModel",
     "Coulomb",
+    "Cylinder",
     "DEFAULT_RANGES",
     "Dahl",
     "Elman",
     "ElmanFull",
+    "GMS",
     "LuGre",
     "Scaler",
     "Stribeck",
+    "Unidentifiable",
     "available",
     "bristle_friction",
     "check_theta",
@@ -46,6 +55,8 @@ _REGISTRY: dict[str, type[AbstractFrictionModel]] = {
     "dahl": Dahl,
     "coulomb": Coulomb,
     "stribeck": Stribeck,
+    "gms": GMS,
+    "cylinder": Cylinder,
 }
 
 

@@ -17,6 +17,13 @@ Every model maps a flat search vector ``theta`` (what the optimisers see, in
 
 ``simulate`` is the output-error (free-run) prediction of ALGORITHMS.md §2.4 /
 §11 step 4: the measured friction is never fed back.
+
+A model that needs measured signals besides the velocity (the cylinder friction
+of docs/algorithms.md §13.1 needs the chamber pressures) names them in
+:attr:`~AbstractFrictionModel.input_names` and takes them as ``inputs``, a
+``(C, T)`` array in that order: ``model.simulate(theta, v, dt, inputs)``. Every
+other model has ``input_names == ()`` and ignores ``inputs``.
+:meth:`~AbstractFrictionModel.inputs_from` reads them from a record.
 """
 
 from __future__ import annotations
@@ -33,7 +40,34 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .. import _xla
 
-__all__ = ["AbstractFrictionModel", "check_theta", "friction_scales"]
+__all__ = ["AbstractFrictionModel", "Unidentifiable", "check_theta", "friction_scales", "record_velocity"]
+
+
+class Unidentifiable(str):
+    """The name of a parameter the data may not determine, with the ``reason``.
+
+    A ``str`` (so ``"sigma0" in model.unidentifiable(record)`` works) that also
+    carries a human-readable ``reason`` for reports.
+    """
+
+    reason: str
+
+    def __new__(cls, name: str, reason: str) -> "Unidentifiable":
+        obj = super().__new__(cls, name)
+        obj.reason = str(reason)
+        return obj
+
+    def __reduce__(self):
+        return (Unidentifiable, (str(self), self.reason))
+
+
+def record_velocity(data) -> np.ndarray:
+    """The velocity [m/s] of a record (anything with ``.velocity``) or of a plain array."""
+    v = getattr(data, "velocity", data)
+    v = np.asarray(v, dtype=float).ravel()
+    if v.size == 0 or not np.all(np.isfinite(v)):
+        raise ValueError("velocity must be a non-empty, finite time series")
+    return v
 
 
 def _as_float_dtype(*arrays) -> jnp.dtype:
@@ -117,6 +151,45 @@ class AbstractFrictionModel(eqx.Module):
 
     # ------------------------------------------------------------ description
     @property
+    def input_names(self) -> tuple[str, ...]:
+        """Measured channels the model needs besides the velocity, in the row order
+        of ``inputs`` (e.g. ``("p1", "p2")``, chamber pressures in Pa); ``()`` for
+        models driven by the velocity alone."""
+        return ()
+
+    def inputs_from(self, data, length: int | None = None) -> np.ndarray | None:
+        """The ``(C, T)`` ``inputs`` array read from ``data``'s attributes named in
+        :attr:`input_names` (a :class:`jaxfric.rig.FrictionData` or an identify
+        ``Record``), or ``None`` for a model that needs none.
+
+        Raises ``ValueError`` naming the missing channels when ``data`` lacks them,
+        and when a channel is not ``length`` samples long.
+        """
+        if not self.input_names:
+            return None
+        missing = [n for n in self.input_names if getattr(data, n, None) is None]
+        if missing:
+            raise ValueError(
+                f"{type(self).__name__} needs the measured channel(s) {', '.join(missing)} "
+                f"(of {self.input_names}) but the data have none; pass a record that holds "
+                "them (e.g. FrictionData.from_arrays(..., p1=..., p2=...))"
+            )
+        rows = [np.asarray(getattr(data, n), dtype=np.float64).ravel() for n in self.input_names]
+        for name, row in zip(self.input_names, rows):
+            if length is not None and row.shape[0] != length:
+                raise ValueError(f"channel {name} has {row.shape[0]} samples, expected {length}")
+            if not np.all(np.isfinite(row)):
+                raise ValueError(f"channel {name} holds NaN or inf")
+        return np.stack(rows)
+
+    def unidentifiable(self, data) -> tuple[Unidentifiable, ...]:
+        """Parameters that ``data`` (a record or a velocity array) may not determine,
+        each with its reason (:class:`Unidentifiable`); ``()`` by default."""
+        del data
+        return ()
+
+    
+    @property
     @abc.abstractmethod
     def param_names(self) -> tuple[str, ...]:
         """Names of the search coordinates, in ``theta`` order."""
@@ -141,10 +214,32 @@ class AbstractFrictionModel(eqx.Module):
     # -------------------------------------------------------------- rollouts
     @abc.abstractmethod
     def _simulate_batch(self, thetas: Array, velocity: Array, dt) -> Array:
-        """Model-specific rollout; called traced, through :meth:`simulate_batch`."""
+        """Model-specific rollout; called traced, through :meth:`simulate_batch`.
+
+        Models with :attr:`input_names` take a fourth argument, the ``(C, T)``
+        ``inputs``; the others are called with three."""
+
+    def _check_inputs(self, inputs):
+        """``None`` for models that ignore ``inputs``; else the array, after an
+        eager (trace-time) check that it is there and has ``C`` rows."""
+        if not self.input_names:
+            return None
+        if inputs is None:
+            raise ValueError(
+                f"{type(self).__name__} needs inputs={self.input_names} (a (C, T) array of "
+                "measured channels, e.g. chamber pressures in Pa); none were given"
+            )
+        inputs = jnp.asarray(inputs)
+        if inputs.ndim != 2 or inputs.shape[0] != len(self.input_names):
+            raise ValueError(
+                f"inputs must be a ({len(self.input_names)}, T) array holding {self.input_names}, "
+                f"got shape {inputs.shape}"
+            )
+        return inputs
 
     def simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None,
+        inputs: Float[ArrayLike, "C T"] | None = None,
     ) -> Float[Array, "P T"]:
         """Free-run friction of ``P`` candidates on one velocity record, ``(P, T)``.
 
@@ -155,11 +250,13 @@ class AbstractFrictionModel(eqx.Module):
         (512-bit vectors where the CPU has them).
         """
         self._check_dt(dt)
+        inputs = self._check_inputs(inputs)
         rollout = _xla.jit(_jit_rollout, _xla.resolve(_xla.AUTO, "rollout"))
-        return rollout(self, thetas, velocity, dt)
+        return rollout(self, thetas, velocity, dt, inputs)
 
     def simulate(
-        self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt=None
+        self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"], dt=None,
+        inputs: Float[ArrayLike, "C T"] | None = None,
     ) -> Float[Array, " T"]:
         """Free-run friction prediction for one parameter vector.
 
@@ -171,13 +268,16 @@ class AbstractFrictionModel(eqx.Module):
         single-candidate scan); other vmaps (over data, or nested) fall back to
         ordinary batching. ``velocity`` and the returned friction are in the
         model's working units (see ``needs_scaling``); ``dt`` is the sample time
-        in s (ignored by static maps and the Elman networks).
+        in s (ignored by static maps and the Elman networks). ``inputs``: the
+        ``(C, T)`` measured channels named by :attr:`input_names` (ignored by
+        models that need none).
         """
         theta = jnp.asarray(theta)
         if theta.ndim != 1:
             raise ValueError(f"theta must be 1-D, got shape {theta.shape}; use simulate_batch")
         self._check_dt(dt)
-        return _single_rollout(self)(theta, velocity, dt)
+        inputs = self._check_inputs(inputs)
+        return _single_rollout(self)(theta, velocity, dt, inputs)
 
     # ---------------------------------------------------------------- helpers
     #: Models whose rollout integrates in time reject a concrete non-positive or
@@ -202,13 +302,16 @@ class AbstractFrictionModel(eqx.Module):
         lower, upper = self.bounds()
         return 0.5 * (lower + upper)
 
-    def with_data_bounds(self, velocity: ArrayLike, friction: ArrayLike) -> "AbstractFrictionModel":
-        """Return a copy whose unset search ranges are centred on the data's levels.
+    def with_data_bounds(
+        self, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None
+    ) -> "AbstractFrictionModel":
+        """Return a copy whose unset search ranges are centred on the data's levels
+        (``inputs``: the :attr:`input_names` channels, for models that have some).
 
         Models fitted on scaled data (or without data-dependent ranges) return
         ``self`` unchanged.
         """
-        del velocity, friction
+        del velocity, friction, inputs
         return self
 
     # ------------------------------------------------------------- internals
@@ -231,9 +334,11 @@ class AbstractFrictionModel(eqx.Module):
         return thetas.astype(dtype), velocity.astype(dtype)
 
 
-def _jit_rollout(model: AbstractFrictionModel, thetas, velocity, dt):
+def _jit_rollout(model: AbstractFrictionModel, thetas, velocity, dt, inputs=None):
     # The model has only static fields, so it is an empty pytree whose treedef
     # (hence the jit cache key) is its configuration.
+    if model.input_names:
+        return model._simulate_batch(thetas, velocity, dt, inputs)
     return model._simulate_batch(thetas, velocity, dt)
 
 
@@ -243,8 +348,8 @@ def _any_batched(flags) -> bool:
 
 @functools.lru_cache(maxsize=128)
 def _single_rollout(model: AbstractFrictionModel):
-    """``(theta, velocity, dt) -> (T,)`` for ``model`` with a batching rule that
-    sends ``vmap`` over ``theta`` to ``simulate_batch``.
+    """``(theta, velocity, dt, inputs) -> (T,)`` for ``model`` with a batching rule
+    that sends ``vmap`` over ``theta`` to ``simulate_batch``.
 
     ``custom_vmap`` alone does not support reverse-mode differentiation, so it
     sits under a ``custom_jvp`` whose rule differentiates the plain rollout:
@@ -252,22 +357,22 @@ def _single_rollout(model: AbstractFrictionModel):
     configuration (models are hashable static configs).
     """
 
-    def plain(theta, velocity, dt):
-        return model.simulate_batch(theta[None, :], velocity, dt)[0]
+    def plain(theta, velocity, dt, inputs):
+        return model.simulate_batch(theta[None, :], velocity, dt, inputs)[0]
 
     batched = jax.custom_batching.custom_vmap(plain)
 
     @batched.def_vmap
-    def _rule(axis_size, in_batched, theta, velocity, dt):
-        theta_b, velocity_b, dt_b = in_batched
-        if theta_b and not velocity_b and not _any_batched(dt_b):
-            return model.simulate_batch(theta, velocity, dt), True
+    def _rule(axis_size, in_batched, theta, velocity, dt, inputs):
+        theta_b, velocity_b, dt_b, inputs_b = in_batched
+        if theta_b and not velocity_b and not _any_batched(dt_b) and not _any_batched(inputs_b):
+            return model.simulate_batch(theta, velocity, dt, inputs), True
         axes = tuple(0 if _any_batched(b) else None for b in in_batched)
-        return jax.vmap(plain, in_axes=axes, axis_size=axis_size)(theta, velocity, dt), True
+        return jax.vmap(plain, in_axes=axes, axis_size=axis_size)(theta, velocity, dt, inputs), True
 
     @jax.custom_jvp
-    def rollout(theta, velocity, dt):
-        return batched(theta, velocity, dt)
+    def rollout(theta, velocity, dt, inputs):
+        return batched(theta, velocity, dt, inputs)
 
     @rollout.defjvp
     def _rollout_jvp(primals, tangents):

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ._base import AbstractFrictionModel, friction_scales
+from ._base import AbstractFrictionModel, Unidentifiable, friction_scales, record_velocity
 
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     # ALGORITHMS.md §8.5 [D]: order-of-magnitude ranges for hydraulic cylinders.
@@ -32,9 +32,78 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "Fs_ratio": (1.0, 3.0),
     "vs": (1e-4, 5e-2),
     "delta": (0.5, 3.0),
+    # docs/algorithms.md §13.1 [D]: output offset, of the order of a Coulomb level.
+    "F_off": (-200.0, 200.0),
+    # docs/algorithms.md §8.4 [D]: GMS element stiffness (as sigma0) and slip rate C [N/s].
+    "k": (1e4, 1e9),
+    "C": (1e1, 1e7),
+    # docs/algorithms.md §13.1 [D]: Simscape cylinder friction, preload [N],
+    # pressure coefficient [N/Pa] (Simscape's default 1e-6) and break-away ratio [-].
+    "F_pr": (0.0, 2000.0),
+    "f_cfr": (0.0, 1e-4),
+    "K_brk": (1.0, 3.0),
 }
 
-_LOG_RANGED = ("sigma0", "sigma1", "sigma2", "vs")
+#: Suffixes of direction-dependent parameters (docs/algorithms.md §13.1): ``Fc_pos``
+#: acts for v > 0, ``Fc_neg`` for v < 0; both share the range of ``Fc``.
+DIRECTIONS = ("_pos", "_neg")
+
+_LOG_RANGED = ("sigma0", "sigma1", "sigma2", "vs", "k", "C")
+
+
+def base_name(phys: str) -> str:
+    """``Fc_pos`` -> ``Fc``: the range key of a direction-dependent parameter."""
+    for suffix in DIRECTIONS:
+        if phys.endswith(suffix):
+            return phys[: -len(suffix)]
+    return phys
+
+
+#: Parameters that get a ``_pos`` / ``_neg`` pair when a model is asymmetric (§13.1).
+_DIRECTIONAL = ("Fc", "Fs", "sigma2")
+
+
+def directional_coords(coords, asymmetric: bool, offset: bool) -> tuple:
+    """docs/algorithms.md §13.1: the symmetric ``coords`` with ``Fc``, ``Fs`` and
+    ``sigma2`` split into ``_pos`` (v > 0) and ``_neg`` (v < 0) levels when
+    ``asymmetric``, and an output offset ``F_off`` [N] appended when ``offset``.
+    With both off the symmetric layout is returned unchanged (saved fits load)."""
+    out = []
+    for search, phys, kind in coords:
+        if asymmetric and phys in _DIRECTIONAL:
+            out += [(search + sfx, phys + sfx, kind) for sfx in DIRECTIONS]
+        else:
+            out.append((search, phys, kind))
+    if offset:
+        out.append(("F_off", "F_off", "linear"))
+    return tuple(out)
+
+
+def by_direction(p: dict, name: str, v: Array) -> Array:
+    """``p[name]`` for a symmetric model, else ``p[name_pos]`` where v > 0 and
+    ``p[name_neg]`` elsewhere (§13.1)."""
+    if name in p:
+        return p[name]
+    return jnp.where(v > 0, p[name + "_pos"], p[name + "_neg"])
+
+
+def signed_level(t: Array, p: dict, name: str, level_pos: Array, level_neg: Array) -> Array:
+    """``t * level`` for a smoothed sign ``t`` in [-1, 1] (symmetric), else
+    ``max(t, 0) level_pos - max(-t, 0) level_neg`` (§13.1): the EMPS form
+    ``Fc+ [v>0] - Fc- [v<0]`` with the model's smoothed sign. ``name`` tells which."""
+    if name in p:
+        return t * level_pos
+    return jnp.maximum(t, 0.0) * level_pos - jnp.maximum(-t, 0.0) * level_neg
+
+
+def add_offset(f: Array, p: dict) -> Array:
+    """``f + F_off`` when the model has an output offset (§13.1)."""
+    return f + p["F_off"] if "F_off" in p else f
+
+
+def _ratio_base(phys: str) -> str:
+    """The level a ``ratio`` coordinate multiplies: ``Fs`` -> ``Fc``, ``Fs_neg`` -> ``Fc_neg``."""
+    return "Fc" + phys[len(base_name(phys)):]
 
 
 def as_range(value) -> tuple[float, float] | None:
@@ -61,12 +130,21 @@ def data_ranges(velocity: ArrayLike, friction: ArrayLike) -> dict[str, tuple[flo
       (damping/viscous force at V between 0.1 % and 100x resp. 200 % of F);
     - vs in [1e-3, 1] V m/s.
 
+    - F_off in [-0.5, 0.5] F (§13.1);
+    - GMS element stiffness k like sigma0, slip rate C in [1e-1, 1e4] F/s
+      (relaxation times 10 s to 0.1 ms at the Coulomb level);
+    - cylinder preload F_pr in [0, 1.2] F.
+
     For F = 200 N and V = 14 mm/s these reproduce the §8.5 table to within a
     factor of about 2. Fs/Fc and delta keep their defaults.
     """
     f, v = friction_scales(velocity, friction)
     return {
         "Fc": (0.05 * f, 1.2 * f),
+        "F_off": (-0.5 * f, 0.5 * f),
+        "k": (f / 1e-2, f / 1e-7),
+        "C": (1e-1 * f, 1e4 * f),
+        "F_pr": (0.0, 1.2 * f),
         "sigma0": (f / 1e-2, f / 1e-7),
         "sigma1": (1e-3 * f / v, 1e2 * f / v),
         "sigma2": (1e-3 * f / v, 2.0 * f / v),
@@ -94,6 +172,21 @@ def coulomb_viscous_ls(velocity: ArrayLike, friction: ArrayLike, *, viscous: boo
     return fc, s2
 
 
+#: Below this fraction of max |v| a sample counts as low speed (pre-sliding or the
+#: Stribeck dip) for :meth:`AbstractPhysicalModel.unidentifiable` [D]. A sine sweeps
+#: through it in 1.3 % of its samples and the EMPS recording in 1.5 %: both are
+#: flagged, as the EMPS data description says its pre-sliding is weakly excited;
+#: records with slow reversals or small-amplitude (pre-sliding) segments pass.
+LOW_SPEED = 0.02
+#: Fewer low-speed samples than this fraction of the record, and the parameters
+#: that only low speeds excite are reported as not determined by the data.
+MIN_LOW_SPEED_FRACTION = 0.02
+#: Sliding samples (|v| > 0.2 max|v|) of one direction whose speeds span less than this
+#: ((95th - 5th percentile) / median) are "one speed" [D]: the pneumatic O-ring records
+#: (triangular strokes) span 22-24 %, the EMPS trapezoids several-fold.
+ONE_SPEED_SPREAD = 0.3
+
+
 class AbstractPhysicalModel(AbstractFrictionModel):
     """A model whose search coordinates are transforms of named physical parameters.
 
@@ -106,6 +199,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
     """
 
     needs_scaling: ClassVar[bool] = False
+    #: Physical parameters set by pre-sliding (bristle / element stiffness, micro-damping).
+    _presliding: ClassVar[tuple[str, ...]] = ()
+    #: Physical parameters set by low-speed sliding (the Stribeck dip).
+    _low_speed: ClassVar[tuple[str, ...]] = ("Fs", "vs", "delta")
 
     @property
     @abc.abstractmethod
@@ -122,7 +219,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         return tuple(c[1] for c in self._coords)
 
     def _range_key(self, phys: str, kind: str) -> str:
-        return "Fs_ratio" if kind == "ratio" else phys
+        return "Fs_ratio" if kind == "ratio" else base_name(phys)
 
     def physical_range(self, key: str) -> tuple[float, float]:
         """Range of physical parameter ``key`` (or ``"Fs_ratio"``) in use."""
@@ -139,6 +236,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                 raise ValueError(f"{key}_range must be positive, got {(lo, hi)}")
             if key == "Fs_ratio" and lo < 1.0:
                 raise ValueError(f"Fs_ratio_range must start at >= 1 so that Fs >= Fc, got {(lo, hi)}")
+            if key == "K_brk" and lo < 1.0:
+                raise ValueError(f"K_brk_range must start at >= 1 (break-away >= Coulomb), got {(lo, hi)}")
+            if key in ("F_pr", "f_cfr") and lo < 0.0:
+                raise ValueError(f"{key}_range must be non-negative, got {(lo, hi)}")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Search box from the physical ranges (log10 for the ``log10`` coordinates)."""
@@ -157,7 +258,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         if theta.shape[-1:] != (self.num_params,):
             raise ValueError(f"theta must have last axis {self.num_params}, got shape {theta.shape}")
         out: dict[str, Array] = {}
-        ratio = None
+        ratios = []
         for i, (_, phys, kind) in enumerate(self._coords):
             x = theta[..., i]
             if kind == "log10":
@@ -165,13 +266,12 @@ class AbstractPhysicalModel(AbstractFrictionModel):
             elif kind == "linear":
                 out[phys] = x
             else:
-                ratio = (phys, x)
-        if ratio is not None:
-            out[ratio[0]] = out["Fc"] * ratio[1]
+                ratios.append((phys, x))
+        for phys, x in ratios:
+            out[phys] = out[_ratio_base(phys)] * x
         return {name: out[name] for name in self.physical_names}
 
-    def from_physical(self, **params) -> Array:
-        """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
+    def _check_physical_names(self, params: dict) -> None:
         missing = set(self.physical_names) - set(params)
         extra = set(params) - set(self.physical_names)
         if missing or extra:
@@ -179,6 +279,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                 f"{type(self).__name__}.from_physical needs exactly {self.physical_names}; "
                 f"missing {sorted(missing)}, unexpected {sorted(extra)}"
             )
+
+    def from_physical(self, **params) -> Array:
+        """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
+        self._check_physical_names(params)
         cols = []
         for _, phys, kind in self._coords:
             p = jnp.asarray(params[phys])
@@ -187,17 +291,105 @@ class AbstractPhysicalModel(AbstractFrictionModel):
             elif kind == "linear":
                 cols.append(p)
             else:
-                cols.append(p / jnp.asarray(params["Fc"]))
+                cols.append(p / jnp.asarray(params[_ratio_base(phys)]))
         cols = jnp.broadcast_arrays(*cols)
         dtype = jnp.result_type(*cols, jnp.float32)
         return jnp.stack([c.astype(dtype) for c in cols], axis=-1)
 
-    def with_data_bounds(self, velocity: ArrayLike, friction: ArrayLike) -> "AbstractPhysicalModel":
-        """Copy with every *unset* range centred on the data (:func:`data_ranges`).
+    def unidentifiable(
+        self, data, *, low_speed: float = LOW_SPEED, min_fraction: float = MIN_LOW_SPEED_FRACTION
+    ) -> tuple[Unidentifiable, ...]:
+        """Physical parameters the record may not determine, with reasons.
+
+        ``data``: a record (anything with ``.velocity``) or a velocity array [m/s].
+        Rules [D]: with fewer than ``min_fraction`` of the samples at
+        ``0 < |v| < low_speed * max|v|``, the pre-sliding parameters (LuGre's
+        sigma0, sigma1; Dahl's sigma0; GMS's k_i, C) and the Stribeck-dip ones
+        (Fs, vs, delta) are reported; a ``_pos`` (``_neg``) level is reported
+        when no sample moves faster than that threshold in the positive
+        (negative) direction; viscous coefficients are reported when the record
+        slides at one speed (relative spread of |v| below ``ONE_SPEED_SPREAD``) in
+        the direction they act in (asymmetric), or in both directions with an
+        offset (symmetric: then 2 levels fix 3 unknowns); ``F_off`` is reported whenever the model has both an
+        offset and direction-dependent Coulomb levels (the three are not separable
+        from sliding data). The fit may still return values for them: they
+        are then set by the search box or by effects they were not meant for.
+        """
+        v = record_velocity(data)
+        speed = np.abs(v)
+        thr = low_speed * float(speed.max())
+        frac = float(np.mean((speed > 0.0) & (speed < thr)))
+        out = []
+        if frac < min_fraction:
+            why = (f"only {frac:.2%} of the samples have 0 < |v| < {thr:.3g} m/s ({low_speed:.0%} of "
+                   f"max |v|; needed {min_fraction:.0%})")
+            for name in self.physical_names:
+                if self._group(name) in self._presliding:
+                    out.append(Unidentifiable(name, why + ": the record holds almost no pre-sliding, "
+                                              "so this stiffness/damping is not determined by it"))
+                elif self._group(name) in self._low_speed:
+                    out.append(Unidentifiable(name, why + ": the Stribeck dip is not excited"))
+        names = self.physical_names
+        if "F_off" in names and "Fc_pos" in names and "Fc_neg" in names:
+            out.append(Unidentifiable(
+                "F_off", "with direction-dependent Coulomb levels a constant offset shifts "
+                "Fc_pos up and Fc_neg down alike: sliding data fix only Fc_pos + F_off and "
+                "Fc_neg - F_off (the split comes from standstill samples and the search box)"))
+        out += self._one_speed(v)
+        for sfx, sign in (("_pos", 1.0), ("_neg", -1.0)):
+            if not np.any(sign * v > thr):
+                for name in self.physical_names:
+                    if name.endswith(sfx) and name not in out:
+                        direction = "positive" if sign > 0 else "negative"
+                        out.append(Unidentifiable(name, f"no sample moves in the {direction} direction "
+                                                  f"faster than {thr:.3g} m/s"))
+        return tuple(out)
+
+    def _one_speed(self, v: np.ndarray) -> list[Unidentifiable]:
+        speed = np.abs(v)
+        sliding = speed > 0.2 * speed.max()
+        spread = {}
+        for sfx, sign in (("_pos", 1.0), ("_neg", -1.0)):
+            s = speed[sliding & (sign * v > 0)]
+            if s.size:
+                lo, mid, hi = np.percentile(s, [5.0, 50.0, 95.0])
+                spread[sfx] = (hi - lo) / mid
+        names = [n for n in self.physical_names if self._group(n) == "sigma2"]
+        out = []
+        for name in names:
+            sfx = name[len("sigma2"):]
+            if sfx:
+                flagged = sfx in spread and spread[sfx] < ONE_SPEED_SPREAD
+            else:
+                flagged = ("F_off" in self.physical_names and bool(spread)
+                           and max(spread.values()) < ONE_SPEED_SPREAD)
+            if flagged:
+                worst = spread[sfx] if sfx else max(spread.values())
+                out.append(Unidentifiable(name, (
+                    f"the record slides at one speed (|v| spans {worst:.0%} of its median, "
+                    f"< {ONE_SPEED_SPREAD:.0%}): a viscous slope and a Coulomb level fit it alike")))
+        return out
+
+    def _group(self, phys: str) -> str:
+        """The family of a physical parameter for :meth:`unidentifiable` (``Fc_pos`` -> ``Fc``)."""
+        return base_name(phys)
+
+    def _input_ranges(self, friction_level: float, inputs) -> dict[str, tuple[float, float]]:
+        """Data-centred ranges that depend on the measured ``inputs``; none by default."""
+        del friction_level, inputs
+        return {}
+
+    def with_data_bounds(
+        self, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None
+    ) -> "AbstractPhysicalModel":
+        """Copy with every *unset* range centred on the data (:func:`data_ranges`;
+        ranges that scale with measured ``inputs`` when the model has and gets them).
 
         Ranges given explicitly to the constructor are kept.
         """
         suggested = data_ranges(velocity, friction)
+        if inputs is not None and self.input_names:
+            suggested.update(self._input_ranges(friction_scales(velocity, friction)[0], inputs))
         updates = {}
         for field in dataclasses.fields(self):
             if field.name.endswith("_range") and getattr(self, field.name) is None:
@@ -207,20 +399,21 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         return dataclasses.replace(self, **updates)
 
     @classmethod
-    def for_data(cls, velocity: ArrayLike, friction: ArrayLike, **kwargs) -> "AbstractPhysicalModel":
-        """``cls(**kwargs).with_data_bounds(velocity, friction)``."""
-        return cls(**kwargs).with_data_bounds(velocity, friction)
+    def for_data(cls, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None,
+                 **kwargs) -> "AbstractPhysicalModel":
+        """``cls(**kwargs).with_data_bounds(velocity, friction, inputs)``."""
+        return cls(**kwargs).with_data_bounds(velocity, friction, inputs)
 
     def initial_guess(self, velocity: ArrayLike, friction: ArrayLike) -> np.ndarray:
         """Box centre, with Fc and sigma2 from :func:`coulomb_viscous_ls` (clipped to the box)."""
         lower, upper = self.bounds()
         theta = 0.5 * (lower + upper)
-        viscous = "sigma2" in self.physical_names
+        viscous = any(base_name(p) == "sigma2" for p in self.physical_names)
         fc, s2 = coulomb_viscous_ls(velocity, friction, viscous=viscous)
         for i, (_, phys, kind) in enumerate(self._coords):
-            if phys == "Fc":
+            if base_name(phys) == "Fc":
                 theta[i] = fc
-            elif phys == "sigma2" and s2 > 0.0:
+            elif base_name(phys) == "sigma2" and s2 > 0.0:
                 theta[i] = np.log10(s2) if kind == "log10" else s2
         return np.clip(theta, lower, upper)
 

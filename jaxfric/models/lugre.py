@@ -19,6 +19,13 @@ recurrence, ``jaxfric.models._scan.linear_recurrence``).
 
 Units: velocity in m/s, friction in N, ``dt`` in s; parameters in SI units
 (sigma0 N/m, sigma1 and sigma2 N s/m, Fc and Fs N, vs m/s).
+
+Real drives (docs/algorithms.md §13.1): ``asymmetric=True`` makes the levels
+direction-dependent, g(v) = g_pos(v) for v > 0 and g_neg(v) for v <= 0 (Fc, Fs and
+sigma2 each with a ``_pos`` / ``_neg`` value), so the steady state is
+F_ss = g_pos(v) + sigma2_pos v sliding forwards and -g_neg(v) + sigma2_neg v
+backwards; ``offset=True`` adds ``F_off`` to the output. The exact update is
+unchanged (g still depends on v_k only). Both default to ``False``.
 """
 
 from __future__ import annotations
@@ -27,7 +34,14 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._physical import AbstractPhysicalModel, as_range, stribeck_curve
+from ._physical import (
+    AbstractPhysicalModel,
+    add_offset,
+    as_range,
+    by_direction,
+    directional_coords,
+    stribeck_curve,
+)
 from ._scan import linear_recurrence
 
 __all__ = ["LuGre", "Dahl", "bristle_friction"]
@@ -61,7 +75,8 @@ def bristle_friction(
 ) -> Float[Array, "P T"]:
     """Exact-ZOH rollout of the LuGre bristle state and friction output, §8.2.
 
-    ``sigma0``, ``sigma1``, ``sigma2``: shape ``(P, 1)``; ``g``: Stribeck
+    ``sigma0``, ``sigma1``: shape ``(P, 1)``; ``sigma2``: ``(P, 1)`` or
+    ``(P, T)`` (direction-dependent, §13.1); ``g``: Stribeck
     curve g(v_k), shape ``(P, T)`` (``g = Fc`` for Dahl); ``velocity``:
     ``(T,)``. The output at sample k uses the state before the update,
 
@@ -100,6 +115,10 @@ class LuGre(AbstractPhysicalModel):
     physical units (``Fs_ratio_range`` for Fs/Fc); ``None`` means the §8.5
     default, or the data-centred range after :meth:`with_data_bounds` /
     :meth:`for_data`. ``dt`` in :meth:`simulate` is the sample time in s.
+
+    ``asymmetric=True`` (docs/algorithms.md §13.1, module docstring) replaces
+    ``log10_sigma2``, ``Fc``, ``Fs_over_Fc`` by their ``_pos`` / ``_neg`` pairs
+    (9 coordinates); ``offset=True`` appends ``F_off`` [N].
     """
 
     stribeck_exponent: float = eqx.field(default=2.0, static=True, converter=float)
@@ -109,8 +128,12 @@ class LuGre(AbstractPhysicalModel):
     Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    asymmetric: bool = eqx.field(default=False, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
+    _presliding = ("sigma0", "sigma1")
 
     def __check_init__(self):
         if not self.stribeck_exponent > 0.0:
@@ -119,7 +142,7 @@ class LuGre(AbstractPhysicalModel):
 
     @property
     def _coords(self):
-        return (
+        coords = (
             ("log10_sigma0", "sigma0", "log10"),
             ("log10_sigma1", "sigma1", "log10"),
             ("log10_sigma2", "sigma2", "log10"),
@@ -127,16 +150,24 @@ class LuGre(AbstractPhysicalModel):
             ("Fs_over_Fc", "Fs", "ratio"),
             ("log10_vs", "vs", "log10"),
         )
+        return directional_coords(coords, self.asymmetric, self.offset)
 
     def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P 6"], velocity: Float[ArrayLike, " T"], dt
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
     ) -> Float[Array, "P T"]:
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
         thetas, v = self._prepare(thetas, velocity)
         p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
         dt = _sample_time(dt, v.dtype)
-        g = stribeck_curve(v[None, :], p["Fc"], p["Fs"], p["vs"], self.stribeck_exponent)
-        return bristle_friction(p["sigma0"], p["sigma1"], p["sigma2"], g, v, dt)
+        vv = v[None, :]
+        if self.asymmetric:
+            g_pos = stribeck_curve(vv, p["Fc_pos"], p["Fs_pos"], p["vs"], self.stribeck_exponent)
+            g_neg = stribeck_curve(vv, p["Fc_neg"], p["Fs_neg"], p["vs"], self.stribeck_exponent)
+            g = jnp.where(vv > 0, g_pos, g_neg)
+        else:
+            g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], self.stribeck_exponent)
+        sigma2 = by_direction(p, "sigma2", vv)
+        return add_offset(bristle_friction(p["sigma0"], p["sigma1"], sigma2, g, v, dt), p)
 
 
 class Dahl(AbstractPhysicalModel):
@@ -148,14 +179,22 @@ class Dahl(AbstractPhysicalModel):
     same exact zero-order-hold update. Search coordinates ``log10_sigma0``,
     ``Fc`` (+ ``log10_sigma2`` when ``viscous=True``). Physical parameters:
     ``sigma0`` [N/m], ``Fc`` [N], ``sigma2`` [N s/m].
+
+    ``asymmetric=True`` (docs/algorithms.md §13.1): g = Fc_pos for v > 0 and
+    Fc_neg for v <= 0 (and sigma2_pos/neg when viscous); ``offset=True``
+    appends ``F_off`` [N] to the output.
     """
 
     viscous: bool = eqx.field(default=False, static=True)
     sigma0_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    asymmetric: bool = eqx.field(default=False, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
+    _presliding = ("sigma0",)
 
     def __check_init__(self):
         self._check_ranges()
@@ -165,7 +204,7 @@ class Dahl(AbstractPhysicalModel):
         coords = (("log10_sigma0", "sigma0", "log10"), ("Fc", "Fc", "linear"))
         if self.viscous:
             coords += (("log10_sigma2", "sigma2", "log10"),)
-        return coords
+        return directional_coords(coords, self.asymmetric, self.offset)
 
     def _simulate_batch(
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
@@ -175,6 +214,7 @@ class Dahl(AbstractPhysicalModel):
         p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
         dt = _sample_time(dt, v.dtype)
         zero = jnp.zeros_like(p["sigma0"])
-        sigma2 = p["sigma2"] if self.viscous else zero
-        g = jnp.broadcast_to(p["Fc"], (thetas.shape[0], v.shape[0]))
-        return bristle_friction(p["sigma0"], zero, sigma2, g, v, dt)
+        vv = v[None, :]
+        sigma2 = by_direction(p, "sigma2", vv) if self.viscous else zero
+        g = jnp.broadcast_to(by_direction(p, "Fc", vv), (thetas.shape[0], v.shape[0]))
+        return add_offset(bristle_friction(p["sigma0"], zero, sigma2, g, v, dt), p)

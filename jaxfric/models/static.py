@@ -8,17 +8,34 @@ hyperparameter in m/s, small against the record's speeds.
 
 Static maps ignore ``dt`` (``uses_dt = False``). Units: velocity m/s,
 friction N.
+
+Real drives (docs/algorithms.md §13.1): ``asymmetric=True`` gives every level
+(``Fc``, ``Fs``, ``sigma2``) a ``_pos`` value for v > 0 and a ``_neg`` value for
+v < 0, ``offset=True`` adds a constant ``F_off`` to the output. Both default to
+``False``, the paper's symmetric form with its unchanged ``theta`` layout.
+:class:`Cylinder` is the Simscape cylinder friction whose Coulomb level grows
+with the chamber pressures.
 """
 
 from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._physical import AbstractPhysicalModel, as_range, stribeck_curve
+from ._physical import (
+    AbstractPhysicalModel,
+    Unidentifiable,
+    add_offset,
+    as_range,
+    by_direction,
+    directional_coords,
+    signed_level,
+    stribeck_curve,
+)
 
-__all__ = ["Coulomb", "Stribeck"]
+__all__ = ["Coulomb", "Cylinder", "Stribeck"]
 
 
 def _check_v_eps(v_eps: float) -> None:
@@ -41,12 +58,25 @@ class Coulomb(AbstractPhysicalModel):
     default). Physical parameters: ``Fc`` [N], ``sigma2`` [N s/m].
     Hyperparameters: ``v_eps`` [m/s] (default 1e-4), ``viscous``, and the
     ``Fc_range`` / ``sigma2_range`` search ranges (see :class:`LuGre`).
+
+    ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1, the EMPS
+    reference model of Janot et al. 2019 with a smoothed sign t = tanh(v / v_eps))::
+
+        F = Fc_pos max(t, 0) - Fc_neg max(-t, 0) + sigma2_pos v [v > 0] + sigma2_neg v [v < 0] + F_off
+
+    with search coordinates ``Fc_pos``, ``Fc_neg``, ``log10_sigma2_pos``,
+    ``log10_sigma2_neg``, ``F_off`` (``F_off_range``, default data-centred
+    +-0.5 F). Linear in its physical parameters: :meth:`fit_least_squares`
+    solves it exactly.
     """
 
     v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
     viscous: bool = eqx.field(default=True, static=True)
     Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    asymmetric: bool = eqx.field(default=False, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     uses_dt = False
 
@@ -59,7 +89,7 @@ class Coulomb(AbstractPhysicalModel):
         coords = (("Fc", "Fc", "linear"),)
         if self.viscous:
             coords += (("log10_sigma2", "sigma2", "log10"),)
-        return coords
+        return directional_coords(coords, self.asymmetric, self.offset)
 
     def _simulate_batch(
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
@@ -67,10 +97,48 @@ class Coulomb(AbstractPhysicalModel):
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
         del dt
         p, vv = _columns(self, thetas, velocity)
-        f = p["Fc"] * jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        if self.asymmetric:
+            f = signed_level(t, p, "Fc", p["Fc_pos"], p["Fc_neg"])
+        else:
+            f = p["Fc"] * t
         if self.viscous:
-            f = f + p["sigma2"] * vv
-        return f
+            f = f + by_direction(p, "sigma2", vv) * vv
+        return add_offset(f, p)
+
+    def fit_least_squares(self, velocity: ArrayLike, friction: ArrayLike) -> dict[str, float]:
+        """Exact least-squares fit of the physical parameters (the model is linear in
+        them, docs/algorithms.md §13.1): ``{name: value}`` for :meth:`from_physical`.
+
+        Solved unconstrained on every sample with the model's own smoothed sign; a
+        negative viscous coefficient (which the log10 search coordinate cannot
+        hold) is returned as it is, so check it before ``from_physical``.
+        """
+        v = np.asarray(velocity, dtype=float).ravel()
+        f = np.asarray(friction, dtype=float).ravel()
+        if v.shape != f.shape or v.size < self.num_params:
+            raise ValueError(
+                f"velocity and friction must have the same length, at least {self.num_params}; "
+                f"got {v.shape} and {f.shape}"
+            )
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
+            raise ValueError("velocity and friction must be finite (no NaN or inf)")
+        t = np.tanh(v / self.v_eps)
+        cols: dict[str, np.ndarray] = {}
+        if self.asymmetric:
+            cols["Fc_pos"], cols["Fc_neg"] = np.maximum(t, 0.0), -np.maximum(-t, 0.0)
+        else:
+            cols["Fc"] = t
+        if self.viscous:
+            if self.asymmetric:
+                cols["sigma2_pos"], cols["sigma2_neg"] = v * (v > 0), v * (v <= 0)
+            else:
+                cols["sigma2"] = v
+        if self.offset:
+            cols["F_off"] = np.ones_like(v)
+        names = list(cols)
+        coef, *_ = np.linalg.lstsq(np.stack([cols[n] for n in names], axis=1), f, rcond=None)
+        return {n: float(c) for n, c in zip(names, coef)}
 
 
 class Stribeck(AbstractPhysicalModel):
@@ -84,6 +152,14 @@ class Stribeck(AbstractPhysicalModel):
     [m/s], ``sigma2`` [N s/m] (+ ``delta`` [-]). Hyperparameters: ``v_eps``
     [m/s] (default 1e-4), ``exponent`` (the fixed delta, default 2),
     ``fit_exponent`` and the ``*_range`` fields (see :class:`LuGre`).
+
+    ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): with
+    ``g_pos``, ``g_neg`` the Stribeck curves of (``Fc_pos``, ``Fs_pos``) and
+    (``Fc_neg``, ``Fs_neg``) (shared ``vs``, ``delta``) and t = tanh(v / v_eps),
+    ``F = max(t, 0) g_pos - max(-t, 0) g_neg + sigma2_pos/neg v + F_off``.
+    Search coordinates ``Fc_pos``, ``Fc_neg``, ``Fs_over_Fc_pos``,
+    ``Fs_over_Fc_neg``, ``log10_vs``, ``log10_sigma2_pos``, ``log10_sigma2_neg``
+    (+ ``delta``) + ``F_off``.
     """
 
     v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
@@ -94,6 +170,9 @@ class Stribeck(AbstractPhysicalModel):
     vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     delta_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    asymmetric: bool = eqx.field(default=False, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     uses_dt = False
 
@@ -115,7 +194,7 @@ class Stribeck(AbstractPhysicalModel):
         )
         if self.fit_exponent:
             coords += (("delta", "delta", "linear"),)
-        return coords
+        return directional_coords(coords, self.asymmetric, self.offset)
 
     def _simulate_batch(
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
@@ -124,5 +203,108 @@ class Stribeck(AbstractPhysicalModel):
         del dt
         p, vv = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
-        g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
-        return jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype)) * g + p["sigma2"] * vv
+        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        if not (self.asymmetric or self.offset):
+            g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
+            return t * g + p["sigma2"] * vv
+        if self.asymmetric:
+            g_pos = stribeck_curve(vv, p["Fc_pos"], p["Fs_pos"], p["vs"], delta)
+            g_neg = stribeck_curve(vv, p["Fc_neg"], p["Fs_neg"], p["vs"], delta)
+            f = signed_level(t, p, "Fc", g_pos, g_neg)
+        else:
+            f = t * stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
+        return add_offset(f + by_direction(p, "sigma2", vv) * vv, p)
+
+
+class Cylinder(AbstractPhysicalModel):
+    """Pressure-dependent cylinder friction (Simscape "Cylinder Friction"),
+    docs/algorithms.md §13.1::
+
+        F_C = F_pr + f_cfr (p1 + p2),        F_brk = K_brk F_C
+        F   = tanh(v / v_eps) F_C (1 + (K_brk - 1) exp(-|v / vs|^delta)) + sigma2 v (+ F_off)
+
+    Simscape writes the Stribeck term as exp(-c_v |v|): ``delta = 1`` (the
+    default ``exponent``) and c_v = 1 / vs. Inputs (``input_names``):
+    ``("p1", "p2")``, the cap- and rod-chamber pressures [Pa]; pass them as
+    ``inputs`` (a ``(2, T)`` array) or identify from a record that holds them.
+
+    Search coordinates ``F_pr`` [N], ``f_cfr`` [N/Pa] (both linear, >= 0),
+    ``K_brk`` [-] (linear, range [1, 3]), ``log10_vs``, ``log10_sigma2``
+    (+ ``F_off`` with ``offset=True``); with ``breakaway=False`` the Stribeck
+    term and ``K_brk``, ``vs`` are dropped and the model is linear in
+    ``F_pr``, ``f_cfr``, ``sigma2``. ``f_cfr``'s data-centred range is
+    [0, 1.2 F / median(p1 + p2)], which needs the pressures
+    (``with_data_bounds(v, F, inputs)``).
+    """
+
+    v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
+    exponent: float = eqx.field(default=1.0, static=True, converter=float)
+    breakaway: bool = eqx.field(default=True, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_pr_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    f_cfr_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    K_brk_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+
+    uses_dt = False
+    _low_speed = ("K_brk", "vs")
+
+    def __check_init__(self):
+        _check_v_eps(self.v_eps)
+        if not self.exponent > 0.0:
+            raise ValueError(f"exponent must be positive, got {self.exponent}")
+        self._check_ranges()
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return ("p1", "p2")
+
+    @property
+    def _coords(self):
+        coords = (("F_pr", "F_pr", "linear"), ("f_cfr", "f_cfr", "linear"))
+        if self.breakaway:
+            coords += (("K_brk", "K_brk", "linear"), ("log10_vs", "vs", "log10"))
+        coords += (("log10_sigma2", "sigma2", "log10"),)
+        return directional_coords(coords, False, self.offset)
+
+    def _input_ranges(self, friction_level, inputs):
+        p_sum = np.asarray(inputs, dtype=float)[0] + np.asarray(inputs, dtype=float)[1]
+        level = float(np.median(np.abs(p_sum)))
+        if not level > 0.0:
+            return {}
+        return {"f_cfr": (0.0, 1.2 * friction_level / level)}
+
+    def unidentifiable(self, data, **kwargs) -> tuple[Unidentifiable, ...]:
+        """As :meth:`AbstractPhysicalModel.unidentifiable`, plus ``F_pr`` and ``f_cfr``
+        when the record's pressure sum varies by less than 5 % of its level (the
+        two then only determine their sum ``F_C``)."""
+        out = list(super().unidentifiable(data, **kwargs))
+        p1, p2 = getattr(data, "p1", None), getattr(data, "p2", None)
+        if p1 is not None and p2 is not None:
+            p_sum = np.asarray(p1, dtype=float) + np.asarray(p2, dtype=float)
+            level = float(np.median(np.abs(p_sum)))
+            if not np.ptp(p_sum) > 0.05 * level:
+                why = (f"p1 + p2 varies by {np.ptp(p_sum):.3g} Pa around {level:.3g} Pa (< 5 %): "
+                       "the data fix only F_pr + f_cfr (p1 + p2), not the two apart")
+                out += [Unidentifiable("F_pr", why), Unidentifiable("f_cfr", why)]
+        return tuple(out)
+
+    def _simulate_batch(
+        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt, inputs
+    ) -> Float[Array, "P T"]:
+        """Friction [N] for velocity [m/s] and ``inputs = [p1, p2]`` [Pa]; ``dt`` is ignored."""
+        del dt
+        p, vv = _columns(self, thetas, velocity)
+        inputs = jnp.asarray(inputs, vv.dtype)
+        if inputs.shape[-1] != vv.shape[-1]:
+            raise ValueError(
+                f"inputs have {inputs.shape[-1]} samples but velocity has {vv.shape[-1]}"
+            )
+        f_c = p["F_pr"] + p["f_cfr"] * (inputs[0] + inputs[1])[None, :]
+        level = f_c
+        if self.breakaway:
+            level = stribeck_curve(vv, f_c, p["K_brk"] * f_c, p["vs"], self.exponent)
+        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        return add_offset(t * level + p["sigma2"] * vv, p)
