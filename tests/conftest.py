@@ -85,6 +85,14 @@ SLOW_TESTS = {
     "tests/test_reliability.py::test_lugre_with_overflowing_parameters_is_never_reported_as_best",
     "tests/test_reliability.py::test_identify_never_reports_nan_or_inf",
     "tests/test_reliability.py::test_interrupted_identify_exits_130_and_says_what_was_kept",
+    # share test_identify's module-scoped ENN fit (about 115 s to set up on the loaded machine)
+    "tests/test_identify.py::test_enn_scalers_cost_and_metrics_match_independent_recomputation",
+    "tests/test_identify.py::test_stages_never_get_worse_and_record_their_work",
+    "tests/test_identify.py::test_real_fit_saves_loads_and_summarises",
+    "tests/test_identify.py::test_lugre_recovered_from_noise_free_lugre_data",
+    "tests/test_identify.py::test_multi_start_nelder_mead_from_the_best_agents",
+    "tests/test_reproducibility.py::test_identify_same_key_bit_identical",
+    "tests/test_reproducibility.py::test_minimise_many_is_reproducible_and_matches_single_runs",
 }
 
 

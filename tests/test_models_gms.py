@@ -37,13 +37,17 @@ def euler_reference(p, n, v, dt, substeps=100, delta=2.0):
     h = dt / substeps
 
     def s_of(vk):
-        return p["Fc"] + (p["Fs"] - p["Fc"]) * np.exp(-np.abs(vk / p["vs"]) ** delta)
+        d = "" if "Fc" in p else ("_pos" if vk > 0 else "_neg")
+        return p["Fc" + d] + (p["Fs" + d] - p["Fc" + d]) * np.exp(-np.abs(vk / p["vs"]) ** delta)
+
+    def viscous(vk):
+        return p["sigma2"] if "sigma2" in p else p["sigma2_pos" if vk > 0 else "sigma2_neg"]
 
     F = a * s_of(v[0]) * np.sign(v[0])
     slip = np.full(n, np.sign(v[0]))
     out = np.empty(len(v))
     for j, vk in enumerate(v):
-        out[j] = F.sum() + p["sigma2"] * vk
+        out[j] = F.sum() + viscous(vk) * vk + p.get("F_off", 0.0)
         s, sv = s_of(vk), np.sign(vk)
         slip[slip != sv] = 0.0  # re-stick on a velocity reversal (or standstill)
         for _ in range(substeps):
@@ -67,6 +71,24 @@ def test_gms_exact_update_matches_fine_euler_reference():
     assert err < 1e-3, err
     # the profile exercises both regimes: loops through most of +-Fc and back
     assert np.max(F) > 0.8 * P3["Fc"] and np.min(F) < -0.2 * P3["Fc"]
+
+
+def test_asymmetric_gms_matches_fine_euler_reference_and_symmetric_case():
+    """docs/algorithms.md §13.1 levels: the rig's kind of truth (270 N one way, 150 N back)."""
+    model = GMS(num_elements=3, asymmetric=True, offset=True)
+    p = {**{k: x for k, x in P3.items() if k not in ("Fc", "Fs", "sigma2")},
+         "Fc_pos": 120.0, "Fc_neg": 70.0, "Fs_pos": 160.0, "Fs_neg": 90.0,
+         "sigma2_pos": 500.0, "sigma2_neg": 300.0, "F_off": 4.0}
+    v = profile(300)
+    with jax.enable_x64(True):
+        F = np.asarray(model.simulate(model.from_physical(**p), v, DT))
+        sym = GMS(num_elements=3)
+        same = {**{k: x for k, x in P3.items() if k not in ("Fc", "Fs", "sigma2")}, "F_off": 0.0,
+                **{name + d: P3[name] for name in ("Fc", "Fs", "sigma2") for d in ("_pos", "_neg")}}
+        np.testing.assert_array_equal(model.simulate(model.from_physical(**same), v, DT),
+                                      sym.simulate(sym.from_physical(**P3), v, DT))
+    ref = euler_reference(p, 3, v, DT)
+    assert np.max(np.abs(F - ref)) / np.max(np.abs(ref)) < 1e-3
 
 
 def test_gms_is_stiff_and_stable_at_coarse_steps():

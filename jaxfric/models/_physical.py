@@ -254,6 +254,11 @@ class AbstractPhysicalModel(AbstractFrictionModel):
 
     def to_physical(self, theta: ArrayLike) -> dict[str, Array]:
         """Search coordinates -> physical parameters (SI units, leading axes kept)."""
+        out = self._coord_values(theta)
+        return {name: out[name] for name in self.physical_names}
+
+    def _coord_values(self, theta: ArrayLike) -> dict[str, Array]:
+        """Every ``_coords`` entry's physical value, keyed by its physical name."""
         theta = jnp.asarray(theta)
         if theta.shape[-1:] != (self.num_params,):
             raise ValueError(f"theta must have last axis {self.num_params}, got shape {theta.shape}")
@@ -269,7 +274,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
                 ratios.append((phys, x))
         for phys, x in ratios:
             out[phys] = out[_ratio_base(phys)] * x
-        return {name: out[name] for name in self.physical_names}
+        return out
 
     def _check_physical_names(self, params: dict) -> None:
         missing = set(self.physical_names) - set(params)
@@ -283,6 +288,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
     def from_physical(self, **params) -> Array:
         """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
         self._check_physical_names(params)
+        return self._theta_from(params)
+
+    def _theta_from(self, params: dict) -> Array:
+        """``theta`` from the physical value of every ``_coords`` entry."""
         cols = []
         for _, phys, kind in self._coords:
             p = jnp.asarray(params[phys])

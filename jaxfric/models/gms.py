@@ -38,7 +38,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._physical import AbstractPhysicalModel, as_range, stribeck_curve
+from ._physical import (
+    AbstractPhysicalModel,
+    add_offset,
+    as_range,
+    by_direction,
+    directional_coords,
+    stribeck_curve,
+)
 from ._scan import time_scan
 from .lugre import _sample_time
 
@@ -76,6 +83,12 @@ class GMS(AbstractPhysicalModel):
     ``sigma2``. Hyperparameters: ``num_elements`` N (default 3),
     ``stribeck_exponent`` delta (default 2) and the ``*_range`` fields (as
     :class:`LuGre`; ``k`` and ``C`` are data-centred by :meth:`with_data_bounds`).
+
+    ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): the slip
+    level is s_pos(v) (``Fc_pos``, ``Fs_pos``) for v > 0 and s_neg(v) for v <= 0,
+    the viscous term ``sigma2_pos`` / ``sigma2_neg``, and ``F_off`` is added to
+    the output; an element stuck after a reversal slips again at
+    -alpha_i s_neg (the rig simulator's Maxwell-slip truth is of this kind).
     """
 
     num_elements: int = eqx.field(default=3, static=True, converter=int)
@@ -86,6 +99,9 @@ class GMS(AbstractPhysicalModel):
     Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
+    asymmetric: bool = eqx.field(default=False, static=True)
+    offset: bool = eqx.field(default=False, static=True)
+    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
     _presliding = ("k", "C", "alpha")
@@ -103,13 +119,13 @@ class GMS(AbstractPhysicalModel):
         n = self.num_elements
         coords = tuple((f"log10_k{i}", f"k{i}", "log10") for i in range(1, n + 1))
         coords += tuple((f"split{i}", f"split{i}", "linear") for i in range(1, n))
-        return coords + (
+        return coords + directional_coords((
             ("log10_C", "C", "log10"),
             ("Fc", "Fc", "linear"),
             ("Fs_over_Fc", "Fs", "ratio"),
             ("log10_vs", "vs", "log10"),
             ("log10_sigma2", "sigma2", "log10"),
-        )
+        ), self.asymmetric, self.offset)
 
     def _range_key(self, phys: str, kind: str) -> str:
         match = _ELEMENT.match(phys)
@@ -125,45 +141,32 @@ class GMS(AbstractPhysicalModel):
     @property
     def physical_names(self) -> tuple[str, ...]:
         n = self.num_elements
-        return (tuple(f"k{i}" for i in range(1, n + 1)) + tuple(f"alpha{i}" for i in range(1, n + 1))
-                + ("C", "Fc", "Fs", "vs", "sigma2"))
+        tail = tuple(c[1] for c in self._coords[2 * n - 1:])
+        return tuple(f"k{i}" for i in range(1, n + 1)) + tuple(f"alpha{i}" for i in range(1, n + 1)) + tail
 
     def to_physical(self, theta: ArrayLike) -> dict[str, Array]:
         """Search coordinates -> physical parameters (weights from the splits)."""
-        theta = jnp.asarray(theta)
-        if theta.shape[-1:] != (self.num_params,):
-            raise ValueError(f"theta must have last axis {self.num_params}, got shape {theta.shape}")
+        out = self._coord_values(theta)
         n = self.num_elements
-        start = 2 * n - 1
-        stiff = 10.0 ** theta[..., :n]
-        alpha = _splits_to_weights(theta[..., n:start])
-        out = {f"k{i + 1}": stiff[..., i] for i in range(n)}
+        splits = jnp.stack([jnp.asarray(theta)[..., n + i] for i in range(n - 1)], axis=-1)
+        alpha = _splits_to_weights(splits)
         out.update({f"alpha{i + 1}": alpha[..., i] for i in range(n)})
-        c, fc, ratio, vs, s2 = (theta[..., start + j] for j in range(5))
-        out.update(C=10.0**c, Fc=fc, Fs=fc * ratio, vs=10.0**vs, sigma2=10.0**s2)
-        return out
+        return {name: out[name] for name in self.physical_names}
 
     def from_physical(self, **params) -> Array:
         """Physical parameters (:attr:`physical_names`; the alphas must sum to 1) -> ``theta``."""
         self._check_physical_names(params)
         n = self.num_elements
-        cols = [jnp.asarray(params[name]) for name in self.physical_names]
-        cols = jnp.broadcast_arrays(*cols)
-        dtype = jnp.result_type(*cols, jnp.float32)
-        cols = [c.astype(dtype) for c in cols]
-        alpha = jnp.stack(cols[n:2 * n], axis=-1)
+        alpha = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(params[f"alpha{i}"])
+                                                 for i in range(1, n + 1))), axis=-1)
         if not isinstance(alpha, jax.core.Tracer):
             total = np.asarray(jnp.sum(alpha, axis=-1))
             if not np.allclose(total, 1.0, rtol=1e-5, atol=1e-6):
                 raise ValueError(f"GMS weights alpha1..alpha{n} must sum to 1, got {total}")
-        fc, fs, vs, s2, c = (params[k] for k in ("Fc", "Fs", "vs", "sigma2", "C"))
-        fc = jnp.asarray(fc, dtype)
-        tail = [jnp.log10(jnp.asarray(c, dtype)), fc, jnp.asarray(fs, dtype) / fc,
-                jnp.log10(jnp.asarray(vs, dtype)), jnp.log10(jnp.asarray(s2, dtype))]
-        parts = [jnp.log10(jnp.stack(cols[:n], axis=-1)), _weights_to_splits(alpha),
-                 jnp.stack(jnp.broadcast_arrays(*tail), axis=-1)]
-        shape = jnp.broadcast_shapes(*(p.shape[:-1] for p in parts))
-        return jnp.concatenate([jnp.broadcast_to(p, shape + p.shape[-1:]) for p in parts], axis=-1)
+        splits = _weights_to_splits(alpha)
+        values = dict(params)
+        values.update({f"split{i + 1}": splits[..., i] for i in range(n - 1)})
+        return self._theta_from(values)
 
     # ---------------------------------------------------------------- rollout
     def _simulate_batch(
@@ -176,8 +179,14 @@ class GMS(AbstractPhysicalModel):
         n = self.num_elements
         k = jnp.stack([p[f"k{i}"] for i in range(1, n + 1)], axis=-1)  # (P, N)
         alpha = jnp.stack([p[f"alpha{i}"] for i in range(1, n + 1)], axis=-1)
-        s = stribeck_curve(v[None, :], p["Fc"][:, None], p["Fs"][:, None], p["vs"][:, None],
-                           self.stribeck_exponent)  # (P, T)
+        col = {name: x[:, None] for name, x in p.items()}
+        vv = v[None, :]
+        if self.asymmetric:
+            s = jnp.where(vv > 0,
+                          stribeck_curve(vv, col["Fc_pos"], col["Fs_pos"], col["vs"], self.stribeck_exponent),
+                          stribeck_curve(vv, col["Fc_neg"], col["Fs_neg"], col["vs"], self.stribeck_exponent))
+        else:
+            s = stribeck_curve(vv, col["Fc"], col["Fs"], col["vs"], self.stribeck_exponent)  # (P, T)
         sv = jnp.sign(v)  # (T,)
         decay = jnp.exp(-p["C"][:, None] * dt / s)  # (P, T)
 
@@ -200,4 +209,4 @@ class GMS(AbstractPhysicalModel):
         force0 = alpha * (s[:, :1] * sv[0])
         direction0 = jnp.broadcast_to(sv[0], force0.shape).astype(force0.dtype)
         elements = time_scan(step, (force0, direction0), (v, sv, s.T, decay.T), cpu_unroll=1)
-        return elements.T + p["sigma2"][:, None] * v[None, :]
+        return add_offset(elements.T + by_direction(col, "sigma2", vv) * vv, col)
