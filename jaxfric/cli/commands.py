@@ -100,6 +100,7 @@ def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
         opts = f", model_options={{'neurons': {args.neurons}}}" if name.startswith("elman") else ""
         solver = solver_expression(args.solver, model, budget_for(args))
         ref = f", refine={refine!r}" if refine != "none" else ""
+        ref += ", method='paper'" if getattr(args, "paper", False) else ""
         lines.append(f"fit_{name} = identify({name!r}, data, solver={solver}, key={key_expr}{opts}{ref})")
     return "\n".join(lines)
 

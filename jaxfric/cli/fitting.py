@@ -88,19 +88,19 @@ def build_solver(kind: str, model, budget: Budget):
     stays sized for the model) and changes only the budget.
     """
     import jaxfric as jf
-    from jaxfric.identify import default_solver
+    from jaxfric.identify import paper_solver
 
     if kind == "mapso-nmds":
         if budget.is_default:
             return None
-        # Same lattice as the library default for this model; only the budget changes.
+        # Same lattice as the paper's solver for this model; only the budget changes.
         # (solver_expression below prints this very call for the report.)
-        base = default_solver(model)
+        base = paper_solver(model)
         g = budget.generations if budget.generations is not None else base.mapso.num_generations
         nm = {"nm_max_evals": budget.nm_evals} if budget.nm_evals is not None else {}
         return jf.mapso_nmds(lattice_size=base.mapso.lattice_size, num_generations=g, **nm)
     if kind == "mapso":
-        lattice = default_solver(model).mapso.lattice_size
+        lattice = paper_solver(model).mapso.lattice_size
         return jf.MAPSO(lattice_size=lattice, num_generations=budget.generations or 300)
     if kind == "pso":
         return jf.PSO(num_generations=budget.generations or 500)
@@ -113,7 +113,12 @@ def describe_solver(solver, model) -> str:
     """One phrase for stage messages and reports."""
     from jaxfric.identify import default_solver
 
+    from jaxfric.identify import _api
+
     s = default_solver(model) if solver is None else solver
+    if solver is None and model.num_params > _api.LARGE_MODEL_PARAMS:
+        return (f"MAPSO ({s.lattice_size}x{s.lattice_size} agents, G = {s.num_generations}, first "
+                f"{_api.GLOBAL_STAGE_SAMPLES} samples) -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)")
     if hasattr(s, "mapso"):
         nm = s.nelder_mead.max_evals
         nm_text = f"<= {nm} evaluations" if nm is not None else f"<= {s.nelder_mead.steps_for(model.num_params)} steps"
@@ -177,6 +182,8 @@ def run_identify(name, data, *, solver, key, args, progress):
     refine = getattr(args, "refine", "none")
     if refine != "none":
         kwargs["refine"] = refine
+    if getattr(args, "paper", False):
+        kwargs["method"] = "paper"
     params = inspect.signature(identify).parameters
     if "progress" in params:
         kwargs["progress"] = progress
@@ -197,6 +204,10 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
     for name in check_models(args.models):
         model = build_model(name, args)
         solver = build_solver(args.solver, model, budget_for(args))
+        if solver is None and getattr(args, "paper", False):
+            from jaxfric.identify import paper_solver
+
+            solver = paper_solver(model)  # shown and drawn as what runs
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
             f"{describe_solver(solver, model)}")
         t0 = time.perf_counter()
@@ -224,17 +235,17 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
 
 def solver_expression(kind: str, model, budget: Budget) -> str:
     """Python source of :func:`build_solver`'s result, for the report's "Reproduce"."""
-    from jaxfric.identify import default_solver
+    from jaxfric.identify import paper_solver
 
     if kind == "mapso-nmds":
         if budget.is_default:
             return "None"
-        s = default_solver(model)
+        s = paper_solver(model)
         g = budget.generations if budget.generations is not None else s.mapso.num_generations
         nm = f", nm_max_evals={budget.nm_evals}" if budget.nm_evals is not None else ""
         return f"jf.mapso_nmds(lattice_size={s.mapso.lattice_size}, num_generations={g}{nm})"
     if kind == "mapso":
-        return (f"jf.MAPSO(lattice_size={default_solver(model).mapso.lattice_size}, "
+        return (f"jf.MAPSO(lattice_size={paper_solver(model).mapso.lattice_size}, "
                 f"num_generations={budget.generations or 300})")
     if kind == "pso":
         return f"jf.PSO(num_generations={budget.generations or 500})"

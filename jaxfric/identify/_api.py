@@ -290,7 +290,7 @@ def identify(
         progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
             the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
             ``None`` (silent). A new display never recompiles. The gradient stage
-            shows its own bar (or calls ``sink(method, step, step, J)``), which ends
+            shows its own bar (or calls ``sink(1, step, step, J)``), which ends
             at 100 % also when the solver converges early.
         compiler_options: XLA options for the optimiser run and the gradient stage
             (their executables only): ``"auto"`` (default, see
