@@ -1,7 +1,9 @@
 """Gradient refinement of a fit — beyond the paper (ALGORITHMS.md §2.4 last bullet, §11 step 7).
 
-The models are pure JAX, so ``jax.grad`` through the ``lax.scan`` rollout (BPTT for
-the Elman network) gives J's exact gradient. After (or instead of) Nelder–Mead we
+The models are pure JAX, so ``jax.grad`` through the ``lax.scan`` rollout gives J's
+exact gradient (for the Elman network by its hand-written adjoint, BPTT,
+``Elman.simulate_vjp``; see ``_objective``). The default pipeline of the networks
+ends here (``identify(method="jaxfric")``). After (or instead of) Nelder–Mead we
 polish θ with an optimistix solver:
 
 * ``"bfgs"`` / ``"lbfgs"``: quasi-Newton on J (``optx.minimise``);
