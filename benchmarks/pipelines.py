@@ -218,6 +218,7 @@ def main(argv=None):
              "train": base["train"]["mse_percent"], "run_s": 0.0, "compile_s": 0.0, "evals": "", "steps": ""}]
     print(f"{args.record}: {data.n_samples} samples, {n} train; LS baseline valid {rows[0]['valid']:.3f} %", flush=True)
     t0 = time.time()
+    idim = idim_rows(args) if args.record == "emps" else None
     plan = [("jaxfric", seeds), ("paper", paper_seeds), ("de_nm", seeds)]
     for name, count in plan:
         if name in skip:
@@ -227,8 +228,11 @@ def main(argv=None):
             r.update(pipeline=name, seed=seed)
             rows.append(r)
             print(f"{name:8s} seed {seed}: valid {r['valid']:.3f} %  train {r['train']:.3f} %  "
-                  f"run {r['run_s']:.1f} s  compile {r['compile_s']:.1f} s  evals {r['evals']}", flush=True)
-    write(out, args, desc, rows, base, time.time() - t0, idim_rows(args) if args.record == "emps" else None)
+                  f"run {r['run_s']:.1f} s  compile {r['compile_s']:.1f} s  cpu {r['cpu_s']:.1f} s  "
+                  f"evals {r['evals']}", flush=True)
+            # after every row, so a run stopped by a time limit still leaves its results
+            write(out, args, desc, rows, base, time.time() - t0, idim)
+    write(out, args, desc, rows, base, time.time() - t0, idim)
     return 0
 
 
