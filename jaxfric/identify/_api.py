@@ -68,9 +68,11 @@ LARGE_MODEL_PARAMS = 20
 #: ``identify``'s pipelines: ``"jaxfric"`` (default, the best measured) and ``"paper"``.
 METHODS = ("jaxfric", "paper")
 #: Default pipeline for the networks: MAPSO generations of the global stage. With
-#: the gradient stage after it, the swarm only has to find a basin: on the simulated
-#: rig G = 50 then 500 BFGS steps gave validation MSE 0.233 % (5 keys), G = 300 then
-#: 2000 steps 0.234 % in 3× the time (benchmarks/friction.py).
+#: the gradient stage after it, the swarm only has to find a basin. Simulated rig,
+#: 5 keys, validation MSE mean (max): G = 50 then 500 BFGS steps 0.233 (0.371) %;
+#: G = 300 then 2000 steps 0.234 (0.361) % at about 5× the run time; G = 100 then
+#: 500 steps 0.263 (0.431) %. EMPS at 1 kHz, 3 keys: G = 50 then 500 steps
+#: 0.142–0.194 % against 0.251 % for least squares (benchmarks/pipelines.py).
 FAST_GENERATIONS_BLACK_BOX = 50
 #: Default pipeline for the networks: the global stage sees at most this many
 #: training samples (the first ones; coarse-to-fine). A swarm generation rolls out
