@@ -49,7 +49,9 @@ def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=3, help="optimiser keys per configuration")
     p.add_argument("--data-seed", type=int, default=0, help="key of the simulated record")
-    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    p.add_argument("--out", default=None,
+                   help="output folder (default benchmarks/results; benchmarks/results/quick with --quick, "
+                   "so a smoke run never overwrites the committed results)")
     p.add_argument("--x64", action="store_true", help="search in float64 (default: float32)")
     p.add_argument("--quick", action="store_true", help="tiny budgets: a smoke test of the script")
     p.add_argument("--report-only", action="store_true",
@@ -60,6 +62,9 @@ def parse(argv=None):
 
 
 PAPER_NEURONS = {20: 0.3277, 30: 0.2632, 40: 0.2377}
+#: Timing row of identify's default pipeline (method="jaxfric"); the "paper ..." rows
+#: run method="paper" (the paper's MAPSO–NMDS, identify's default before 0.7).
+JAXFRIC_LABEL = "jaxfric default (MAPSO G=50 -> BFGS 500)"
 
 
 # ------------------------------------------------------------------ helpers
@@ -103,9 +108,9 @@ class Runner:
     """Runs identifications and turns each fit's stages into CSV rows."""
 
     def __init__(self, data, args):
-        from jaxfric.identify import GradientRefinement, default_solver, identify
+        from jaxfric.identify import GradientRefinement, identify, paper_solver
 
-        self.identify, self.default_solver = identify, default_solver
+        self.identify, self.paper_solver = identify, paper_solver
         self.GradientRefinement = GradientRefinement
         self.data, self.args = data, args
         self.rows = []
@@ -115,7 +120,7 @@ class Runner:
     def solver(self, model, generations=None, mapso_only=False):
         import jaxfric
 
-        s = self.default_solver(model)
+        s = self.paper_solver(model)
         if self.args.quick:
             s = jaxfric.mapso_nmds(lattice_size=3, num_generations=5, sl_generations=2,
                                    nm_max_steps=200, nm_max_evals=200)
@@ -241,10 +246,12 @@ def run_benchmark(args, data, out):
     # 1. one full default identification, timed (compile apart), then again from the cache
     if not args.quick:
         print("default ENN identification (timing) ...", flush=True)
-        for k, refine, label in ((100, None, "paper default (first call)"),
-                                 (101, None, "paper default (cached)"),
-                                 (100, "bfgs", "default + refine='bfgs'")):
-            fit = identify("elman", data, key=k, dtype=dtype, refine=refine)
+        for k, method, refine, label in ((100, "paper", None, "paper default (first call)"),
+                                         (101, "paper", None, "paper default (cached)"),
+                                         (100, "paper", "bfgs", "default + refine='bfgs'"),
+                                         (100, "jaxfric", None, JAXFRIC_LABEL),
+                                         (101, "jaxfric", None, JAXFRIC_LABEL + " (cached)")):
+            fit = identify("elman", data, key=k, dtype=dtype, refine=refine, method=method)
             t = fit.timings
             runner.rows.append(row(TIMING_CONFIG, label, k, fit, fit.stages[-1],
                                    time_run=t["run_s"] + t.get("refine_run_s", 0.0),
@@ -336,7 +343,7 @@ def write_markdown(out, rows, files, meta):
         f"Machine: {meta['machine']}, {meta['cores']} CPU cores, load average "
         f"{meta['load']:.1f} at the start: other jobs shared the machine, so times are upper "
         f"bounds. jax {meta['jax']}.\n")
-    add(f"ENN solver = `identify`'s default: MAPSO on an 8×8 lattice (64 agents, §3.5) for "
+    add(f"ENN solver = the paper's (`identify(..., method=\"paper\")`, `paper_solver`): MAPSO on an 8×8 lattice (64 agents, §3.5) for "
         f"G = {DEFAULT_GENERATIONS_BLACK_BOX} generations (162 evaluations each), then "
         "Nelder–Mead with fminsearch's budget, 200·n iterations and 200·n evaluations "
         "(36 000 for N = 30), started from a simplex sized by the swarm's spread. Gradient "
@@ -355,7 +362,7 @@ def write_markdown(out, rows, files, meta):
         add("| call | compile [s] | run [s] | total wall [s] | MSE % train | MSE % valid |")
         add("|---|---|---|---|---|---|")
         for label in ("paper default (first call)", "paper default (cached)",
-                      "default + refine='bfgs'"):
+                      "default + refine='bfgs'", JAXFRIC_LABEL, JAXFRIC_LABEL + " (cached)"):
             for r in R.select(TIMING_CONFIG, label):
                 add(f"| {label} | {r['time_compile_s']:.1f} | {r['time_run_s']:.1f} | "
                     f"{r['time_total_s']:.1f} | {r['mse_percent_train']:.3f} | "
@@ -530,7 +537,8 @@ def main(argv=None):
         jax.config.update("jax_enable_x64", True)
     from jaxfric import rig
 
-    out = Path(args.out)
+    results = Path(__file__).resolve().parent / "results"
+    out = Path(args.out) if args.out else (results / "quick" if args.quick else results)
     out.mkdir(parents=True, exist_ok=True)
     load = os.getloadavg()[0]
     t_start = time.perf_counter()

@@ -212,9 +212,17 @@ def test_named_models_get_the_documented_defaults_and_options():
     assert m.context_weight_bound == _api.NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]
     assert _api.resolve_model("Elman", {"neurons": 20, "context_weight_bound": 5.0}).num_params == 120
     assert _api.resolve_model("lugre", None) == LuGre()
-    solver = _api.default_solver(_api.resolve_model("elman", None))
-    assert solver.mapso.num_agents == 64  # ALGORITHMS §3.5: Lsize 8 for the ENN
-    assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
+    enn = _api.resolve_model("elman", None)
+    for solver in (_api.paper_solver(enn), _api.default_solver(enn, "paper")):
+        assert solver.mapso.num_agents == 64  # ALGORITHMS §3.5: Lsize 8 for the ENN
+        assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
+    # The default pipeline's global stage: the same lattice, a short run (BFGS follows).
+    fast = _api.default_solver(enn)
+    assert isinstance(fast, jaxfric.MAPSO) and fast.num_agents == 64
+    assert fast.num_generations == _api.FAST_GENERATIONS_BLACK_BOX
+    assert _api.default_solver(LuGre()) == _api.paper_solver(LuGre())
+    with pytest.raises(ValueError, match="method must be one of"):
+        _api.default_solver(enn, "fast")
 
 
 def test_static_map_recovered_by_levenberg_marquardt():

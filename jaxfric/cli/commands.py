@@ -86,7 +86,7 @@ def _settings(args, fits) -> dict:
     for name in fits:
         spec = FitSpec.from_args(name, args)
         model = spec.build_model()
-        s[f"{name}: solver"] = describe_solver(spec.build_solver(model), model)
+        s[f"{name}: solver"] = describe_solver(spec.build_solver(model), model, spec.paper)
         if getattr(model, "neurons", None) is not None:
             s["neurons"] = model.neurons
     return s

@@ -41,12 +41,17 @@ def label(name: str, model) -> str:
     return f"{base} ({n} neurons)" if n is not None else base
 
 
-def describe_solver(solver, model) -> str:
-    """One phrase for stage messages and reports."""
+def describe_solver(solver, model, paper: bool = False) -> str:
+    """One phrase for stage messages and reports (``solver=None``: ``identify``'s default
+    for the method, the paper's with ``paper=True``)."""
     from jaxfric import MAPSO, MAPSONMDS, PSO
-    from jaxfric.identify import default_solver
+    from jaxfric.identify import _api
 
-    s = default_solver(model) if solver is None else solver
+    method = "paper" if paper else "jaxfric"
+    s = _api.default_solver(model, method) if solver is None else solver
+    if solver is None and _api._fast_pipeline(model, method):
+        return (f"MAPSO ({s.lattice_size}x{s.lattice_size} agents, G = {s.num_generations}, first "
+                f"{_api.GLOBAL_STAGE_SAMPLES} samples) -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)")
     if isinstance(s, MAPSONMDS):
         nm = s.nelder_mead.max_evals
         nm_text = f"<= {nm} evaluations" if nm is not None else f"<= {s.nelder_mead.steps_for(model.num_params)} steps"
@@ -114,7 +119,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
         model = spec.build_model()
         solver = spec.build_solver(model)
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
-            f"{describe_solver(solver, model)}")
+            f"{describe_solver(solver, model, spec.paper)}")
         t0 = time.perf_counter()
         bar = None if args.quiet else progress_bar(solver, model, label(name, model))
         try:

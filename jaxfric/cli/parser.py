@@ -204,6 +204,9 @@ def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
     g.add_argument("--refine", choices=REFINE_CHOICES, default="none",
                    help="gradient polish after the optimiser (not in the paper; 'auto': LM for small models, "
                    "BFGS for the networks)")
+    g.add_argument("--paper", action="store_true",
+                   help="the paper's method exactly: MAPSO-NMDS, no gradient stage (default: jaxfric's "
+                   "faster, more accurate pipeline; for the networks a short MAPSO then BFGS)")
     g.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
     g.add_argument("--quick", action="store_true", help="tiny budget: a smoke test in seconds, not a real fit")
     g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="report folder (created if needed)")

@@ -33,6 +33,8 @@ class FitSpec:
             the library's choice.
         nm_evals: Nelder–Mead evaluation budget; ``None`` keeps the library's choice.
         refine: gradient refinement after the search (``"none"`` = off).
+        paper: the paper's method exactly (``identify(method="paper")``: MAPSO–NMDS, no
+            gradient stage) instead of the library's default pipeline.
         seed: the key is ``jax.random.key(seed)`` unless a key is passed to :meth:`identify`.
     """
 
@@ -42,6 +44,7 @@ class FitSpec:
     generations: int | None = None
     nm_evals: int | None = None
     refine: str = "none"
+    paper: bool = False
     seed: int = 0
 
     def __post_init__(self):
@@ -57,7 +60,8 @@ class FitSpec:
             nm_evals = nm_evals or QUICK_NM_EVALS
         neurons = args.neurons if name in ("elman", "elman_full") else None
         return cls(model=name, neurons=neurons, solver=args.solver, generations=generations,
-                   nm_evals=nm_evals, refine=getattr(args, "refine", "none"), seed=args.seed)
+                   nm_evals=nm_evals, refine=getattr(args, "refine", "none"),
+                   paper=getattr(args, "paper", False), seed=args.seed)
 
     @property
     def model_options(self) -> dict | None:
@@ -76,12 +80,12 @@ class FitSpec:
     def build_solver(self, model=None):
         """The optimiser; ``None`` when ``identify``'s default solver is used unchanged."""
         import jaxfric as jf
-        from jaxfric.identify import default_solver
+        from jaxfric.identify import paper_solver
 
         if self.solver == "mapso-nmds" and self.default_budget:
             return None
         model = self.build_model() if model is None else model
-        base = default_solver(model)
+        base = paper_solver(model)  # MAPSO–NMDS sized for the model; a budget replaces a field
         g, nm = self.generations, self.nm_evals
         if self.solver == "mapso-nmds":
             mapso = base.mapso if g is None else dataclasses.replace(base.mapso, num_generations=g)
@@ -106,6 +110,8 @@ class FitSpec:
                   "key": jax.random.key(self.seed) if key is None else key}
         if self.refine != "none":
             kwargs["refine"] = self.refine
+        if self.paper:
+            kwargs["method"] = "paper"
         if progress is not None and "progress" in inspect.signature(identify).parameters:
             kwargs["progress"] = progress
         return identify(self.model, data, **kwargs)

@@ -6,9 +6,13 @@
 from ._api import (
     DEFAULT_GENERATIONS_BLACK_BOX,
     DEFAULT_GENERATIONS_PHYSICAL,
+    FAST_GENERATIONS_BLACK_BOX,
+    FAST_REFINE_STEPS,
+    GLOBAL_STAGE_SAMPLES,
     NAMED_MODEL_DEFAULTS,
     default_solver,
     identify,
+    paper_solver,
 )
 from ._data import Record, as_record
 from ._objective import CostData, OutputErrorCost
@@ -25,4 +29,8 @@ __all__ = [
     "as_record",
     "default_solver",
     "identify",
+    "paper_solver",
+    "FAST_GENERATIONS_BLACK_BOX",
+    "FAST_REFINE_STEPS",
+    "GLOBAL_STAGE_SAMPLES",
 ]

@@ -1,7 +1,9 @@
 """Gradient refinement of a fit — beyond the paper (ALGORITHMS.md §2.4 last bullet, §11 step 7).
 
-The models are pure JAX, so ``jax.grad`` through the ``lax.scan`` rollout (BPTT for
-the Elman network) gives J's exact gradient. After (or instead of) Nelder–Mead we
+The models are pure JAX, so ``jax.grad`` through the ``lax.scan`` rollout gives J's
+exact gradient (for the Elman network by its hand-written adjoint, BPTT,
+``Elman.simulate_vjp``; see ``_objective``). The default pipeline of the networks
+ends here (``identify(method="jaxfric")``). After (or instead of) Nelder–Mead we
 polish θ with an optimistix solver:
 
 * ``"bfgs"`` / ``"lbfgs"``: quasi-Newton on J (``optx.minimise``);
@@ -130,7 +132,7 @@ def _residuals_z(z, args):
 
 
 class RefineOutcome(eqx.Module):
-    """Result of :func:`refine`: the kept θ and its J, the solver's J, result code and steps."""
+    """Result of :func:`refine_impl`: the kept θ and its J, the solver's J, result code and steps."""
 
     theta: jax.Array
     f: jax.Array
@@ -140,26 +142,67 @@ class RefineOutcome(eqx.Module):
     num_steps: jax.Array
 
 
-def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
-                data: CostData) -> RefineOutcome:
-    """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]``.
+#: Solver steps per compiled call of the gradient stage. The stage always runs in
+#: chunks of this size, with or without a progress display, so showing progress
+#: never changes the result; between chunks the display is updated.
+REFINE_CHUNK = 50
 
-    :func:`jaxfric.identify` runs it as one jitted call (with its ``compiler_options``).
+_TAGS = frozenset()
+#: Phase number of the gradient stage's reports to a callable progress sink.
+LOCAL_PHASE = 1
 
-    ``cost(theta, data)`` is J; the start's own J is evaluated too, so the
-    returned θ is never worse than ``theta0`` (a non-finite refined J counts as worse).
-    """
-    args = (cost, lower, upper, data)
-    z0 = from_box(theta0, lower, upper, settings.edge)
+
+def _fn(settings: GradientRefinement):
+    # optimistix's solver protocol: fn(y, args) -> (output, aux).
     if settings.least_squares:
-        sol = optx.least_squares(_residuals_z, settings.solver(), z0, args,
-                                 max_steps=settings.max_steps, throw=False)
-    else:
-        sol = optx.minimise(_cost_z, settings.solver(), z0, args,
-                            max_steps=settings.max_steps, throw=False)
-    theta_new = to_box(sol.value, lower, upper)
+        return lambda z, args: (_residuals_z(z, args), None)
+    return lambda z, args: (_cost_z(z, args), None)
+
+
+def _start(settings: GradientRefinement, cost, theta0, lower, upper, data):
+    args = (cost, lower, upper, data)
+    fn = _fn(settings)
+    z0 = from_box(theta0, lower, upper, settings.edge)
+    f_struct = jax.eval_shape(lambda z: fn(z, args)[0], z0)
+    solver = settings.solver()
+    state = solver.init(fn, z0, args, {}, f_struct, None, _TAGS)
+    done, result = solver.terminate(fn, z0, args, {}, state, _TAGS)
+    return z0, state, done, result, cost(theta0, data)
+
+
+def _advance(settings: GradientRefinement, cost, z, state, steps, done, result, lower, upper, data):
+    """Up to :data:`REFINE_CHUNK` more solver steps (never past ``max_steps``), as
+    ``optimistix``'s own loop runs them (``step``, then ``terminate`` on the new state)."""
+    args = (cost, lower, upper, data)
+    fn = _fn(settings)
+    solver = settings.solver()
+    limit = jnp.minimum(steps + REFINE_CHUNK, settings.max_steps)
+    dynamic, static = eqx.partition(state, eqx.is_array)
+
+    def cond(carry):
+        _, _, k, stop, res = carry
+        return (k < limit) & jnp.invert(stop) & (res == optx.RESULTS.successful)
+
+    def body(carry):
+        y, dyn, k, _, _ = carry
+        st = eqx.combine(static, dyn)
+        y_new, st_new, _ = solver.step(fn, y, args, {}, st, _TAGS)
+        stop, res = solver.terminate(fn, y, args, {}, st_new, _TAGS)
+        finite = jnp.all(jnp.isfinite(y_new))
+        res = optx.RESULTS.where(finite, res, optx.RESULTS.nonfinite)
+        return y_new, eqx.partition(st_new, eqx.is_array)[0], k + 1, stop, res
+
+    z, dynamic, steps, done, result = jax.lax.while_loop(
+        cond, body, (z, dynamic, steps, done, result))
+    return z, eqx.combine(static, dynamic), steps, done, result, cost(to_box(z, lower, upper), data)
+
+
+def _finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data, max_steps):
+    result = optx.RESULTS.where(
+        (result == optx.RESULTS.successful) & jnp.invert(done) & (steps >= max_steps),
+        optx.RESULTS.nonlinear_max_steps_reached, result)
+    theta_new = to_box(z, lower, upper)
     f_new = cost(theta_new, data)
-    f_old = cost(theta0, data)
     f_new_safe = jnp.where(jnp.isfinite(f_new), f_new, jnp.inf)
     improved = f_new_safe < f_old
     return RefineOutcome(
@@ -167,9 +210,70 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
         f=jnp.where(improved, f_new_safe, f_old),
         f_refined=f_new,
         improved=improved,
-        result=sol.result,
-        num_steps=jnp.asarray(sol.stats["num_steps"]),
+        result=result,
+        num_steps=steps,
     )
+
+
+def _progress_sink(progress, settings: GradientRefinement):
+    """``(update(steps, f), close(steps))`` for ``progress`` (None, True or a callable)."""
+    if progress is None or progress is False:
+        return (lambda steps, f: None), (lambda steps: None)
+    if progress is True:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=settings.max_steps, desc=f"gradient ({settings.method})", unit="step",
+                   leave=True)
+
+        def update(steps, f):
+            bar.update(steps - bar.n)
+            bar.set_postfix(J=f"{f:.4g}", refresh=False)
+
+        def close(steps):
+            # An early stop (converged) still ends the bar at 100 %, saying when it stopped.
+            if steps < settings.max_steps:
+                bar.set_postfix_str(f"converged at step {steps}", refresh=False)
+            bar.update(bar.total - bar.n)
+            bar.close()
+
+        return update, close
+    if callable(progress):
+        # Phase 1 is the local phase of jaxfric.optim's progress protocol (PHASES):
+        # existing sinks take it without change; ``evals`` carries the step count.
+        return (lambda steps, f: progress(LOCAL_PHASE, steps, steps, f)), (lambda steps: None)
+    raise ValueError(f"progress must be None, True (a tqdm bar) or a callable, got {progress!r}")
+
+
+def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
+                data: CostData, *, progress=None, compiler_options=()) -> RefineOutcome:
+    """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]``.
+
+    The optimistix solver (``init``/``step``/``terminate``) runs in compiled chunks of
+    :data:`REFINE_CHUNK` steps; ``progress`` (``True`` for a tqdm bar, or a callable
+    ``sink(LOCAL_PHASE, step, step, J)``) is told after each chunk. ``compiler_options``:
+    a :func:`jaxfric._xla.resolve` tuple for the compiled chunks.
+
+    ``cost(theta, data)`` is J; the start's own J is evaluated too, so the
+    returned θ is never worse than ``theta0`` (a non-finite refined J counts as worse).
+    """
+    from .. import _xla
+
+    update, close = _progress_sink(progress, settings)
+    start = _xla.filter_jit(_start, compiler_options)
+    advance = _xla.filter_jit(_advance, compiler_options)
+    finish = _xla.filter_jit(_finish, compiler_options)
+    z, state, done, result, f_old = start(settings, cost, theta0, lower, upper, data)
+    steps = jnp.asarray(0)
+    try:
+        while int(steps) < settings.max_steps and not bool(done) and \
+                bool(result == optx.RESULTS.successful):
+            z, state, steps, done, result, f = advance(settings, cost, z, state, steps, done, result,
+                                                       lower, upper, data)
+            update(int(steps), float(f))
+    finally:
+        close(int(steps))
+    return finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data,
+                  settings.max_steps)
 
 
 _RESULT_NAMES = (

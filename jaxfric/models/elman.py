@@ -201,6 +201,57 @@ class Elman(AbstractFrictionModel):
             y = y + p["b_o"][:, None]
         return y
 
+    def simulate_vjp(self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"]):
+        """Free run of one network and its hand-written adjoint (BPTT, ALGORITHMS.md §2.2).
+
+        Returns ``(y, pullback)`` with ``y`` as :meth:`simulate` and
+        ``pullback(g_y) = (∂y/∂θ)ᵀ g_y``. With ``a_k = w u_k + r c_k + b``,
+        ``h_k = tanh a_k``, ``c_{k+1} = α c_k + h_k`` and ``λ_k = ∂L/∂c_k``
+        (``λ_T = 0``), one reverse loop runs
+
+            δ_k = (v g_k + λ_{k+1}) (1 − h_k²),     λ_k = α λ_{k+1} + r δ_k
+
+        and the gradient is a set of sums over time: ∂w = Σ δ_k u_k, ∂r = Σ δ_k c_k,
+        ∂b = Σ δ_k, ∂v = Σ g_k h_k, ∂α = Σ λ_{k+1} c_k, ∂c0 = λ_0, ∂b_o = Σ g_k.
+
+        Why: JAX's reverse mode of the forward scan (linearise, then transpose) took
+        31 ms for a 19 800-sample record against 3.3 ms for the rollout; this loop
+        carries only λ and leaves the sums to vectorised reductions.
+        """
+        theta, u = self._prepare(jnp.asarray(theta)[None, :], velocity)
+        p = {k: x[0] for k, x in self.to_physical(theta).items()}
+        w, r, b, v, alpha, c0 = (p[k] for k in self._BLOCKS)
+
+        def forward(c, uk):
+            h = jnp.tanh(w * uk + r * c + b)
+            return alpha * c + h, (c, h)
+
+        cpu_unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2
+        cs, hs = time_scan(forward, c0, u, cpu_unroll, self.unroll)
+        y = hs @ v
+        if self.output_bias:
+            y = y + p["b_o"]
+
+        def pullback(gy):
+            gy = jnp.asarray(gy, u.dtype)
+
+            def backward(lam, inputs):
+                g, h = inputs
+                delta = (v * g + lam) * (1.0 - h * h)
+                return alpha * lam + r * delta, (delta, lam)
+
+            # time_scan runs forwards only: feed it the reversed record.
+            delta, lam_next = (x[::-1] for x in time_scan(
+                backward, jnp.zeros_like(c0), (gy[::-1], hs[::-1]), cpu_unroll, self.unroll))
+            lam0 = alpha * lam_next[0] + r * delta[0]
+            grads = {"w": u @ delta, "r": jnp.sum(delta * cs, axis=0), "b": jnp.sum(delta, axis=0),
+                     "v": gy @ hs, "alpha": jnp.sum(lam_next * cs, axis=0), "c0": lam0}
+            if self.output_bias:
+                grads["b_o"] = jnp.sum(gy)
+            return self.from_physical(**grads)
+
+        return y, pullback
+
 
 class ElmanFull(AbstractFrictionModel):
     """Classic Elman network with a full context matrix, ALGORITHMS.md §2.3 (Option B)::

@@ -17,6 +17,7 @@ Recorded data: :func:`load_measurements` (raw x, p1, p2, load) or
 
 from .data import FrictionData, Measurements
 from .friction import friction_force, sliding_levels
+from .emps import EMPSRecording, emps_friction_data, idim_ls, load_emps
 from .io import IrregularSamplingWarning, load_friction_pairs, load_measurements, resample_uniform
 from .params import Controller, Cylinder, Load, Rig, SealFriction, Valve, piston_areas
 from .pipeline import butterworth_sos, differentiate, estimate_friction, force_balance, lowpass
@@ -26,6 +27,7 @@ from .simulator import RigRecord, Sensors, default_velocity_profile, load_force,
 
 __all__ = [
     "Controller",
+    "EMPSRecording",
     "CoulombLevels",
     "Cylinder",
     "FrictionData",
@@ -41,10 +43,13 @@ __all__ = [
     "coulomb_levels",
     "default_velocity_profile",
     "differentiate",
+    "emps_friction_data",
     "estimate_friction",
     "force_balance",
+    "idim_ls",
     "friction_force",
     "load_force",
+    "load_emps",
     "load_friction_pairs",
     "load_measurements",
     "lowpass",

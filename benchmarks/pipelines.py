@@ -1,0 +1,291 @@
+"""ENN (N = 30) identification pipelines side by side, on the simulated rig and on real recordings.
+
+Usage::
+
+    python benchmarks/pipelines.py --record rig   [--seeds 5]      # jaxfric.rig.synthetic_friction_data
+    python benchmarks/pipelines.py --record emps  [--seeds 1] [--paper-seeds 1]   # DATA_EMPS.mat, 1 kHz
+    python benchmarks/pipelines.py --record oring [--seeds 1]      # pneumatic O-ring_3bar.csv
+    ... [--quick] [--out DIR] [--data-dir DIR]
+
+Pipelines (issue 17 items 2-3), each on the same record and split (first 80 % train,
+last 20 % validation; the rig's own 1600/400), float32:
+
+* ``jaxfric``: ``identify("elman", data, key=k)`` with every default (MAPSO 8×8 for
+  ``FAST_GENERATIONS_BLACK_BOX`` generations on the first ``GLOBAL_STAGE_SAMPLES``
+  training samples, then ``FAST_REFINE_STEPS`` BFGS steps on the whole window);
+* ``paper``: ``identify(..., method="paper")``: MAPSO–NMDS as the paper describes;
+* ``DE → NM``: ``scipy.optimize.differential_evolution`` (vectorised, the same jitted
+  batched cost) on the same first samples with the same number of evaluations as the
+  ``jaxfric`` swarm, then ``scipy.optimize.minimize(method="Nelder-Mead")`` on the
+  whole training window with as many cost evaluations as the BFGS stage's budget
+  costs in rollouts (``NM_EVALS_PER_BFGS_STEP`` per step, measured: one BFGS step =
+  a forward and an adjoint loop plus line-search evaluations);
+* least-squares baselines on the same split (not in the library): asymmetric
+  Coulomb + viscous + offset, ``F = Fv± v + Fc+ [v>0] − Fc− [v<0] + o``.
+
+EMPS also gets the IDIM-LS table (M, Fv, Fc symmetric and asymmetric) against the
+published values (``jaxfric.rig.emps``). Run time excludes compilation (JAX compile
+events, ``jaxfric.identify._timing.Stopwatch``); the first key of each pipeline also
+pays it and is reported apart.
+
+Writes ``pipelines_<record>.md`` and ``.csv`` into ``--out`` (default
+``benchmarks/results``; ``--quick`` writes to ``benchmarks/results/quick`` so smoke runs
+never overwrite committed results).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import platform
+import sys
+import time
+import warnings
+from pathlib import Path
+
+try:
+    import jaxfric  # noqa: F401
+except ImportError:  # running from a source checkout without installing
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
+#: Nelder–Mead evaluations granted per BFGS step of the jaxfric pipeline (DE → NM row).
+NM_EVALS_PER_BFGS_STEP = 6
+PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648,
+             "Fv_pos": 166.71, "Fc_pos": 20.14, "Fv_neg": 240.42, "Fc_neg": 20.63}
+
+
+def parse(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--record", choices=("rig", "emps", "oring"), default="rig")
+    p.add_argument("--seeds", type=int, default=None, help="keys for jaxfric and DE→NM (rig 5, else 1)")
+    p.add_argument("--paper-seeds", type=int, default=None, help="keys for the paper pipeline (default: --seeds)")
+    p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat or pneumatic_seal_friction")
+    p.add_argument("--out", default=None)
+    p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
+    p.add_argument("--skip", default="", help="comma list of pipelines to skip: jaxfric,paper,de_nm")
+    p.add_argument("--tag", default="", help="suffix of the output names (pipelines_<record><tag>.md)")
+    return p.parse_args(argv)
+
+
+# --------------------------------------------------------------------- data
+def load(args):
+    from jaxfric import rig
+
+    if args.record == "rig":
+        return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
+    if args.record == "emps":
+        path = Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"
+        if not path.is_file():
+            return None, f"no EMPS file at {path}"
+        return (rig.emps_friction_data(rig.load_emps(path)),
+                "EMPS estimation file at 1 kHz, the benchmark's recipe, IDIM-LS mass")
+    folder = Path(args.data_dir or DATA_ROOT / "pneumatic_seal_friction")
+    path = folder / "raw" / "O-ring_3bar.csv"
+    if not path.is_file():
+        return None, f"no O-ring file at {path}"
+    sys.path.insert(0, str(HERE))
+    from real_recordings import load_record
+
+    return load_record(str(path))[1].with_split(0.8), "pneumatic O-ring_3bar.csv (real_recordings.py pipeline)"
+
+
+def ls_baseline(v, f, n):
+    """Asymmetric Coulomb + viscous + offset by least squares on the training window."""
+    from jaxfric.metrics import friction_metrics
+
+    pos, neg = (v > 0).astype(float), (v < 0).astype(float)
+    A = np.stack([v * pos, v * neg, pos, -neg, np.ones_like(v)], axis=1)
+    x, *_ = np.linalg.lstsq(A[:n], f[:n], rcond=None)
+    y = A @ x
+    return {"train": friction_metrics(f[:n], y[:n]), "valid": friction_metrics(f[n:], y[n:]), "coef": x}
+
+
+def idim_rows(args):
+    from jaxfric.rig import emps
+
+    rec = emps.load_emps(Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat")
+    s = emps.emps_states(rec)
+    out = []
+    for asym in (False, True):
+        est = emps.idim_ls(s["v"], s["a"], s["force"], asymmetric=asym)
+        names = ("M", "Fv_pos", "Fv_neg", "Fc_pos", "Fc_neg") if asym else ("M", "Fv", "Fc", "offset")
+        for k in names:
+            ours = getattr(est, k)
+            out.append({"model": "asymmetric" if asym else "symmetric", "parameter": k, "ours": ours,
+                        "published": PUBLISHED[k], "diff_pct": 100 * (ours / PUBLISHED[k] - 1)})
+    return out
+
+
+# ---------------------------------------------------------------- pipelines
+def run_identify(data, key, method, quick):
+    from jaxfric.identify import identify
+
+    kw = {}
+    if quick:
+        import jaxfric as jf
+        from jaxfric.identify import GradientRefinement
+
+        kw = ({"solver": jf.MAPSO(lattice_size=8, num_generations=3),
+               "refine": GradientRefinement(max_steps=10)} if method == "jaxfric" else
+              {"solver": jf.mapso_nmds(lattice_size=8, num_generations=3, nm_max_steps=50, nm_max_evals=50)})
+    cpu0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        fit = identify("elman", data, key=key, method=method, **kw)
+    return {"cpu_s": time.process_time() - cpu0,"valid": fit.metrics["valid"]["mse_percent"], "train": fit.metrics["train"]["mse_percent"],
+            "run_s": fit.timings["run_s"] + fit.timings.get("refine_run_s", 0.0),
+            "compile_s": fit.timings["compile_s"] + fit.timings.get("refine_compile_s", 0.0),
+            "evals": sum(s.get("num_evals", 0) for s in fit.stages),
+            "steps": sum(s.get("num_steps", 0) for s in fit.stages)}
+
+
+def run_de_nm(data, seed, quick):
+    """scipy DE on the first GLOBAL_STAGE_SAMPLES samples, then scipy Nelder–Mead on all."""
+    import scipy.optimize
+
+    from jaxfric import models
+    from jaxfric.fit import predict
+    from jaxfric.identify import _api
+    from jaxfric.identify._data import as_record
+    from jaxfric.identify._objective import OutputErrorCost, cost_data, fit_scalers
+    from jaxfric.identify._timing import Stopwatch
+    from jaxfric.metrics import friction_metrics
+
+    rec = as_record(data)
+    model = _api.resolve_model("elman", None)
+    scalers = fit_scalers(model, rec)
+    full = cost_data(model, rec, scalers, jnp.float32)
+    m = min(_api.GLOBAL_STAGE_SAMPLES, rec.n_train)
+    head = full.__class__(u=full.u[:m], y=full.y[:m], dt=full.dt, inv_norm=full.inv_norm)
+    cost = OutputErrorCost(model)
+    batch = jax.jit(jax.vmap(cost, (0, None)))
+    single = jax.jit(cost)
+    lo, hi = model.bounds()
+    n = lo.size
+    gens = 3 if quick else _api.FAST_GENERATIONS_BLACK_BOX
+    budget_global = _api.default_solver(model).evaluations() if not quick else 8 * 8 * 3
+    nm_evals = 50 if quick else NM_EVALS_PER_BFGS_STEP * _api.FAST_REFINE_STEPS
+    # popsize·n members; maxiter so that (maxiter + 1)·popsize·n ≈ the swarm's budget
+    maxiter = max(1, budget_global // n - 1)
+
+    def f_batch(x):  # scipy's vectorized form: x is (n, S)
+        y = np.asarray(batch(jnp.asarray(x.T, jnp.float32), head), np.float64)
+        return np.where(np.isfinite(y), y, np.inf)
+
+    def f_one(x):
+        y = float(single(jnp.asarray(x, jnp.float32), full))
+        return y if np.isfinite(y) else np.inf
+
+    cpu0 = time.process_time()
+    with Stopwatch() as sw:
+        de = scipy.optimize.differential_evolution(
+            f_batch, list(zip(lo, hi)), popsize=1, maxiter=maxiter, vectorized=True, polish=False,
+            updating="deferred", seed=seed, init="latinhypercube", tol=0.0)
+        nm = scipy.optimize.minimize(f_one, de.x, method="Nelder-Mead",
+                                     options={"maxfev": nm_evals, "maxiter": nm_evals, "adaptive": True})
+    theta = np.clip(nm.x, lo, hi) if nm.fun <= de.fun else de.x
+    y = np.asarray(predict(model, jnp.asarray(theta, jnp.float32), scalers, rec.velocity, rec.dt))
+    k = rec.n_train
+    return {"valid": friction_metrics(rec.friction[k:], y[k:])["mse_percent"],
+            "train": friction_metrics(rec.friction[:k], y[:k])["mse_percent"],
+            "run_s": sw.run_s, "compile_s": sw.compile_s, "cpu_s": time.process_time() - cpu0,
+            # scipy counts a vectorised population call once; count the members
+            "evals": int((de.nit + 1) * n + nm.nfev), "steps": 0,
+            "de_generations": int(de.nit), "gens_ref": gens}
+
+
+def main(argv=None):
+    args = parse(argv)
+    data, desc = load(args)
+    if data is None:
+        print(f"pipelines: {desc}; skipped, nothing written.", file=sys.stderr)
+        return 0
+    seeds = args.seeds or (5 if args.record == "rig" else 1)
+    paper_seeds = args.paper_seeds or seeds
+    out = Path(args.out) if args.out else HERE / "results" / ("quick" if args.quick else "")
+    out.mkdir(parents=True, exist_ok=True)
+    skip = set(filter(None, args.skip.split(",")))
+    v, f, n = np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
+    base = ls_baseline(v, f, n)
+    rows = [{"pipeline": "LS asymmetric Coulomb + viscous + offset", "seed": "", "valid": base["valid"]["mse_percent"],
+             "train": base["train"]["mse_percent"], "run_s": 0.0, "compile_s": 0.0, "evals": "", "steps": ""}]
+    print(f"{args.record}: {data.n_samples} samples, {n} train; LS baseline valid {rows[0]['valid']:.3f} %", flush=True)
+    t0 = time.time()
+    idim = idim_rows(args) if args.record == "emps" else None
+    plan = [("jaxfric", seeds), ("paper", paper_seeds), ("de_nm", seeds)]
+    for name, count in plan:
+        if name in skip:
+            continue
+        for seed in range(count):
+            r = run_de_nm(data, seed, args.quick) if name == "de_nm" else run_identify(data, seed, name, args.quick)
+            r.update(pipeline=name, seed=seed)
+            rows.append(r)
+            print(f"{name:8s} seed {seed}: valid {r['valid']:.3f} %  train {r['train']:.3f} %  "
+                  f"run {r['run_s']:.1f} s  compile {r['compile_s']:.1f} s  cpu {r['cpu_s']:.1f} s  "
+                  f"evals {r['evals']}", flush=True)
+            # after every row, so a run stopped by a time limit still leaves its results
+            write(out, args, desc, rows, base, time.time() - t0, idim)
+    write(out, args, desc, rows, base, time.time() - t0, idim)
+    return 0
+
+
+LABELS = {"jaxfric": "ENN N = 30, jaxfric default (MAPSO G = 50 on ≤ 2000 samples → BFGS 500)",
+          "paper": "ENN N = 30, paper (MAPSO–NMDS, `method=\"paper\"`)",
+          "de_nm": "ENN N = 30, scipy DE → Nelder–Mead (same budget as jaxfric)"}
+
+
+def write(out, args, desc, rows, base, wall, idim):
+    keys = ["pipeline", "seed", "valid", "train", "run_s", "compile_s", "cpu_s", "evals", "steps"]
+    stem = f"pipelines_{args.record}{args.tag}"
+    with open(out / f"{stem}.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in keys})
+    lines = [f"# ENN identification pipelines: {desc}", "",
+             f"Generated by `python benchmarks/pipelines.py {' '.join(sys.argv[1:])}` (see its docstring). Machine: {platform.machine()}, "
+             f"{os.cpu_count()} CPU cores shared with other jobs (load average {os.getloadavg()[0]:.1f} at the end), "
+             f"jax {jax.__version__}, float32. MSE % = 100·mean(e²)/var(F) on the window. Run time excludes "
+             "compilation; cells are mean (min–max) over keys; the first key also paid the compile time shown. "
+             "CPU [s] = the process's CPU time over the call (all threads; compilation included for the first "
+             "key): unlike wall time it hardly depends on what else runs, and the rollouts are sequential, so on "
+             "an idle machine the wall time of a key served from the jit cache is at most about its CPU time.", "",
+             "| pipeline | keys | MSE % valid | MSE % train | run [s] | compile [s] (first key) | CPU [s] (last key) | evaluations |",
+             "|---|---|---|---|---|---|---|---|"]
+
+    def cell(vals):
+        a = np.asarray(vals, float)
+        return f"{a.mean():.3f}" if a.size == 1 else f"{a.mean():.3f} ({a.min():.3f}–{a.max():.3f})"
+
+    groups = {}
+    for r in rows:
+        groups.setdefault(r["pipeline"], []).append(r)
+    for name, rs in groups.items():
+        label = LABELS.get(name, name)
+        lines.append(f"| {label} | {len(rs) if name in LABELS else '–'} | {cell([r['valid'] for r in rs])} | "
+                     f"{cell([r['train'] for r in rs])} | "
+                     f"{cell([r['run_s'] for r in rs]) if name in LABELS else '–'} | "
+                     f"{rs[0]['compile_s']:.1f} | {rs[-1].get('cpu_s', 0.0):.1f} | {rs[0]['evals']} |")
+    c = base["coef"]
+    lines += ["", f"LS baseline on the training window: Fv+ = {c[0]:.4g}, Fv− = {c[1]:.4g}, Fc+ = {c[2]:.4g}, "
+              f"Fc− = {c[3]:.4g}, offset = {c[4]:.4g} (SI units).", ""]
+    if idim:
+        lines += ["## EMPS IDIM-LS against the published values (SOURCE.md)", "",
+                  "| model | parameter | ours | published | diff % |", "|---|---|---|---|---|"]
+        lines += [f"| {r['model']} | {r['parameter']} | {r['ours']:.4f} | {r['published']:.4f} | {r['diff_pct']:+.2f} |"
+                  for r in idim]
+        lines.append("")
+    lines.append(f"Benchmark wall time: {wall:.0f} s.")
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / (stem + '.md')}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
