@@ -93,6 +93,9 @@ SLOW_TESTS = {
     "tests/test_identify.py::test_multi_start_nelder_mead_from_the_best_agents",
     "tests/test_reproducibility.py::test_identify_same_key_bit_identical",
     "tests/test_reproducibility.py::test_minimise_many_is_reproducible_and_matches_single_runs",
+    "tests/test_reproducibility.py::test_cli_identify_twice_with_the_same_seed_is_bit_identical",
+    "tests/test_optim_properties.py::test_optimisers_on_random_functions_and_boxes",
+    "tests/test_optim_properties.py::test_hybrid_refines_global_phase_and_multistart_counts",
 }
 
 
