@@ -165,8 +165,9 @@ def progress_bar(solver, model, desc: str):
     return LazyBar(total, local_total, desc)
 
 
-def run_identify(name, data, *, solver, key, args, progress):
-    """``jaxfric.identify(name, data, solver=..., key=..., ...)``.
+def run_identify(name, data, *, solver, key, args, progress, valid=None):
+    """``jaxfric.identify(name, data, solver=..., key=..., ...)``; with ``valid`` (name ->
+    record, from ``--valid``) ``identify(name, train={file: data}, valid=valid, ...)``.
 
     ``progress`` (a tqdm bar updated from inside the jitted run, or ``None``) is passed
     only when ``identify`` accepts it; the CLI also prints a line per model, before and after.
@@ -180,10 +181,12 @@ def run_identify(name, data, *, solver, key, args, progress):
     params = inspect.signature(identify).parameters
     if "progress" in params:
         kwargs["progress"] = progress
+    if valid:
+        return identify(name, train={args.file: data}, valid=valid, **kwargs)
     return identify(name, data, **kwargs)
 
 
-def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
+def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> dict:
     """Identify every model of ``args.models`` on ``data`` with ``key``; ``name -> Fit``.
 
     Every model gets the same ``key`` (they are independent problems), so a model's
@@ -204,7 +207,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fit = run_identify(name, data, solver=solver, key=key, args=args, progress=bar)
+                fit = run_identify(name, data, solver=solver, key=key, args=args, progress=bar, valid=valid)
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own

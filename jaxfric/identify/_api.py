@@ -30,7 +30,7 @@ from ..fit import Fit, model_config, model_name, predict, rollout_model
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
-from ._data import Record, RecordSet, as_records
+from ._data import Record, RecordSet, as_record, as_records
 from ._diagnostics import BoundWarning, on_bound, unidentifiable
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
 from ._pooled import PooledOutputErrorCost, pooled_cost_data

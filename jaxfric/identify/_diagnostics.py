@@ -32,7 +32,7 @@ def _coordinates(model: AbstractFrictionModel):
     if isinstance(model, AbstractPhysicalModel):
         for search, phys, kind in model._coords:
             key = model._range_key(phys, kind)
-            yield search, (f"{phys}/Fc" if kind == "ratio" else phys), kind, f"{key}_range"
+            yield search, phys, kind, f"{key}_range"
     else:
         for name in model.param_names:
             yield name, name, "linear", None
@@ -42,7 +42,8 @@ def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) 
     """Parameters of ``theta`` (search coordinates) within ``tol`` box widths of a bound.
 
     Returns one dict per such parameter: ``name`` (physical), ``search_name``,
-    ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units,
+    ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units
+    (for LuGre's ``Fs`` the ratio Fs/Fc, whose range is ``Fs_ratio_range``),
     ``option`` (the model option that sets the range, e.g. ``"vs_range"``) and a
     one-line ``message`` naming all of it. Empty for models fitted on scaled data.
     """
@@ -63,10 +64,11 @@ def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) 
                  else f"pass {option}=({lo:.4g}, {hi * 10 if kind == 'log10' else hi + width:.4g})")
         if option is None:
             widen = "widen the search box"
+        shown = f"{name}/Fc" if kind == "ratio" else name
         out.append({
             "name": name, "search_name": search, "side": side, "value": value, "range": [lo, hi],
             "option": option,
-            "message": (f"{name} = {value:.4g} ended on the {side} bound of its search range "
+            "message": (f"{shown} = {value:.4g} ended on the {side} bound of its search range "
                         f"[{lo:.4g}, {hi:.4g}]: the box, not the data, fixed it; widen the range "
                         f"({widen}) and fit again"),
         })
