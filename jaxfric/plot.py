@@ -110,7 +110,14 @@ def predict_on(fit, data) -> np.ndarray:
     predictions already on the data's grid.
     """
     if hasattr(fit, "predict"):
-        y_hat = _np(fit.predict(data.velocity, data.dt))
+        import warnings
+
+        from .fit import ExtrapolationWarning
+
+        with warnings.catch_warnings():
+            # a figure of the validation data shows the extrapolation; no console line for it
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            y_hat = _np(fit.predict(data.velocity, data.dt))
     else:
         y_hat = _np(fit)
     n = _np(data.velocity).size
