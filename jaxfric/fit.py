@@ -10,7 +10,14 @@ File format (one ``.npz`` file, no pickles): member ``header`` holds UTF-8 JSON
 (``format``, ``format_version``, jaxfric version, model class and configuration,
 metrics, settings, ...); members ``theta``, ``velocity_scaler``, ``friction_scaler``
 (``[lo, hi]``, float64) and ``history_evals``/``history_f`` hold the arrays with
-their exact dtypes, so save → load → predict is bit-identical. Writes go to a
+their exact dtypes, so save → load → predict is bit-identical; a fit from
+``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). :func:`load_fit` refuses
+non-finite weights, scalers or sample time (they would predict NaN).
+
+Prediction is honest about its data (:meth:`Fit.predict`, :meth:`Fit.predict_at`): one
+output sample per input sample; a sample time other than the fit's is resampled onto
+the fit's grid for every model whose output depends on it (:class:`ResamplingWarning`);
+velocities outside the training range give an :class:`ExtrapolationWarning`. Writes go to a
 temporary file in the target directory, then ``os.replace``: a crash never leaves
 a half-written fit under the final name.
 """

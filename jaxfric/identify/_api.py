@@ -5,6 +5,11 @@ cost J (step 4), run the global + local optimiser (steps 5–6, MAPSO–NMDS by
 default), optionally polish with gradients (step 7, not in the paper), then
 report metrics on the training, validation and whole record (step 8).
 
+Beyond the paper: several records (``train=[...]``, ``valid=...``; the cost pools
+them, each rolled out from its own initial state, :mod:`._pooled`), an ensemble of K
+keys in one :func:`jaxfric.minimise_many` call (``keys=K``), and the flags of
+:mod:`._diagnostics` (parameters on a bound, unidentifiable parameters).
+
 Everything the user passed is checked first (:mod:`._data`, the model's own
 checks, the solver's ``check``), so bad input fails in milliseconds with a
 ``ValueError`` instead of after a long run.
