@@ -254,3 +254,21 @@ def test_extrapolation_beyond_the_training_velocity_is_warned():
     with warnings.catch_warnings():
         warnings.simplefilter("error", ExtrapolationWarning)
         fit.predict(np.linspace(-0.02, 0.02, 100))
+
+
+def test_unidentifiable_parameters_come_from_the_models_hook(monkeypatch):
+    """The models' ``unidentifiable(velocity)`` answer lands in fit.diagnostics and the summary."""
+    from jaxfric.identify import _diagnostics
+
+    calls = []
+
+    def hook(self, velocity):
+        calls.append(np.asarray(velocity).size)
+        return ("sigma2: one sliding speed per direction",)
+
+    monkeypatch.setattr(Coulomb, "unidentifiable", hook, raising=False)
+    assert _diagnostics.unidentifiable(Coulomb(), np.ones(5)) == ("sigma2: one sliding speed per direction",)
+    fit = identify("coulomb", train=[coulomb_record(0.0, 100), coulomb_record(1.0, 50)], key=0, solver=TINY)
+    assert calls[-1] == 150  # the training samples of both records
+    assert fit.diagnostics["unidentifiable"] == ["sigma2: one sliding speed per direction"]
+    assert "! sigma2: one sliding speed per direction" in fit.summary()

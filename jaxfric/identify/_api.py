@@ -478,8 +478,7 @@ def identify(
         _warn_if_divergent(metrics)
         diagnostics = {
             "on_bound": on_bound(model, theta),
-            "unidentifiable": list(unidentifiable(model, theta, records.train_velocity,
-                                                  records.train_friction)),
+            "unidentifiable": list(unidentifiable(model, records.train_velocity)),
         }
         for d in diagnostics["on_bound"]:
             warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning, stacklevel=2)

@@ -75,14 +75,15 @@ def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) 
     return out
 
 
-def unidentifiable(model: AbstractFrictionModel, theta, velocity, friction) -> tuple[str, ...]:
-    """Parameters the data cannot determine, in the model's own words.
+def unidentifiable(model: AbstractFrictionModel, velocity) -> tuple[str, ...]:
+    """Parameters the training velocity cannot determine, in the model's own words.
 
-    Asks ``model.unidentifiable(theta, velocity, friction)`` (e.g. LuGre's σ0, σ1 when
-    the record holds no pre-sliding) when the model's class defines it; ``()`` otherwise.
+    Asks ``model.unidentifiable(velocity)`` (the models' hook: a record or a velocity
+    array in, reasons out; e.g. LuGre's σ0, σ1 when the record holds no pre-sliding)
+    when the model's class defines it; ``()`` otherwise. For several training records
+    ``velocity`` is their samples together.
     """
     method = getattr(type(model), "unidentifiable", None)
     if not callable(method):
         return ()
-    return tuple(str(m) for m in method(model, np.asarray(theta), np.asarray(velocity),
-                                        np.asarray(friction)))
+    return tuple(str(m) for m in method(model, np.asarray(velocity, np.float64)))
