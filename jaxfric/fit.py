@@ -10,7 +10,14 @@ File format (one ``.npz`` file, no pickles): member ``header`` holds UTF-8 JSON
 (``format``, ``format_version``, jaxfric version, model class and configuration,
 metrics, settings, ...); members ``theta``, ``velocity_scaler``, ``friction_scaler``
 (``[lo, hi]``, float64) and ``history_evals``/``history_f`` hold the arrays with
-their exact dtypes, so save → load → predict is bit-identical. Writes go to a
+their exact dtypes, so save → load → predict is bit-identical; a fit from
+``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). :func:`load_fit` refuses
+non-finite weights, scalers or sample time (they would predict NaN).
+
+Prediction is honest about its data (:meth:`Fit.predict`, :meth:`Fit.predict_at`): one
+output sample per input sample; a sample time other than the fit's is resampled onto
+the fit's grid for every model whose output depends on it (:class:`ResamplingWarning`);
+velocities outside the training range give an :class:`ExtrapolationWarning`. Writes go to a
 temporary file in the target directory, then ``os.replace``: a crash never leaves
 a half-written fit under the final name.
 """
@@ -22,6 +29,7 @@ import io
 import json
 import os
 import tempfile
+import warnings
 import zipfile
 from typing import Any
 
@@ -32,7 +40,8 @@ import numpy as np
 from . import models as _models
 from .models import AbstractFrictionModel, Scaler
 
-__all__ = ["FORMAT_VERSION", "Fit", "load_fit", "rollout_model"]
+__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit",
+           "rollout_model"]
 
 FORMAT_NAME = "jaxfric.fit"
 #: Version of the file layout written by :meth:`Fit.save`; :func:`load_fit` reads
@@ -40,6 +49,18 @@ FORMAT_NAME = "jaxfric.fit"
 FORMAT_VERSION = 1
 
 _WINDOWS = ("train", "valid", "all")
+
+#: Longest record :meth:`Fit.predict_at` builds on the fit's time grid (a record at
+#: a much coarser sample time than the fit's would otherwise allocate without bound).
+MAX_RESAMPLED_SAMPLES = 50_000_000
+
+
+class ResamplingWarning(UserWarning):
+    """:meth:`Fit.predict` resampled a record whose sample time differs from the fit's."""
+
+
+class ExtrapolationWarning(UserWarning):
+    """The velocity leaves the range the model was trained on."""
 
 
 def _jaxfric_version() -> str:
@@ -107,7 +128,7 @@ def rollout_model(model: AbstractFrictionModel) -> AbstractFrictionModel:
     return dataclasses.replace(model, **reset) if reset else model
 
 
-def _check_velocity(velocity, dtype) -> jax.Array:
+def _velocity_np(velocity) -> np.ndarray:
     v = np.asarray(velocity)
     if v.ndim != 1 or v.shape[0] == 0:
         raise ValueError(f"velocity must be a non-empty 1-D time series, got shape {v.shape}")
@@ -115,7 +136,22 @@ def _check_velocity(velocity, dtype) -> jax.Array:
         raise ValueError(f"velocity must be numeric, got dtype {v.dtype}")
     if not np.all(np.isfinite(v)):
         raise ValueError("velocity holds NaN or inf")
+    return v.astype(np.float64)
+
+
+def _check_velocity(velocity, dtype) -> jax.Array:
+    _velocity_np(velocity)
     return jnp.asarray(velocity, dtype)
+
+
+def _check_dt(dt) -> float:
+    if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
+        raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
+    return float(dt)
+
+
+def _same_step(a: float, b: float) -> bool:
+    return abs(a - b) <= 1e-6 * b
 
 
 def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
@@ -127,9 +163,7 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     theta = jnp.asarray(theta)
     dtype = theta.dtype
     v = _check_velocity(velocity, dtype)
-    if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
-        raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
-    dt = jnp.asarray(dt, dtype)
+    dt = jnp.asarray(_check_dt(dt), dtype)
     model = rollout_model(model)
     if inputs is not None and model.input_names:
         inputs = jnp.asarray(inputs, dtype)
@@ -160,11 +194,20 @@ class Fit:
         key_data, key_impl, seed: the PRNG key used (see :attr:`key`).
         settings: solver, refinement, dtype, data-bounds and split settings (JSON values).
         version: jaxfric version that produced the fit.
+        velocity_range: ``(min, max)`` [m/s] of the training velocity (``None`` if
+            unknown: fits saved before 0.7); prediction beyond it warns.
+        diagnostics: ``{"on_bound": [...], "unidentifiable": [...]}``: parameters
+            that ended on a bound of the search box (name, side, value, range, what
+            to widen) and parameters the model says the data cannot determine.
+        ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
+            final costs ``J``, keys, per-member validation MSE %, the index of the
+            best member (this fit) and the spread of each parameter; else ``None``.
     """
 
     def __init__(self, *, model, theta, velocity_scaler, friction_scaler, dt, n_train,
                  n_samples, metrics, stages=(), history=None, solution=None, timings=None,
-                 key_data=None, key_impl=None, seed=None, settings=None, version=None):
+                 key_data=None, key_impl=None, seed=None, settings=None, version=None,
+                 velocity_range=None, diagnostics=None, ensemble=None):
         self.model = model
         self.theta = model.check_theta(np.asarray(theta))
         self.velocity_scaler = velocity_scaler
@@ -183,6 +226,13 @@ class Fit:
         self.seed = seed
         self.settings = dict(settings or {})
         self.version = version if version is not None else _jaxfric_version()
+        if velocity_range is None and velocity_scaler is not None:
+            # the network's scaler is exactly the training min/max (§2.4)
+            velocity_range = (np.asarray(velocity_scaler.lo), np.asarray(velocity_scaler.hi))
+        self.velocity_range = (None if velocity_range is None
+                               else (float(velocity_range[0]), float(velocity_range[1])))
+        self.diagnostics = {"on_bound": [], "unidentifiable": [], **dict(diagnostics or {})}
+        self.ensemble = None if ensemble is None else dict(ensemble)
 
     # ------------------------------------------------------------------ use
     @property
@@ -212,13 +262,115 @@ class Fit:
         The model state starts from its initial condition at the first sample
         (learned ``c0`` for the Elman network, the steady state for LuGre); the
         velocity is scaled with the training-window scaler and the output mapped
-        back to newtons. ``dt`` defaults to the identification record's. ``inputs``:
+        back to newtons. ``dt`` [s] defaults to the identification record's. ``inputs``:
         the ``(C, T)`` channels named by ``model.input_names`` (e.g. ``[p1, p2]`` in
         Pa for :class:`jaxfric.models.Cylinder`); ignored by the other models.
+
+        One output sample per input sample, always. A ``dt`` other than the fit's
+        is handled by :meth:`predict_at` (resampling onto the fit's grid, with a
+        :class:`ResamplingWarning`) for every model whose output depends on the
+        sample time; static maps ignore it. Velocities outside the training range
+        give an :class:`ExtrapolationWarning`.
         """
-        dt = self.dt if dt is None else dt
+        v = _velocity_np(velocity)
+        if dt is None:
+            dt = self.dt
+        dt = _check_dt(dt)
+        if self.model.uses_dt and not _same_step(dt, self.dt):
+            if inputs is not None:
+                raise ValueError(
+                    f"dt = {dt:.6g} s differs from the fit's {self.dt:.6g} s and input channels "
+                    f"were given: resample the record (velocity and {list(self.model.input_names)}) "
+                    "to the fit's sample time first")
+            return self.predict_at(np.arange(v.shape[0]) * dt, velocity)
+        self._warn_extrapolation(v)
         return predict(self.model, self.theta, (self.velocity_scaler, self.friction_scaler),
-                       velocity, dt, inputs)
+                       velocity, self.dt if self.model.uses_dt else dt, inputs)
+
+    def predict_at(self, t, velocity) -> jax.Array:
+        """Friction [N] at the time stamps ``t`` [s] (any increasing grid, uniform or
+        not) for the velocity samples ``velocity`` [m/s] taken there.
+
+        The model was identified at the sample time :attr:`dt`, and a recurrent model
+        (the Elman network, LuGre, Dahl) is a function of it: when ``t`` is not a
+        uniform grid of step :attr:`dt`, the velocity is interpolated linearly onto
+        one (from ``t[0]``, one step past ``t[-1]``), rolled out, and the prediction
+        interpolated back to ``t``, with a :class:`ResamplingWarning`. The result has
+        one sample per input sample. Linear interpolation does not low-pass: a record
+        sampled much finer than the fit should be filtered to the fit's bandwidth first.
+
+        Raises:
+            ValueError: ``t`` and ``velocity`` of different lengths, ``t`` not
+                strictly increasing or not finite, or a grid longer than
+                :data:`MAX_RESAMPLED_SAMPLES` samples.
+        """
+        v = _velocity_np(velocity)
+        t = np.asarray(t, np.float64) if np.ndim(t) else np.asarray([t], np.float64)
+        if t.shape != v.shape:
+            raise ValueError(f"t and velocity must have the same length, got {t.shape} and {v.shape}")
+        if not np.all(np.isfinite(t)):
+            raise ValueError("t holds NaN or inf")
+        steps = np.diff(t)
+        if np.any(steps <= 0.0):
+            raise ValueError(f"time stamps must increase strictly (index {int(np.argmax(steps <= 0)) + 1})")
+        self._warn_extrapolation(v)
+        scalers = (self.velocity_scaler, self.friction_scaler)
+        dtype = np.asarray(self.theta).dtype
+        uniform = steps.size == 0 or (np.ptp(steps) <= 1e-6 * self.dt and _same_step(float(steps.mean()), self.dt))
+        if not self.model.uses_dt or uniform:
+            return predict(self.model, self.theta, scalers, jnp.asarray(v, dtype), self.dt)
+        m = int(np.ceil((t[-1] - t[0]) / self.dt - 1e-9)) + 1
+        if m > MAX_RESAMPLED_SAMPLES:
+            raise ValueError(
+                f"resampling this record onto the fit's sample time {self.dt:.6g} s needs {m} samples "
+                f"(> {MAX_RESAMPLED_SAMPLES}); pass a shorter record"
+            )
+        step = float(np.median(steps))
+        warnings.warn(
+            f"the record's sample time ({step:.6g} s{'' if np.ptp(steps) <= 1e-6 * step else ', irregular'}) "
+            f"differs from the fit's ({self.dt:.6g} s): the velocity was interpolated onto the fit's "
+            f"grid ({m} samples), rolled out there and the prediction interpolated back to the "
+            f"{t.size} input samples",
+            ResamplingWarning, stacklevel=3)
+        grid = t[0] + self.dt * np.arange(m)
+        y = predict(self.model, self.theta, scalers, jnp.asarray(np.interp(grid, t, v), dtype), self.dt)
+        return jnp.asarray(np.interp(t, grid, np.asarray(y, np.float64)), dtype)
+
+    def predict_band(self, velocity, dt=None) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` [N]: the elementwise min and max of the ensemble members'
+        predictions (:attr:`ensemble`, from ``identify(..., keys=K)``), so the band
+        always holds the best member's :meth:`predict`. Raises ``ValueError`` for a
+        fit without an ensemble."""
+        members = self.ensemble_predictions(velocity, dt)
+        return members.min(axis=0), members.max(axis=0)
+
+    def ensemble_predictions(self, velocity, dt=None) -> np.ndarray:
+        """``(K, T)`` predictions [N] of the ensemble members (see :meth:`predict_band`)."""
+        if not self.ensemble or "theta" not in self.ensemble:
+            raise ValueError("this fit has no ensemble: identify(..., keys=K) makes one")
+        out = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)  # said once, below
+            for theta in np.asarray(self.ensemble["theta"]):
+                member = Fit(model=self.model, theta=theta, velocity_scaler=self.velocity_scaler,
+                             friction_scaler=self.friction_scaler, dt=self.dt, n_train=self.n_train,
+                             n_samples=self.n_samples, metrics={})
+                out.append(np.asarray(member.predict(velocity, dt), np.float64))
+        return np.stack(out)
+
+    def _warn_extrapolation(self, v: np.ndarray) -> None:
+        rng = self.velocity_range
+        if rng is None:
+            return
+        lo, hi = rng
+        tol = 1e-6 * max(hi - lo, abs(hi), abs(lo))
+        outside = (v < lo - tol) | (v > hi + tol)
+        if outside.any():
+            warnings.warn(
+                f"{int(outside.sum())} of {v.size} velocity samples lie outside the training range "
+                f"[{lo:.4g}, {hi:.4g}] m/s (min {v.min():.4g}, max {v.max():.4g}): the "
+                f"{type(self.model).__name__} extrapolates there",
+                ExtrapolationWarning, stacklevel=4)
 
     # --------------------------------------------------------------- report
     def to_dict(self, include_theta: bool = True) -> dict[str, Any]:
@@ -246,7 +398,12 @@ class Fit:
             "key": {"data": self.key_data, "impl": self.key_impl, "seed": self.seed},
             "settings": _jsonable(self.settings),
             "jaxfric_version": self.version,
+            "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
+            "diagnostics": _jsonable(self.diagnostics),
         }
+        if self.ensemble:
+            out["ensemble"] = _jsonable({k: v for k, v in self.ensemble.items()
+                                         if include_theta or k != "theta"})
         if not self.model.needs_scaling:
             out["params"] = {k: _jsonable(v) for k, v in self.params.items()}
         if include_theta:
@@ -271,9 +428,31 @@ class Fit:
                 unit = "evals" if "num_evals" in s else "steps"
                 parts.append(f"{s['stage']} J={s['J']:.4g} ({n} {unit})")
             lines.append("stages: " + " -> ".join(parts))
+        records = self.metrics.get("records") or []
+        if len(records) > 1:
+            lines.append(f"{'record':<16}{'role':<7}{'samples':>8}{'MSE %':>10}{'MAX [N]':>11}")
+            for r in records:
+                m = r.get("all") or {}
+                mse, mx = m.get("mse_percent"), m.get("max_abs")
+                lines.append(f"{str(r['name'])[:15]:<16}{r['role']:<7}{r['n_samples']:>8}"
+                             + (f"{mse:>10.4f}{mx:>11.3g}" if mse is not None else f"{'-':>10}{'-':>11}"))
         if not self.model.needs_scaling:
+            flagged = {d["name"] for d in self.diagnostics.get("on_bound", [])}
             lines.append("params: " + ", ".join(
-                f"{k}={float(v):.4g}" for k, v in self.params.items()))
+                f"{k}={float(v):.4g}{' [on bound]' if k in flagged else ''}"
+                for k, v in self.params.items()))
+        for d in self.diagnostics.get("on_bound", []):
+            lines.append(f"! {d['message']}")
+        for text in self.diagnostics.get("unidentifiable", []):
+            lines.append(f"! {text}")
+        if self.ensemble:
+            e = self.ensemble
+            vm = [x for x in e.get("valid_mse_percent", []) if x is not None]
+            lines.append(f"ensemble: {len(e.get('J', []))} members (best #{e.get('best')}), "
+                         + (f"validation MSE % {min(vm):.4g}..{max(vm):.4g}" if vm else "no validation"))
+            for name, sp in (e.get("spread") or {}).items():
+                lines.append(f"  {name}: median {sp['median']:.4g}, 5-95 % [{sp['p5']:.4g}, {sp['p95']:.4g}], "
+                             f"min..max [{sp['min']:.4g}, {sp['max']:.4g}]")
         t = self.timings
         if t:
             lines.append(
@@ -304,6 +483,8 @@ class Fit:
             "history_evals": np.asarray(self.history["evals"]),
             "history_f": np.asarray(self.history["f"]),
         }
+        if self.ensemble and "theta" in self.ensemble:
+            arrays["ensemble_theta"] = np.asarray(self.ensemble["theta"])
         path = os.fspath(path)
         directory = os.path.dirname(os.path.abspath(path))
         fd, tmp = tempfile.mkstemp(prefix=".jaxfric-fit-", suffix=".tmp", dir=directory)
@@ -320,8 +501,15 @@ class Fit:
 
 
 def _read(path) -> tuple[dict, dict[str, np.ndarray]]:
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        # open(3) would read (and then close) file descriptor 3
+        raise ValueError(f"path must be a file name (str or os.PathLike), got {type(path).__name__} {path!r}")
     with open(path, "rb") as fh:
         raw = fh.read()
+    if not raw.startswith(b"PK"):
+        # np.load would try it as a pickle and suggest allow_pickle, which must never be used here
+        raise ValueError(f"{os.fsdecode(path)} is not a readable jaxfric fit file: not an .npz archive "
+                         "(fits are written by Fit.save / jaxfric identify; corrupted or truncated?)")
     try:
         with np.load(io.BytesIO(raw), allow_pickle=False) as z:
             arrays = {name: z[name] for name in z.files}
@@ -339,12 +527,22 @@ def _read(path) -> tuple[dict, dict[str, np.ndarray]]:
     return header, arrays
 
 
+def _finite_array(path, name: str, a: np.ndarray) -> np.ndarray:
+    if not np.issubdtype(a.dtype, np.number) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{path}: the fit's {name} holds NaN or inf (or is not numeric): the file is "
+                         "corrupted, or was saved from a diverged fit; it would predict NaN")
+    return a
+
+
 def load_fit(path) -> Fit:
     """Read a fit written by :meth:`Fit.save`.
 
     Raises:
-        ValueError: the file is corrupted or truncated, is not a jaxfric fit, or was
-            written in a newer (or unknown) format version than this jaxfric reads.
+        ValueError: ``path`` is not a file name (an int would be a file descriptor); the
+            file is not an ``.npz`` archive, is corrupted or truncated, is not a
+            jaxfric fit, was written in a newer (or unknown) format version than this
+            jaxfric reads, or holds non-finite (or, for the scalers, empty-range)
+            weights, scalers or sample time.
         FileNotFoundError: no such file.
     """
     header, arrays = _read(path)
@@ -363,12 +561,28 @@ def load_fit(path) -> Fit:
 
         def scaler(name):
             a = arrays[name]
-            return None if a.size == 0 else Scaler(lo=np.float64(a[0]), hi=np.float64(a[1]))
+            if a.size == 0:
+                return None
+            _finite_array(path, name.replace("_", " "), a)
+            if a.shape != (2,) or not a[1] > a[0]:
+                raise ValueError(f"{path}: the fit's {name.replace('_', ' ')} {a.tolist()} is not a "
+                                 "range [lo, hi] with lo < hi")
+            return Scaler(lo=np.float64(a[0]), hi=np.float64(a[1]))
 
+        theta = _finite_array(path, "weights (theta)", arrays["theta"])
+        dt = header["dt"]
+        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise ValueError(f"{path}: the fit's sample time dt = {dt!r} is not a positive number")
+        ensemble = header.get("ensemble")
+        if ensemble is not None and "ensemble_theta" in arrays:
+            ensemble = {**ensemble, "theta": _finite_array(path, "ensemble weights", arrays["ensemble_theta"])}
+        vrange = header.get("train_velocity_range")
+        if vrange is not None and not (len(vrange) == 2 and np.all(np.isfinite(np.asarray(vrange, float)))):
+            raise ValueError(f"{path}: the training velocity range {vrange!r} is not two finite numbers")
         key = header.get("key") or {}
         return Fit(
             model=model,
-            theta=arrays["theta"],
+            theta=theta,
             velocity_scaler=scaler("velocity_scaler"),
             friction_scaler=scaler("friction_scaler"),
             dt=header["dt"],
@@ -384,6 +598,9 @@ def load_fit(path) -> Fit:
             seed=key.get("seed"),
             settings=header.get("settings"),
             version=header.get("jaxfric_version"),
+            velocity_range=vrange,
+            diagnostics=header.get("diagnostics"),
+            ensemble=ensemble,
         )
     except (KeyError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None

@@ -11,6 +11,7 @@ Figures (paper numbering from docs/algorithms.md §1):
 - :func:`plot_friction_velocity` -- friction against velocity (hysteresis loops);
 - :func:`plot_fit` -- measured against estimated friction for one model (Figs 11-12);
 - :func:`plot_error` -- error curves ``F - F_hat`` of several models;
+- :func:`plot_band` -- an ensemble's prediction band around its best member;
 - :func:`plot_convergence` -- best objective against function evaluations (log scale);
 - :func:`plot_table1` -- final values of the Table 1 benchmark, per function and solver.
 
@@ -29,6 +30,7 @@ from matplotlib.figure import Figure
 
 __all__ = [
     "fit_label",
+    "plot_band",
     "plot_convergence",
     "plot_data",
     "plot_error",
@@ -108,7 +110,14 @@ def predict_on(fit, data) -> np.ndarray:
     predictions already on the data's grid.
     """
     if hasattr(fit, "predict"):
-        y_hat = _np(fit.predict(data.velocity, data.dt))
+        import warnings
+
+        from .fit import ExtrapolationWarning
+
+        with warnings.catch_warnings():
+            # a figure of the validation data shows the extrapolation; no console line for it
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            y_hat = _np(fit.predict(data.velocity, data.dt))
     else:
         y_hat = _np(fit)
     n = _np(data.velocity).size
@@ -254,7 +263,7 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     y_hat = predict_on(fit, data)
     n = _n_train(data)
     scale, unit = velocity_unit(v)
-    parts = [f"train {_mse_percent(y[:n], y_hat[:n]):.3g} %"]
+    parts = [f"train {_mse_percent(y[:n], y_hat[:n]):.3g} %"] if n > 0 else []
     if n < y.size:
         parts.append(f"valid {_mse_percent(y[n:], y_hat[n:]):.3g} %")
     fig = Figure(figsize=(12, 4.6), layout="constrained")
@@ -314,6 +323,30 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     ax.set_title(title or "Friction estimation error")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
+    return fig
+
+
+def plot_band(fit, data, *, label: str | None = None, title: str | None = None) -> Figure:
+    """An ensemble's prediction band (``fit.predict_band``: min-max over the members of
+    ``identify(..., keys=K)``) around the best member's prediction, with the measured
+    friction, against time; the validation window is shaded."""
+    label = label or fit_label(fit)
+    t = _time(data)
+    y = _np(data.friction)
+    lo, hi = (_np(a) for a in fit.predict_band(data.velocity, data.dt))
+    y_hat = predict_on(fit, data)
+    k = len(fit.ensemble.get("J", []))
+    fig = Figure(figsize=(9, 4.2), layout="constrained")
+    ax = fig.subplots()
+    ax.fill_between(t, lo, hi, color="tab:red", alpha=0.25, lw=0, label=f"band: min-max of {k} members")
+    ax.plot(t, y, label="measured", **_MEASURED)
+    ax.plot(t, y_hat, color="tab:red", lw=1.0, label=f"best member: {label}")
+    _mark_split(ax, data)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("friction force [N]")
+    ax.set_title(title or f"Ensemble prediction band: {label}")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
     return fig
 
 

@@ -7,6 +7,8 @@ One call, :func:`write_report`, writes into a folder::
     data.png             velocity and computed friction against time (split marked)
     friction_velocity.png  friction against velocity, measured and per model
     fit_<model>.png      measured against estimated friction, one per model
+    fit_<model>_<record>.png  the same on each extra validation record (``records=``)
+    band_<model>.png     an ensemble's prediction band (fits from ``identify(..., keys=K)``)
     error.png            error curves of all models
     convergence.png      best objective against evaluations, all models
     models/<model>.npz   each fit, saved with ``Fit.save`` (``jaxfric predict`` reads it)
@@ -237,19 +239,21 @@ def _environment() -> dict:
             "float64": bool(jax.config.jax_enable_x64)}
 
 
-def _fmt_params(d: Mapping) -> list[str]:
+def _fmt_params(d: Mapping, on_bound=frozenset()) -> list[str]:
     lines = []
     for k, v in d.items():
         arr = np.asarray(v)
         if arr.ndim == 0 and arr.dtype.kind in "fi":
-            lines.append(f"| {k} | {float(arr):.6g} |")
+            mark = " **(on a bound: widen its range)**" if k in on_bound else ""
+            lines.append(f"| {k} | {float(arr):.6g}{mark} |")
     return lines
 
 
 def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str | None = None,
                  source: str = "", settings: Mapping | None = None, notes: list[str] | None = None,
                  python: str | None = None, extra_files: Mapping[str, str] | None = None,
-                 save_models: bool = True, on_written: Callable[[Path], None] | None = None) -> dict:
+                 save_models: bool = True, on_written: Callable[[Path], None] | None = None,
+                 records: Mapping[str, Any] | None = None) -> dict:
     """Write the report folder ``out`` for ``fits`` (name -> fit) on ``data``.
 
     Args:
@@ -265,6 +269,9 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         extra_files: name -> description of other files the caller put in ``out``.
         save_models: save each fit to ``models/<name>.json`` (needs ``fit.save``).
         on_written: called with each finished file's path (progress, bookkeeping).
+        records: name -> validation record (``FrictionData``) the fits were validated on
+            besides ``data`` (``identify(train=..., valid=...)``): one figure per model
+            and record; the per-record metrics come from each fit's ``metrics["records"]``.
 
     Returns:
         ``{"files": [paths], "rows": comparison rows, "table": plain-text table}``.
@@ -295,6 +302,21 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         name = f"fit_{slug(r['name'])}.png"
         figure(name, lambda r=r: _plot.plot_fit(fits[r["name"]], data, label=r["label"]),
                f"Measured and estimated friction: {r['label']}")
+    records = dict(records or {})
+    record_figs: dict[str, dict[str, str]] = {}
+    for rec_name, rec in records.items():
+        for r in rows:
+            name = f"fit_{slug(r['name'])}_{slug(rec_name)}.png"
+            figure(name, lambda r=r, rec=rec, rec_name=rec_name: _plot.plot_fit(
+                fits[r["name"]], rec, label=r["label"],
+                title=f"Validation record {rec_name}: {r['label']}"),
+                f"Validation record {rec_name}: {r['label']}")
+            record_figs.setdefault(r["name"], {})[rec_name] = name
+    for r in rows:
+        if getattr(fits[r["name"]], "ensemble", None) and hasattr(fits[r["name"]], "predict_band"):
+            name = f"band_{slug(r['name'])}.png"
+            figure(name, lambda r=r: _plot.plot_band(fits[r["name"]], data, label=r["label"]),
+                   f"Ensemble prediction band: {r['label']}")
     figure("error.png", lambda: _plot.plot_error({r["label"]: fits[r["name"]] for r in rows}, data),
            "Estimation error of each model")
     conv = {r["label"]: fits[r["name"]] for r in rows}
@@ -321,9 +343,16 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         "environment": _environment(),
         "settings": _jsonable(dict(settings or {})),
         "data": _data_summary(data),
+        "validation_records": {k: _data_summary(v) for k, v in records.items()},
         "metric_definitions": METRIC_FORMULAS,
         "models": {r["name"]: {"label": r["label"], "num_params": r["params"], "seconds": r["seconds"],
                                "metrics": r["metrics"], "file": model_files.get(r["name"]),
+                               "records": _fit_records(fits[r["name"]]),
+                               "on_bound": _on_bound(fits[r["name"]]),
+                               "unidentifiable": list((getattr(fits[r["name"]], "diagnostics", None)
+                                                       or {}).get("unidentifiable", [])),
+                               "ensemble": _ensemble(fits[r["name"]]),
+                               "record_figures": record_figs.get(r["name"], {}),
                                "fit": fit_dict(fits[r["name"]])} for r in rows},
         "figures": figs,
         "notes": list(notes or []),
@@ -332,6 +361,21 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
     text = _markdown(results, rows, fits, python=python, extra_files=extra_files or {})
     done(atomic_write_text(out / "report.md", text))
     return {"files": written, "rows": rows, "table": format_table(rows)}
+
+
+def _fit_records(fit) -> list[dict]:
+    """Per-record metrics of a fit (``fit.metrics["records"]``), when it has several records."""
+    recs = (getattr(fit, "metrics", None) or {}).get("records") or []
+    return list(recs) if len(recs) > 1 else []
+
+
+def _on_bound(fit) -> list[dict]:
+    return list((getattr(fit, "diagnostics", None) or {}).get("on_bound", []))
+
+
+def _ensemble(fit) -> dict | None:
+    e = getattr(fit, "ensemble", None)
+    return None if not e else {k: v for k, v in e.items() if k != "theta"}
 
 
 def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | None,
@@ -343,10 +387,16 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
     L += ["", "## Data", ""]
     if results["source"]:
         L += [results["source"], ""]
-    L.append(f"{d['n_samples']} samples at {d['fs_hz']:.4g} Hz ({d['duration_s']:.3g} s); the first "
-             f"{d['n_train']} estimate the models, the last {d['n_valid']} validate them. Velocity "
+    if d["n_valid"] > 0:
+        split = f"the first {d['n_train']} estimate the models, the last {d['n_valid']} validate them"
+    else:
+        split = "all of them estimate the models"
+    L.append(f"{d['n_samples']} samples at {d['fs_hz']:.4g} Hz ({d['duration_s']:.3g} s); {split}. Velocity "
              f"{d['velocity_range_m_s'][0] * 1e3:.3g} to {d['velocity_range_m_s'][1] * 1e3:.3g} mm/s, "
              f"friction {d['friction_range_N'][0]:.4g} to {d['friction_range_N'][1]:.4g} N.")
+    for name, v in results["validation_records"].items():
+        L.append(f"\nValidation record `{name}`: {v['n_samples']} samples ({v['duration_s']:.3g} s), "
+                 "rolled out whole from the model's initial state.")
     for note in results["notes"]:
         L.append(f"\n*Note:* {note}")
     L += ["", "![data](data.png)", "", "![friction against velocity](friction_velocity.png)", ""]
@@ -366,11 +416,38 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             vals = [r["metrics"].get(w, {}).get(key) for w in WINDOWS]
             L.append(f"| {key} | " + " | ".join("-" if v is None else f"{v:.5g}" for v in vals) + " |")
         fit = fits[r["name"]]
+        if m["records"]:
+            L += ["", "| record | role | samples | MSE % | MAX [N] | FIT % |", "|---|---|---|---|---|---|"]
+            for rec in m["records"]:
+                a = rec.get("all") or {}
+                cells = [("-" if a.get(k) is None else f"{a[k]:.5g}") for k in ("mse_percent", "max_abs", "fit_percent")]
+                L.append(f"| {rec['name']} | {rec['role']} | {rec['n_samples']} | " + " | ".join(cells) + " |")
+            L += ["", "Each record is rolled out from the model's initial state; the comparison table "
+                  "pools the samples of the training and of the validation records."]
+            for rec_name, fig in m["record_figures"].items():
+                L += ["", f"![{r['label']} on {rec_name}]({fig})"]
         params = getattr(fit, "params", None) or getattr(fit, "physical", None)
         if isinstance(params, Mapping) and not getattr(getattr(fit, "model", None), "needs_scaling", False):
-            pl = _fmt_params(params)
+            pl = _fmt_params(params, {d["name"] for d in m["on_bound"]})
             if pl:
                 L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
+        for d in m["on_bound"]:
+            L += ["", f"**On a bound:** {d['message']}."]
+        for text in m["unidentifiable"]:
+            L += ["", f"**Not identifiable from these data:** {text}"]
+        e = m["ensemble"]
+        if e:
+            vm = [x for x in e.get("valid_mse_percent", []) if x is not None]
+            L += ["", f"Ensemble of {len(e['J'])} runs (one vmapped call); this fit is member "
+                  f"{e['best']}, the one with the lowest training cost"
+                  + (f"; validation MSE % over the members {min(vm):.4g} to {max(vm):.4g}" if vm else "") + "."]
+            if e.get("spread"):
+                L += ["", "| parameter | min | 5 % | median | 95 % | max |", "|---|---|---|---|---|---|"]
+                for k, sp in e["spread"].items():
+                    L.append(f"| {k} | " + " | ".join(f"{sp[q]:.5g}" for q in ("min", "p5", "median", "p95", "max")) + " |")
+            band = f"band_{slug(r['name'])}.png"
+            if band in results["figures"]:
+                L += ["", f"![ensemble band]({band})"]
         stages = getattr(fit, "stages", None)
         if stages:
             parts = []

@@ -160,6 +160,18 @@ def files(tmp_path_factory):
     out["no_theta"] = _rewrite_fit(fit_path, d / "no_theta.npz", edit_arrays=lambda a: a.pop("theta"))
     out["long_theta"] = _rewrite_fit(fit_path, d / "long_theta.npz",
                                      edit_arrays=lambda a: a.update(theta=np.zeros(5)))
+    enn = jf.models.Elman(neurons=2)
+    enn_fit = Fit(model=enn, theta=np.zeros(enn.num_params, np.float32),
+                  velocity_scaler=jf.models.Scaler.fit(V), friction_scaler=jf.models.Scaler.fit(F),
+                  dt=0.01, n_train=40, n_samples=N, metrics={"train": None, "valid": None, "all": None})
+    enn_fit.save(d / "enn.npz")
+    out["nan_scaler"] = _rewrite_fit(d / "enn.npz", d / "nan_scaler.npz",
+                                     edit_arrays=lambda a: a.update(friction_scaler=np.array([np.nan, 1.0])))
+    out["inf_theta"] = _rewrite_fit(d / "enn.npz", d / "inf_theta.npz",
+                                    edit_arrays=lambda a: a.update(theta=np.full(enn.num_params, np.inf, np.float32)))
+    out["pickle"] = d / "pickled.npy"
+    np.save(out["pickle"], np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    out["dup_header"] = _csv(d / "dup_header.csv", "t,v,v,F", [(a, b, b, c) for a, b, c in rows])
     np.savez(d / "other.npz", weights=np.zeros(3))
     out["other_npz"] = d / "other.npz"
     out["garbage_checkpoint"] = d / "checkpoint.npz"
@@ -543,6 +555,33 @@ API_CASES = [
      ["the fit file is incomplete or corrupted", "theta"]),
     ("load_fit/theta-wrong-length", lambda f: jf.load_fit(f["long_theta"]), ValueError,
      ["5 entries", "2 parameters"]),
+    ("load_fit/nan-scaler", lambda f: jf.load_fit(f["nan_scaler"]), ValueError,
+     ["friction scaler holds NaN or inf", "would predict NaN"]),
+    ("load_fit/inf-weights", lambda f: jf.load_fit(f["inf_theta"]), ValueError,
+     ["weights (theta) holds NaN or inf"]),
+    ("load_fit/pickle-file", lambda f: jf.load_fit(f["pickle"]), ValueError,
+     ["is not a readable jaxfric fit file", "not an .npz archive"]),
+    ("load_fit/int-is-not-a-file-descriptor", lambda f: jf.load_fit(3), ValueError,
+     ["path must be a file name", "int 3"]),
+    # ------------------------------------------------------- issue 17.4/17.7, 20.5, 20.12
+    ("identify/validation-window-too-short", lambda f: jf.identify("coulomb", (V, F, 0.01), key=0, train=0.97),
+     ValueError, ["the validation window has 2 sample(s)", "at least 10"]),
+    ("identify/unknown-model-keyword", lambda f: jf.identify("elman", (V, F, 0.01), key=0, nerons=3),
+     ValueError, ["invalid options for model 'elman'", "'nerons'", "its options are", "neurons"]),
+    ("identify/records-different-dt",
+     lambda f: jf.identify("coulomb", train=[(V, F, 0.01)], valid=[(V, F, 0.02)], key=0), ValueError,
+     ["different sample times", "valid[0] 0.02 s"]),
+    ("identify/valid-with-a-split-record", lambda f: jf.identify("coulomb", (V, F, 0.01), valid=(V, F, 0.01), key=0),
+     ValueError, ["valid= needs the training records as train=[record, ...]"]),
+    ("identify/keys-zero", lambda f: jf.identify("coulomb", (V, F, 0.01), key=0, keys=0), ValueError,
+     ["keys must be a number of members >= 1"]),
+    ("identify/key-and-key-batch",
+     lambda f: jf.identify("coulomb", (V, F, 0.01), key=0, keys=jax.random.split(KEY, 2)), ValueError,
+     ["not both"]),
+    ("rig/load-pairs-duplicate-header", lambda f: C(f["dup_header"], COLS), ValueError,
+     ["names column 'v' (for channel 'velocity') 2 times", "indices [1, 2]"]),
+    ("fit/predict-at-lengths-differ", lambda f: _fit().predict_at(T, V[:-1]), ValueError,
+     ["t and velocity must have the same length"]),
 ]
 
 
@@ -562,6 +601,13 @@ def test_api_rejects_bad_input_before_computing(guarded, files, name, call, exc,
     message = str(info.value)
     for w in words:
         assert w in message, f"{name}: {w!r} not in {message!r}"
+
+
+def test_load_fit_never_suggests_allow_pickle(files):
+    for name in ("pickle", "good", "binary"):
+        with pytest.raises(ValueError) as info:
+            jf.load_fit(files[name])
+        assert "allow_pickle" not in str(info.value), str(info.value)
 
 
 def test_catalogue_is_long_and_names_are_unique():
@@ -608,6 +654,12 @@ CLI_CASES = [
     ("cli predict/out-is-a-folder", ["predict", "{fit}", "{good}", "--velocity-col", "v", "--time-col", "t",
                                  "--out", "{folder}", *QUIET], ["--out", "a-folder", "folder"]),
     ("cli demo/unknown-model", ["demo", "--model", "magic", *QUIET], ["unknown model 'magic'"]),
+    ("cli predict/nan-scaler-model", ["predict", "{nan_scaler}", "{good}", "--velocity-col", "v", "--time-col", "t",
+                                      *QUIET], ["cannot load the fit", "friction scaler holds NaN or inf"]),
+    ("cli identify/duplicate-header", ["identify", "{dup_header}", *PAIRS, *QUIET],
+     ["--velocity-col", "2 columns named 'v' (indices 1, 2)"]),
+    ("cli identify/validation-window-too-short", ["identify", "{good}", *PAIRS, "--train-fraction", "0.97", *QUIET],
+     ["the validation window has 2 sample(s)"]),
     ("cli demo/negative-seed", ["demo", "--seed", "-1", *QUIET], ["argument --seed: must be >= 0"]),
 ]
 
@@ -620,7 +672,7 @@ SUBPROCESS = {
     "cli identify/missing-file", "cli identify/binary-file", "cli identify/text-in-numeric-column",
     "cli identify/unsorted-time", "cli identify/constant-friction", "cli identify/unknown-model",
     "cli identify/unknown-solver", "cli identify/zero-generations", "cli predict/truncated-model",
-    "cli predict/model-from-newer-version", "cli demo/unknown-model",
+    "cli predict/model-from-newer-version", "cli demo/unknown-model", "cli predict/nan-scaler-model",
 }
 
 

@@ -299,3 +299,70 @@ def test_read_table_and_units(tmp_path):
     assert unit_factor("force", "-1", "--load-unit") == -1.0
     with pytest.raises(UserError, match="non-zero"):
         unit_factor("force", "0", "--load-unit")
+
+
+# ------------------------------------------------------ predict: honest; --valid
+def test_predict_keeps_one_row_per_input_row_and_warns_even_when_quiet(cli_env, tmp_path):
+    """Irregular time stamps: one prediction per input row (not per resampled row), equal to
+    Fit.predict_at, and the resampling is one 'jaxfric: warning:' line despite --quiet."""
+    from jaxfric.fit import Fit
+    from jaxfric.models import LuGre
+
+    model = LuGre(Fc_range=(5.0, 100.0))
+    theta = np.asarray(model.from_physical(sigma0=1e5, sigma1=300.0, sigma2=800.0, Fc=40.0, Fs=60.0,
+                                           vs=3e-3), np.float32)
+    fit = Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=0.01,
+              n_train=80, n_samples=100, metrics={}, velocity_range=(-0.03, 0.03))
+    fit.save(tmp_path / "lugre.npz")
+    t = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.5, 1.5, 59)]) * 0.01
+    v = 0.02 * np.sin(2 * np.pi * 0.5 * t)
+    (tmp_path / "irregular.csv").write_text("t,v\n" + "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(t, v)) + "\n")
+    proc = jaxfric(cli_env, "predict", tmp_path / "lugre.npz", tmp_path / "irregular.csv", "--velocity-col", "v",
+                   "--time-col", "t", "--quiet", "--out", tmp_path / "pred.csv")
+    assert_ok(proc)
+    warnings_ = [ln for ln in proc.stderr.splitlines() if ln.startswith("jaxfric: warning:")]
+    assert len(warnings_) == 1 and "differs from the fit's" in warnings_[0], proc.stderr
+    table = np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True)
+    assert table.shape == (60,)
+    np.testing.assert_array_equal(table["t"], t)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        expect = np.asarray(fit.predict_at(t, v), np.float64)
+    np.testing.assert_allclose(table["friction_predicted"], expect, rtol=1e-6, atol=1e-6)
+
+
+def test_identify_with_valid_files_trains_on_the_whole_file_and_reports_each_record(cli_env, tmp_path):
+    import jax
+
+    import jaxfric as jf
+    from jaxfric import rig
+    from jaxfric.identify import identify
+
+    def write(name, phase, n):
+        t = np.arange(n) * 0.01
+        v = 0.02 * np.sin(2 * np.pi * 0.5 * t + phase) + 0.005 * np.sin(2 * np.pi * 1.3 * t)
+        f = 40.0 * np.tanh(v / 1e-3) + 800.0 * v + np.cos(7.0 * t)
+        p = tmp_path / name
+        p.write_text("t,v,F\n" + "\n".join(f"{a:.17g},{b:.17g},{c:.17g}" for a, b, c in zip(t, v, f)) + "\n")
+        return p
+
+    a, b = write("a.csv", 0.0, 300), write("b.csv", 1.0, 200)
+    out = tmp_path / "rep"
+    proc = jaxfric(cli_env, "identify", a, "--valid", b, "--velocity-col", "v", "--friction-col", "F",
+                   "--time-col", "t", "--model", "coulomb", "--quick", "--seed", "3", "--quiet", "--out", out)
+    assert_ok(proc)
+    res = json.loads((out / "results.json").read_text())
+    assert res["data"]["n_train"] == 300 and res["data"]["n_valid"] == 0
+    recs = res["models"]["coulomb"]["records"]
+    assert [(r["name"], r["role"], r["n_samples"]) for r in recs] == [(str(a), "train", 300), (str(b), "valid", 200)]
+    cols = {"t": "t", "velocity": "v", "friction": "F"}
+    fit = identify("coulomb", train={str(a): rig.load_friction_pairs(a, cols)},
+                   valid={str(b): rig.load_friction_pairs(b, cols)}, key=jax.random.key(3),
+                   solver=jf.mapso_nmds(lattice_size=5, num_generations=3, nm_max_evals=200))
+    for got, want in zip(recs, fit.metrics["records"]):
+        assert got["all"]["mse_percent"] == pytest.approx(want["all"]["mse_percent"], rel=1e-6)
+    text = (out / "report.md").read_text()
+    assert "| record | role | samples |" in text and "Validation record" in text
+    assert any(p.name.startswith("fit_coulomb_") and "b_csv" in p.name for p in out.iterdir())

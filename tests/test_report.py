@@ -138,3 +138,46 @@ def test_no_fits_is_an_error(tmp_path, data):
 def test_slug():
     assert report.slug("ENN (30 neurons)") == "enn_30_neurons"
     assert report.slug("???") == "model"
+
+
+def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
+    """A real Fit with several records, a parameter on a bound and an ensemble: per-record
+    table and figure, the bound mark with the range to widen, and the band figure."""
+    from jaxfric.fit import Fit
+    from jaxfric.identify import on_bound
+    from jaxfric.models import Coulomb
+
+    model = Coulomb(Fc_range=(10.0, 190.0))
+    v = np.asarray(data.velocity)
+    thetas = np.asarray([model.from_physical(Fc=190.0, sigma2=s) for s in (1.0, 50.0, 300.0)], np.float64)
+    valid = FrictionData.from_arrays(v[:300], np.asarray(data.friction)[:300], 0.01, n_train=1).valid()
+
+    def rec(name, role, fr, fh):
+        m = friction_metrics(fr, fh)
+        return {"name": name, "role": role, "n_samples": fr.size, "n_train": fr.size if role == "train" else 0,
+                "train": m if role == "train" else None, "valid": m if role == "valid" else None, "all": m}
+
+    f_all = np.asarray(data.friction)
+    fit = Fit(model=model, theta=thetas[0], velocity_scaler=None, friction_scaler=None, dt=0.01,
+              n_train=500, n_samples=799,
+              metrics={"train": friction_metrics(f_all, f_all + 1.0), "valid": friction_metrics(f_all, f_all + 2.0),
+                       "all": friction_metrics(f_all, f_all + 1.5),
+                       "records": [rec("run1", "train", f_all, f_all + 1.0),
+                                   rec("run2", "valid", f_all[1:300], f_all[1:300] + 2.0)]},
+              diagnostics={"on_bound": on_bound(model, thetas[0])},
+              ensemble={"theta": thetas, "J": [0.1, 0.2, 0.3], "best": 0, "valid_mse_percent": [1.0, 2.0, 3.0],
+                        "keys": [[0, 1], [0, 2], [0, 3]], "spread": {"Fc": {k: 190.0 for k in
+                                                                             ("min", "p5", "median", "p95", "max")}}})
+    report.write_report(tmp_path, data.with_split(None, n_train=500), {"coulomb": fit}, title="records",
+                        records={"run2": valid})
+    text = (tmp_path / "report.md").read_text()
+    assert "| run2 | valid | 299 |" in text and "Validation record `run2`" in text
+    assert "190 **(on a bound: widen its range)**" in text and "Fc_range=(10, 370)" in text
+    assert "Ensemble of 3 runs" in text and "![ensemble band](band_coulomb.png)" in text
+    for name in ("band_coulomb.png", "fit_coulomb_run2.png"):
+        img = mpimg.imread(tmp_path / name)
+        assert img[..., :3].std() > 0.05, name
+    res = json.loads((tmp_path / "results.json").read_text())["models"]["coulomb"]
+    assert res["on_bound"][0]["name"] == "Fc" and res["on_bound"][0]["side"] == "upper"
+    assert [r["name"] for r in res["records"]] == ["run1", "run2"]
+    assert "theta" not in res["ensemble"] and res["ensemble"]["J"] == [0.1, 0.2, 0.3]

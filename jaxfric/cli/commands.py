@@ -14,6 +14,7 @@ import os
 import shlex
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -102,14 +103,15 @@ def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
     return "\n".join(lines)
 
 
-def _finish(args, out: Path, data, fits, *, title, source, argv, notes, python, extra_files) -> int:
+def _finish(args, out: Path, data, fits, *, title, source, argv, notes, python, extra_files,
+            records=None) -> int:
     from jaxfric.report import write_report
 
     say = _say(args)
     say(f"writing the report to {out}/")
     result = write_report(out, data, fits, title=title, command=_command_line(argv), source=source,
                           settings=_settings(args, fits), notes=notes, python=python,
-                          extra_files=extra_files, on_written=KEPT.add)
+                          extra_files=extra_files, on_written=KEPT.add, records=records)
     print(result["table"])
     n_png = sum(p.suffix == ".png" for p in result["files"])
     print(f"\nreport: {out / 'report.md'} (with results.json, {n_png} figures and the fits in {out / 'models'})")
@@ -164,29 +166,49 @@ def cmd_identify(args, argv) -> int:
 
     from .data import identification_data
 
-    from jaxfric.identify import as_record
+    import argparse
+
+    from jaxfric.identify import as_records
 
     check_models(args.models)
     say = _say(args)
     data, desc, notes = identification_data(args)
-    # identify's own record checks (lengths, NaN, split, constant friction), now: before any
-    # stage message, progress bar or report folder.
-    as_record(data)
+    valid = {}
+    for path in getattr(args, "valid", None) or []:
+        # the same columns, units and pipeline as FILE
+        v_data, _, v_notes = identification_data(argparse.Namespace(**{**vars(args), "file": path}))
+        valid[path] = v_data
+        notes = list(notes) + [f"{path}: {n}" for n in v_notes]
+    if valid:
+        data = data.with_split(None, n_train=data.n_samples)  # FILE whole for estimation
+    # identify's own record checks (lengths, NaN, split, constant friction, sample times), now:
+    # before any stage message, progress bar or report folder.
+    if valid:
+        as_records(train={args.file: data}, valid=valid)
+    else:
+        as_records(data)
     for note in notes:
         say(f"note: {note}")
-    say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz: {data.n_train} for estimation, "
-        f"{data.n_valid} for validation")
+    if valid:
+        say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz for estimation; validation on "
+            + ", ".join(f"{p} ({d.n_samples} samples)" for p, d in valid.items()))
+    else:
+        say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz: {data.n_train} for estimation, "
+            f"{data.n_valid} for validation")
     out = _prepare_out(args.out)
     key = jax.random.key(args.seed)
     notes = list(notes) + (["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else [])
-    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out), notes=notes)
+    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out), notes=notes, valid=valid or None)
+    split = (f"used whole; validation records {list(valid)} loaded the same way, and each fit is "
+             "identify(name, train={FILE: data}, valid={...}, ...)" if valid
+             else f"train_fraction={args.train_fraction}")
     python = _python_snippet(args, list(fits), [
         f"# data: {desc}, as a jaxfric.rig.FrictionData (see jaxfric.rig.load_friction_pairs /",
-        f"# load_measurements + estimate_friction), train_fraction={data.n_train / data.n_samples:.6g}",
+        f"# load_measurements + estimate_friction), {split}",
         "data = ..."], f"jax.random.key({args.seed})")
     return _finish(args, out, data, fits, title=f"jaxfric identify: {Path(args.file).name}",
                    source=desc[0].upper() + desc[1:] + ".", argv=argv, notes=notes, python=python,
-                   extra_files=None)
+                   extra_files=None, records=valid or None)
 
 
 # ------------------------------------------------------------------- predict
@@ -210,10 +232,13 @@ def cmd_predict(args, argv) -> int:
     except (ValueError, KeyError, TypeError, OSError) as e:
         raise UserError(f"cannot load the fit {args.model_file}: {e}") from None
     t, v, dt, measured, notes = prediction_input(args)
-    say = _say(args)
-    for note in notes:
-        say(f"note: {note}")
-    pred = np.asarray(fit.predict(v, dt), dtype=np.float64)
+    # Resampling and extrapolation change what the numbers mean: said even with --quiet.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pred = np.asarray(fit.predict_at(t, v), dtype=np.float64)
+    for w in caught:
+        if issubclass(w.category, UserWarning):
+            print(f"jaxfric: warning: {' '.join(str(w.message).split())}", file=sys.stderr, flush=True)
     cols = {"t": t, "velocity": v, "friction_predicted": pred}
     if measured is not None:
         cols["friction_measured"] = measured

@@ -32,6 +32,10 @@ class Table:
         """The column named ``spec`` (header name, or a 0-based index), after checking
         it has no empty or NaN cell (other columns may: they are not used)."""
         spec = str(spec).strip()
+        if self.header.count(spec) > 1:
+            at = [i for i, h in enumerate(self.header) if h == spec]
+            raise UserError(f"{option}: {self.path} has {len(at)} columns named {spec!r} (indices "
+                            f"{', '.join(map(str, at))}); rename them or give the 0-based index")
         if spec in self.header:
             try:
                 i = column_index(self.header, spec, path=self.path, what=option)
@@ -219,7 +223,9 @@ def identification_data(args):
 
 
 def prediction_input(args):
-    """``(t, velocity, dt, friction_or_None, notes)`` for ``jaxfric predict`` (SI units)."""
+    """``(t, velocity, dt, friction_or_None, notes)`` for ``jaxfric predict`` (SI units), one
+    entry per data row of the file: irregular stamps are checked by the loader but not
+    resampled here (``Fit.predict_at`` resamples onto the fit's grid and back)."""
     from jaxfric import rig
 
     table = read_table(args.data, delimiter=args.delimiter, skip_rows=args.skip_rows)
@@ -231,9 +237,9 @@ def prediction_input(args):
         scale["friction"] = unit_factor("force", args.friction_unit, "--friction-unit")
     else:
         cols["friction"] = np.zeros_like(t)  # placeholder: the loader wants the channel
-    data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale, train_fraction=1.0)
-    friction = np.asarray(data.friction) if args.friction_col is not None else None
-    return np.asarray(data.t), np.asarray(data.velocity), float(data.dt), friction, notes
+    data, _ = _load_quietly(rig.load_friction_pairs, cols, scale=scale, train_fraction=1.0)
+    friction = cols["friction"] * scale["friction"] if args.friction_col is not None else None
+    return t, cols["velocity"] * scale["velocity"], float(data.dt), friction, []
 
 
 def simulated_rig(key):

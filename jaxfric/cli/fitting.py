@@ -103,7 +103,7 @@ def progress_bar(solver, model, desc: str):
     return LazyBar(total, local_total, desc)
 
 
-def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
+def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> dict:
     """Identify every model of ``args.models`` on ``data`` with ``key``; ``name -> Fit``.
 
     Every model gets the same ``key`` (they are independent problems), so a model's
@@ -125,7 +125,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None) -> dict:
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fit = spec.identify(data, key=key, progress=bar)
+                fit = spec.identify(data, key=key, progress=bar, valid=valid, train_name=args.file)
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own

@@ -144,6 +144,7 @@ Known names: """ + "; ".join(f"{k}: {', '.join(v)}" for k, v in UNITS.items()) +
 examples:
   jaxfric identify pairs.csv --velocity-col v --friction-col F --time-col t
   jaxfric identify pairs.csv --velocity-col 0 --friction-col 1 --dt 0.0078125 --model lugre
+  jaxfric identify run1.csv --valid run2.csv --valid run3.csv --velocity-col v --friction-col F --time-col t
   jaxfric identify rig.csv --time-col t --x-col x --p1-col p1 --p2-col p2 --load-col load \\
       --bore 0.10 --rod 0.07 --mass 120
   jaxfric identify rec.txt --delimiter whitespace --time-col 0 --time-unit ms --x-col 4 \\
@@ -270,6 +271,9 @@ def build_parser() -> Parser:
     i.add_argument("--train-fraction", type=fraction, default=None, metavar="F",
                    help="leading fraction of the record used for estimation; the rest validates "
                    "(default: the library's, 0.8 as in the paper)")
+    i.add_argument("--valid", action="append", default=[], metavar="FILE",
+                   help="validation recording (same columns and options as FILE; repeatable): FILE is "
+                   "then used whole for estimation and each --valid file whole for validation")
     _fitting(i, default_models="elman,lugre")
     _common(i)
 

@@ -98,8 +98,10 @@ class FitSpec:
         changes = {k: v for k, v in (("max_steps", g), ("max_evals", nm)) if v is not None}
         return dataclasses.replace(base.nelder_mead, **changes)
 
-    def identify(self, data, *, key=None, progress=None):
-        """``jaxfric.identify(model, data, ...)`` as this specification says."""
+    def identify(self, data, *, key=None, progress=None, valid=None, train_name="train"):
+        """``jaxfric.identify(model, data, ...)`` as this specification says; with ``valid``
+        (name -> record, from ``--valid``) ``identify(model, train={train_name: data},
+        valid=valid, ...)``: ``data`` is used whole for estimation."""
         import inspect
 
         import jax
@@ -114,4 +116,6 @@ class FitSpec:
             kwargs["method"] = "paper"
         if progress is not None and "progress" in inspect.signature(identify).parameters:
             kwargs["progress"] = progress
+        if valid:
+            return identify(self.model, train={train_name: data}, valid=valid, **kwargs)
         return identify(self.model, data, **kwargs)

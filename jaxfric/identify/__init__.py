@@ -14,14 +14,21 @@ from ._api import (
     identify,
     paper_solver,
 )
-from ._data import Record, as_record
+from ._data import MIN_VALID_SAMPLES, Record, RecordSet, as_record, as_records
+from ._diagnostics import BoundWarning, on_bound, unidentifiable
 from ._objective import CostData, OutputErrorCost
 from ._refine import GradientRefinement
 
 __all__ = [
     "DEFAULT_GENERATIONS_BLACK_BOX",
     "DEFAULT_GENERATIONS_PHYSICAL",
+    "MIN_VALID_SAMPLES",
     "NAMED_MODEL_DEFAULTS",
+    "BoundWarning",
+    "RecordSet",
+    "as_records",
+    "on_bound",
+    "unidentifiable",
     "CostData",
     "GradientRefinement",
     "OutputErrorCost",

@@ -12,6 +12,11 @@ gradient of the network's hand-written adjoint; physical models keep MAPSO–NMD
 On EMPS at 1 kHz the paper's pipeline spent 172–374 s, 70 % of it in Nelder–Mead
 evaluating one 20 000-step rollout at a time; ``benchmarks/pipelines.py`` measures both.
 
+Beyond the paper: several records (``train=[...]``, ``valid=...``; the cost pools
+them, each rolled out from its own initial state, :mod:`._pooled`), an ensemble of K
+keys in one :func:`jaxfric.minimise_many` call (``keys=K``), and the flags of
+:mod:`._diagnostics` (parameters on a bound, unidentifiable parameters).
+
 Everything the user passed is checked first (:mod:`._data`, the model's own
 checks, the solver's ``check``), so bad input fails in milliseconds with a
 ``ValueError`` instead of after a long run.
@@ -22,6 +27,7 @@ compiled run, and to the gradient stage, which reports between compiled chunks.
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
 import warnings
 from typing import Any
@@ -36,9 +42,11 @@ from .. import models as _models
 from ..fit import Fit, model_config, model_name, predict, rollout_model
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
-from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise
-from ._data import Record, as_record
+from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
+from ._data import Record, RecordSet, as_record, as_records
+from ._diagnostics import BoundWarning, on_bound, unidentifiable
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
+from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, as_refinement, refine_impl, result_name
 from ._timing import Stopwatch
 
@@ -133,11 +141,22 @@ def _check_method(method) -> str:
 
 
 def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
-    """A model instance from an instance or a :func:`jaxfric.models.get` name."""
+    """A model instance from an instance or a :func:`jaxfric.models.get` name.
+
+    ``options`` go to the constructor of a named model; an unknown one is a
+    ``ValueError`` listing the options the model has.
+    """
     if isinstance(model, str):
         key = model.strip().lower().replace("-", "_")
         kwargs = dict(NAMED_MODEL_DEFAULTS.get(key, {}))
         kwargs.update(options or {})
+        valid = [f.name for f in dataclasses.fields(type(_models.get(model)))]
+        unknown = sorted(set(options or {}) - set(valid))
+        if unknown:
+            raise ValueError(
+                f"invalid options for model {model!r}: {', '.join(map(repr, unknown))}; "
+                f"its options are {', '.join(valid) or '(none)'}"
+            )
         try:
             return _models.get(model, **kwargs)
         except TypeError as err:
@@ -145,8 +164,8 @@ def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
     if isinstance(model, AbstractFrictionModel):
         if options:
             raise ValueError(
-                "model_options apply only to a model given by name; configure the "
-                f"{type(model).__name__} instance directly"
+                f"model options ({', '.join(sorted(options))}) apply only to a model given by "
+                f"name; configure the {type(model).__name__} instance directly"
             )
         return model
     raise ValueError(
@@ -168,6 +187,26 @@ def _as_key(key):
             f"{'a batch of keys of shape ' + str(k.shape) if typed else repr(key)}"
         )
     return key, None
+
+
+def _as_keys(key, keys):
+    """The members' keys of ``identify(..., keys=K)``: ``K`` keys split from ``key``, or
+    the given batch. Returns ``(typed key batch, K)``."""
+    if isinstance(keys, numbers.Integral) and not isinstance(keys, bool):
+        if keys < 1:
+            raise ValueError(f"keys must be a number of members >= 1 or a batch of keys, got {keys}")
+        return jax.random.split(_as_key(key)[0], int(keys)), int(keys)
+    if key is not None:
+        raise ValueError("give key= (one run, or the root of keys=K) or a batch keys=[...], not both")
+    k = jnp.asarray(keys)
+    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key) and k.ndim == 1 and k.shape[0] >= 1:
+        return k, int(k.shape[0])
+    if k.dtype == jnp.uint32 and k.ndim == 2 and k.shape[1] == 2 and k.shape[0] >= 1:
+        return jax.random.wrap_key_data(k), int(k.shape[0])
+    raise ValueError(
+        "keys must be a number of members K (split from key=) or a 1-D batch of JAX PRNG keys "
+        f"(jax.random.split(key, K)), got {keys!r}"
+    )
 
 
 def _key_record(key):
@@ -220,10 +259,45 @@ def _window_metrics(y_hat, record: Record) -> dict:
         return {"train": None, "valid": None, "all": None, "prediction_finite": False}
     n, f = record.n_train, record.friction
     return {
-        "train": friction_metrics(f[:n], y_hat[:n]),
-        "valid": friction_metrics(f[n:], y_hat[n:]) if np.ptp(f[n:]) > 0 else None,
-        "all": friction_metrics(f, y_hat),
+        "train": friction_metrics(f[:n], y_hat[:n]) if n and np.ptp(f[:n]) > 0 else None,
+        "valid": friction_metrics(f[n:], y_hat[n:]) if n < f.size and np.ptp(f[n:]) > 0 else None,
+        "all": friction_metrics(f, y_hat) if np.ptp(f) > 0 else None,
     }
+
+
+def _record_metrics(predictions, records: RecordSet) -> dict:
+    """§6 metrics in newtons, per record and pooled over records.
+
+    Each record is rolled out from its own initial state (``predictions[i]`` is
+    record ``i``'s free run). ``train``/``valid``/``all`` pool the samples of the
+    training windows, the validation windows and everything; ``records`` lists each
+    record's own ``train``/``valid``/``all``. One split record gives the classic
+    windows (its validation window continues the training state).
+    """
+    one = records.single
+    if one is not None:
+        out = _window_metrics(predictions[0], one)
+    else:
+        y_hats = [np.asarray(p, np.float64) for p in predictions]
+        if not all(np.all(np.isfinite(p)) for p in y_hats):
+            return {"train": None, "valid": None, "all": None, "prediction_finite": False,
+                    "records": []}
+
+        def pooled(part):
+            f = np.concatenate([r.friction[part(r)] for r in records.records])
+            p = np.concatenate([y[part(r)] for y, r in zip(y_hats, records.records)])
+            return friction_metrics(f, p) if f.size and np.ptp(f) > 0 else None
+
+        out = {"train": pooled(lambda r: slice(0, r.n_train)),
+               "valid": pooled(lambda r: slice(r.n_train, None)),
+               "all": pooled(lambda r: slice(None))}
+    per = []
+    for y_hat, r in zip(predictions, records.records):
+        m = _window_metrics(y_hat, r) if np.all(np.isfinite(np.asarray(y_hat))) else {}
+        per.append({"name": r.name or "record", "role": r.role, "n_samples": r.n_samples,
+                    "n_train": r.n_train, **{w: m.get(w) for w in ("train", "valid", "all")}})
+    out["records"] = per
+    return out
 
 
 def _stage_mse(metrics: dict) -> dict:
@@ -255,11 +329,13 @@ def _warn_if_divergent(metrics: dict) -> None:
 
 def identify(
     model,
-    data,
+    data=None,
     *,
     solver: AbstractSolver | None = None,
-    key,
-    train: int | float | None = None,
+    key=None,
+    keys=None,
+    train=None,
+    valid=None,
     refine=None,
     theta0=None,
     dtype=None,
@@ -268,6 +344,7 @@ def identify(
     progress=None,
     compiler_options="auto",
     method: str = "jaxfric",
+    **options,
 ) -> Fit:
     """Identify a friction model from a velocity/friction record (ALGORITHMS.md §11).
 
@@ -277,14 +354,33 @@ def identify(
             :func:`jaxfric.models.available`). Names get :data:`NAMED_MODEL_DEFAULTS`
             (Elman: ``context_weight_bound=1``) unless ``model_options`` override them.
         data: a ``jaxfric.rig.FrictionData`` (or any object with ``.velocity`` [m/s],
-            ``.friction`` [N], ``.dt`` [s] and ``.n_train``) or ``(velocity, friction, dt)``.
+            ``.friction`` [N], ``.dt`` [s] and ``.n_train``) or ``(velocity, friction, dt)``,
+            split into a training and a validation window by ``train``. Leave it out to
+            train on whole records (``train=[...]``, ``valid=...``).
             Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that
             name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`); such a model
-            on data without them raises ``ValueError`` before any optimisation.
+            on data without them raises ``ValueError`` before any optimisation (one
+            record only: pooled records carry no input channels yet).
         solver: any jaxfric solver; default :func:`default_solver` for ``method``. ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.
-        train: training samples (int) or fraction; default the data's ``n_train``,
-            else 0.8 (the paper's 1600/2000). The rest is the validation window.
+        keys: an ensemble: ``K`` (an int; the members' keys are
+            ``jax.random.split(key, K)``) or a batch of keys (then no ``key``). The K
+            runs go through :func:`jaxfric.minimise_many` in one vmapped call; the
+            returned fit is the member with the lowest training cost J, and
+            ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
+            MSE %, the spread of each parameter); ``fit.predict_band(v)`` is the
+            members' min-max prediction band. Member ``i`` equals
+            ``identify(..., key=keys[i])`` (up to floating-point reassociation).
+        train: with ``data``: training samples (int) or fraction; default the data's
+            ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
+            window and must hold at least :data:`~jaxfric.identify.MIN_VALID_SAMPLES`
+            samples. Without ``data``: one record, a list of records or a mapping
+            name -> record, each used whole for training; the cost pools the squared
+            errors over the records, each rolled out from its own initial state.
+        valid: with ``train=[...]``: one record, a list or a mapping name -> record,
+            each rolled out whole from its own initial state for validation. Metrics
+            per record are in ``fit.metrics["records"]``; ``train``/``valid``/``all``
+            pool the samples. All records need the same sample time.
         refine: gradient stage after the solver — not in the paper. ``None`` (default):
             ``method``'s choice (BFGS, :data:`FAST_REFINE_STEPS` steps, for the networks
             under ``"jaxfric"``; none otherwise); ``False``: none; ``"bfgs"``,
@@ -298,6 +394,9 @@ def identify(
             data (``model.with_data_bounds``); no effect on the Elman networks.
         model_options: constructor options for a model given by name
             (e.g. ``{"neurons": 20}``).
+        **options: the same, as keywords: ``identify("elman", data, key=0, neurons=20)``,
+            ``identify("lugre", data, key=0, vs_range=(1e-4, 1.0))``. Unknown ones are a
+            ``ValueError`` listing the model's options.
         progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
             the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
             ``None`` (silent). A new display never recompiles. The gradient stage
@@ -326,23 +425,40 @@ def identify(
     (``benchmarks/results/peers_gpu.md``). For a single fit on a GPU machine, use
     ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
 
+    Parameters on a bound: for physical models every parameter that ends on an edge
+    of its search box is named with a :class:`BoundWarning` (which range to widen,
+    e.g. ``vs_range``) and in ``fit.diagnostics["on_bound"]``; parameters the model
+    declares unidentifiable from these data go to ``fit.diagnostics["unidentifiable"]``.
+
     Returns:
         a :class:`jaxfric.Fit`.
 
     Raises:
         ValueError: before any optimisation, for an unknown model name, invalid model
             options (e.g. ``neurons < 1``), velocity and friction of different lengths,
-            NaN/inf in the data, a record shorter than the split or an empty validation
-            window, zero-variance friction, a non-finite or out-of-box ``theta0``, an
+            NaN/inf in the data, a record shorter than the split or a validation
+            window shorter than ``MIN_VALID_SAMPLES``, records with different sample
+            times, zero-variance friction, a non-finite or out-of-box ``theta0``, an
             invalid solver, refinement or key.
     """
+    if model_options and options and set(model_options) & set(options):
+        raise ValueError(
+            f"model option(s) {sorted(set(model_options) & set(options))} given twice "
+            "(in model_options and as keywords)"
+        )
     with Stopwatch() as total:
-        record = as_record(data, train)
-        model = resolve_model(model, model_options)
-        inputs = model.inputs_from(record, record.n_samples)  # fails early if a channel is missing
+        records = as_records(data, train, valid)
+        model = resolve_model(model, {**(model_options or {}), **options})
+        if model.input_names and records.single is None:
+            raise ValueError(
+                f"{type(model).__name__} needs the input channels {list(model.input_names)}; "
+                "identify it on one record (data=...), not on train=[...]/valid=...")
+        inputs = (None if records.single is None
+                  else model.inputs_from(records.single, records.single.n_samples))  # fails early
         if data_bounds:
-            model = model.with_data_bounds(record.train_velocity, record.train_friction,
-                                           None if inputs is None else inputs[:, : record.n_train])
+            model = model.with_data_bounds(
+                records.train_velocity, records.train_friction,
+                None if inputs is None else inputs[:, : records.single.n_train])
         _check_method(method)
         coarse = solver is None and _fast_pipeline(model, method)
         if solver is None:
@@ -359,70 +475,115 @@ def identify(
         refine_options = _xla.resolve(compiler_options, "rollout")
         lower, upper = model.bounds()
         theta0 = _check_theta0(model, theta0, lower, upper)
-        key, seed = _as_key(key)
+        if keys is None:
+            key, seed = _as_key(key)
+            member_keys = None
+        else:
+            seed = key if isinstance(key, numbers.Integral) and not isinstance(key, bool) else None
+            member_keys, _ = _as_keys(key, keys)
         dtype = search_dtype(dtype)
 
-        scalers = fit_scalers(model, record)
-        data_j = cost_data(model, record, scalers, dtype)
-        # Coarse-to-fine: the default pipeline's swarm sees the first samples only.
-        data_global = data_j
-        if coarse and record.n_train > GLOBAL_STAGE_SAMPLES:
-            data_global = eqx.tree_at(lambda d: (d.u, d.y), data_j,
-                                      (data_j.u[:GLOBAL_STAGE_SAMPLES], data_j.y[:GLOBAL_STAGE_SAMPLES]))
+        scalers = fit_scalers(model, records)
         # The cost holds the model as a *static* field (its jit cache key). Search
         # ranges shape only the box, which travels as arrays, so the cost gets the
         # model with its ranges cleared: a new record (new data-centred box) does
         # not recompile.
-        cost = OutputErrorCost(rollout_model(model))
+        if records.single is not None:
+            data_j = cost_data(model, records.single, scalers, dtype)
+            cost = OutputErrorCost(rollout_model(model))
+        else:
+            data_j = pooled_cost_data(model, records, scalers, dtype)
+            cost = PooledOutputErrorCost(rollout_model(model))
+        # Coarse-to-fine: the default pipeline's swarm sees the first samples only.
+        data_global = data_j
+        if coarse and records.single is not None and records.single.n_train > GLOBAL_STAGE_SAMPLES:
+            data_global = eqx.tree_at(lambda d: (d.u, d.y), data_j,
+                                      (data_j.u[:GLOBAL_STAGE_SAMPLES], data_j.y[:GLOBAL_STAGE_SAMPLES]))
+
+        def run_predictions(theta):
+            return [predict(model, theta, scalers, r.velocity, r.dt, inputs) for r in records.records]
 
         with Stopwatch() as sw:
-            sol = minimise(cost, solver, (lower, upper), args=data_global, key=key, y0=theta0,
-                           dtype=dtype, progress=progress, compiler_options=compiler_options)
+            if member_keys is None:
+                sol = minimise(cost, solver, (lower, upper), args=data_global, key=key, y0=theta0,
+                               dtype=dtype, progress=progress, compiler_options=compiler_options)
+            else:
+                sol = minimise_many(cost, solver, (lower, upper), keys=member_keys, args=data_global,
+                                    y0=theta0, dtype=dtype, progress=progress,
+                                    compiler_options=compiler_options)
             sol = jax.block_until_ready(sol)
-        stages = _stages(sol, solver)
         timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
-        theta = sol.value
-        metrics = _window_metrics(
-            predict(model, theta, scalers, record.velocity, record.dt, inputs), record)
-        stages[-1].update(_stage_mse(metrics))
+        thetas = jnp.atleast_2d(sol.value)
+        f_final = jnp.atleast_1d(sol.f)
 
+        refined = None
         if settings_refine is not None:
             lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
             with Stopwatch() as swr:
-                out = jax.block_until_ready(refine_impl(
-                    settings_refine, cost, theta, lo, hi, data_j, progress=progress,
-                    compiler_options=refine_options))
-            theta = out.theta
-            metrics = _window_metrics(
-                predict(model, theta, scalers, record.velocity, record.dt, inputs), record)
-            stages.append({
-                "stage": settings_refine.method,
-                "J": float(out.f),
-                "J_refined": float(out.f_refined),
-                "improved": bool(out.improved),
-                "num_steps": int(out.num_steps),
-                "result": result_name(out.result),
-                **_stage_mse(metrics),
-            })
+                # One member after another: the gradient stage runs in compiled chunks
+                # between progress reports, the same program for every member.
+                outs = [refine_impl(settings_refine, cost, th, lo, hi, data_j,
+                                    progress=progress if member_keys is None else None,
+                                    compiler_options=refine_options) for th in thetas]
+                refined = jax.block_until_ready(
+                    jax.tree_util.tree_map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *outs))
+            thetas, f_final = refined.theta, refined.f
             timings.update(refine_compile_s=swr.compile_s, refine_run_s=swr.run_s)
 
-        key_data, key_impl = _key_record(key)
+        f_np = np.asarray(f_final, np.float64)
+        best = int(np.argmin(np.where(np.isfinite(f_np), f_np, np.inf)))
+        sol_best = sol if member_keys is None else jax.tree_util.tree_map(lambda a: a[best], sol)
+        stages = _stages(sol_best, solver)
+        theta_opt = sol_best.value
+        if refined is not None:
+            stages[-1].update(_stage_mse(_record_metrics(run_predictions(theta_opt), records)))
+            r = jax.tree_util.tree_map(lambda a: a[best], refined)
+            theta = r.theta
+            metrics = _record_metrics(run_predictions(theta), records)
+            stages.append({
+                "stage": settings_refine.method,
+                "J": float(r.f),
+                "J_refined": float(r.f_refined),
+                "improved": bool(r.improved),
+                "num_steps": int(r.num_steps),
+                "result": result_name(r.result),
+                **_stage_mse(metrics),
+            })
+        else:
+            theta = theta_opt
+            metrics = _record_metrics(run_predictions(theta), records)
+            stages[-1].update(_stage_mse(metrics))
+
+        ensemble = None
+        if member_keys is not None:
+            ensemble = _ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records)
+        key_used = key if member_keys is None else member_keys[best]
+        key_data, key_impl = _key_record(key_used)
         _warn_if_divergent(metrics)
+        diagnostics = {
+            "on_bound": on_bound(model, theta),
+            "unidentifiable": list(unidentifiable(model, records.train_velocity)),
+        }
+        for d in diagnostics["on_bound"]:
+            warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning, stacklevel=2)
         fit = Fit(
             model=model,
             theta=np.asarray(theta),
             velocity_scaler=scalers[0],
             friction_scaler=scalers[1],
-            dt=record.dt,
-            n_train=record.n_train,
-            n_samples=record.n_samples,
+            dt=records.dt,
+            n_train=records.n_train,
+            n_samples=records.n_samples,
             metrics={**metrics, "num_params": model.num_params, "cost": float(stages[-1]["J"])},
             stages=stages,
-            history=_history(sol),
+            history=_history(sol_best),
             solution=sol,
             key_data=key_data,
             key_impl=key_impl,
-            seed=seed,
+            seed=seed if member_keys is None else None,
+            velocity_range=(float(records.train_velocity.min()), float(records.train_velocity.max())),
+            diagnostics=diagnostics,
+            ensemble=ensemble,
             settings={
                 "model_name": model_name(model),
                 "model_config": model_config(model),
@@ -434,11 +595,37 @@ def identify(
                 "dtype": str(np.dtype(dtype)),
                 "data_bounds": bool(data_bounds),
                 "method": method,
-                "global_stage_samples": int(data_global.y.shape[0]),
+                "global_stage_samples": (int(data_global.y.shape[0]) if records.single is not None
+                                         else None),
                 "theta0_given": theta0 is not None,
                 "cost": "mean squared scaled error" if model.needs_scaling
                         else "mean squared error / var(F_train)",
+                "records": [{"name": r.name or "record", "role": r.role, "n_samples": r.n_samples}
+                            for r in records.records],
+                **({"ensemble_size": int(thetas.shape[0]),
+                    "ensemble_root_seed": seed} if member_keys is not None else {}),
             },
         )
     fit.timings = {**timings, "total_s": total.wall_s}
     return fit
+
+
+def _ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records) -> dict:
+    """``Fit.ensemble``: members, their costs and validation errors, parameter spread."""
+    thetas = np.asarray(thetas)
+    valid_mse = []
+    for th in thetas:
+        m = _record_metrics(run_predictions(jnp.asarray(th)), records)
+        valid_mse.append((m.get("valid") or {}).get("mse_percent"))
+    if model.needs_scaling:
+        named = {}
+    else:
+        named = {k: np.asarray(v, np.float64).reshape(len(thetas))
+                 for k, v in model.to_physical(jnp.asarray(thetas)).items()}
+    spread = {k: {"min": float(v.min()), "p5": float(np.percentile(v, 5)),
+                  "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
+                  "max": float(v.max())} for k, v in named.items()}
+    key_data = np.asarray(jax.random.key_data(member_keys)).reshape(len(thetas), -1).tolist()
+    return {"theta": thetas, "J": [float(x) for x in f_np], "best": best,
+            "valid_mse_percent": valid_mse, "keys": key_data, "spread": spread,
+            "params": {k: v.tolist() for k, v in named.items()}}

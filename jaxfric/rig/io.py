@@ -109,6 +109,11 @@ def _read_table(path, columns: Mapping, delimiter, skip_rows: int, comments: str
             if col not in header:
                 raise ValueError(f"{path}: column '{col}' (for channel '{channel}') is missing; "
                                  f"the header has {header}")
+            if header.count(col) > 1:
+                at = [i for i, h in enumerate(header) if h == col]
+                raise ValueError(f"{path}: the header names column '{col}' (for channel '{channel}') "
+                                 f"{len(at)} times (at indices {at}); rename the columns or map the "
+                                 "channel by its 0-based index")
             index[channel] = header.index(col)
             names[channel] = f"column '{col}'"
         else:
