@@ -32,10 +32,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-try:
-    import jaxfric  # noqa: F401
-except ImportError:  # a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# this checkout's jaxfric, even where another copy is installed
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import equinox as eqx
 import jax.numpy as jnp
