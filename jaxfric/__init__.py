@@ -13,12 +13,13 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-from . import functions, metrics, models, rig
+from . import compensation, export, functions, metrics, models, motion, rig
 from ._xla import compiler_options
 from .fit import Fit, load_fit
 from .identify import GradientRefinement, identify
 from .metrics import friction_metrics
 from .models import Coulomb, Dahl, Elman, ElmanFull, LuGre, Stribeck
+from .motion import MotionData, MotionFit, identify_motion, load_motion_fit
 from .optim import (
     MAPSO,
     MAPSONMDS,
@@ -44,21 +45,28 @@ __all__ = [
     "History",
     "LuGre",
     "MAPSO",
+    "MotionData",
+    "MotionFit",
     "MAPSONMDS",
     "NelderMead",
     "PSO",
     "RESULTS",
     "Solution",
     "Stribeck",
+    "compensation",
     "compiler_options",
+    "export",
     "friction_metrics",
     "functions",
     "identify",
+    "identify_motion",
     "load_fit",
+    "load_motion_fit",
     "mapso_nmds",
     "metrics",
     "minimise",
     "minimise_many",
     "models",
+    "motion",
     "rig",
 ]

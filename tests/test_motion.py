@@ -200,3 +200,42 @@ def test_identify_motion_bad_input_fails_fast():
         identify_motion("coulomb", (u, x, 1e-3), key=0, mass=-1.0)
     with pytest.raises(ValueError, match="error must be"):
         identify_motion("coulomb", (u, x, 1e-3), key=0, mass=1.0, error="force")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["lugre", "elman"])
+def test_identify_motion_runs_for_dynamic_models(name, tmp_path):
+    """LuGre (bristle state) and Elman (context, scalers without a friction signal) run
+    inside the mechanics, give finite metrics, and survive save/load."""
+    model = models.Coulomb(v_eps=1e-3)
+    theta = model.from_physical(Fc=12.0, sigma2=60.0)
+    with jax.enable_x64(True):
+        u, x, _ = _recording(model, theta, 2.5, n=600)
+    solver = MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=3),
+                       nelder_mead=NelderMead(max_steps=20, max_evals=20))
+    opts = {"neurons": 3} if name == "elman" else None
+    fit = identify_motion(name, (u, x, 1e-3), key=1, mass=2.5, solver=solver, model_options=opts)
+    for w in ("train", "valid", "train_kstep", "valid_kstep"):
+        assert np.isfinite(fit.metrics[w]["rmse_mm"])
+    fit.save(tmp_path / "f.npz")
+    back = load_motion_fit(tmp_path / "f.npz")
+    np.testing.assert_array_equal(back.simulate(u[:40], 0.0, 0.0)["x"], fit.simulate(u[:40], 0.0, 0.0)["x"])
+
+
+@pytest.mark.slow
+def test_cli_identify_motion(tmp_path):
+    from jaxfric.cli import main
+
+    model = models.Coulomb(v_eps=1e-3)
+    with jax.enable_x64(True):
+        u, x, _ = _recording(model, model.from_physical(Fc=12.0, sigma2=60.0), 2.5, n=600)
+    path = tmp_path / "m.csv"
+    np.savetxt(path, np.c_[np.arange(600) * 1e-3, u / 10, x], delimiter=",", header="t,volt,x", comments="")
+    rc = main(["identify-motion", str(path), "--force-col", "volt", "--force-gain", "10", "--x-col", "x",
+               "--time-col", "t", "--mass", "2.5", "--model", "coulomb", "--quick", "--quiet",
+               "--no-cache", "--out", str(tmp_path / "r")])
+    assert rc == 0
+    assert (tmp_path / "r" / "models" / "coulomb.npz").exists()
+    assert "valid RMSE [mm]" in (tmp_path / "r" / "motion.md").read_text()
+    assert main(["identify-motion", str(path), "--force-col", "volt", "--x-col", "x", "--time-col", "t",
+                 "--quiet", "--no-cache", "--out", str(tmp_path / "r2")]) != 0  # no mass given
