@@ -203,9 +203,9 @@ def test_identify_motion_bad_input_fails_fast():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["lugre", "elman"])
+@pytest.mark.parametrize("name", ["elman"])
 def test_identify_motion_runs_for_dynamic_models(name, tmp_path):
-    """LuGre (bristle state) and Elman (context, scalers without a friction signal) run
+    """The Elman network (context, scalers without a friction signal) runs
     inside the mechanics, give finite metrics, and survive save/load."""
     model = models.Coulomb(v_eps=1e-3)
     theta = model.from_physical(Fc=12.0, sigma2=60.0)

@@ -31,6 +31,7 @@ from ..identify._timing import Stopwatch
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
+from ..rig._checks import as_channel
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._step import friction_step
 
@@ -42,18 +43,9 @@ ERRORS = ("position", "velocity", "both")
 
 
 def _series(name, values) -> np.ndarray:
-    if np.iscomplexobj(values):
-        raise ValueError(f"{name} holds complex numbers")
-    try:
-        a = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} is not numeric: {err}") from None
-    if a.ndim != 1 or a.size < 2:
-        raise ValueError(f"{name} must be a 1-D series of at least 2 samples, got shape {a.shape}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        raise ValueError(f"{name} holds {int(bad.sum())} NaN/inf samples (first at index "
-                         f"{int(np.flatnonzero(bad)[0])})")
+    a = as_channel(name, values)
+    if a.size < 2:
+        raise ValueError(f"{name} must hold at least 2 samples, got {a.size}")
     return a
 
 
