@@ -141,7 +141,6 @@ def run_emps(path, quick, key=0):
     rows.append(("IDIM-LS asymmetric reference (published)", ref_a, 0.0))
     fits = {}
     runs = [(name, model, None) for name, model in emps_candidates().items()]
-    runs.insert(1, ("static+offset, 100-step cost", emps_candidates()["static+offset (Coulomb+viscous)"], 100))
     for name, model, horizon in runs:
         if quick and "Elman" in name:
             continue
@@ -210,16 +209,16 @@ def run_rig(quick, key=0):
     for name, make, horizons in (("Stribeck", models.Stribeck, (None, 10)), ("LuGre", models.LuGre, (10,))):
         t0 = time.perf_counter()
         fb = identify(make(), fb_data, key=key, dtype=jnp.float64, solver=_solver(make().num_params, quick))
-        done = [("force balance", fb, time.perf_counter() - t0, 0.0)]
+        done = [("force balance", fb, time.perf_counter() - t0)]
         for h in horizons:
             t0 = time.perf_counter()
             mo = identify_motion(make(), mdata, key=key, mass=float(r.cylinder.mass), train=fb_data.n_train,
                                  horizon=h, solver=_solver(make().num_params + 1, quick), fit_offset=True,
                                  dtype=jnp.float64, metric_horizon=10)
             how = "motion, free-run cost" if h is None else f"motion, {h}-step cost"
-            done.append((how, mo, time.perf_counter() - t0, mo.offset))
-        for how, fit, secs, off in done:
-            pred = np.asarray(fit.predict(v_true), np.float64) + off
+            done.append((how, mo, time.perf_counter() - t0))
+        for how, fit, secs in done:
+            pred = np.asarray(fit.predict(v_true), np.float64)
             m = friction_metrics(f_true, pred)
             rows.append({"model": name, "method": how, "mse_percent": m["mse_percent"],
                          "rmse_N": m["rmse"], "seconds": secs})

@@ -90,8 +90,8 @@ def reference(fs: float = 1000.0, *, x0: float = 0.05, amplitude: float = 0.01, 
 def feedforward(fit, ref: Reference) -> np.ndarray:
     """Friction feed-forward [N] of ``fit`` along the reference velocity (§13.3).
 
-    Only the fit and the reference enter: ``fit.predict`` of the reference velocity plus a
-    fitted constant offset if the fit has one (:class:`jaxfric.motion.MotionFit`). A fit
+    Only the fit and the reference enter: ``fit.predict`` of the reference velocity (a
+    :class:`jaxfric.motion.MotionFit` includes its fitted offset). A fit
     made at another sample time (the Elman network is a discrete map at its data's rate)
     is evaluated on its own time grid and interpolated linearly. ``None`` means no
     compensation (zeros).
@@ -105,7 +105,7 @@ def feedforward(fit, ref: Reference) -> np.ndarray:
     else:
         tf = np.arange(int(np.floor(t[-1] / fit_dt)) + 1) * fit_dt
         f = np.interp(t, tf, np.asarray(fit.predict(np.interp(tf, t, ref.v), fit_dt), np.float64))
-    return f + float(getattr(fit, "offset", 0.0))
+    return f
 
 
 def track(rig: Rig, ref: Reference, friction_ff=None, *, gains: Gains = Gains(), substeps: int = 4,

@@ -57,7 +57,8 @@ def _weights(fit) -> dict:
     kind = _kind(model)
     p = {k: np.asarray(v, np.float64) for k, v in
          model.to_physical(jnp.asarray(np.asarray(fit.theta, np.float64))).items()}
-    w = {"kind": kind, **p}
+    # a MotionFit's constant force offset is part of its friction (MotionFit.predict)
+    w = {"kind": kind, **p, "offset": float(getattr(fit, "offset", 0.0))}
     if model.needs_scaling:
         w.update(v_lo=float(fit.velocity_scaler.lo), v_hi=float(fit.velocity_scaler.hi),
                  f_lo=float(fit.friction_scaler.lo), f_hi=float(fit.friction_scaler.hi))
@@ -113,7 +114,11 @@ class NumpyStep:
         return None
 
     def step(self, v: float, state=None):
-        w, v = self.weights, float(v)
+        f, state = self._step(float(v), state)
+        return f + self.weights["offset"], state
+
+    def _step(self, v: float, state):
+        w = self.weights
         if state is None:
             state = self.init(v)
         kind = w["kind"]
@@ -256,7 +261,12 @@ def c_header(fit, path=None, *, prefix: str = "jaxfric") -> str:
             f"    double y = 0.0;\n{hidden}"
             f"    y += {P}_b_o;\n"
             f"    return (y + 1.0) * (0.5 * ({P}_f_hi - {P}_f_lo)) + {P}_f_lo;\n}}")
-    lines += ["", f"#endif /* {guard} */", ""]
+    # every model's step above is <prefix>_core; the public step adds the offset
+    text = "\n".join(lines)
+    text = text.replace(f"static inline double {P}_step(", f"static inline double {P}_core(")
+    lines = [text, f"static const double {P}_offset = {_num(w['offset'])};",
+             f"static inline double {P}_step({P}_state *s, double v) {{ return {P}_core(s, v) + {P}_offset; }}",
+             "", f"#endif /* {guard} */", ""]
     text = "\n".join(lines)
     if path is not None:
         from .report import atomic_write_text

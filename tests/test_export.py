@@ -101,3 +101,28 @@ def test_export_refuses_unknown_prefix_and_model():
     fit = _fit(models.Coulomb(), models.Coulomb().from_physical(Fc=1.0, sigma2=1.0), v)
     with pytest.raises(ValueError, match="identifier"):
         c_header(fit, prefix="bad name")
+
+
+def test_motion_fit_export_includes_its_offset(tmp_path):
+    """A MotionFit's friction includes its fitted constant offset; so do both exports."""
+    from jaxfric.motion import MotionFit
+
+    v = _velocity(300)
+    lugre = models.LuGre()
+    theta = lugre.from_physical(sigma0=1e6, sigma1=300.0, sigma2=500.0, Fc=20.0, Fs=30.0, vs=5e-3)
+    fit = MotionFit(model=lugre, theta=np.asarray(theta, np.float64), velocity_scaler=None,
+                    friction_scaler=None, dt=1e-3, n_train=10, n_samples=10, metrics={},
+                    settings={"motion": {"mass": 1.0, "offset": -3.25, "v0": 0.0}})
+    with jax.enable_x64(True):
+        ref = np.asarray(fit.predict(v))
+        plain = np.asarray(Fit.predict(fit, v))
+    np.testing.assert_allclose(ref - plain, -3.25)
+    _close(fit.to_numpy().run(v), ref)
+    if _CC is not None:
+        fit.to_c_header(tmp_path / "friction.h")
+        (tmp_path / "main.c").write_text(_HARNESS)
+        subprocess.run([_CC, "-std=c99", "-O2", "-Wall", "-Werror", "-o", str(tmp_path / "run"),
+                        str(tmp_path / "main.c"), "-lm"], check=True, cwd=tmp_path, capture_output=True)
+        out = subprocess.run([str(tmp_path / "run")], input="\n".join(repr(float(x)) for x in v), text=True,
+                             capture_output=True, check=True).stdout
+        _close(np.array(out.split(), float), ref)

@@ -202,7 +202,7 @@ class MotionFit(Fit):
     """A friction model identified inside the mechanics (:func:`identify_motion`).
 
     Everything of :class:`jaxfric.Fit` (``predict`` gives the friction [N] for a
-    velocity record; ``params``; ``save``), plus the mechanics: ``mass`` [kg],
+    velocity record, offset included; ``params``; ``save``; ``to_numpy``), plus the mechanics: ``mass`` [kg],
     ``offset`` [N] (a constant force added to the friction, 0 unless fitted),
     ``v0`` correction [m/s], the velocity filter ``cutoff`` [Hz], and :meth:`simulate`.
     ``metrics`` holds position metrics per window (``"train"``, ``"valid"``: free run;
@@ -220,6 +220,10 @@ class MotionFit(Fit):
     @property
     def offset(self) -> float:
         return float(self.mechanics["offset"])
+
+    def predict(self, velocity, dt=None):
+        """Friction [N] for a velocity record, the fitted constant offset included."""
+        return super().predict(velocity, dt) + self.offset
 
     def friction_step(self):
         """The per-sample :class:`jaxfric.motion.FrictionStep` of this fit's model."""
