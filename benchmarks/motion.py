@@ -138,7 +138,7 @@ def run_emps(path, quick, key=0):
     ref_a = reference_fit(asym, asym.from_physical(Fc_pos=IDIM_ASYM["Fc+"], Fc_neg=IDIM_ASYM["Fc-"],
                                                    Fv_pos=IDIM_ASYM["Fv+"], Fv_neg=IDIM_ASYM["Fv-"]),
                           IDIM["M"], IDIM["offset"], data, n_train)
-    rows.append(("IDIM-LS asymmetric reference (published)", ref_a, 0.0))
+    rows.append(("IDIM-LS asymmetric (published Fc+-, Fv+-; offset of the symmetric fit)", ref_a, 0.0))
     fits = {}
     runs = [(name, model, None) for name, model in emps_candidates().items()]
     for name, model, horizon in runs:
