@@ -372,6 +372,21 @@ class Fit:
                 f"{type(self.model).__name__} extrapolates there",
                 ExtrapolationWarning, stacklevel=4)
 
+    # --------------------------------------------------------------- export
+    def to_numpy(self):
+        """A pure-NumPy per-sample step ``f, state = step(v, state)`` of this fit
+        (:func:`jaxfric.export.numpy_step`), for controllers outside JAX."""
+        from .export import numpy_step
+
+        return numpy_step(self)
+
+    def to_c_header(self, path=None, *, prefix: str = "jaxfric") -> str:
+        """C99 header with this fit's per-sample step and weights
+        (:func:`jaxfric.export.c_header`); written to ``path`` if given."""
+        from .export import c_header
+
+        return c_header(self, path, prefix=prefix)
+
     # --------------------------------------------------------------- report
     def to_dict(self, include_theta: bool = True) -> dict[str, Any]:
         """A JSON-able summary (plain Python values)."""

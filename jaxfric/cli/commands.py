@@ -305,3 +305,12 @@ def cmd_bench(args, argv) -> int:
 
 
 COMMANDS = {"demo": cmd_demo, "identify": cmd_identify, "predict": cmd_predict, "bench": cmd_bench}
+
+
+def _identify_motion(args, argv) -> int:
+    from .motion import cmd_identify_motion
+
+    return cmd_identify_motion(args, argv)
+
+
+COMMANDS["identify-motion"] = _identify_motion

@@ -296,6 +296,11 @@ def build_parser() -> Parser:
                    help="output CSV ('-' for standard output)")
     _common(r)
 
+    from .motion import add_parser as _add_motion
+
+    _add_motion(sub, common=_common, formatter=_Formatter, positive_float=positive_float,
+                positive_int=positive_int, fraction=fraction, seed=seed, model_list=model_list)
+
     b = sub.add_parser("bench", help="run a benchmark script (table1, friction)",
                        description="Run one of the benchmark scripts of benchmarks/.",
                        epilog=BENCH_EPILOG, formatter_class=_Formatter)

@@ -1,0 +1,149 @@
+"""``jaxfric identify-motion FILE``: friction from actuator force and position (docs/algorithms.md §13.2).
+
+Reads a CSV with a force column (or a drive voltage and ``--force-gain``) and a position
+column, identifies each ``--model`` inside the mechanics with
+:func:`jaxfric.identify_motion`, and writes a report folder: ``motion.md`` (position
+RMSE [mm] and FIT %, free run and k-step, per model), ``models/<model>.npz`` (load with
+:func:`jaxfric.motion.load_motion_fit`) and ``motion_free_run.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from .errors import KEPT, UserError
+
+EPILOG = """examples:
+  jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
+      --mass-range 50,200 --offset --model coulomb,lugre
+  jaxfric identify-motion rig.csv --force-col force --x-col x --time-col t --mass 120 --quick
+"""
+
+
+def _pair(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH, got {text!r}") from None
+    if not 0 < lo < hi:
+        raise argparse.ArgumentTypeError(f"need 0 < LOW < HIGH, got {text!r}")
+    return lo, hi
+
+
+def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction, seed, model_list) -> None:
+    """Register the ``identify-motion`` sub-command on ``sub`` (the CLI's subparsers)."""
+    p = sub.add_parser("identify-motion", help="identify friction inside the mechanics from force and position",
+                       description="Simulation-error identification: m dv/dt = F_act - F_friction - F_load, "
+                       "dx/dt = v; friction parameters (and optionally mass and offset) fitted to the "
+                       "measured position. No friction signal or acceleration needed.",
+                       epilog=EPILOG, formatter_class=formatter)
+    p.add_argument("file", metavar="FILE", help="CSV (or whitespace-separated) file")
+    g = p.add_argument_group("columns (header name or 0-based index)")
+    g.add_argument("--force-col", required=True, metavar="COL", help="actuator force [N] (or voltage, see --force-gain)")
+    g.add_argument("--force-gain", type=float, default=1.0, metavar="N/UNIT", help="force = gain * column")
+    g.add_argument("--x-col", required=True, metavar="COL", help="position [m]")
+    g.add_argument("--load-col", metavar="COL", help="external load opposing +x [N]")
+    g.add_argument("--time-col", metavar="COL", help="time stamps [s] (or give --dt)")
+    g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s]")
+    g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
+    g.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
+    m = p.add_argument_group("mechanics")
+    m.add_argument("--mass", type=positive_float, metavar="KG", help="known moving mass [kg]")
+    m.add_argument("--mass-range", type=_pair, metavar="LO,HI", help="identify the mass in [LO, HI] kg")
+    m.add_argument("--offset", action="store_true", help="identify a constant force offset")
+    m.add_argument("--horizon", type=positive_int, metavar="K",
+                   help="fit the K-step-ahead position error instead of the free run")
+    m.add_argument("--cutoff", type=positive_float, metavar="HZ", help="velocity low-pass [Hz] (default fs/10)")
+    f = p.add_argument_group("identification")
+    f.add_argument("--model", "--models", dest="models", type=model_list, default="coulomb,lugre",
+                   metavar="NAMES", help="comma-separated friction models")
+    f.add_argument("--neurons", type=positive_int, default=10, help="hidden neurons of an Elman network")
+    f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F")
+    f.add_argument("--seed", type=seed, default=0)
+    f.add_argument("--quick", action="store_true", help="tiny budget: a smoke test, not a real fit")
+    f.add_argument("--out", default="jaxfric-motion", metavar="DIR", help="report folder")
+    common(p)
+
+
+def _data(args):
+    from jaxfric.motion import MotionData
+
+    from .data import _time_column, read_table
+
+    table = read_table(args.file, delimiter=args.delimiter)
+    force = table.column(args.force_col, "--force-col") * args.force_gain
+    x = table.column(args.x_col, "--x-col")
+    load = table.column(args.load_col, "--load-col") if args.load_col is not None else None
+    t = _time_column(table, args)
+    dt = float(np.median(np.diff(t)))
+    try:
+        return MotionData.from_arrays(force, x, dt, load=load, cutoff=args.cutoff)
+    except ValueError as e:
+        raise UserError(f"{args.file}: {e}") from None
+
+
+def cmd_identify_motion(args, argv) -> int:
+    """Identify each model inside the mechanics and write the report folder."""
+    import jax.numpy as jnp
+
+    from jaxfric.identify import default_solver
+    from jaxfric.motion import identify_motion
+    from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
+    from jaxfric.report import atomic_write_text, save_figure
+
+    from .commands import _prepare_out, _say
+
+    if (args.mass is None) == (args.mass_range is None):
+        raise UserError("give exactly one of --mass (known) and --mass-range LO,HI (identified)")
+    say = _say(args)
+    data = _data(args)
+    out = _prepare_out(args.out)
+    (out / "models").mkdir(exist_ok=True)
+    mass = args.mass if args.mass is not None else args.mass_range
+    fits, lines = {}, []
+    for name in args.models:
+        from jaxfric import models as _models
+
+        opts = {"neurons": args.neurons} if name.startswith("elman") else {}
+        model = _models.get(name, **opts)
+        solver = (MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=5),
+                            nelder_mead=NelderMead(max_steps=50, max_evals=50))
+                  if args.quick else default_solver(model))
+        say(f"identifying {name} inside the mechanics ({data.n_samples} samples)")
+        try:
+            fit = identify_motion(model, data, key=args.seed, mass=mass, train=args.train_fraction,
+                                  solver=solver, horizon=args.horizon, fit_offset=args.offset,
+                                  dtype=jnp.float64 if args.x64 else None)
+        except ValueError as e:
+            raise UserError(str(e)) from None
+        fits[name] = fit
+        path = out / "models" / f"{name}.npz"
+        fit.save(path)
+        KEPT.add(path)
+        m = fit.metrics
+        lines.append(f"| {name} | {fit.mass:.4g} | {fit.offset:.4g} | {m['valid']['rmse_mm']:.4g} | "
+                     f"{m['valid']['fit_percent']:.2f} | {m['valid_kstep']['rmse_mm']:.4g} |")
+        print(fit.summary())
+    k = next(iter(fits.values())).metrics["horizon"]
+    md = ["# jaxfric identify-motion", "", f"Command: `jaxfric {' '.join(argv)}`", "",
+          "Validation: free run from the state estimated at the start of the held-back part; "
+          f"{k}-step-ahead from every measured state.", "",
+          f"| model | mass [kg] | offset [N] | valid RMSE [mm] | valid FIT % | valid {k}-step RMSE [mm] |",
+          "|---|---|---|---|---|---|", *lines, "", "![free run](motion_free_run.png)", ""]
+    KEPT.add(atomic_write_text(out / "motion.md", "\n".join(md)))
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    n_train = next(iter(fits.values())).n_train
+    t = np.arange(data.n_samples) * data.dt
+    ax.plot(t[n_train:], 1e3 * data.position[n_train:], "k", lw=2, label="measured")
+    for name, fit in fits.items():
+        ax.plot(t[n_train:], 1e3 * fit.simulate_from(data, n_train)["x"], lw=1, label=name)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position [mm]")
+    ax.legend()
+    KEPT.add(save_figure(fig, out / "motion_free_run.png"))
+    say(f"report written to {out}")
+    return 0

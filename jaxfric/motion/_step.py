@@ -1,0 +1,192 @@
+"""One sample of a friction model at a time: the per-step form of every rollout.
+
+``model.simulate(theta, velocity, dt)`` needs the whole velocity record in advance.
+Inside the mechanics (``docs/algorithms.md §13.2``) the velocity of the next sample
+depends on the friction of this one, so the friction has to advance one sample at a
+time. A :class:`FrictionStep` splits a model's recursion into
+
+    F_k     = output(theta, s_k, v_k)          friction [N] at sample k
+    s_{k+1} = update(theta, s_k, v_k)          zero-order hold of v_k over one sample
+    s_0     = init(theta, v_0)
+
+which reproduces ``model.simulate`` (and, with the §2.4 scalers, ``Fit.predict``)
+sample for sample; ``tests/test_motion.py`` checks this for every model. The state
+``s`` is a pytree of arrays (``()`` for static maps).
+
+:func:`friction_step` picks the implementation by the model's type (a
+``functools.singledispatch`` on the class, so nominal types, no attribute guessing):
+
+* LuGre, Dahl: the bristle state z and its exact zero-order-hold update (§8.2);
+* Elman, ElmanFull: the context vector (§2.2, §2.3), in the fit's scaled units;
+* any other model whose output ignores ``dt`` (``uses_dt = False``: the static maps
+  Coulomb, Stribeck and their variants) is memoryless: ``output`` is the model's own
+  ``simulate`` on one sample, so a new static form needs nothing here.
+
+A new dynamic model registers its own step with ``friction_step.register(cls)``.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ..models import (AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
+                      stribeck_curve)
+from ..models.lugre import _phi
+
+__all__ = ["FrictionStep", "StaticStep", "BristleStep", "ElmanStep", "ElmanFullStep",
+           "friction_step"]
+
+
+class FrictionStep(eqx.Module):
+    """Per-sample friction of one model (module docstring). Units: v in m/s, F in N,
+    ``dt`` in s. ``implicit_state``: whether the motion integrator may advance the
+    state with the *new* velocity (backward Euler in the state, needed for stiff
+    bristle springs, ``jaxfric.motion.simulate_motion``)."""
+
+    model: AbstractFrictionModel = eqx.field(static=True)
+
+    implicit_state = False
+
+    def init(self, theta, v0, dt) -> Any:
+        return ()
+
+    def output(self, theta, state, v, dt) -> Array:
+        raise NotImplementedError
+
+    def update(self, theta, state, v, dt) -> Any:
+        return state
+
+
+class StaticStep(FrictionStep):
+    """Memoryless map: ``F_k = model.simulate(theta, [v_k])[0]``, no state."""
+
+    def output(self, theta, state, v, dt):
+        return self.model.simulate(theta, jnp.reshape(v, (1,)), dt)[0]
+
+
+class BristleStep(FrictionStep):
+    """LuGre / Dahl bristle state z, §8.1-8.3:
+
+    ``a = sigma0 |v| / g(v)``, ``F = sigma0 z + sigma1 (v - a z) + sigma2 v``,
+    ``z' = z exp(-a h) + v h phi(a h)`` (exact under the hold), ``z_0 = sgn(v_0) g(v_0) / sigma0``.
+    """
+
+    implicit_state = True
+
+    def _params(self, theta, v):
+        p = self.model.to_physical(theta)
+        if isinstance(self.model, LuGre):
+            g = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], self.model.stribeck_exponent)
+            return p["sigma0"], p["sigma1"], p["sigma2"], g
+        zero = jnp.zeros_like(p["sigma0"])
+        return p["sigma0"], zero, p.get("sigma2", zero), p["Fc"]
+
+    def init(self, theta, v0, dt):
+        s0, _, _, g = self._params(theta, v0)
+        return jnp.sign(v0) * g / s0
+
+    def output(self, theta, z, v, dt):
+        s0, s1, s2, g = self._params(theta, v)
+        a = s0 * jnp.abs(v) / g
+        return s0 * z + s1 * (v - a * z) + s2 * v
+
+    def update(self, theta, z, v, dt):
+        s0, _, _, g = self._params(theta, v)
+        x = s0 * jnp.abs(v) / g * dt
+        return z * jnp.exp(-x) + v * dt * _phi(x)
+
+
+class _ScaledStep(FrictionStep):
+    """A network on §2.4-scaled data: velocity in, newtons out through the scalers."""
+
+    velocity_scaler: Scaler
+    friction_scaler: Scaler
+
+    def _u(self, v):
+        return self.velocity_scaler.scale(v)
+
+
+class ElmanStep(_ScaledStep):
+    """Diagonal-context Elman network, §2.2: ``h = tanh(w u + r c + b)``,
+    ``y = v.h (+ b_o)``, ``c' = alpha c + h``, ``c_0`` learned."""
+
+    def init(self, theta, v0, dt):
+        return self.model.to_physical(theta)["c0"]
+
+    def _hidden(self, theta, c, v):
+        p = self.model.to_physical(theta)
+        return p, jnp.tanh(p["w"] * self._u(v) + p["r"] * c + p["b"])
+
+    def output(self, theta, c, v, dt):
+        p, h = self._hidden(theta, c, v)
+        y = jnp.sum(p["v"] * h) + (p["b_o"] if self.model.output_bias else 0.0)
+        return self.friction_scaler.unscale(y)
+
+    def update(self, theta, c, v, dt):
+        p, h = self._hidden(theta, c, v)
+        return p["alpha"] * c + h
+
+
+class ElmanFullStep(_ScaledStep):
+    """Full-context Elman network, §2.3: ``h = tanh(w u + W_c c + b)``, ``y = v.h + b_o``, ``c' = h``."""
+
+    def init(self, theta, v0, dt):
+        p = self.model.to_physical(theta)
+        return p["c0"] if self.model.learn_c0 else jnp.zeros_like(p["w"])
+
+    def _hidden(self, theta, c, v):
+        p = self.model.to_physical(theta)
+        return p, jnp.tanh(p["w"] * self._u(v) + p["W_c"] @ c + p["b"])
+
+    def output(self, theta, c, v, dt):
+        p, h = self._hidden(theta, c, v)
+        y = jnp.sum(p["v"] * h) + (p["b_o"] if self.model.output_bias else 0.0)
+        return self.friction_scaler.unscale(y)
+
+    def update(self, theta, c, v, dt):
+        return self._hidden(theta, c, v)[1]
+
+
+@functools.singledispatch
+def friction_step(model: AbstractFrictionModel, scalers=(None, None)) -> FrictionStep:
+    """The :class:`FrictionStep` of ``model`` (module docstring). ``scalers`` =
+    ``(velocity, friction)`` :class:`Scaler` pair for models with ``needs_scaling``.
+
+    Raises ``ValueError`` for a model with internal state that has no registered step.
+    """
+    if not isinstance(model, AbstractFrictionModel):
+        raise ValueError(f"expected a jaxfric friction model, got {type(model).__name__}")
+    if model.uses_dt or model.needs_scaling:
+        raise ValueError(
+            f"{type(model).__name__} has internal state and no per-sample step: register one "
+            "with jaxfric.motion.friction_step.register")
+    return StaticStep(model)
+
+
+@friction_step.register(LuGre)
+@friction_step.register(Dahl)
+def _bristle(model, scalers=(None, None)):
+    return BristleStep(model)
+
+
+def _scalers(model, scalers):
+    sv, sf = scalers
+    if not (isinstance(sv, Scaler) and isinstance(sf, Scaler)):
+        raise ValueError(f"{type(model).__name__} works on scaled data: pass its "
+                         "(velocity, friction) Scaler pair")
+    return sv, sf
+
+
+@friction_step.register(Elman)
+def _elman(model, scalers=(None, None)):
+    return ElmanStep(model, *_scalers(model, scalers))
+
+
+@friction_step.register(ElmanFull)
+def _elman_full(model, scalers=(None, None)):
+    return ElmanFullStep(model, *_scalers(model, scalers))
