@@ -108,7 +108,7 @@ class Runner:
     """Runs identifications and turns each fit's stages into CSV rows."""
 
     def __init__(self, data, args):
-        from jaxfric.identify import GradientRefinement, identify, paper_solver
+        from jaxfric.identification import GradientRefinement, identify, paper_solver
 
         self.identify, self.paper_solver = identify, paper_solver
         self.GradientRefinement = GradientRefinement
@@ -235,7 +235,7 @@ TIMING_CONFIG = "default timing"
 
 def run_benchmark(args, data, out):
     """All identifications; returns (rows, figure files)."""
-    from jaxfric.identify import NAMED_MODEL_DEFAULTS, identify
+    from jaxfric.identification import NAMED_MODEL_DEFAULTS, identify
     from jaxfric.models import Elman, LuGre
 
     seeds = list(range(args.seeds))
@@ -320,7 +320,7 @@ class Rows:
 
 
 def write_markdown(out, rows, files, meta):
-    from jaxfric.identify import DEFAULT_GENERATIONS_BLACK_BOX, NAMED_MODEL_DEFAULTS
+    from jaxfric.identification import DEFAULT_GENERATIONS_BLACK_BOX, NAMED_MODEL_DEFAULTS
 
     R = Rows(rows)
     rb_default = NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]

@@ -79,9 +79,9 @@ from baselines import lugre_numpy_hoisted, lugre_numpy_per_step, lugre_python_lo
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 from jaxfric.fit import predict, rollout_model  # noqa: E402
-from jaxfric.identify import OutputErrorCost, as_record, default_solver, identify  # noqa: E402
-from jaxfric.identify._objective import cost_data  # noqa: E402
-from jaxfric.identify._timing import Stopwatch  # noqa: E402
+from jaxfric.identification import OutputErrorCost, as_record, default_solver, identify  # noqa: E402
+from jaxfric.identification._objective import cost_data  # noqa: E402
+from jaxfric.identification._timing import Stopwatch  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
 from jaxfric.optim.driver import _batching  # noqa: E402

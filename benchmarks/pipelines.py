@@ -25,7 +25,7 @@ last 20 % validation; the rig's own 1600/400), float32:
 
 EMPS also gets the IDIM-LS table (M, Fv, Fc symmetric and asymmetric) against the
 published values (``jaxfric.rig.emps``). Run time excludes compilation (JAX compile
-events, ``jaxfric.identify._timing.Stopwatch``); the first key of each pipeline also
+events, ``jaxfric.identification._timing.Stopwatch``); the first key of each pipeline also
 pays it and is reported apart.
 
 Writes ``pipelines_<record>.md`` and ``.csv`` into ``--out`` (default
@@ -125,12 +125,12 @@ def idim_rows(args):
 
 # ---------------------------------------------------------------- pipelines
 def run_identify(data, key, method, quick):
-    from jaxfric.identify import identify
+    from jaxfric.identification import identify
 
     kw = {}
     if quick:
         import jaxfric as jf
-        from jaxfric.identify import GradientRefinement
+        from jaxfric.identification import GradientRefinement
 
         kw = ({"solver": jf.MAPSO(lattice_size=8, num_generations=3),
                "refine": GradientRefinement(max_steps=10)} if method == "jaxfric" else
@@ -152,10 +152,10 @@ def run_de_nm(data, seed, quick):
 
     from jaxfric import models
     from jaxfric.fit import predict
-    from jaxfric.identify import _api
-    from jaxfric.identify._data import as_record
-    from jaxfric.identify._objective import OutputErrorCost, cost_data, fit_scalers
-    from jaxfric.identify._timing import Stopwatch
+    from jaxfric.identification import _api
+    from jaxfric.identification._data import as_record
+    from jaxfric.identification._objective import OutputErrorCost, cost_data, fit_scalers
+    from jaxfric.identification._timing import Stopwatch
     from jaxfric.metrics import friction_metrics
 
     rec = as_record(data)

@@ -80,7 +80,7 @@ def baseline(train, records: dict) -> tuple[np.ndarray, dict]:
 
 
 def check(title: str, train: dict, valid: dict, models=("coulomb", "lugre")) -> list[str]:
-    from jaxfric.identify import BoundWarning, identify
+    from jaxfric.identification import BoundWarning, identify
 
     lines = [f"### {title}", ""]
     (tname, trec), = train.items()

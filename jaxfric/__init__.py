@@ -14,8 +14,6 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 import importlib as _importlib
-import sys as _sys
-import types as _types
 
 # Names are imported on first use (PEP 562), so ``import jaxfric`` -- and with it
 # ``jaxfric --help`` -- does not pay for importing JAX (about 2 s) before it is needed.
@@ -27,7 +25,7 @@ _LAZY = {
     "load_motion_fit": ".motion",
     "compiler_options": "._xla",
     "Fit": ".fit", "load_fit": ".fit",
-    "GradientRefinement": ".identify", "identify": ".identify",
+    "GradientRefinement": ".identification", "identify": ".identification",
     "friction_metrics": ".metrics",
     "Coulomb": ".models", "Dahl": ".models", "Elman": ".models", "ElmanFull": ".models",
     "LuGre": ".models", "Stribeck": ".models",
@@ -47,29 +45,13 @@ def __getattr__(name: str):
         value = _importlib.import_module(f".{name}", __name__)
     else:
         value = getattr(_importlib.import_module(where, __name__), name)
-    if name != "identify":
-        globals()[name] = value
+    globals()[name] = value
     return value
 
 
 def __dir__():
     return sorted(set(globals()) | set(_LAZY))
 
-
-class _Package(_types.ModuleType):
-    """``jaxfric.identify`` is the function even after the ``jaxfric.identify`` subpackage
-    is imported (the import system then sets the package attribute to the subpackage)."""
-
-    @property
-    def identify(self):
-        return _importlib.import_module(".identify", __name__).identify
-
-    @identify.setter
-    def identify(self, value):  # the import system's assignment of the subpackage
-        pass
-
-
-_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "Coulomb",

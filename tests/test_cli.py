@@ -91,7 +91,7 @@ def python_fit(demo):
 
     import jaxfric as jf
     from jaxfric import rig
-    from jaxfric.identify import identify
+    from jaxfric.identification import identify
 
     csv = demo[0] / "friction_data.csv"
     data = rig.load_friction_pairs(csv, {"t": "t", "velocity": "velocity", "friction": "friction"})
@@ -338,7 +338,7 @@ def test_identify_with_valid_files_trains_on_the_whole_file_and_reports_each_rec
 
     import jaxfric as jf
     from jaxfric import rig
-    from jaxfric.identify import identify
+    from jaxfric.identification import identify
 
     def write(name, phase, n):
         t = np.arange(n) * 0.01

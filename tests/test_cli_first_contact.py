@@ -34,7 +34,7 @@ def test_lazy_package_keeps_public_names():
 
     for name in jf.__all__:
         assert getattr(jf, name) is not None, name
-    import jaxfric.identify  # noqa: F401 - the subpackage import must not shadow the function
+    import jaxfric.identification  # noqa: F401 - the subpackage import must not shadow the function
 
     assert callable(jf.identify) and jf.identify.__name__ == "identify"
     with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
@@ -97,19 +97,19 @@ def _args(*argv):
 
 def test_cli_solver_budgets_are_the_librarys():
     from jaxfric.cli.spec import FitSpec
-    from jaxfric.identify import default_solver
+    from jaxfric.identification import paper_solver
 
     for name in ("lugre", "elman"):
         spec = FitSpec.from_args(name, _args("--models", name, "--solver", "mapso"))
         model = spec.build_model()
         # LuGre with --solver mapso ran 300 generations while identify's default runs 200
-        assert spec.build_solver(model) == default_solver(model).mapso
+        assert spec.build_solver(model) == paper_solver(model).mapso
     spec = FitSpec.from_args("lugre", _args("--models", "lugre", "--solver", "nelder-mead"))
     model = spec.build_model()
-    assert spec.build_solver(model) == default_solver(model).nelder_mead
+    assert spec.build_solver(model) == paper_solver(model).nelder_mead
     spec = FitSpec.from_args("lugre", _args("--models", "lugre", "--generations", "7"))
     solver = spec.build_solver(spec.build_model())
-    base = default_solver(spec.build_model())
+    base = paper_solver(spec.build_model())
     assert solver.mapso.num_generations == 7
     assert solver.mapso.lattice_size == base.mapso.lattice_size
     assert solver.nelder_mead == base.nelder_mead

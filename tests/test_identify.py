@@ -18,9 +18,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxfric
-from jaxfric.identify import GradientRefinement, identify
-from jaxfric.identify import _api
-from jaxfric.identify._timing import Stopwatch
+from jaxfric.identification import GradientRefinement, identify
+from jaxfric.identification import _api
+from jaxfric.identification._timing import Stopwatch
 from jaxfric.models import Elman, LuGre
 from jaxfric.rig import FrictionData
 
@@ -331,7 +331,7 @@ def test_theta0_outside_the_box_is_rejected(no_optimiser):
 
 # ------------------------------------------------------------- refinement pieces
 def test_refinement_resolution():
-    from jaxfric.identify._refine import as_refinement
+    from jaxfric.identification._refine import as_refinement
 
     assert as_refinement(None, 6) is None and as_refinement(False, 180) is None
     assert as_refinement(True, 6).method == "lm"  # small physical model
@@ -348,7 +348,7 @@ def test_refinement_resolution():
 @settings(max_examples=60, deadline=None)
 @given(frac=st.floats(0.0, 1.0), lo=st.floats(-1e3, 1e3), width=st.floats(1e-3, 1e3))
 def test_sine_reparametrisation_round_trip_and_stays_in_box(frac, lo, width):
-    from jaxfric.identify._refine import from_box, to_box
+    from jaxfric.identification._refine import from_box, to_box
 
     with jax.enable_x64(True):
         lower, upper = jnp.asarray([lo]), jnp.asarray([lo + width])

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import jaxfric
-from jaxfric.identify import GradientRefinement, identify
-from jaxfric.identify import _api
-from jaxfric.identify._objective import CostData, OutputErrorCost, _plain_cost
+from jaxfric.identification import GradientRefinement, identify
+from jaxfric.identification import _api
+from jaxfric.identification._objective import CostData, OutputErrorCost, _plain_cost
 from jaxfric.models import Coulomb, Elman
 
 DT = 1.0 / 128.0

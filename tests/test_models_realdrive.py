@@ -348,7 +348,7 @@ def test_inputs_from_a_record_are_checked_by_the_model_that_needs_them():
                                                 p2=np.full(n, 1e5))
     np.testing.assert_array_equal(Cylinder().inputs_from(data), np.stack([np.full(n, 3e5), np.full(n, 1e5)]))
     assert Coulomb().inputs_from(data) is None
-    from jaxfric.identify import as_record
+    from jaxfric.identification import as_record
 
     bad = as_record((v, np.tanh(v / 1e-3), DT))
     with pytest.raises(ValueError, match="p1, p2"):

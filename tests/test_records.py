@@ -18,9 +18,9 @@ import pytest
 
 import jaxfric as jf
 from jaxfric.fit import ExtrapolationWarning, Fit, ResamplingWarning, load_fit
-from jaxfric.identify import BoundWarning, identify
-from jaxfric.identify._pooled import PooledOutputErrorCost, pooled_cost_data
-from jaxfric.identify._data import as_records
+from jaxfric.identification import BoundWarning, identify
+from jaxfric.identification._pooled import PooledOutputErrorCost, pooled_cost_data
+from jaxfric.identification._data import as_records
 from jaxfric.metrics import friction_metrics
 from jaxfric.models import Coulomb, Elman, LuGre, Scaler
 
@@ -162,7 +162,7 @@ def test_a_parameter_stopped_by_its_range_is_flagged():
 
 def test_model_options_as_keywords_reach_the_model(monkeypatch):
     """``identify("elman", ..., neurons=2)`` builds a 2-neuron network (seen by the optimiser)."""
-    from jaxfric.identify import _api
+    from jaxfric.identification import _api
 
     seen = {}
 
@@ -258,7 +258,7 @@ def test_extrapolation_beyond_the_training_velocity_is_warned():
 
 def test_unidentifiable_parameters_come_from_the_models_hook(monkeypatch):
     """The models' ``unidentifiable(velocity)`` answer lands in fit.diagnostics and the summary."""
-    from jaxfric.identify import _diagnostics
+    from jaxfric.identification import _diagnostics
 
     calls = []
 

@@ -35,8 +35,8 @@ from hypothesis import strategies as st
 import jaxfric as jf
 from jaxfric import report
 from jaxfric.fit import Fit, rollout_model
-from jaxfric.identify._data import as_record
-from jaxfric.identify._objective import OutputErrorCost, cost_data, fit_scalers
+from jaxfric.identification._data import as_record
+from jaxfric.identification._objective import OutputErrorCost, cost_data, fit_scalers
 from jaxfric.rig import FrictionData
 from test_optim_properties import Recorder, check_solution
 

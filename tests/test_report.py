@@ -144,7 +144,7 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
     """A real Fit with several records, a parameter on a bound and an ensemble: per-record
     table and figure, the bound mark with the range to widen, and the band figure."""
     from jaxfric.fit import Fit
-    from jaxfric.identify import on_bound
+    from jaxfric.identification import on_bound
     from jaxfric.models import Coulomb
 
     model = Coulomb(Fc_range=(10.0, 190.0))

@@ -168,7 +168,7 @@ def cmd_identify(args, argv) -> int:
 
     import argparse
 
-    from jaxfric.identify import as_records
+    from jaxfric.identification import as_records
 
     check_models(args.models)
     say = _say(args)

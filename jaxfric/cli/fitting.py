@@ -3,7 +3,7 @@
 Each model's fit is one :class:`jaxfric.cli.spec.FitSpec` (arguments -> specification ->
 ``jaxfric.identify``). Models are passed by *name* (with ``model_options``), so the command
 line gets the library's named-model defaults; without ``--generations`` / ``--nm-evals``
-the library's :func:`jaxfric.identify.default_solver` is used unchanged, and a budget the
+the library's :func:`jaxfric.identification.default_solver` is used unchanged, and a budget the
 user gives replaces only that field of it. ``--quick`` shrinks the budget to a smoke test
 (3 generations, 200 Nelder–Mead evaluations), which compiles exactly the same programs, so
 it also warms the compilation cache.
@@ -45,7 +45,7 @@ def describe_solver(solver, model, paper: bool = False) -> str:
     """One phrase for stage messages and reports (``solver=None``: ``identify``'s default
     for the method, the paper's with ``paper=True``)."""
     from jaxfric import MAPSO, MAPSONMDS, PSO
-    from jaxfric.identify import _api
+    from jaxfric.identification import _api
 
     method = "paper" if paper else "jaxfric"
     s = _api.default_solver(model, method) if solver is None else solver
@@ -94,7 +94,7 @@ def progress_bar(solver, model, desc: str):
     then left out rather than failing inside the compiled run's callback)."""
     import importlib.util
 
-    from jaxfric.identify import default_solver
+    from jaxfric.identification import default_solver
 
     if importlib.util.find_spec("tqdm") is None:
         return None

@@ -88,7 +88,7 @@ def cmd_identify_motion(args, argv) -> int:
     """Identify each model inside the mechanics and write the report folder."""
     import jax.numpy as jnp
 
-    from jaxfric.identify import default_solver
+    from jaxfric.identification import default_solver
     from jaxfric.motion import identify_motion
     from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
     from jaxfric.report import atomic_write_text, save_figure

@@ -1,7 +1,7 @@
 """One specification object per fit: command-line arguments -> :class:`FitSpec` -> the library.
 
 The command line holds no copy of a library default. Every field left ``None`` means
-"what the library chooses": the solver starts from :func:`jaxfric.identify.default_solver`
+"what the library chooses": the solver starts from :func:`jaxfric.identification.default_solver`
 for the model (lattice size, generations, Nelder–Mead budget) and a budget the user gave
 replaces only that field. ``repr(spec)`` is the report's "Reproduce" line: evaluating it
 with ``from jaxfric.cli.spec import FitSpec`` and calling :meth:`FitSpec.identify` repeats
@@ -73,14 +73,14 @@ class FitSpec:
 
     def build_model(self):
         """The model ``identify`` builds for this name (its named defaults + options)."""
-        from jaxfric.identify._api import resolve_model  # the model identify() builds from a name
+        from jaxfric.identification._api import resolve_model  # the model identify() builds from a name
 
         return resolve_model(self.model, self.model_options)
 
     def build_solver(self, model=None):
         """The optimiser; ``None`` when ``identify``'s default solver is used unchanged."""
         import jaxfric as jf
-        from jaxfric.identify import paper_solver
+        from jaxfric.identification import paper_solver
 
         if self.solver == "mapso-nmds" and self.default_budget:
             return None
@@ -106,7 +106,7 @@ class FitSpec:
 
         import jax
 
-        from jaxfric.identify import identify
+        from jaxfric.identification import identify
 
         kwargs = {"solver": self.build_solver(), "model_options": self.model_options,
                   "key": jax.random.key(self.seed) if key is None else key}

@@ -25,9 +25,9 @@ import numpy as np
 from jaxtyping import Array
 
 from ..fit import Fit, load_fit, model_config, model_name, rollout_model
-from ..identify._api import _as_key, _history, _key_record, _stages, default_solver, resolve_model
-from ..identify._objective import search_dtype
-from ..identify._timing import Stopwatch
+from ..identification._api import _as_key, _history, _key_record, _stages, default_solver, resolve_model
+from ..identification._objective import search_dtype
+from ..identification._timing import Stopwatch
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
@@ -363,7 +363,7 @@ def identify_motion(
         key: PRNG key or int seed. Same key, same fit.
         mass: known moving mass [kg], or a ``(low, high)`` range to identify it (log search).
         train: training fraction or sample count (default 0.8); the rest is validation.
-        solver: default :func:`jaxfric.identify.default_solver` (MAPSO-NMDS).
+        solver: default :func:`jaxfric.identification.default_solver` (MAPSO-NMDS).
         error: ``"position"`` (default), ``"velocity"`` (against the filtered velocity)
             or ``"both"``; each term is a mean squared error / variance (1 - R^2).
         horizon: ``None`` = free-run simulation error over the training window (default);

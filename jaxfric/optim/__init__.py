@@ -2,7 +2,7 @@
 one driver (``minimise``, ``minimise_many``) and the step protocol they share."""
 
 from ._base import RESULTS, AbstractIterativeSolver, AbstractSolver, History, Solution
-from .chain import AbstractChain, Chain, ChainState, chain
+from .chained import AbstractChain, Chain, ChainState, chain
 from .driver import minimise, minimise_many
 from .hybrid import MAPSONMDS, mapso_nmds
 from .mapso import MAPSO

@@ -310,7 +310,7 @@ class AbstractIterativeSolver(AbstractSolver):
         return None
 
     def num_stages(self) -> int:
-        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chain.chain`
+        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chained.chain`
         has 2). The driver runs each in a loop of its own, so batched runs never pay
         for one stage's step while in another."""
         return 1

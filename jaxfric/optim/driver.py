@@ -32,7 +32,7 @@ import numpy as np
 
 from .. import _xla
 from ._base import AbstractIterativeSolver, History, Solution, check_positive_int, count_dtype
-from .chain import AbstractChain
+from .chained import AbstractChain
 from .optx_adapter import OptxMinimiser, as_protocol
 from .problem import _as_float_leaves, _check_output, _Flat, prepare_bounds
 from .progress import ProgressHook, TqdmProgress, register

@@ -1,5 +1,5 @@
 """MAPSO–NMDS (docs/algorithms.md §5.1): MAPSO's global search, then Nelder–Mead from
-gBest, the paper's instance of :func:`~jaxfric.optim.chain.chain`.
+gBest, the paper's instance of :func:`~jaxfric.optim.chained.chain`.
 
 ``θ_MAPSO = MAPSO(J, bounds, G)`` and ``θ* = NM(J, start=θ_MAPSO)``. Optionally the
 ``num_starts`` best agents (by personal best) seed Nelder–Mead runs and the best
@@ -8,7 +8,7 @@ refined point wins.
 
 from __future__ import annotations
 
-from .chain import AbstractChain
+from .chained import AbstractChain
 from .mapso import MAPSO
 from .nelder_mead import NelderMead
 

@@ -1,6 +1,6 @@
 """Friction identification: model + data + optimiser → :class:`jaxfric.Fit` (ALGORITHMS.md §11).
 
-``from jaxfric.identify import identify`` (re-exported as ``jaxfric.identify``).
+``from jaxfric.identification import identify`` (re-exported as ``jaxfric.identify``).
 """
 
 from ._api import (
