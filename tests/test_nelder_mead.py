@@ -83,10 +83,12 @@ def test_first_simplex_is_full_rank_and_inside_bounds():
 
 def test_adaptive_coefficients_follow_gao_han_and_default_switch():
     nm = jf.NelderMead()
-    assert nm.coefficients(5) == (1.0, 2.0, 0.5, 0.5)
-    assert nm.coefficients(9) == (1.0, 2.0, 0.5, 0.5)
-    rho, chi, gamma, sigma = nm.coefficients(30)  # default adaptive from n = 10
-    assert (rho, chi, gamma, sigma) == pytest.approx((1.0, 1 + 2 / 30, 0.75 - 1 / 60, 1 - 1 / 30))
+    assert nm.coefficients(1) == (1.0, 2.0, 0.5, 0.5)  # Gao-Han's sigma would be 0 at n = 1
+    assert nm.coefficients(2) == pytest.approx((1.0, 2.0, 0.5, 0.5))  # the two sets agree at n = 2
+    for n in (5, 9, 30):  # default adaptive from n = 2 (benchmarks/results/nm_vs_scipy.md)
+        rho, chi, gamma, sigma = nm.coefficients(n)
+        assert (rho, chi, gamma, sigma) == pytest.approx((1.0, 1 + 2 / n, 0.75 - 1 / (2 * n), 1 - 1 / n))
+    assert jf.NelderMead(adaptive=False).coefficients(5) == (1.0, 2.0, 0.5, 0.5)
     assert jf.NelderMead(adaptive=False).coefficients(30) == (1.0, 2.0, 0.5, 0.5)
 
 
