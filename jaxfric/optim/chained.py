@@ -42,7 +42,13 @@ class ChainState(eqx.Module):
     first: Any
     second: Any
     second_done: Any
-    key: Any
+    key: Any  # the local stage's key as raw words (a Solution holds plain arrays only)
+    key_impl: Any = eqx.field(static=True, default=None)
+
+    def local_key(self):
+        if self.key_impl is None:
+            return self.key
+        return jax.random.wrap_key_data(self.key, impl=self.key_impl)
 
 
 def _index(tree, i):
@@ -112,8 +118,8 @@ class AbstractChain(AbstractIterativeSolver):
 
         def one(x0):
             if isinstance(local, OptxMinimiser):
-                return local.init(fn, lower, upper, args, state.key, x0, options=opts)
-            return local.init(fn, lower, upper, args, state.key, x0)
+                return local.init(fn, lower, upper, args, state.local_key(), x0, options=opts)
+            return local.init(fn, lower, upper, args, state.local_key(), x0)
 
         starts = self._starts(g)
         if self.num_starts == 1:
@@ -122,18 +128,21 @@ class AbstractChain(AbstractIterativeSolver):
             # one after another, as the runs themselves go (lax.map, not vmap)
             second = jax.lax.map(one, starts)
         done = jax.vmap(lambda s: self._local.terminate(fn, lower, upper, args, s)[0])(second)
-        return ChainState(jnp.array(1, jnp.int32), g, second, done, state.key)
+        return ChainState(jnp.array(1, jnp.int32), g, second, done, state.key, state.key_impl)
 
     # ------------------------------------------------------------- step protocol
     def init(self, fn, lower, upper, args, key, x0=None):
         k_global, k_local = jax.random.split(key)
         g = self._global.init(fn, lower, upper, args, k_global, x0)
+        typed = jnp.issubdtype(k_local.dtype, jax.dtypes.prng_key)
+        impl = str(jax.random.key_impl(k_local)) if typed else None
+        raw = jax.random.key_data(k_local)
         local_shape = jax.eval_shape(
             lambda: self._switch(fn, lower, upper, args,
-                                 ChainState(jnp.array(0, jnp.int32), g, None, None, k_local)))
+                                 ChainState(jnp.array(0, jnp.int32), g, None, None, raw, impl)))
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
                                        (local_shape.second, local_shape.second_done))
-        state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], k_local)
+        state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], raw, impl)
         done, _ = self._global.terminate(fn, lower, upper, args, g)
         return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
                             lambda s: s, state)
@@ -152,13 +161,18 @@ class AbstractChain(AbstractIterativeSolver):
             return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
                                 lambda s: s, state)
         local = self._local
-        i = jnp.argmin(state.second_done)  # the first run not yet finished
+        i = self._current(state)
         s_i = local.step(fn, lower, upper, args, _index(state.second, i))
         done_i, _ = local.terminate(fn, lower, upper, args, s_i)
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
             (_put(state.second, i, s_i), state.second_done.at[i].set(done_i)),
         )
+
+    def _current(self, state):
+        """The local run being stepped: the first not yet finished (a static 0 for one
+        start, so XLA updates its state in place)."""
+        return 0 if self.num_starts == 1 else jnp.argmin(state.second_done)
 
     def terminate(self, fn, lower, upper, args, state):
         done = (state.stage == 1) & jnp.all(state.second_done)
@@ -217,7 +231,7 @@ class AbstractChain(AbstractIterativeSolver):
 
     def progress(self, state):
         _, g_step = self._global.progress(state.first)
-        i = jnp.argmin(state.second_done)
+        i = self._current(state)
         _, l_step = self._local.progress(_index(state.second, i))
         # the step that switched stages is the global stage's last generation
         local = (state.stage == 1) & ((l_step > 0) | jnp.all(state.second_done))

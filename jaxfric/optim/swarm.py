@@ -78,14 +78,17 @@ def update_bests(state: SwarmState, x, f) -> SwarmState:
 
 def first_population(key, num, lower, upper, vmax, x0=None):
     """Positions ~ U(box), velocities ~ U(±Vmax); the rows of ``x0`` (one start, or a
-    ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``."""
+    ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``,
+    ``key`` as raw words (``jax.random.key_data``)."""
     kx, kv, key = jax.random.split(key, 3)
     x = uniform_in_box(kx, (num, lower.shape[0]), lower, upper)
     if x0 is not None:
         x0 = jnp.atleast_2d(jnp.clip(x0, lower, upper))
         x = x.at[: x0.shape[0]].set(x0)
     v = uniform_in_box(kv, x.shape, -vmax, vmax)
-    return x, v, key
+    # the state keeps the key's raw words (all counter_seed reads), so a Solution holds
+    # plain arrays only
+    return x, v, jax.random.key_data(key)
 
 
 def swarm_from(x, v, f, key) -> SwarmState:
