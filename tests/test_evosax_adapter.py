@@ -164,6 +164,7 @@ def test_missing_evosax_in_process(monkeypatch):
 def test_identify_accepts_an_evosax_chain():
     data = jf.rig.synthetic_friction_data(key=jax.random.key(0))
     solver = jf.cmaes_nm(num_generations=30, nm_max_steps=100)
-    fit = jf.identify("lugre", data, solver=solver, key=0)
+    fit = jf.identify("coulomb", data, solver=solver, key=0)
     assert np.isfinite(fit.metrics["cost"])
+    assert fit.stages[0]["stage"] == "evosax"
     assert fit.stages[0]["num_evals"] == solver.global_solver.evaluations(len(fit.theta))
