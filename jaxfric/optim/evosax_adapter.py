@@ -26,7 +26,9 @@ uniform random population (row 0 = ``y0`` when given), all evaluated.
 
 **Counts.** Evaluations of a run are exact: ``1 + P·G`` (distribution-based) or
 ``P·(G + 1)`` (population-based) for population size ``P`` and ``G`` generations
-(:meth:`Evosax.evaluations`). NaN and inf fitness become ``+inf`` before the strategy
+(:meth:`Evosax.evaluations`), fewer when the strategy's own state turns non-finite
+(CMA-ES's step size underflows some thousand generations after it has converged): the
+run then ends, keeping the last finite state and the best point (no restarts yet). NaN and inf fitness become ``+inf`` before the strategy
 sees them, so they rank last and never become the best.
 
 **Keys.** Generation ``i`` uses ``fold_in(key, i)`` (split in two for ``ask`` and
@@ -105,6 +107,12 @@ def resolve_strategy(strategy) -> type:
     return by_norm[key]
 
 
+def _all_finite(tree):
+    leaves = [jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(tree)
+              if jnp.issubdtype(jnp.result_type(a), jnp.inexact)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
+
+
 @functools.lru_cache(maxsize=64)
 def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
     """One evosax strategy object per configuration: its ``init/ask/tell`` are jitted
@@ -118,7 +126,8 @@ def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
 
 class EvosaxState(eqx.Module):
     """The strategy's own state, the best projected point and its value, the exact
-    evaluation count, generations done and the run's key."""
+    evaluation count, generations done, the run's key, and whether the strategy's
+    state broke down (turned non-finite: the run then ends, see :class:`Evosax`)."""
 
     inner: Any
     x_best: Any
@@ -126,6 +135,7 @@ class EvosaxState(eqx.Module):
     num_evals: Any
     generation: Any
     key: Any
+    broken: Any
 
 
 class Evosax(AbstractIterativeSolver):
@@ -163,9 +173,11 @@ class Evosax(AbstractIterativeSolver):
         self.params = tuple(sorted((params or {}).items()))
         self.strategy_kwargs = tuple(sorted(strategy_kwargs.items()))
 
-    def __repr__(self):
+    def __repr__(self):  # the constructor call (Fit.settings records it)
+        extra = "".join(f", {k}={v!r}" for k, v in self.strategy_kwargs)
+        params = f", params={dict(self.params)!r}" if self.params else ""
         return (f"Evosax({self.strategy.__name__!r}, population_size={self.population_size}, "
-                f"num_generations={self.num_generations})")
+                f"num_generations={self.num_generations}, std_init={self.std_init}{params}{extra})")
 
     # ------------------------------------------------------------------ configuration
     @property
@@ -244,7 +256,7 @@ class Evosax(AbstractIterativeSolver):
             i = jnp.argmin(F)
             x, f, evals = X[i], F[i], P
         return EvosaxState(inner, x, f, jnp.array(evals, count_dtype()),
-                           jnp.array(0, jnp.int32), key)
+                           jnp.array(0, jnp.int32), key, jnp.array(False))
 
     def step(self, fn, lower, upper, args, state: EvosaxState) -> EvosaxState:
         es = self._es(lower)
@@ -258,6 +270,11 @@ class Evosax(AbstractIterativeSolver):
         # keep the carried state's dtypes (evosax's constants follow JAX's default float)
         inner = jax.tree_util.tree_map(lambda new, old: jnp.asarray(new, jnp.result_type(old)),
                                        inner, state.inner)
+        # After convergence CMA-ES's step size underflows to 0 and its state to NaN:
+        # every later sample would be NaN, so the run ends with the last finite state.
+        broken = ~_all_finite(inner)
+        inner = jax.tree_util.tree_map(lambda new, old: jnp.where(broken, old, new),
+                                       inner, state.inner)
         i = jnp.argmin(F)
         better = F[i] < state.f_best
         return EvosaxState(
@@ -267,10 +284,12 @@ class Evosax(AbstractIterativeSolver):
             state.num_evals + es.population_size,
             state.generation + 1,
             state.key,
+            broken,
         )
 
     def terminate(self, fn, lower, upper, args, state):
-        return state.generation >= self.num_generations, result_from_f(state.f_best)
+        done = (state.generation >= self.num_generations) | state.broken
+        return done, result_from_f(state.f_best)
 
     def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
         return Solution(
