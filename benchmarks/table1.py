@@ -47,6 +47,11 @@ import numpy as np  # noqa: E402
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 
+# the evosax rows (issue 16 item 3); this folder is not on sys.path when the CLI
+# (`jaxfric bench table1`) loads the script by path
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import table1_rows  # noqa: E402
+
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
 
@@ -173,6 +178,8 @@ def main(argv=None):
             pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
             sol, c, r = timed_batch(name, pso, dim, keys)
             results.append(("PSO (equal evaluations)", sol, c, r))
+            if table1_rows.have_evosax():  # issue 16 item 3: CMA-ES, CMA-ES→NM at this budget
+                results += table1_rows.evosax_runs(name, dim, keys, budget, timed_batch)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
                 rows.append(row)

@@ -32,6 +32,7 @@ _LAZY = {
     "MAPSO": ".optim", "MAPSONMDS": ".optim", "PSO": ".optim", "RESULTS": ".optim",
     "History": ".optim", "NelderMead": ".optim", "Solution": ".optim", "mapso_nmds": ".optim",
     "minimise": ".optim", "minimise_many": ".optim", "chain": ".optim",
+    "Evosax": ".optim", "cmaes_nm": ".optim",
     "FrictionData": ".rig",
 }
 
@@ -57,6 +58,7 @@ __all__ = [
     "Coulomb",
     "Dahl",
     "Elman",
+    "Evosax",
     "ElmanFull",
     "Fit",
     "GradientRefinement",
@@ -74,6 +76,7 @@ __all__ = [
     "Stribeck",
     "chain",
     "compensation",
+    "cmaes_nm",
     "compiler_options",
     "export",
     "friction_metrics",

@@ -237,8 +237,10 @@ def _stages(sol, solver) -> list[dict]:
              for k, v in sol.stats.items()}
     if "f_global" in stats:
         n_global = stats["num_evals_global"]
+        # the chain's own global stage (MAPSO, PSO, Evosax, ...), not always MAPSO
+        g_name = type(solver.global_solver).__name__.lower()
         return [
-            {"stage": "mapso", "J": stats["f_global"], "num_evals": n_global},
+            {"stage": g_name, "J": stats["f_global"], "num_evals": n_global},
             {"stage": "nelder_mead", "J": float(sol.f), "num_evals": stats["num_evals"] - n_global},
         ]
     return [{"stage": type(solver).__name__.lower(), "J": float(sol.f),

@@ -4,6 +4,7 @@ one driver (``minimise``, ``minimise_many``) and the step protocol they share.""
 from ._base import RESULTS, AbstractIterativeSolver, AbstractSolver, History, Solution
 from .chained import AbstractChain, Chain, ChainState, chain
 from .driver import minimise, minimise_many
+from .evosax_adapter import Evosax, EvosaxState, cmaes_nm
 from .hybrid import MAPSONMDS, mapso_nmds
 from .mapso import MAPSO
 from .nelder_mead import NelderMead, NelderMeadState
@@ -20,6 +21,8 @@ __all__ = [
     "AbstractSwarm",
     "AskTellState",
     "Chain",
+    "Evosax",
+    "EvosaxState",
     "ChainState",
     "History",
     "Solution",
@@ -36,6 +39,7 @@ __all__ = [
     "TqdmProgress",
     "SwarmState",
     "chain",
+    "cmaes_nm",
     "minimise",
     "minimise_many",
 ]

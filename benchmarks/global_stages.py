@@ -1,0 +1,196 @@
+"""Global stages compared on the main job (issue 16 item 4): MAPSO vs CMA-ES vs PSO,
+each followed by the same Nelder–Mead stage, at equal evaluation budgets.
+
+Models: the Elman network (ENN, N = 30 neurons, 180 parameters, |r| ≤ 1) and LuGre
+(6 parameters), identified with :func:`jaxfric.identify` (``solver=chain(global, NM)``,
+no gradient stage) on
+
+* ``rig``: the simulated hydraulic rig, ``jaxfric.rig.synthetic_friction_data``
+  (2000 samples at 128 Hz, 1600 training / 400 validation);
+* ``emps``: the EMPS ball-screw axis (``DATA_EMPS.mat``, when found; see its
+  SOURCE.md), friction from the benchmark's force-balance recipe: 4th-order
+  Butterworth at 100 Hz on ``qm`` run forward-backward, central differences twice,
+  ``friction = gtau·vir − M·a`` with the published M = 95.1089 kg, 50 samples dropped
+  at each end, then every ``--emps-decimate``-th sample (default 10: 100 Hz, about
+  2480 samples, so one rollout costs about what the rig's does); last 20 % validation.
+
+Equal budgets: MAPSO runs ``--generations`` generations (lattice 8×8 for the ENN, 5×5
+for LuGre, as :func:`jaxfric.identify.default_solver`); PSO (same number of
+particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`, population
+4 + ⌊3 ln D⌋) get generations so that their evaluations do not exceed MAPSO's. The
+same ``NelderMead(max_evals=--nm-evals)`` follows each. Per key: validation and
+training MSE %, the global stage's J, evaluations, run time; the first key's call
+includes compilation (reported apart).
+
+    python benchmarks/global_stages.py                       # both data sets, 5 keys
+    python benchmarks/global_stages.py --data rig --models lugre --keys 2
+
+Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import platform
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import jax
+import numpy as np
+
+try:
+    import jaxfric as jf
+except ImportError:  # a source checkout without installing
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import jaxfric as jf
+from jaxfric.identify._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
+
+EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
+
+
+def emps_path() -> Path:
+    env = os.environ.get("JAXFRIC_EMPS")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
+
+
+def emps_record(path: Path, decimate: int = 10, drop: int = 50):
+    """Velocity, force-balance friction and dt of EMPS (SOURCE.md's recipe)."""
+    import scipy.io
+    import scipy.signal
+
+    m = scipy.io.loadmat(path)
+    t, qm, vir = (np.ravel(m[k]).astype(np.float64) for k in ("t", "qm", "vir"))
+    gtau = float(np.ravel(m["gtau"])[0])
+    dt = float(np.median(np.diff(t)))
+    b, a = scipy.signal.butter(4, 100.0, fs=1.0 / dt)
+    q = scipy.signal.filtfilt(b, a, qm)
+    v = np.gradient(q, dt)
+    acc = np.gradient(v, dt)
+    friction = gtau * vir - EMPS_MASS * acc
+    sl = slice(drop, len(t) - drop, decimate)
+    return v[sl], friction[sl], dt * decimate
+
+
+def datasets(names):
+    out = {}
+    if "rig" in names:
+        out["rig"] = jf.rig.synthetic_friction_data(jax.random.key(0))
+    if "emps" in names:
+        p = emps_path()
+        if p.exists():
+            v, f, dt = emps_record(p)
+            out["emps"] = jf.FrictionData.from_arrays(v, f, dt, train_fraction=0.8)
+        else:
+            print(f"EMPS data not found at {p}: skipped (set JAXFRIC_EMPS)", flush=True)
+    return out
+
+
+def solvers(model_name: str, n: int, generations: int, nm_evals: int):
+    """The three chains at equal global budgets (MAPSO's evaluation count)."""
+    lattice = 8 if n > LARGE_MODEL_PARAMS else 5
+    mapso = jf.MAPSO(lattice_size=lattice, num_generations=generations)
+    budget = mapso.evaluations()
+    pso = jf.PSO(num_particles=lattice**2, num_generations=max(1, budget // lattice**2 - 1))
+    cma = jf.Evosax("CMA_ES", num_generations=1)
+    cma = jf.Evosax("CMA_ES", num_generations=max(1, (budget - 1) // cma.population(n)))
+    nm = jf.NelderMead(max_steps=200 * n, max_evals=nm_evals)
+    return budget, {"MAPSO": jf.chain(mapso, nm), "CMA-ES": jf.chain(cma, nm),
+                    "PSO": jf.chain(pso, nm)}
+
+
+def run(data_name, data, model_name, keys, generations, nm_evals):
+    """Yields one row per (global stage, key)."""
+    model = jf.models.get(model_name, **NAMED_MODEL_DEFAULTS.get(model_name, {}))
+    budget, chains = solvers(model_name, model.num_params, generations, nm_evals)
+    for label, solver in chains.items():
+        for i, k in enumerate(keys):
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                fit = jf.identify(model_name, data, solver=solver, key=int(k))
+            wall = time.perf_counter() - t0
+            valid = (fit.metrics.get("valid") or {}).get("mse_percent", float("nan"))
+            train = (fit.metrics.get("train") or {}).get("mse_percent", float("nan"))
+            row = {
+                "data": data_name, "model": model_name, "global": label, "key": int(k),
+                "budget_global": budget, "num_evals_global": fit.stages[0]["num_evals"],
+                "num_evals": sum(s.get("num_evals", 0) for s in fit.stages),
+                "J_global": fit.stages[0]["J"], "J": fit.metrics["cost"],
+                "train_mse_pct": train, "valid_mse_pct": valid,
+                "compile_s": fit.timings.get("compile_s", float("nan")),
+                "run_s": fit.timings.get("run_s", float("nan")), "wall_s": wall,
+            }
+            print(f"{data_name:5s} {model_name:6s} {label:7s} key={k} J_glob={row['J_global']:.4g} "
+                  f"J={row['J']:.4g} train={train:.3g}% valid={valid:.3g}% "
+                  f"evals={row['num_evals']} run={row['run_s']:.1f}s wall={wall:.1f}s", flush=True)
+            yield row
+
+
+def write(out: Path, rows, a):
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "global_stages.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    lines = [
+        "# Global stages on the main job: MAPSO vs CMA-ES vs PSO, then the same Nelder–Mead",
+        "",
+        f"`python benchmarks/global_stages.py --data {a.data} --models {a.models} --keys {a.keys} "
+        f"--generations {a.generations} --nm-evals {a.nm_evals}`. MAPSO G = {a.generations} "
+        "(8×8 for the ENN, 5×5 for LuGre); PSO (same particle count) and CMA-ES (evosax, "
+        "population 4 + ⌊3 ln D⌋, box-scaled σ₀ = 0.3) get at most MAPSO's evaluations; "
+        f"then NelderMead(max_evals={a.nm_evals}); no gradient stage. Keys 0..{a.keys - 1}. "
+        "Median [min – max] over keys. Run s: optimiser run without compilation "
+        "(identify's timing).",
+        "",
+        f"Machine: {platform.machine()}, {os.cpu_count()} CPU(s) shared with other jobs "
+        f"(timings noisy), jax {jax.__version__}, jaxfric {jf.__version__}.",
+        "",
+        "| data | model | global stage | global evals | valid MSE % | train MSE % | J after global | run s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["data"], r["model"], r["global"]), []).append(r)
+
+    def mm(vals, fmt):
+        v = np.asarray(vals, float)
+        return f"{fmt(np.median(v))} [{fmt(v.min())} – {fmt(v.max())}]"
+
+    g3 = lambda x: f"{x:.3g}"  # noqa: E731
+    for (d, m, g), rs in groups.items():
+        lines.append(
+            f"| {d} | {m} | {g} | {rs[0]['num_evals_global']} | "
+            f"{mm([r['valid_mse_pct'] for r in rs], g3)} | {mm([r['train_mse_pct'] for r in rs], g3)} | "
+            f"{mm([r['J_global'] for r in rs], g3)} | {np.median([r['run_s'] for r in rs]):.1f} |")
+    (out / "global_stages.md").write_text("\n".join(lines) + "\n")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", default="rig,emps")
+    p.add_argument("--models", default="lugre,elman")
+    p.add_argument("--keys", type=int, default=5)
+    p.add_argument("--generations", type=int, default=100, help="MAPSO generations")
+    p.add_argument("--nm-evals", type=int, default=2000)
+    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    a = p.parse_args(argv)
+    rows = []
+    for dname, data in datasets(a.data.split(",")).items():
+        for model_name in a.models.split(","):
+            for row in run(dname, data, model_name, range(a.keys), a.generations, a.nm_evals):
+                rows.append(row)
+                write(Path(a.out), rows, a)  # partial results survive an interruption
+    print(f"wrote {Path(a.out) / 'global_stages.md'}")
+
+
+if __name__ == "__main__":
+    main()

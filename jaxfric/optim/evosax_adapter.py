@@ -1,0 +1,329 @@
+"""Any evosax (≥ 0.3) evolution strategy as a jaxfric solver (issue 16 item 2).
+
+:class:`Evosax` runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
+(``evosax.algorithms.algorithms``) — through jaxfric's step protocol
+(:class:`~jaxfric.optim.AbstractIterativeSolver`), so :func:`jaxfric.minimise` gives it
+what it gives every solver: bounds, history, progress, checkpoints, warm starts and
+``minimise_many``'s batched seeds; it is also a valid global stage of
+:func:`~jaxfric.optim.chain` (``cmaes_nm()`` = ``chain(Evosax("CMA_ES"), NelderMead())``)
+and a ``solver=`` of :func:`jaxfric.identify`.
+
+**Bounds** (one rule for every strategy). The strategy searches the unit box: a point
+``u ∈ [0, 1]^D`` stands for ``x = lower + u ⊙ (upper − lower)``, so parameters of very
+different scales get the same initial spread (docs/algorithms.md §5.1's box ``Ω``).
+Every candidate the strategy asks for is *projected* onto the box, ``u ← clip(u, 0, 1)``
+(what jaxfric's PSO does with its particles), the projected point is evaluated, and the
+projected point is what the strategy is told (repair, not penalty). So every evaluated
+point, every member of a population-based strategy and the reported best lie in the
+bounds.
+
+**Start.** Distribution-based strategies (CMA-ES, SNES, …) start with their mean at a
+uniform random point of the box (``y0`` when given) and, where the strategy has a
+``std_init`` parameter, ``std_init = 0.3`` box widths (Hansen's advice for a box
+search: ``σ₀ ≈ 0.3·(upper − lower)``); the mean is evaluated once so the run's best is
+a real point from the start. Population-based strategies (DE, PSO, GAs) start from a
+uniform random population (row 0 = ``y0`` when given), all evaluated.
+
+**Counts.** Evaluations of a run are exact: ``1 + P·G`` (distribution-based) or
+``P·(G + 1)`` (population-based) for population size ``P`` and ``G`` generations
+(:meth:`Evosax.evaluations`), fewer when the strategy's own state turns non-finite
+(CMA-ES's step size underflows some thousand generations after it has converged): the
+run then ends, keeping the last finite state and the best point (no restarts yet). NaN and inf fitness become ``+inf`` before the strategy
+sees them, so they rank last and never become the best.
+
+**Keys.** Generation ``i`` uses ``fold_in(key, i)`` (split in two for ``ask`` and
+``tell``), so the same key gives the same run, chunked (checkpoints) or not.
+
+evosax is an optional dependency: ``pip install -e ".[evosax]"``. Without it,
+constructing :class:`Evosax` raises ``ImportError`` naming that extra.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._base import (
+    AbstractIterativeSolver,
+    History,
+    Solution,
+    batch_objective,
+    check_positive_int,
+    check_range,
+    count_dtype,
+    result_from_f,
+    scalar_objective,
+)
+from .chain import Chain
+from .nelder_mead import NelderMead
+
+INSTALL_HINT = 'pip install -e ".[evosax]"'
+
+#: Short names accepted besides evosax's own (compared case- and separator-blind).
+ALIASES = {"de": "DifferentialEvolution", "cmaes": "CMA_ES", "ga": "SimpleGA"}
+
+
+def _evosax():
+    """``(algorithms dict, distribution-based base class)`` or a clear ImportError."""
+    try:
+        from evosax.algorithms import algorithms
+        from evosax.algorithms.distribution_based.base import DistributionBasedAlgorithm
+    except ImportError as err:
+        raise ImportError(
+            f"jaxfric.Evosax needs the optional package evosax (>= 0.3): {INSTALL_HINT} "
+            f"(or pip install evosax). Import failed with: {err}"
+        ) from err
+    return algorithms, DistributionBasedAlgorithm
+
+
+def _norm(name: str) -> str:
+    return name.lower().replace("_", "").replace("-", "").replace(" ", "")
+
+
+def resolve_strategy(strategy) -> type:
+    """The evosax strategy class for a name (``"CMA_ES"``, ``"cma-es"``, ``"DE"``,
+    ``"SNES"``, ``"PSO"``, …) or a class; ``ValueError`` listing the names otherwise."""
+    algorithms, _ = _evosax()
+    if isinstance(strategy, type):
+        return strategy
+    if not isinstance(strategy, str):
+        raise ValueError(
+            "strategy must be an evosax strategy name (e.g. 'CMA_ES', 'DE', 'SNES', 'PSO') "
+            f"or class, got {type(strategy).__name__}"
+        )
+    by_norm = {_norm(k): v for k, v in algorithms.items()}
+    key = _norm(strategy)
+    key = _norm(ALIASES.get(key, key))
+    if key not in by_norm:
+        raise ValueError(
+            f"unknown evosax strategy {strategy!r}; choose one of {sorted(algorithms)} "
+            f"(aliases: {sorted(ALIASES)})"
+        )
+    return by_norm[key]
+
+
+def _all_finite(tree):
+    leaves = [jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(tree)
+              if jnp.issubdtype(jnp.result_type(a), jnp.inexact)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
+
+
+@functools.lru_cache(maxsize=64)
+def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
+    """One evosax strategy object per configuration: its ``init/ask/tell`` are jitted
+    with the object as a static argument, so reusing it reuses their compilations."""
+    # Built eagerly even when first asked for inside a trace: the cached object must
+    # not hold tracers of that trace.
+    with jax.ensure_compile_time_eval():
+        return cls(population_size=population_size,
+                   solution=jnp.zeros((num_dims,), dtype), **dict(kwargs))
+
+
+class EvosaxState(eqx.Module):
+    """The strategy's own state, the best projected point and its value, the exact
+    evaluation count, generations done, the run's key, and whether the strategy's
+    state broke down (turned non-finite: the run then ends, see :class:`Evosax`)."""
+
+    inner: Any
+    x_best: Any
+    f_best: Any
+    num_evals: Any
+    generation: Any
+    key: Any
+    broken: Any
+
+
+class Evosax(AbstractIterativeSolver):
+    """An evosax evolution strategy under jaxfric's driver (see the module docstring).
+
+    Args:
+        strategy: an evosax strategy name (``"CMA_ES"``, ``"SNES"``, ``"Sep_CMA_ES"``,
+            ``"DE"`` = ``"DifferentialEvolution"``, ``"PSO"``, ``"SimpleGA"``, …; case and
+            ``-``/``_`` do not matter) or class.
+        population_size: ``P``; ``None`` takes CMA-ES's ``4 + ⌊3 ln D⌋`` for
+            distribution-based strategies and 25 (jaxfric's PSO) for population-based ones.
+        num_generations: ``G`` (ask/tell rounds after the start).
+        std_init: initial standard deviation in box widths, for strategies with a
+            ``std_init`` parameter (0.3); ``None`` keeps evosax's default (1.0, i.e. a
+            box width, which puts most CMA-ES samples on the bounds).
+        params: overrides of the strategy's evosax ``Params`` (e.g.
+            ``{"crossover_rate": 0.5}`` for DE).
+        **strategy_kwargs: passed to the evosax constructor (e.g. ``num_diff=2`` for DE).
+    """
+
+    strategy: Any
+    population_size: int | None
+    num_generations: int
+    std_init: float | None
+    params: tuple
+    strategy_kwargs: tuple
+
+    def __init__(self, strategy="CMA_ES", *, population_size: int | None = None,
+                 num_generations: int = 1000, std_init: float | None = 0.3,
+                 params: dict | None = None, **strategy_kwargs):
+        self.strategy = resolve_strategy(strategy)
+        self.population_size = population_size
+        self.num_generations = num_generations
+        self.std_init = std_init
+        self.params = tuple(sorted((params or {}).items()))
+        self.strategy_kwargs = tuple(sorted(strategy_kwargs.items()))
+
+    def __repr__(self):  # the constructor call (Fit.settings records it)
+        extra = "".join(f", {k}={v!r}" for k, v in self.strategy_kwargs)
+        params = f", params={dict(self.params)!r}" if self.params else ""
+        return (f"Evosax({self.strategy.__name__!r}, population_size={self.population_size}, "
+                f"num_generations={self.num_generations}, std_init={self.std_init}{params}{extra})")
+
+    # ------------------------------------------------------------------ configuration
+    @property
+    def distribution_based(self) -> bool:
+        _, base = _evosax()
+        return issubclass(self.strategy, base)
+
+    def population(self, n: int) -> int:
+        """Population size ``P`` for ``n`` parameters."""
+        if self.population_size is not None:
+            return self.population_size
+        return 4 + int(math.floor(3 * math.log(n))) if self.distribution_based else 25
+
+    def evaluations(self, n: int) -> int:
+        """Exact objective evaluations of a run on ``n`` parameters."""
+        start = 1 if self.distribution_based else self.population(n)
+        return start + self.population(n) * self.num_generations
+
+    def check(self):
+        if self.population_size is not None:
+            check_positive_int("population_size", self.population_size, minimum=2)
+        check_positive_int("num_generations", self.num_generations)
+        if self.std_init is not None:
+            check_range("std_init", self.std_init, 0.0, lo_open=True)
+        try:
+            hash((self.params, self.strategy_kwargs))
+        except TypeError:
+            raise ValueError("params and strategy keyword values must be hashable "
+                             "(numbers, strings, functions)") from None
+        # Build the strategy once on a 2-parameter problem, so a wrong keyword or
+        # parameter name fails here and not inside a traced run.
+        try:
+            es = _build(self.strategy, self.population(2), 2, "float32", self.strategy_kwargs)
+        except (TypeError, AssertionError) as err:
+            raise ValueError(f"{self.strategy.__name__} refused its settings: {err}") from None
+        self._es_params(es)
+
+    def _es(self, lower):
+        n = lower.shape[0]
+        return _build(self.strategy, self.population(n), n, str(lower.dtype),
+                      self.strategy_kwargs)
+
+    def _es_params(self, es):
+        params = es.default_params
+        over = dict(self.params)
+        if self.std_init is not None and hasattr(params, "std_init") and "std_init" not in over:
+            over["std_init"] = self.std_init
+        unknown = sorted(set(over) - set(vars(params)))
+        if unknown:
+            raise ValueError(f"{self.strategy.__name__} has no parameter(s) {unknown}; "
+                             f"its parameters: {sorted(vars(params))}")
+        return params.replace(**{k: jnp.asarray(v) if k == "std_init" else v
+                                 for k, v in over.items()})
+
+    # ------------------------------------------------------------------ step protocol
+    def init(self, fn, lower, upper, args, key, x0=None) -> EvosaxState:
+        es, n = self._es(lower), lower.shape[0]
+        params = self._es_params(es)
+        k_init, k_start, key = jax.random.split(key, 3)
+        width = upper - lower
+        u0 = None if x0 is None else (jnp.atleast_2d(x0) - lower) / width
+        if self.distribution_based:
+            mean = jax.random.uniform(k_start, (n,), lower.dtype) if u0 is None else u0[0]
+            inner = es.init(k_init, mean, params)
+            x = lower + mean * width
+            f = scalar_objective(fn, args)(x)
+            evals = 1
+        else:
+            P = self.population(n)
+            U = jax.random.uniform(k_start, (P, n), lower.dtype)
+            if u0 is not None:
+                U = U.at[: u0.shape[0]].set(u0)
+            X = lower + U * width
+            F = batch_objective(fn, args)(X)
+            inner = es.init(k_init, U, F, params)
+            i = jnp.argmin(F)
+            x, f, evals = X[i], F[i], P
+        return EvosaxState(inner, x, f, jnp.array(evals, count_dtype()),
+                           jnp.array(0, jnp.int32), key, jnp.array(False))
+
+    def step(self, fn, lower, upper, args, state: EvosaxState) -> EvosaxState:
+        es = self._es(lower)
+        params = self._es_params(es)
+        k_ask, k_tell = jax.random.split(jax.random.fold_in(state.key, state.generation))
+        U, inner = es.ask(k_ask, state.inner, params)
+        U = jnp.clip(U.astype(lower.dtype), 0.0, 1.0)  # projection onto the box
+        X = lower + U * (upper - lower)
+        F = batch_objective(fn, args)(X)
+        inner, _ = es.tell(k_tell, U, F, inner, params)
+        # keep the carried state's dtypes (evosax's constants follow JAX's default float)
+        inner = jax.tree_util.tree_map(lambda new, old: jnp.asarray(new, jnp.result_type(old)),
+                                       inner, state.inner)
+        # After convergence CMA-ES's step size underflows to 0 and its state to NaN:
+        # every later sample would be NaN, so the run ends with the last finite state.
+        broken = ~_all_finite(inner)
+        inner = jax.tree_util.tree_map(lambda new, old: jnp.where(broken, old, new),
+                                       inner, state.inner)
+        i = jnp.argmin(F)
+        better = F[i] < state.f_best
+        return EvosaxState(
+            inner,
+            jnp.where(better, X[i], state.x_best),
+            jnp.where(better, F[i], state.f_best),
+            state.num_evals + es.population_size,
+            state.generation + 1,
+            state.key,
+            broken,
+        )
+
+    def terminate(self, fn, lower, upper, args, state):
+        done = (state.generation >= self.num_generations) | state.broken
+        return done, result_from_f(state.f_best)
+
+    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
+        return Solution(
+            value=state.x_best, f=state.f_best, result=result,
+            stats={"num_steps": state.generation, "num_evals": state.num_evals},
+            history=History.empty(1, state.f_best.dtype), state=state,
+        )
+
+    def best(self, state):
+        return state.x_best, state.f_best
+
+    def num_evals(self, state):
+        return state.num_evals
+
+    def max_steps(self, n: int) -> int:
+        return self.num_generations
+
+    def max_evaluations(self, n: int) -> int:
+        return self.evaluations(n)
+
+    def progress(self, state):
+        return jnp.array(0, jnp.int32), state.generation
+
+    def progress_totals(self):
+        return self.num_generations, None
+
+
+def cmaes_nm(*, population_size: int | None = None, num_generations: int = 1000,
+             std_init: float | None = 0.3, nm_max_steps: int | None = None,
+             nm_max_evals: int | None = None, **nm_kwargs) -> Chain:
+    """``chain(Evosax("CMA_ES"), NelderMead())``: CMA-ES's global search, then
+    Nelder–Mead from its best point (docs/algorithms.md §5.1 with CMA-ES as the global
+    stage). ``nm_*`` keywords and the rest go to :class:`~jaxfric.NelderMead`."""
+    cma = Evosax("CMA_ES", population_size=population_size, num_generations=num_generations,
+                 std_init=std_init)
+    nm = NelderMead(max_steps=nm_max_steps, max_evals=nm_max_evals, **nm_kwargs)
+    return Chain(cma, nm)
