@@ -15,7 +15,7 @@ no gradient stage) on
   2480 samples, so one rollout costs about what the rig's does); last 20 % validation.
 
 Equal budgets: MAPSO runs ``--generations`` generations (lattice 8×8 for the ENN, 5×5
-for LuGre, as :func:`jaxfric.identify.default_solver`); PSO (same number of
+for LuGre, as :func:`jaxfric.identification.default_solver`); PSO (same number of
 particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`, population
 4 + ⌊3 ln D⌋) get generations so that their evaluations do not exceed MAPSO's. The
 same ``NelderMead(max_evals=--nm-evals)`` follows each. Per key: validation and
@@ -48,7 +48,7 @@ try:
 except ImportError:  # a source checkout without installing
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import jaxfric as jf
-from jaxfric.identify._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
+from jaxfric.identification._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
 
 EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
 

@@ -375,7 +375,7 @@ def identify(
             ``identify(..., key=keys[i])`` (up to floating-point reassociation).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
-            window and must hold at least :data:`~jaxfric.identify.MIN_VALID_SAMPLES`
+            window and must hold at least :data:`~jaxfric.identification.MIN_VALID_SAMPLES`
             samples. Without ``data``: one record, a list of records or a mapping
             name -> record, each used whole for training; the cost pools the squared
             errors over the records, each rolled out from its own initial state.
