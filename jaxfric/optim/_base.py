@@ -68,8 +68,11 @@ class History(eqx.Module):
         size = self.f.shape[0]
         take = (self.counter % self.stride) == 0
         idx = jnp.minimum(self.length, size - 1)
-        evals = jnp.where(take, self.evals.at[idx].set(num_evals), self.evals)
-        f = jnp.where(take, self.f.at[idx].set(f_best), self.f)
+        # Counters arrive as int32 or int64 (count_dtype) and f in the solver's dtype:
+        # cast to the buffer's, so strict dtype promotion (optimistix's tests) holds.
+        evals = jnp.where(take, self.evals.at[idx].set(jnp.asarray(num_evals).astype(self.evals.dtype)),
+                          self.evals)
+        f = jnp.where(take, self.f.at[idx].set(jnp.asarray(f_best).astype(self.f.dtype)), self.f)
         length = self.length + take.astype(jnp.int32)
 
         def compress(ev, fv):
@@ -91,6 +94,8 @@ class History(eqx.Module):
         """Record the run's last ``(num_evals, f_best)`` whatever the stride, so the
         history always ends at the reported result (no-op if it is already there)."""
         last = jnp.maximum(self.length - 1, 0)
+        num_evals = jnp.asarray(num_evals).astype(self.evals.dtype)
+        f_best = jnp.asarray(f_best).astype(self.f.dtype)
         missing = (self.length == 0) | (self.evals[last] != num_evals) | (self.f[last] != f_best)
         forced = History(self.evals, self.f, self.length, jnp.ones_like(self.stride),
                          jnp.zeros_like(self.counter)).record(num_evals, f_best)

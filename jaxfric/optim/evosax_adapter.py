@@ -59,7 +59,7 @@ from ._base import (
     result_from_f,
     scalar_objective,
 )
-from .chain import Chain
+from .chained import Chain
 from .nelder_mead import NelderMead
 
 INSTALL_HINT = 'pip install -e ".[evosax]"'
