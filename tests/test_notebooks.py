@@ -27,9 +27,9 @@ ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
 
-def test_there_are_three_notebooks_without_outputs():
+def test_there_are_four_notebooks_without_outputs():
     assert [p.name for p in NOTEBOOKS] == ["01_test_functions.ipynb", "02_friction_identification.ipynb",
-                                           "03_real_recordings.ipynb"]
+                                           "03_real_recordings.ipynb", "04_motion_and_compensation.ipynb"]
     for path in NOTEBOOKS:
         nb = nbformat.read(path, as_version=4)
         for cell in nb.cells:
