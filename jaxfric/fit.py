@@ -204,7 +204,9 @@ class Fit:
             unknown: fits saved before 0.7); prediction beyond it warns.
         diagnostics: ``{"on_bound": [...], "unidentifiable": [...]}``: parameters
             that ended on a bound of the search box (name, side, value, range, what
-            to widen) and parameters the model says the data cannot determine.
+            to widen) and parameters the model says the data cannot determine, as
+            ``"name: reason"`` strings (:func:`unidentifiable_names` takes the names);
+            :meth:`summary` and the report mark both kinds.
         ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
             final costs ``J``, keys, per-member validation MSE %, the index of the
             best member (this fit) and the spread of each parameter; else ``None``.
