@@ -200,14 +200,15 @@ def figure(out, data, preds):
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), constrained_layout=True)
     ax[0].plot(t[n:], f[n:], color="0.6", lw=0.8, label="measured (gtau·vir − M·a)")
     keep = [k for k in preds if "no refine" not in k]
-    for k in keep:
-        ax[0].plot(t[n:], preds[k][n:], lw=0.8, label=k[:45])
+    colours = [f"C{i}" for i in range(10) if i != 7]  # C7 is grey, the measured trace's colour
+    for k, c in zip(keep, colours):
+        ax[0].plot(t[n:], preds[k][n:], lw=0.8, color=c, label=k[:45])
     ax[0].set(xlabel="t [s]", ylabel="friction [N]", title="EMPS, held-back last 20 %")
     ax[0].legend(fontsize=7, ncol=2)
     v = np.asarray(data.velocity)
     ax[1].plot(v[n:], f[n:], ".", ms=1, color="0.6", label="measured")
-    for k in keep:
-        ax[1].plot(v[n:], preds[k][n:], ".", ms=0.6, label=k[:45])
+    for k, c in zip(keep, colours):
+        ax[1].plot(v[n:], preds[k][n:], ".", ms=0.6, color=c, label=k[:45])
     ax[1].set(xlabel="v [m/s]", ylabel="friction [N]")
     fig.savefig(out / "emps_validation.png", dpi=110)
     plt.close(fig)
