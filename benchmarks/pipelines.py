@@ -57,8 +57,6 @@ HERE = Path(__file__).resolve().parent
 DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
 #: Nelder–Mead evaluations granted per BFGS step of the jaxfric pipeline (DE → NM row).
 NM_EVALS_PER_BFGS_STEP = 6
-PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648,
-             "Fv_pos": 166.71, "Fc_pos": 20.14, "Fv_neg": 240.42, "Fc_neg": 20.63}
 
 
 def parse(argv=None):
@@ -108,19 +106,10 @@ def ls_baseline(v, f, n):
 
 
 def idim_rows(args):
+    from emps import idim_table  # benchmarks/emps.py: the IDIM-LS table against the published values
     from jaxfric.rig import emps
 
-    rec = emps.load_emps(Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat")
-    s = emps.emps_states(rec)
-    out = []
-    for asym in (False, True):
-        est = emps.idim_ls(s["v"], s["a"], s["force"], asymmetric=asym)
-        names = ("M", "Fv_pos", "Fv_neg", "Fc_pos", "Fc_neg") if asym else ("M", "Fv", "Fc", "offset")
-        for k in names:
-            ours = getattr(est, k)
-            out.append({"model": "asymmetric" if asym else "symmetric", "parameter": k, "ours": ours,
-                        "published": PUBLISHED[k], "diff_pct": 100 * (ours / PUBLISHED[k] - 1)})
-    return out
+    return idim_table(emps.load_emps(Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"))
 
 
 # ---------------------------------------------------------------- pipelines
@@ -279,7 +268,7 @@ def write(out, args, desc, rows, base, wall, idim):
     if idim:
         lines += ["## EMPS IDIM-LS against the published values (SOURCE.md)", "",
                   "| model | parameter | ours | published | diff % |", "|---|---|---|---|---|"]
-        lines += [f"| {r['model']} | {r['parameter']} | {r['ours']:.4f} | {r['published']:.4f} | {r['diff_pct']:+.2f} |"
+        lines += [f"| {r['form']} | {r['parameter']} | {r['ours']:.4f} | {r['published']:.4f} | {r['diff_pct']:+.2f} |"
                   for r in idim]
         lines.append("")
     lines.append(f"Benchmark wall time: {wall:.0f} s.")

@@ -154,6 +154,12 @@ def _same_step(a: float, b: float) -> bool:
     return abs(a - b) <= 1e-6 * b
 
 
+def unidentifiable_names(texts) -> set[str]:
+    """Parameter names of ``Fit.diagnostics["unidentifiable"]`` entries, which are
+    ``"name: reason"`` strings (:func:`jaxfric.identification.unidentifiable`)."""
+    return {str(t).split(": ", 1)[0] for t in texts}
+
+
 def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
     """Free-run friction [N] of ``model`` at ``theta`` for ``velocity`` [m/s] (§2.4):
     scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
@@ -198,7 +204,9 @@ class Fit:
             unknown: fits saved before 0.7); prediction beyond it warns.
         diagnostics: ``{"on_bound": [...], "unidentifiable": [...]}``: parameters
             that ended on a bound of the search box (name, side, value, range, what
-            to widen) and parameters the model says the data cannot determine.
+            to widen) and parameters the model says the data cannot determine, as
+            ``"name: reason"`` strings (:func:`unidentifiable_names` takes the names);
+            :meth:`summary` and the report mark both kinds.
         ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
             final costs ``J``, keys, per-member validation MSE %, the index of the
             best member (this fit) and the spread of each parameter; else ``None``.
@@ -453,13 +461,15 @@ class Fit:
                              + (f"{mse:>10.4f}{mx:>11.3g}" if mse is not None else f"{'-':>10}{'-':>11}"))
         if not self.model.needs_scaling:
             flagged = {d["name"] for d in self.diagnostics.get("on_bound", [])}
+            loose = unidentifiable_names(self.diagnostics.get("unidentifiable", []))
             lines.append("params: " + ", ".join(
                 f"{k}={float(v):.4g}{' [on bound]' if k in flagged else ''}"
+                f"{' [not identifiable]' if k in loose else ''}"
                 for k, v in self.params.items()))
         for d in self.diagnostics.get("on_bound", []):
             lines.append(f"! {d['message']}")
         for text in self.diagnostics.get("unidentifiable", []):
-            lines.append(f"! {text}")
+            lines.append(f"! {text} (not identifiable from these data: the value is physically meaningless)")
         if self.ensemble:
             e = self.ensemble
             vm = [x for x in e.get("valid_mse_percent", []) if x is not None]

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from . import plot as _plot
+from .fit import unidentifiable_names
 from .files import TEMP_SUFFIX, atomic_write, atomic_write_bytes, atomic_write_text, jsonable, write_json
 from .metrics import METRIC_FORMULAS, friction_metrics
 
@@ -239,12 +240,13 @@ def _environment() -> dict:
             "float64": bool(jax.config.jax_enable_x64)}
 
 
-def _fmt_params(d: Mapping, on_bound=frozenset()) -> list[str]:
+def _fmt_params(d: Mapping, on_bound=frozenset(), unidentifiable=frozenset()) -> list[str]:
     lines = []
     for k, v in d.items():
         arr = np.asarray(v)
         if arr.ndim == 0 and arr.dtype.kind in "fi":
             mark = " **(on a bound: widen its range)**" if k in on_bound else ""
+            mark += " **(not identifiable from these data)**" if k in unidentifiable else ""
             lines.append(f"| {k} | {float(arr):.6g}{mark} |")
     return lines
 
@@ -428,13 +430,13 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
                 L += ["", f"![{r['label']} on {rec_name}]({fig})"]
         params = getattr(fit, "params", None) or getattr(fit, "physical", None)
         if isinstance(params, Mapping) and not getattr(getattr(fit, "model", None), "needs_scaling", False):
-            pl = _fmt_params(params, {d["name"] for d in m["on_bound"]})
+            pl = _fmt_params(params, {d["name"] for d in m["on_bound"]}, unidentifiable_names(m["unidentifiable"]))
             if pl:
                 L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
         for d in m["on_bound"]:
             L += ["", f"**On a bound:** {d['message']}."]
         for text in m["unidentifiable"]:
-            L += ["", f"**Not identifiable from these data:** {text}"]
+            L += ["", f"**Not identifiable from these data (its value is physically meaningless):** {text}"]
         e = m["ensemble"]
         if e:
             vm = [x for x in e.get("valid_mse_percent", []) if x is not None]

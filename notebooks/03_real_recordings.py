@@ -177,3 +177,110 @@ if HAVE_DATA:
     for fit in fits.values():
         display(plot.plot_fit(fit, data))
     display(plot.plot_error(fits, data))
+
+
+# %% [markdown]
+# ## A second real recording: the EMPS positioning axis
+#
+# EMPS (Janot, Gautier & Brunot 2019) is a ball-screw axis under a PD position loop, published as
+# a system-identification benchmark with reference friction values. `jaxfric.rig.emps` follows
+# the benchmark's own recipe: 4th-order Butterworth at 100 Hz forward–backward on the measured
+# position, central differences for velocity and acceleration, 50 samples dropped at each end,
+# and the rigid-body inverse model `gtau·vir = M·a + Fv·v + Fc·sign(v) + offset` solved by
+# least squares (IDIM-LS). The friction record is `gtau·vir − M·a` with the IDIM-LS mass.
+#
+# Set `JAXFRIC_EMPS` to your `DATA_EMPS.mat`; otherwise the notebook looks in
+# `../../shared/data/emps/` and skips this section when the file is not there.
+# `benchmarks/emps.py` runs every model on the same split (`benchmarks/results/emps.md`).
+
+# %%
+EMPS_FILE = Path(os.environ.get("JAXFRIC_EMPS", "../../shared/data/emps/DATA_EMPS.mat"))
+HAVE_EMPS = EMPS_FILE.is_file()
+if HAVE_EMPS:
+    emps_rec = rig.load_emps(EMPS_FILE)
+    print(f"EMPS: {emps_rec.n_samples} samples at {1 / emps_rec.dt:.0f} Hz from {EMPS_FILE.resolve()}")
+else:
+    print(f"SKIPPED: no EMPS file at {EMPS_FILE.resolve()}; set JAXFRIC_EMPS to DATA_EMPS.mat "
+          "to run this section.")
+
+# %% [markdown]
+# ### IDIM-LS against the published values
+#
+# The mass, viscous and Coulomb coefficients, symmetric and direction-dependent, estimated on the
+# whole recording as the benchmark does; they agree with the published IDIM-LS values to within
+# about 1 %.
+
+# %%
+PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935,
+             "Fv_pos": 166.71, "Fc_pos": 20.14, "Fv_neg": 240.42, "Fc_neg": 20.63}
+if HAVE_EMPS:
+    from jaxfric.rig.emps import emps_states, idim_ls
+
+    states = emps_states(emps_rec)
+    lines = ["| form | parameter | jaxfric | published | difference |", "|---|---|---|---|---|"]
+    for asym in (False, True):
+        est = idim_ls(states["v"], states["a"], states["force"], asymmetric=asym)
+        for k in (("M", "Fv_pos", "Fv_neg", "Fc_pos", "Fc_neg") if asym else ("M", "Fv", "Fc")):
+            ours = getattr(est, k)
+            lines.append(f"| {'asymmetric' if asym else 'symmetric'} | {k} | {ours:.4g} | {PUBLISHED[k]:.4g} "
+                         f"| {100 * (ours / PUBLISHED[k] - 1):+.2f} % |")
+    display(Markdown("\n".join(lines)))
+
+# %% [markdown]
+# ### Identify on the first 80 %, validate on the last 20 %
+#
+# The held-back 20 % is never used to choose anything. Three contenders: a four-level
+# least-squares map (asymmetric Coulomb + viscous + offset, five numbers by `numpy.linalg.lstsq`,
+# the baseline to beat), jaxfric's asymmetric Coulomb + viscous + offset model (a short swarm,
+# then Levenberg–Marquardt) and the Elman network with `identify`'s defaults. With the small
+# budget the searches are cut to a few generations and steps, so only the plumbing is shown.
+
+# %%
+if HAVE_EMPS:
+    emps = rig.emps_friction_data(emps_rec)            # first 80 % train, last 20 % validate
+    v_e, f_e, n_e = np.asarray(emps.velocity), np.asarray(emps.friction), emps.n_train
+    pos, neg = (v_e > 0).astype(float), (v_e < 0).astype(float)
+    A = np.stack([v_e * pos, v_e * neg, pos, -neg, np.ones_like(v_e)], axis=1)
+    coef, *_ = np.linalg.lstsq(A[:n_e], f_e[:n_e], rcond=None)
+    emps_pred = {"LS baseline": A @ coef}
+    emps_time = {"LS baseline": 0.0}
+
+    phys_solver = jf.MAPSO(lattice_size=3 if SMALL else 5, num_generations=2 if SMALL else 30)
+    from jaxfric.identification import GradientRefinement
+
+    enn_opts = ({"solver": jf.MAPSO(lattice_size=8, num_generations=3),
+                 "refine": GradientRefinement(method="bfgs", max_steps=5)} if SMALL else {})
+    emps_fits = {
+        "Coulomb asym. + offset": (jf.models.Coulomb(asymmetric=True, offset=True),
+                                   {"solver": phys_solver, "refine": "lm", "data_bounds": True}),
+        "ENN (N = 30)": ("elman", enn_opts),
+    }
+    for label, (model, opts) in emps_fits.items():
+        t0 = time.perf_counter()
+        fit = jf.identify(model, emps, key=0, **opts)
+        emps_time[label] = time.perf_counter() - t0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # a few samples lie a hair outside the training range
+            emps_pred[label] = np.asarray(fit.predict(emps.velocity))
+        print(f"{label}: {fit.summary()}\n")
+
+    def nmse(y, sl):
+        return 100 * np.mean((f_e[sl] - y[sl]) ** 2) / np.var(f_e[sl])
+
+    rows = ["| model | MSE % train | MSE % valid (last 20 %) | time [s] |", "|---|---|---|---|"]
+    for label, y in emps_pred.items():
+        rows.append(f"| {label} | {nmse(y, slice(None, n_e)):.3f} | {nmse(y, slice(n_e, None)):.3f} "
+                    f"| {emps_time[label]:.1f} |")
+    display(Markdown("\n".join(rows)))
+
+    t_e = np.asarray(emps.t)
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2), constrained_layout=True)
+    ax[0].plot(t_e[n_e:], f_e[n_e:], color="0.6", lw=0.8, label="measured")
+    for label, y in emps_pred.items():
+        ax[0].plot(t_e[n_e:], y[n_e:], lw=0.8, label=label)
+        ax[1].plot(v_e[n_e:], y[n_e:], ".", ms=0.8, label=label)
+    ax[1].plot(v_e[n_e:], f_e[n_e:], ".", ms=0.8, color="0.6", zorder=0, label="measured")
+    ax[0].set(xlabel="t [s]", ylabel="friction [N]", title="EMPS: held-back last 20 %")
+    ax[1].set(xlabel="v [m/s]", ylabel="friction [N]", title="friction against velocity")
+    ax[0].legend(fontsize=8)
+    plt.show()

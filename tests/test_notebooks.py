@@ -70,9 +70,11 @@ def test_notebook_runs_with_the_small_budget(path, tmp_path_factory, monkeypatch
 def test_real_recordings_notebook_skips_without_data(tmp_path, monkeypatch):
     monkeypatch.setenv("JAXFRIC_NOTEBOOK_BUDGET", "small")
     monkeypatch.setenv("JAXFRIC_PNEUMATIC_DATA", str(tmp_path / "absent"))
+    monkeypatch.setenv("JAXFRIC_EMPS", str(tmp_path / "absent" / "DATA_EMPS.mat"))
     path = ROOT / "notebooks" / "03_real_recordings.ipynb"
     nb = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
                             resources={"metadata": {"path": str(path.parent)}}).execute()
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "SKIPPED: no pneumatic_seal_friction data" in text
+    assert "SKIPPED: no EMPS file" in text

@@ -1,6 +1,7 @@
 """The report folder: every file present, written atomically, numbers consistent."""
 
 import json
+import re
 
 import matplotlib.image as mpimg
 import numpy as np
@@ -181,3 +182,30 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
     assert res["on_bound"][0]["name"] == "Fc" and res["on_bound"][0]["side"] == "upper"
     assert [r["name"] for r in res["records"]] == ["run1", "run2"]
     assert "theta" not in res["ensemble"] and res["ensemble"]["J"] == [0.1, 0.2, 0.3]
+
+
+def test_unidentifiable_parameters_are_named_with_reasons_in_summary_json_and_report(tmp_path):
+    """A real LuGre Fit on a record that never moves slowly (no pre-sliding): sigma0 and
+    sigma1 are marked in Fit.summary(), results.json and report.md, each with its reason."""
+    import jaxfric
+    from jaxfric.identification import identify
+
+    dt = 1e-3
+    t = np.arange(1000) * dt
+    v = 0.1 * np.sign(np.sin(2 * np.pi * 2.0 * t)) + 0.02 * np.sin(2 * np.pi * 7.0 * t)
+    data = FrictionData.from_arrays(v, 20.0 * np.sign(v) + 50.0 * v, dt)
+    fit = identify("lugre", data, key=0, solver=jaxfric.MAPSO(lattice_size=3, num_generations=2), refine=False)
+    texts = fit.diagnostics["unidentifiable"]
+    by_name = {s.split(": ", 1)[0]: s.split(": ", 1)[1] for s in texts}
+    assert {"sigma0", "sigma1"} <= set(by_name) and "Fc" not in by_name
+    assert "pre-sliding" in by_name["sigma0"]  # the model's reason, not only the name
+    summary = fit.summary()
+    assert re.search(r"sigma0=\S+ \[not identifiable\]", summary)
+    assert not re.search(r"Fc=\S+ \[not identifiable\]", summary)
+    assert f"! sigma0: {by_name['sigma0']}" in summary and "physically meaningless" in summary
+    report.write_report(tmp_path, data, {"lugre": fit}, title="no pre-sliding", save_models=False)
+    text = (tmp_path / "report.md").read_text()
+    assert re.search(r"\| sigma0 \| \S+ \*\*\(not identifiable from these data\)\*\* \|", text)
+    assert f"physically meaningless):** sigma1: {by_name['sigma1']}" in text
+    res = json.loads((tmp_path / "results.json").read_text())["models"]["lugre"]
+    assert res["unidentifiable"] == list(texts)

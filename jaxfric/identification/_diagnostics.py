@@ -76,7 +76,7 @@ def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) 
 
 
 def unidentifiable(model: AbstractFrictionModel, velocity) -> tuple[str, ...]:
-    """Parameters the training velocity cannot determine, in the model's own words.
+    """Parameters the training velocity cannot determine, as ``"name: reason"`` strings.
 
     Asks ``model.unidentifiable(velocity)`` (the models' hook: a record or a velocity
     array in, reasons out; e.g. LuGre's σ0, σ1 when the record holds no pre-sliding)
@@ -86,4 +86,7 @@ def unidentifiable(model: AbstractFrictionModel, velocity) -> tuple[str, ...]:
     method = getattr(type(model), "unidentifiable", None)
     if not callable(method):
         return ()
-    return tuple(str(m) for m in method(model, np.asarray(velocity, np.float64)))
+    # "name: reason" (one JSON-friendly string each; the name is what precedes the
+    # first ": "), so Fit.summary(), results.json and report.md say why, not only which
+    return tuple(f"{m}: {m.reason}" if getattr(m, "reason", None) else str(m)
+                 for m in method(model, np.asarray(velocity, np.float64)))
