@@ -41,6 +41,7 @@ from jaxfric.motion import MotionData, friction_step, identify_motion, simulate_
 from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
 
 SMALL = os.environ.get("JAXFRIC_NOTEBOOK_BUDGET") == "small"
+print(f"budget: {'small' if SMALL else 'full'}")
 
 # %% [markdown]
 # ## 1. A known axis, simulated: 2.5 kg, Coulomb + viscous friction and a 3 N offset
