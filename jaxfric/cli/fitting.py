@@ -44,14 +44,20 @@ def label(name: str, model) -> str:
 def describe_solver(solver, model, paper: bool = False) -> str:
     """One phrase for stage messages and reports (``solver=None``: ``identify``'s default
     for the method, the paper's with ``paper=True``)."""
-    from jaxfric import MAPSO, MAPSONMDS, PSO
     from jaxfric.identification import _api
 
     method = "paper" if paper else "jaxfric"
     s = _api.default_solver(model, method) if solver is None else solver
-    if solver is None and _api._fast_pipeline(model, method):
-        return (f"MAPSO ({s.lattice_size}x{s.lattice_size} agents, G = {s.num_generations}, first "
-                f"{_api.GLOBAL_STAGE_SAMPLES} samples) -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)")
+    text = _describe(s, model)
+    if _api._fast_pipeline(model, method):  # identify adds the gradient stage
+        where = f" on the first {_api.GLOBAL_STAGE_SAMPLES} samples" if solver is None else ""
+        text += f"{where} -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)"
+    return text
+
+
+def _describe(s, model) -> str:
+    from jaxfric import MAPSO, MAPSONMDS, PSO
+
     if isinstance(s, MAPSONMDS):
         nm = s.nelder_mead.max_evals
         nm_text = f"<= {nm} evaluations" if nm is not None else f"<= {s.nelder_mead.steps_for(model.num_params)} steps"
@@ -125,7 +131,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fit = spec.identify(data, key=key, progress=bar, valid=valid, train_name=args.file)
+                fit = spec.identify(data, key=key, progress=bar, valid=valid, train_name=getattr(args, "file", "train"))
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own
