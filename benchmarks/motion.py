@@ -104,8 +104,7 @@ def emps_candidates():
 
 def total_offset(fit) -> float:
     """The constant force of a fit: the mechanics' offset plus the model's ``F_off``."""
-    p = fit.params()
-    return fit.offset + float(p.get("F_off", 0.0))
+    return fit.offset + float(fit.params.get("F_off", 0.0))
 
 
 def run_emps(path, quick, key=0, only=None):
