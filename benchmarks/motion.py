@@ -7,7 +7,8 @@ Usage::
 
 * ``emps``: friction identified inside the mechanics of the EMPS axis (input ``gtau*vir``,
   output ``qm``, last 20 % held back) for Coulomb+viscous+offset, asymmetric
-  Coulomb+viscous+offset, LuGre+offset and Elman+offset friction; free-run and k-step
+  Coulomb+viscous+offset, LuGre+offset, GMS+offset and Elman+offset friction
+  (``--rows`` fits a subset and writes ``motion_rows.md`` instead); free-run and k-step
   position RMSE [mm] and FIT % on the held-back part, beside the published IDIM-LS
   reference (SOURCE.md) simulated the same way.
 * ``rig``: on the simulated hydraulic rig, friction recovered from actuator force and
@@ -40,10 +41,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfric import models
-from jaxfric.models import AbstractPhysicalModel
-from jaxfric.models._physical import as_range
 from jaxfric.motion import MotionData, MotionFit, identify_motion
 from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
+from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
 
 EMPS_DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 #: Published IDIM-LS values of SOURCE.md (Janot, Gautier, Brunot 2019).
@@ -52,48 +52,12 @@ IDIM_ASYM = {"Fv+": 166.71, "Fc+": 20.14, "Fv-": 240.42, "Fc-": 20.63}
 K_STEP = 100
 
 
-class AsymmetricCoulomb(AbstractPhysicalModel):
-    """Benchmark-local asymmetric Coulomb + viscous friction (docs/algorithms.md §13.1)::
-
-        F = Fc+ s+(v) + Fv+ v [v > 0] - Fc- s-(v) + Fv- v [v < 0],   s+- smooth halves of tanh(v/v_eps)
-
-    (the offset is identified by the mechanics, ``fit_offset``). Search coordinates are the
-    four physical values, linear; ranges as (low, high) in N and N s/m.
-    """
-
-    v_eps: float = eqx.field(default=1e-4, static=True)
-    Fc_range: tuple | None = eqx.field(default=(1.0, 100.0), static=True, converter=as_range)
-    Fv_range: tuple | None = eqx.field(default=(1.0, 1000.0), static=True, converter=as_range)
-    uses_dt = False
-
-    @property
-    def _coords(self):
-        return (("Fc_pos", "Fc_pos", "linear"), ("Fc_neg", "Fc_neg", "linear"),
-                ("Fv_pos", "Fv_pos", "linear"), ("Fv_neg", "Fv_neg", "linear"))
-
-    def physical_range(self, key):
-        return self.Fc_range if key.startswith("Fc") else self.Fv_range
-
-    def with_data_bounds(self, velocity, friction):
-        return self
-
-    def _simulate_batch(self, thetas, velocity, dt=None):
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        v = v[None, :]
-        s = jnp.tanh(v / self.v_eps)
-        pos, neg = 0.5 * (1 + s), 0.5 * (1 - s)
-        return pos * (p["Fc_pos"] + p["Fv_pos"] * v) + neg * (-p["Fc_neg"] + p["Fv_neg"] * v)
-
-
-def load_emps(path) -> tuple[MotionData, int]:
-    """EMPS estimation file -> (MotionData with force gtau*vir and position qm, n_train = 80 %)."""
-    import scipy.io
-
-    d = scipy.io.loadmat(os.fspath(path))
-    t = d["t"].ravel()
-    force = float(d["gtau"].ravel()[0]) * d["vir"].ravel()
-    data = MotionData.from_arrays(force, d["qm"].ravel(), float(np.median(np.diff(t))), cutoff=100.0)
+def emps_motion_data(path) -> tuple[MotionData, int]:
+    """EMPS estimation file (``jaxfric.rig.emps.load_emps``) -> (MotionData with force
+    gtau*vir and position qm, velocity for initial states from the benchmark's 100 Hz
+    filter; n_train = 80 %)."""
+    rec = load_emps(path)
+    data = MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
     return data, int(round(0.8 * data.n_samples))
 
 
@@ -115,38 +79,57 @@ def _solver(n_params, quick):
                      nelder_mead=NelderMead(max_steps=nm, max_evals=nm))
 
 
+def asymmetric_coulomb():
+    """The library's asymmetric Coulomb + viscous friction with its own output offset
+    (docs/algorithms.md §13.1): F = Fc+ [v>0] - Fc- [v<0] + Fv+- v + F_off."""
+    return models.Coulomb(asymmetric=True, offset=True, v_eps=1e-4, Fc_range=(1.0, 100.0),
+                          sigma2_range=(10.0, 1000.0), F_off_range=(-20.0, 20.0))
+
+
 def emps_candidates():
+    """name -> friction model; a model with its own ``F_off`` (``offset=True``) is fitted
+    without the mechanics' separate offset (the two would be one parameter twice)."""
     return {
         "static+offset (Coulomb+viscous)": models.Coulomb(v_eps=1e-4, Fc_range=(1.0, 100.0),
                                                           sigma2_range=(10.0, 1000.0)),
-        "asymmetric+offset": AsymmetricCoulomb(),
+        "asymmetric+offset": asymmetric_coulomb(),
         "LuGre+offset": models.LuGre(Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0),
                                      sigma0_range=(1e4, 1e9), sigma1_range=(1.0, 1e5),
                                      vs_range=(1e-4, 0.1)),
+        "GMS(3)+offset": models.GMS(num_elements=3, Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0),
+                                    k_range=(1e4, 1e9), C_range=(1.0, 1e5), vs_range=(1e-4, 0.1)),
         "Elman(10)+offset": models.Elman(neurons=10, context_weight_bound=1.0),
     }
 
 
-def run_emps(path, quick, key=0):
-    data, n_train = load_emps(path)
+def total_offset(fit) -> float:
+    """The constant force of a fit: the mechanics' offset plus the model's ``F_off``."""
+    return fit.offset + float(fit.params.get("F_off", 0.0))
+
+
+def run_emps(path, quick, key=0, only=None):
+    data, n_train = emps_motion_data(path)
     rows = []
     coul = models.Coulomb(v_eps=1e-4, Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0))
     ref = reference_fit(coul, coul.from_physical(Fc=IDIM["Fc"], sigma2=IDIM["Fv"]), IDIM["M"],
                         IDIM["offset"], data, n_train)
     rows.append(("IDIM-LS reference (published)", ref, 0.0))
-    asym = AsymmetricCoulomb()
+    asym = asymmetric_coulomb()
     ref_a = reference_fit(asym, asym.from_physical(Fc_pos=IDIM_ASYM["Fc+"], Fc_neg=IDIM_ASYM["Fc-"],
-                                                   Fv_pos=IDIM_ASYM["Fv+"], Fv_neg=IDIM_ASYM["Fv-"]),
-                          IDIM["M"], IDIM["offset"], data, n_train)
+                                                   sigma2_pos=IDIM_ASYM["Fv+"], sigma2_neg=IDIM_ASYM["Fv-"],
+                                                   F_off=IDIM["offset"]),
+                          IDIM["M"], 0.0, data, n_train)
     rows.append(("IDIM-LS asymmetric (published Fc+-, Fv+-; offset of the symmetric fit)", ref_a, 0.0))
     fits = {}
     runs = [(name, model, None) for name, model in emps_candidates().items()]
     for name, model, horizon in runs:
-        if quick and "Elman" in name:
+        if (quick and "Elman" in name) or (only and not any(o in name for o in only)):
             continue
+        own_offset = bool(getattr(model, "offset", False))
         t0 = time.perf_counter()
         fit = identify_motion(model, data, key=key, mass=(50.0, 200.0), train=n_train, horizon=horizon,
-                              solver=_solver(model.num_params + 2, quick), fit_offset=True,
+                              solver=_solver(model.num_params + 2 - own_offset, quick),
+                              fit_offset=not own_offset,
                               offset_range=(-20.0, 20.0), data_bounds=False, dtype=jnp.float64,
                               metric_horizon=K_STEP)
         secs = time.perf_counter() - t0
@@ -163,7 +146,7 @@ def emps_table(rows) -> str:
     lines = [head]
     for name, fit, secs in rows:
         m = fit.metrics
-        lines.append(f"| {name} | {fit.mass:.2f} | {fit.offset:.2f} | {m['valid']['rmse_mm']:.3f} | "
+        lines.append(f"| {name} | {fit.mass:.2f} | {total_offset(fit):.2f} | {m['valid']['rmse_mm']:.3f} | "
                      f"{m['valid']['fit_percent']:.2f} | {m['valid_kstep']['rmse_mm']:.5f} | "
                      f"{m['train']['rmse_mm']:.3f} | {secs:.0f} |")
     return "\n".join(lines)
@@ -257,6 +240,9 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     ap.add_argument("--parts", default="emps,rig,compensation")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--rows", default=None,
+                    help="comma-separated substrings: fit only the EMPS rows whose names contain one "
+                         "(the result then goes to motion_rows.md, never over motion.md)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -267,8 +253,10 @@ def main(argv=None):
         if not Path(args.emps).exists():
             print(f"EMPS file {args.emps} not found: skipping the EMPS part")
         else:
-            data, n_train, rows = run_emps(args.emps, args.quick)
-            emps_figure(data, n_train, rows, out)
+            only = args.rows.split(",") if args.rows else None
+            data, n_train, rows = run_emps(args.emps, args.quick, only=only)
+            if not only:
+                emps_figure(data, n_train, rows, out)
             md += ["## EMPS: friction inside the mechanics, last 20 % held back", "",
                    EMPS_NOTE, "", emps_table(rows), "", "![EMPS free run](motion_emps.png)", ""]
     if "rig" in parts:
@@ -284,7 +272,7 @@ def main(argv=None):
                *[f"| {k} | {f.metrics['valid']['mse_percent']:.3f} |" for k, f in fits.items()], "",
                compensation_table(rows), "", "![tracking error](motion_compensation.png)", ""]
     text = "\n".join(md)
-    (out / "motion.md").write_text(text)
+    (out / ("motion_rows.md" if args.rows else "motion.md")).write_text(text)
     print(text)
 
 
@@ -317,9 +305,11 @@ validation free run starts from the state estimated at the start of the held-bac
 (measured position, velocity from the 100 Hz zero-phase low-pass of `qm`, friction state
 tracked along that velocity), and the {K_STEP}-step-ahead error (MATLAB `compare(..., {K_STEP})`,
 from every measured state) is reported beside it. Mass and a constant force offset are
-identified with the friction (mass searched in [50, 200] kg); the cost is the free-run
-position MSE over the estimation part. The IDIM-LS rows simulate the published
-parameters of SOURCE.md the same way."""
+identified with the friction (mass searched in [50, 200] kg; the asymmetric row's offset
+is the library model's own `F_off`, `Coulomb(asymmetric=True, offset=True)`); the cost is
+the free-run position MSE over the estimation part. The data come from
+`jaxfric.rig.emps.load_emps`. The IDIM-LS rows simulate the published parameters of
+SOURCE.md the same way."""
 
 
 if __name__ == "__main__":

@@ -20,7 +20,12 @@ friction in N; the §2.4 scalers of the Elman networks are applied inside.
 
 Both reproduce ``Fit.predict`` to rounding (``tests/test_export.py`` compiles the
 header with the system C compiler and compares on a recording). Supported: Elman,
-ElmanFull, LuGre, Dahl, Coulomb, Stribeck.
+ElmanFull, LuGre, Dahl, Coulomb, Stribeck (symmetric or in the docs/algorithms.md §13.1
+``asymmetric`` / ``offset`` forms) and GMS (§8.4, either form). A symmetric model is
+exported as the asymmetric form with equal ``_pos`` / ``_neg`` levels, which is the same
+arithmetic (``max(t, 0) L - max(-t, 0) L = t L``); the model's ``F_off`` joins the
+fit's constant offset. ``Cylinder`` is refused: its friction needs the chamber
+pressures as a second input, which a ``step(v, state)`` does not carry.
 """
 
 from __future__ import annotations
@@ -32,18 +37,23 @@ import re
 
 import numpy as np
 
-from .models import Coulomb, Dahl, Elman, ElmanFull, LuGre, Stribeck
+from .models import GMS, Coulomb, Cylinder, Dahl, Elman, ElmanFull, LuGre, Stribeck
 
 __all__ = ["NumpyStep", "c_header", "numpy_step"]
 
-_SUPPORTED = (Elman, ElmanFull, LuGre, Dahl, Coulomb, Stribeck)
+_SUPPORTED = (Elman, ElmanFull, LuGre, Dahl, Coulomb, Stribeck, GMS)
+#: direction-dependent levels (§13.1); a symmetric model's one value fills both
+_DIRECTIONAL = ("Fc", "Fs", "sigma2")
 
 
 def _kind(model) -> str:
     for cls, name in ((Elman, "elman"), (ElmanFull, "elman_full"), (LuGre, "lugre"),
-                      (Dahl, "dahl"), (Coulomb, "coulomb"), (Stribeck, "stribeck")):
+                      (Dahl, "dahl"), (Coulomb, "coulomb"), (Stribeck, "stribeck"), (GMS, "gms")):
         if type(model) is cls:
             return name
+    if isinstance(model, Cylinder):
+        raise ValueError("export does not support Cylinder: its friction depends on the chamber "
+                         "pressures, a second input that step(v, state) does not carry")
     raise ValueError(f"export supports {', '.join(c.__name__ for c in _SUPPORTED)}; "
                      f"got {type(model).__name__}")
 
@@ -69,15 +79,33 @@ def _weights(fit) -> dict:
         w["c0"] = p["c0"] if model.learn_c0 else np.zeros_like(p["w"])
     if kind == "lugre":
         w["delta"] = float(model.stribeck_exponent)
-    if kind == "dahl":
-        w["sigma2"] = float(p["sigma2"]) if model.viscous else 0.0
-    if kind == "coulomb":
+    if kind in ("dahl", "coulomb") and not model.viscous:
+        w["sigma2"] = 0.0
+    if kind in ("coulomb", "stribeck"):
         w["v_eps"] = float(model.v_eps)
-        w["sigma2"] = float(p["sigma2"]) if model.viscous else 0.0
     if kind == "stribeck":
-        w["v_eps"] = float(model.v_eps)
         w["delta"] = float(p["delta"]) if model.fit_exponent else float(model.exponent)
+    if kind == "gms":
+        n = model.num_elements
+        w["k"] = np.array([p[f"k{i}"] for i in range(1, n + 1)], np.float64)
+        w["alpha"] = np.array([p[f"alpha{i}"] for i in range(1, n + 1)], np.float64)
+        w["delta"] = float(model.stribeck_exponent)
+    for name in _DIRECTIONAL:
+        if name in w:
+            w[name + "_pos"] = w[name + "_neg"] = float(w.pop(name))
+    # the model's own output offset (§13.1) is one more constant force
+    w["offset"] += float(w.pop("F_off", 0.0))
     return w
+
+
+def _pick(w, name, v):
+    """The §13.1 level ``name`` acting at velocity v: ``_pos`` for v > 0, else ``_neg``."""
+    return w[name + "_pos"] if v > 0 else w[name + "_neg"]
+
+
+def _slip_level(w, v):
+    """Stribeck level g(v) / s(v) of the direction v moves in (LuGre, Stribeck, GMS)."""
+    return _stribeck(v, _pick(w, "Fc", v), _pick(w, "Fs", v), w["vs"], w["delta"])
 
 
 def _stribeck(v, fc, fs, vs, delta):
@@ -105,10 +133,12 @@ class NumpyStep:
         w, v0 = self.weights, float(v0)
         kind = w["kind"]
         if kind == "lugre":
-            g = _stribeck(v0, w["Fc"], w["Fs"], w["vs"], w["delta"])
-            return np.sign(v0) * g / w["sigma0"]
+            return np.sign(v0) * _slip_level(w, v0) / w["sigma0"]
         if kind == "dahl":
-            return np.sign(v0) * w["Fc"] / w["sigma0"]
+            return np.sign(v0) * _pick(w, "Fc", v0) / w["sigma0"]
+        if kind == "gms":
+            force = w["alpha"] * (_slip_level(w, v0) * np.sign(v0))
+            return force, np.full_like(force, np.sign(v0))
         if kind in ("elman", "elman_full"):
             return np.array(w["c0"], np.float64)
         return None
@@ -123,20 +153,26 @@ class NumpyStep:
             state = self.init(v)
         kind = w["kind"]
         if kind in ("lugre", "dahl"):
-            s0, s2 = w["sigma0"], w["sigma2"]
+            s0, s2 = w["sigma0"], _pick(w, "sigma2", v)
             if kind == "lugre":
-                s1, g = w["sigma1"], _stribeck(v, w["Fc"], w["Fs"], w["vs"], w["delta"])
+                s1, g = w["sigma1"], _slip_level(w, v)
             else:
-                s1, g = 0.0, w["Fc"]
+                s1, g = 0.0, _pick(w, "Fc", v)
             a = s0 * abs(v) / g
             f = s0 * state + s1 * (v - a * state) + s2 * v
             x = a * self.dt
             return float(f), float(state * math.exp(-x) + v * self.dt * _phi(x))
-        if kind == "coulomb":
-            return float(w["Fc"] * math.tanh(v / w["v_eps"]) + w["sigma2"] * v), None
-        if kind == "stribeck":
-            g = _stribeck(v, w["Fc"], w["Fs"], w["vs"], w["delta"])
-            return float(math.tanh(v / w["v_eps"]) * g + w["sigma2"] * v), None
+        if kind == "gms":
+            return self._gms(v, state)
+        if kind in ("coulomb", "stribeck"):
+            t = math.tanh(v / w["v_eps"])
+            if kind == "coulomb":
+                pos, neg = w["Fc_pos"], w["Fc_neg"]
+            else:
+                pos = _stribeck(v, w["Fc_pos"], w["Fs_pos"], w["vs"], w["delta"])
+                neg = _stribeck(v, w["Fc_neg"], w["Fs_neg"], w["vs"], w["delta"])
+            level = max(t, 0.0) * pos - max(-t, 0.0) * neg
+            return float(level + _pick(w, "sigma2", v) * v), None
         u = 2.0 * (v - w["v_lo"]) / (w["v_hi"] - w["v_lo"]) - 1.0
         if kind == "elman":
             h = np.tanh(w["w"] * u + w["r"] * state + w["b"])
@@ -146,6 +182,24 @@ class NumpyStep:
             new = h
         y = float(w["v"] @ h) + w["b_o"]
         return float((y + 1.0) * (0.5 * (w["f_hi"] - w["f_lo"])) + w["f_lo"]), new
+
+    def _gms(self, v, state):
+        """§8.4 element update over one held sample (``jaxfric.models.gms``)."""
+        w = self.weights
+        force, direction = state
+        f = float(np.sum(force)) + _pick(w, "sigma2", v) * v
+        s = _slip_level(w, v)
+        sv = float(np.sign(v))
+        level = w["alpha"] * s
+        target = level * sv
+        relaxed = target + (force - target) * math.exp(-w["C"] * self.dt / s)
+        stuck = force + w["k"] * (v * self.dt)
+        moving = sv != 0.0
+        slips = moving & ((direction == sv) | (sv * force >= level))
+        reaches = moving & (sv * stuck >= level)
+        new_force = np.where(slips, relaxed, np.where(reaches, target, stuck))
+        new_direction = np.where(slips | reaches, sv, 0.0)
+        return float(f), (new_force, new_direction)
 
     def run(self, velocity) -> np.ndarray:
         """Friction [N] for a whole velocity record, one :meth:`step` per sample."""
@@ -194,42 +248,83 @@ def c_header(fit, path=None, *, prefix: str = "jaxfric") -> str:
     stribeck = (f"static inline double {P}_g(double v, double fc, double fs, double vs, double delta) {{\n"
                 f"    double r = fabs(v) / vs;\n"
                 f"    return fc + (fs - fc) * exp(-(delta == 2.0 ? r * r : pow(r, delta)));\n}}\n")
+    pick = "(v > 0 ? {P}_{n}_pos : {P}_{n}_neg)"
+
+    def lvl(name):
+        return pick.format(P=P, n=name)
+
+    def consts(names):
+        for name in names:
+            for sfx in ("_pos", "_neg") if name in _DIRECTIONAL else ("",):
+                lines.append(f"static const double {P}_{name}{sfx} = {_num(w[name + sfx])};")
+
+    slip = (f"(v > 0 ? {P}_g(v, {P}_Fc_pos, {P}_Fs_pos, {P}_vs, {P}_delta)"
+            f" : {P}_g(v, {P}_Fc_neg, {P}_Fs_neg, {P}_vs, {P}_delta))")
+    sign = "((v > 0) - (v < 0))"
     if kind in ("lugre", "dahl"):
         lines.append(f"typedef struct {{ double z; }} {P}_state;")
         lines.append(f"static const double {P}_dt = {_num(dt)};")
         s1 = w["sigma1"] if kind == "lugre" else 0.0
-        for name, val in (("sigma0", w["sigma0"]), ("sigma1", s1), ("sigma2", w["sigma2"]), ("Fc", w["Fc"])):
-            lines.append(f"static const double {P}_{name} = {_num(val)};")
+        lines.append(f"static const double {P}_sigma1 = {_num(s1)};")
+        consts(("sigma0", "sigma2", "Fc") + (("Fs", "vs", "delta") if kind == "lugre" else ()))
         if kind == "lugre":
-            for name in ("Fs", "vs", "delta"):
-                lines.append(f"static const double {P}_{name} = {_num(w[name])};")
             lines.append(stribeck)
-            g = f"{P}_g(v, {P}_Fc, {P}_Fs, {P}_vs, {P}_delta)"
+            g = slip
         else:
-            g = f"{P}_Fc"
-        sign = "((v > 0) - (v < 0))"
+            g = lvl("Fc")
         lines.append(f"static inline void {P}_init({P}_state *s, double v) {{ s->z = {sign} * {g} / {P}_sigma0; }}")
         lines.append(
             f"static inline double {P}_step({P}_state *s, double v) {{\n"
             f"    double g = {g};\n"
             f"    double a = {P}_sigma0 * fabs(v) / g;\n"
-            f"    double f = {P}_sigma0 * s->z + {P}_sigma1 * (v - a * s->z) + {P}_sigma2 * v;\n"
+            f"    double f = {P}_sigma0 * s->z + {P}_sigma1 * (v - a * s->z) + {lvl('sigma2')} * v;\n"
             f"    double x = a * {P}_dt;\n"
             f"    double phi = x < 1e-8 ? 1.0 - 0.5 * x : -expm1(-x) / x;\n"
             f"    s->z = s->z * exp(-x) + v * {P}_dt * phi;\n"
             f"    return f;\n}}")
+    elif kind == "gms":
+        n = int(w["k"].size)
+        lines.append(f"#define {P.upper()}_N {n}")
+        lines.append(f"typedef struct {{ double F[{n}]; double d[{n}]; }} {P}_state;")
+        lines.append(f"static const double {P}_dt = {_num(dt)};")
+        lines.append(_array(f"{P}_k", w["k"]))
+        lines.append(_array(f"{P}_alpha", w["alpha"]))
+        consts(("C", "Fc", "Fs", "vs", "delta", "sigma2"))
+        lines.append(stribeck)
+        lines.append(f"static inline void {P}_init({P}_state *s, double v) {{\n"
+                     f"    double sg = {sign}, lv = {slip};\n"
+                     f"    for (int j = 0; j < {n}; ++j) {{ s->F[j] = {P}_alpha[j] * (lv * sg); s->d[j] = sg; }}\n}}")
+        lines.append(
+            f"static inline double {P}_step({P}_state *s, double v) {{\n"
+            f"    double f = 0.0;\n"
+            f"    for (int j = 0; j < {n}; ++j) f += s->F[j];\n"
+            f"    f += {lvl('sigma2')} * v;\n"
+            f"    double lv = {slip}, sv = {sign};\n"
+            f"    double decay = exp(-{P}_C * {P}_dt / lv);\n"
+            f"    for (int j = 0; j < {n}; ++j) {{\n"
+            f"        double level = {P}_alpha[j] * lv, target = level * sv;\n"
+            f"        double relaxed = target + (s->F[j] - target) * decay;\n"
+            f"        double stuck = s->F[j] + {P}_k[j] * (v * {P}_dt);\n"
+            f"        int moving = sv != 0.0;\n"
+            f"        int slips = moving && (s->d[j] == sv || sv * s->F[j] >= level);\n"
+            f"        int reaches = moving && sv * stuck >= level;\n"
+            f"        s->F[j] = slips ? relaxed : (reaches ? target : stuck);\n"
+            f"        s->d[j] = (slips || reaches) ? sv : 0.0;\n"
+            f"    }}\n"
+            f"    return f;\n}}")
     elif kind in ("coulomb", "stribeck"):
         lines.append(f"typedef struct {{ int unused; }} {P}_state;")
         lines.append(f"static inline void {P}_init({P}_state *s, double v) {{ (void)s; (void)v; }}")
-        for name in ("Fc", "sigma2", "v_eps") + (("Fs", "vs", "delta") if kind == "stribeck" else ()):
-            lines.append(f"static const double {P}_{name} = {_num(w[name])};")
+        consts(("Fc", "sigma2", "v_eps") + (("Fs", "vs", "delta") if kind == "stribeck" else ()))
         if kind == "stribeck":
             lines.append(stribeck)
-            level = f"{P}_g(v, {P}_Fc, {P}_Fs, {P}_vs, {P}_delta)"
+            pos = f"{P}_g(v, {P}_Fc_pos, {P}_Fs_pos, {P}_vs, {P}_delta)"
+            neg = f"{P}_g(v, {P}_Fc_neg, {P}_Fs_neg, {P}_vs, {P}_delta)"
         else:
-            level = f"{P}_Fc"
+            pos, neg = f"{P}_Fc_pos", f"{P}_Fc_neg"
         lines.append(f"static inline double {P}_step({P}_state *s, double v) {{\n    (void)s;\n"
-                     f"    return tanh(v / {P}_v_eps) * {level} + {P}_sigma2 * v;\n}}")
+                     f"    double t = tanh(v / {P}_v_eps);\n"
+                     f"    return fmax(t, 0.0) * {pos} - fmax(-t, 0.0) * {neg} + {lvl('sigma2')} * v;\n}}")
     else:
         n = int(np.asarray(w["w"]).size)
         lines.append(f"#define {P.upper()}_N {n}")

@@ -255,7 +255,8 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
                  source: str = "", settings: Mapping | None = None, notes: list[str] | None = None,
                  python: str | None = None, extra_files: Mapping[str, str] | None = None,
                  save_models: bool = True, on_written: Callable[[Path], None] | None = None,
-                 records: Mapping[str, Any] | None = None) -> dict:
+                 records: Mapping[str, Any] | None = None,
+                 sections: Mapping[str, str] | None = None) -> dict:
     """Write the report folder ``out`` for ``fits`` (name -> fit) on ``data``.
 
     Args:
@@ -274,6 +275,9 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         records: name -> validation record (``FrictionData``) the fits were validated on
             besides ``data`` (``identify(train=..., valid=...)``): one figure per model
             and record; the per-record metrics come from each fit's ``metrics["records"]``.
+        sections: heading -> Markdown body of further sections the caller computed (e.g.
+            ``jaxfric demo``'s friction-compensation table, :func:`jaxfric.compensation.compensation_table`),
+            placed after the model sections and kept in ``results.json`` under ``sections``.
 
     Returns:
         ``{"files": [paths], "rows": comparison rows, "table": plain-text table}``.
@@ -358,6 +362,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
                                "fit": fit_dict(fits[r["name"]])} for r in rows},
         "figures": figs,
         "notes": list(notes or []),
+        "sections": dict(sections or {}),
     }
     done(write_json(out / "results.json", results))
     text = _markdown(results, rows, fits, python=python, extra_files=extra_files or {})
@@ -461,6 +466,8 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
         if m["file"]:
             L += ["", f"Saved fit: `{m['file']}` (use `jaxfric predict {m['file']} DATA.csv`)."]
         L.append("")
+    for heading, body in results.get("sections", {}).items():
+        L += [f"## {heading}", "", body.rstrip(), ""]
     if results["settings"]:
         L += ["## Settings", "", "| setting | value |", "|---|---|"]
         L += [f"| {k} | {v} |" for k, v in results["settings"].items()]

@@ -66,6 +66,25 @@ def test_demo_quick_writes_the_report(demo):
     assert not [p for p in out.rglob(".*")], "temporary files left behind"
 
 
+def test_demo_report_holds_the_compensation_table(demo):
+    """docs/algorithms.md §13.3 in the demo's report: no, each fit's and the ideal feed-forward."""
+    import re
+
+    out, _ = demo
+    text = (out / "report.md").read_text()
+    assert "## Friction compensation" in text
+    section = text.split("## Friction compensation", 1)[1].split("\n## ", 1)[0]
+    assert "| compensation | tracking RMS [mm] | max error [mm] |" in section
+    rows = {m.group(1): [float(x) for x in m.group(2, 3, 4)] for m in re.finditer(
+        r"^\| ([^|]+?) \| ([-\d.e+]+) \| ([-\d.e+]+) \| ([-\d.e+]+) \|$", section, re.M)}
+    assert set(rows) == {"none", "elman", "lugre", "ideal (true friction)"}, rows
+    assert all(np.isfinite(v).all() and min(v) >= 0 for v in rows.values()), rows
+    # the true friction fed forward tracks better than no compensation
+    assert rows["ideal (true friction)"][0] < rows["none"][0]
+    assert (out / "compensation.png").stat().st_size > 10_000
+    assert "Friction compensation" in json.loads((out / "results.json").read_text())["sections"]
+
+
 def test_demo_prints_the_comparison_table(demo):
     out, proc = demo
     lines = proc.stdout.splitlines()

@@ -42,14 +42,42 @@ def _cases():
     out.append((c, c.from_physical(Fc=20.0, sigma2=200.0)))
     s = models.Stribeck(fit_exponent=True)
     out.append((s, s.from_physical(Fc=20.0, Fs=35.0, vs=4e-3, sigma2=150.0, delta=1.3)))
+    # §13.1 asymmetric / offset forms (every _pos level differs from its _neg) and GMS (§8.4)
+    ca = models.Coulomb(asymmetric=True, offset=True)
+    out.append((ca, ca.from_physical(Fc_pos=20.0, Fc_neg=12.0, sigma2_pos=200.0, sigma2_neg=120.0, F_off=3.0)))
+    sa = models.Stribeck(asymmetric=True, offset=True)
+    out.append((sa, sa.from_physical(Fc_pos=20.0, Fc_neg=14.0, Fs_pos=35.0, Fs_neg=22.0, vs=4e-3,
+                                     sigma2_pos=150.0, sigma2_neg=90.0, F_off=-2.0)))
+    so = models.Stribeck(offset=True)
+    out.append((so, so.from_physical(Fc=20.0, Fs=35.0, vs=4e-3, sigma2=150.0, F_off=1.5)))
+    la = models.LuGre(asymmetric=True, offset=True)
+    out.append((la, la.from_physical(sigma0=1e6, sigma1=300.0, sigma2_pos=500.0, sigma2_neg=350.0,
+                                     Fc_pos=20.0, Fc_neg=14.0, Fs_pos=30.0, Fs_neg=25.0, vs=5e-3, F_off=-3.0)))
+    da = models.Dahl(viscous=True, asymmetric=True, offset=True)
+    out.append((da, da.from_physical(sigma0=2e5, Fc_pos=15.0, Fc_neg=9.0, sigma2_pos=100.0,
+                                     sigma2_neg=60.0, F_off=2.5)))
+    do = models.Dahl(offset=True)
+    out.append((do, do.from_physical(sigma0=2e5, Fc=15.0, F_off=-1.5)))
+    gms = dict(k1=2e5, k2=6e4, k3=1e4, alpha1=0.5, alpha2=0.3, alpha3=0.2, C=30.0, vs=4e-3)
+    g = models.GMS(num_elements=3)
+    out.append((g, g.from_physical(Fc=20.0, Fs=30.0, sigma2=150.0, **gms)))
+    ga = models.GMS(num_elements=3, asymmetric=True, offset=True)
+    out.append((ga, ga.from_physical(Fc_pos=20.0, Fc_neg=13.0, Fs_pos=30.0, Fs_neg=22.0, sigma2_pos=150.0,
+                                     sigma2_neg=90.0, F_off=4.0, **gms)))
     return out
+
+
+def _id(x):
+    if not isinstance(x, models.AbstractFrictionModel):
+        return "theta"
+    return type(x).__name__ + "".join(f"-{f}" for f in ("asymmetric", "offset") if getattr(x, f, False))
 
 
 def _close(got, ref):
     np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.max(np.abs(ref)))
 
 
-@pytest.mark.parametrize("model,theta", _cases(), ids=lambda x: type(x).__name__)
+@pytest.mark.parametrize("model,theta", _cases(), ids=_id)
 def test_numpy_step_matches_predict(model, theta):
     v = _velocity()
     with jax.enable_x64(True):
@@ -78,7 +106,7 @@ int main(void) {
 
 
 @pytest.mark.skipif(_CC is None, reason="no C compiler (cc/gcc) on this machine")
-@pytest.mark.parametrize("model,theta", _cases(), ids=lambda x: type(x).__name__)
+@pytest.mark.parametrize("model,theta", _cases(), ids=_id)
 def test_c_header_matches_predict(model, theta, tmp_path):
     v = _velocity()
     with jax.enable_x64(True):
@@ -101,6 +129,13 @@ def test_export_refuses_unknown_prefix_and_model():
     fit = _fit(models.Coulomb(), models.Coulomb().from_physical(Fc=1.0, sigma2=1.0), v)
     with pytest.raises(ValueError, match="identifier"):
         c_header(fit, prefix="bad name")
+    cyl = models.Cylinder()
+    lo, hi = cyl.bounds()
+    bad = _fit(cyl, 0.5 * (np.asarray(lo) + np.asarray(hi)), v)
+    with pytest.raises(ValueError, match="Cylinder.*pressure"):
+        bad.to_numpy()
+    with pytest.raises(ValueError, match="Cylinder.*pressure"):
+        c_header(bad)
 
 
 def test_motion_fit_export_includes_its_offset(tmp_path):

@@ -16,8 +16,11 @@ from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
 
 
 def _velocity(n=400, dt=1e-3):
+    """Reversals and a 40-sample standstill (v exactly 0), where stick/slip states differ."""
     t = np.arange(n) * dt
-    return 0.02 * np.sin(2 * np.pi * 3 * t) + 0.005 * np.sin(2 * np.pi * 11 * t + 0.3)
+    v = 0.02 * np.sin(2 * np.pi * 3 * t) + 0.005 * np.sin(2 * np.pi * 11 * t + 0.3)
+    v[200:240] = 0.0
+    return v
 
 
 def _models_and_thetas():
@@ -31,13 +34,39 @@ def _models_and_thetas():
         (models.Coulomb(), models.Coulomb().from_physical(Fc=20.0, sigma2=200.0)),
         (models.Stribeck(), models.Stribeck().from_physical(Fc=20.0, Fs=35.0, vs=4e-3, sigma2=150.0)),
     ]
+    # §13.1 asymmetric / offset forms and GMS (§8.4): every direction-dependent level differs
+    la = models.LuGre(asymmetric=True, offset=True)
+    da = models.Dahl(viscous=True, asymmetric=True, offset=True)
+    do = models.Dahl(offset=True)
+    g = models.GMS(num_elements=3)
+    ga = models.GMS(num_elements=3, asymmetric=True, offset=True)
+    gms = dict(k1=2e5, k2=6e4, k3=1e4, alpha1=0.5, alpha2=0.3, alpha3=0.2, C=30.0, vs=4e-3)
+    out += [
+        (la, la.from_physical(sigma0=1e6, sigma1=300.0, sigma2_pos=500.0, sigma2_neg=350.0, Fc_pos=20.0,
+                              Fc_neg=14.0, Fs_pos=30.0, Fs_neg=25.0, vs=5e-3, F_off=-3.0)),
+        (da, da.from_physical(sigma0=2e5, Fc_pos=15.0, Fc_neg=9.0, sigma2_pos=100.0, sigma2_neg=60.0,
+                              F_off=2.5)),
+        (do, do.from_physical(sigma0=2e5, Fc=15.0, F_off=-1.5)),
+        (g, g.from_physical(Fc=20.0, Fs=30.0, sigma2=150.0, **gms)),
+        (ga, ga.from_physical(Fc_pos=20.0, Fc_neg=13.0, Fs_pos=30.0, Fs_neg=22.0, sigma2_pos=150.0,
+                              sigma2_neg=90.0, F_off=4.0, **gms)),
+        (models.Coulomb(asymmetric=True, offset=True), models.Coulomb(asymmetric=True, offset=True)
+         .from_physical(Fc_pos=20.0, Fc_neg=12.0, sigma2_pos=200.0, sigma2_neg=120.0, F_off=3.0)),
+    ]
     for m in (el, elf):
         lo, hi = m.bounds()
         out.append((m, rng.uniform(lo, hi) * 0.5))
     return out
 
 
-@pytest.mark.parametrize("model,theta", _models_and_thetas(), ids=lambda x: type(x).__name__)
+def _model_id(x):
+    if not isinstance(x, models.AbstractFrictionModel):
+        return "theta"
+    flags = "".join(f"-{f}" for f in ("asymmetric", "offset") if getattr(x, f, False))
+    return type(x).__name__ + flags
+
+
+@pytest.mark.parametrize("model,theta", _models_and_thetas(), ids=_model_id)
 def test_step_reproduces_predict(model, theta):
     """Stepping output/update sample by sample gives Fit.predict's free run (same recursion)."""
     with jax.enable_x64(True):

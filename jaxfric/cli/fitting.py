@@ -131,7 +131,9 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                fit = spec.identify(data, key=key, progress=bar, valid=valid, train_name=getattr(args, "file", "train"))
+                # `jaxfric demo` has no FILE argument: its record keeps the default name
+                fit = spec.identify(data, key=key, progress=bar, valid=valid,
+                                    train_name=getattr(args, "file", None) or "train")
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own

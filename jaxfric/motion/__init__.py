@@ -9,7 +9,7 @@
 
 from ._api import MotionData, MotionFit, identify_motion, load_motion_fit, motion_metrics
 from ._forward import k_step_positions, simulate_motion, track_states
-from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, StaticStep,
+from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
                     friction_step)
 
 __all__ = [
@@ -17,6 +17,7 @@ __all__ = [
     "ElmanFullStep",
     "ElmanStep",
     "FrictionStep",
+    "GMSStep",
     "MotionData",
     "MotionFit",
     "StaticStep",

@@ -16,7 +16,9 @@ sample for sample; ``tests/test_motion.py`` checks this for every model. The sta
 :func:`friction_step` picks the implementation by the model's type (a
 ``functools.singledispatch`` on the class, so nominal types, no attribute guessing):
 
-* LuGre, Dahl: the bristle state z and its exact zero-order-hold update (§8.2);
+* LuGre, Dahl: the bristle state z and its exact zero-order-hold update (§8.2),
+  symmetric or in the §13.1 asymmetric / offset forms;
+* GMS: the element forces and their stick/slip directions (§8.4);
 * Elman, ElmanFull: the context vector (§2.2, §2.3), in the fit's scaled units;
 * any other model whose output ignores ``dt`` (``uses_dt = False``: the static maps
   Coulomb, Stribeck and their variants) is memoryless: ``output`` is the model's own
@@ -34,11 +36,12 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ..models import (AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
+from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
                       stribeck_curve)
+from ..models._physical import add_offset, by_direction
 from ..models.lugre import _phi
 
-__all__ = ["FrictionStep", "StaticStep", "BristleStep", "ElmanStep", "ElmanFullStep",
+__all__ = ["FrictionStep", "StaticStep", "BristleStep", "GMSStep", "ElmanStep", "ElmanFullStep",
            "friction_step"]
 
 
@@ -72,33 +75,90 @@ class StaticStep(FrictionStep):
 class BristleStep(FrictionStep):
     """LuGre / Dahl bristle state z, §8.1-8.3:
 
-    ``a = sigma0 |v| / g(v)``, ``F = sigma0 z + sigma1 (v - a z) + sigma2 v``,
+    ``a = sigma0 |v| / g(v)``, ``F = sigma0 z + sigma1 (v - a z) + sigma2 v (+ F_off)``,
     ``z' = z exp(-a h) + v h phi(a h)`` (exact under the hold), ``z_0 = sgn(v_0) g(v_0) / sigma0``.
+    With ``asymmetric=True`` (§13.1) g and sigma2 take their ``_pos`` values for v > 0
+    and ``_neg`` otherwise, as the models' rollouts do.
     """
 
     implicit_state = True
 
     def _params(self, theta, v):
         p = self.model.to_physical(theta)
-        if isinstance(self.model, LuGre):
-            g = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], self.model.stribeck_exponent)
-            return p["sigma0"], p["sigma1"], p["sigma2"], g
         zero = jnp.zeros_like(p["sigma0"])
-        return p["sigma0"], zero, p.get("sigma2", zero), p["Fc"]
+        if isinstance(self.model, LuGre):
+            delta = self.model.stribeck_exponent
+            if self.model.asymmetric:
+                g = jnp.where(v > 0, stribeck_curve(v, p["Fc_pos"], p["Fs_pos"], p["vs"], delta),
+                              stribeck_curve(v, p["Fc_neg"], p["Fs_neg"], p["vs"], delta))
+            else:
+                g = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], delta)
+            return p, p["sigma0"], p["sigma1"], by_direction(p, "sigma2", v), g
+        s2 = by_direction(p, "sigma2", v) if self.model.viscous else zero
+        return p, p["sigma0"], zero, s2, by_direction(p, "Fc", v)
 
     def init(self, theta, v0, dt):
-        s0, _, _, g = self._params(theta, v0)
+        _, s0, _, _, g = self._params(theta, v0)
         return jnp.sign(v0) * g / s0
 
     def output(self, theta, z, v, dt):
-        s0, s1, s2, g = self._params(theta, v)
+        p, s0, s1, s2, g = self._params(theta, v)
         a = s0 * jnp.abs(v) / g
-        return s0 * z + s1 * (v - a * z) + s2 * v
+        return add_offset(s0 * z + s1 * (v - a * z) + s2 * v, p)
 
     def update(self, theta, z, v, dt):
-        s0, _, _, g = self._params(theta, v)
+        _, s0, _, _, g = self._params(theta, v)
         x = s0 * jnp.abs(v) / g * dt
         return z * jnp.exp(-x) + v * dt * _phi(x)
+
+
+class GMSStep(FrictionStep):
+    """Generalised Maxwell-slip, §8.4 (``jaxfric.models.gms``): state = (element forces
+    F_i, stick/slip direction d_i in {-1, 0, +1}); ``F = sum_i F_i + sigma2 v (+ F_off)``;
+    over one held sample an element slipping the way v moves (or beyond its level
+    ``alpha_i s(v)``) relaxes exactly, ``F_i <- t_i + (F_i - t_i) exp(-C h / s(v))`` with
+    ``t_i = alpha_i s(v) sgn(v)``; a sticking one moves by ``k_i v h`` and stops at ``t_i``
+    when it reaches its level. ``F_i(0) = alpha_i s(v_0) sgn(v_0)``. The explicit state
+    update is the model's own (stable for any h), so ``implicit_state`` stays False.
+    """
+
+    def _params(self, theta, v):
+        m = self.model
+        p = m.to_physical(theta)
+        n = m.num_elements
+        k = jnp.stack([p[f"k{i}"] for i in range(1, n + 1)], axis=-1)
+        alpha = jnp.stack([p[f"alpha{i}"] for i in range(1, n + 1)], axis=-1)
+        delta = m.stribeck_exponent
+        if m.asymmetric:
+            s = jnp.where(v > 0, stribeck_curve(v, p["Fc_pos"], p["Fs_pos"], p["vs"], delta),
+                          stribeck_curve(v, p["Fc_neg"], p["Fs_neg"], p["vs"], delta))
+        else:
+            s = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], delta)
+        return p, k, alpha, s
+
+    def init(self, theta, v0, dt):
+        _, _, alpha, s = self._params(theta, v0)
+        force = alpha * (s * jnp.sign(v0))
+        return force, jnp.broadcast_to(jnp.sign(v0), force.shape).astype(force.dtype)
+
+    def output(self, theta, state, v, dt):
+        p, _, _, _ = self._params(theta, v)
+        return add_offset(jnp.sum(state[0]) + by_direction(p, "sigma2", v) * v, p)
+
+    def update(self, theta, state, v, dt):
+        force, direction = state
+        p, k, alpha, s = self._params(theta, v)
+        sv = jnp.sign(v)
+        level = alpha * s
+        target = level * sv
+        relaxed = target + (force - target) * jnp.exp(-p["C"] * dt / s)
+        stuck = force + k * (v * dt)
+        moving = sv != 0
+        slips = moving & ((direction == sv) | (sv * force >= level))
+        reaches = moving & (sv * stuck >= level)
+        new_force = jnp.where(slips, relaxed, jnp.where(reaches, target, stuck))
+        new_direction = jnp.where(slips | reaches, sv, jnp.zeros_like(direction))
+        return new_force, new_direction
 
 
 class _ScaledStep(FrictionStep):
@@ -172,6 +232,11 @@ def friction_step(model: AbstractFrictionModel, scalers=(None, None)) -> Frictio
 @friction_step.register(Dahl)
 def _bristle(model, scalers=(None, None)):
     return BristleStep(model)
+
+
+@friction_step.register(GMS)
+def _gms(model, scalers=(None, None)):
+    return GMSStep(model)
 
 
 def _scalers(model, scalers):
