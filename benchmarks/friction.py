@@ -43,6 +43,9 @@ except ImportError:  # running from a source checkout without installing
 import jax
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+
 
 # ----------------------------------------------------------------- options
 def parse(argv=None):
@@ -537,9 +540,7 @@ def main(argv=None):
         jax.config.update("jax_enable_x64", True)
     from jaxfric import rig
 
-    results = Path(__file__).resolve().parent / "results"
-    out = Path(args.out) if args.out else (results / "quick" if args.quick else results)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(args.out, quick=args.quick)
     load = os.getloadavg()[0]
     t_start = time.perf_counter()
     print("simulating the rig ...", flush=True)

@@ -50,6 +50,9 @@ except ImportError:  # a source checkout without installing
     import jaxfric as jf
 from jaxfric.identification._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+
 EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
 
 
@@ -181,8 +184,9 @@ def main(argv=None):
     p.add_argument("--keys", type=int, default=5)
     p.add_argument("--generations", type=int, default=100, help="MAPSO generations")
     p.add_argument("--nm-evals", type=int, default=2000)
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=getattr(a, "quick", False))
     rows = []
     for dname, data in datasets(a.data.split(",")).items():
         for model_name in a.models.split(","):

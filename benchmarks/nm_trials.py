@@ -23,6 +23,7 @@ import csv
 import platform
 import statistics
 import time
+import sys
 from pathlib import Path
 
 import jax
@@ -35,6 +36,9 @@ import optimistix as optx  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
 
 
 def rosenbrock(y, args):
@@ -111,7 +115,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--quick", action="store_true")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     scale = 0.2 if a.quick else 1.0
     reps = 3 if a.quick else a.repeats
@@ -124,7 +128,7 @@ def main(argv=None):
     rows = []
     for label, fn, y0, args, options, steps in cases:
         rows += measure(label, fn, y0, args, options, steps, reps)
-    out = Path(a.out)
+    out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "nm_trials.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))

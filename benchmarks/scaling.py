@@ -51,6 +51,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import speed_optim  # noqa: E402  (NumPy Rosenbrock for pyswarms)
+from _harness import results_dir  # noqa: E402
 from peers import load_now, write_csv  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
@@ -272,8 +273,9 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
     p.add_argument("--tag", default="", help="suffix of the output files, e.g. gpu -> scaling_gpu.md")
-    p.add_argument("--out", type=Path, default=HERE / "results")
+    p.add_argument("--out", type=Path, default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=a.quick)
     if a.quick:
         a.seeds, a.particles, a.lattices, a.candidates = [1, 4], [16, 64], [3], [8, 32]
         a.pso_generations, a.mapso_generations, a.repeats = 10, 3, 2

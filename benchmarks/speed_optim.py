@@ -27,6 +27,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+
 
 def rosen_batch(X):
     return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
@@ -73,8 +76,8 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"),
-                   help="output folder (quick runs: point it elsewhere, never over committed results)")
+    p.add_argument("--out", default=None,
+                   help="output folder (default benchmarks/results)")
     p.add_argument("--tag", default="", help="suffix for the output files (e.g. gpu)")
     a = p.parse_args(argv)
     if a.dtype == "float64":
@@ -238,7 +241,7 @@ def main(argv=None):
         ratios.append(f"jaxfric PSO / evosax PSO, {a.seeds} seeds vmapped (evals/s): "
                       f"{mine['evals_per_s'] / evo['evals_per_s']:.2f}; median final f "
                       f"{mine['median_f']:.3g} vs {evo['median_f']:.3g} at equal evaluations")
-    out = Path(a.out)
+    out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
             + (f"_{a.tag}" if a.tag else ""))

@@ -51,6 +51,7 @@ from jaxfric import functions as F  # noqa: E402
 # (`jaxfric bench table1`) loads the script by path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import table1_rows  # noqa: E402
+from _harness import results_dir  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
@@ -151,7 +152,7 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=2017)
     p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     dims = [a.dim] if a.dim is not None else [int(d) for d in a.dims.split(",")]
     if a.quick:
@@ -163,7 +164,7 @@ def main(argv=None):
     swarm = jf.MAPSO(num_generations=a.restart_generations, sl_generations=a.restart_sl_generations)
     if swarm.evaluations() >= a.budget:
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
-    out = Path(a.out)
+    out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
 
     keys = jax.random.split(jax.random.key(a.seed), a.runs)

@@ -32,6 +32,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+
 SUCCESS = 1e-8
 #: Share of the budget CMA-ES gets in CMA-ES → NM (Nelder–Mead gets the rest).
 GLOBAL_SHARE = 0.8
@@ -184,8 +187,9 @@ def main(argv=None):
     p.add_argument("--budget", type=int, default=None)
     p.add_argument("--with-paper-rows", action="store_true",
                    help="also run MAPSO-NMDS (G = 1000) and PSO")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=getattr(a, "quick", False))
     functions = a.functions.split(",")
     for name in functions:
         jf.functions.get(name)
