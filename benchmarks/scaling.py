@@ -50,14 +50,13 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import speed_optim  # noqa: E402  (NumPy Rosenbrock for pyswarms)
 from _harness import results_dir  # noqa: E402
 from peers import load_now, write_csv  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
-from baselines import elman_rollout_vectorised  # noqa: E402
+from baselines import elman_rollout_vectorised, rosen_batch  # noqa: E402
 
 DIM, NEURONS, SAMPLES, FS = 30, 30, 1600, 128.0
 
@@ -136,7 +135,7 @@ def pyswarms_row(a, log) -> dict:
             100, DIM, options={"c1": 2.0, "c2": 2.0, "w": 0.9}, bounds=(lo, hi),
             oh_strategy={"w": "lin_variation"}, bh_strategy="nearest",
             velocity_clamp=(-vmax, vmax), vh_strategy="zero")
-        cost, _ = opt.optimize(speed_optim.rosen_batch, iters=iters, verbose=False)
+        cost, _ = opt.optimize(rosen_batch, iters=iters, verbose=False)
         return cost
 
     first, med, cost = timed(once, a.repeats)

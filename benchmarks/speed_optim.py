@@ -29,32 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
 from _harness import results_dir  # noqa: E402
-
-
-def rosen_batch(X):
-    return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
-
-
-def ackley_batch(X):
-    d = X.shape[1]
-    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
-            - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / d) + 20.0 + np.e)
-
-
-def griewank_batch(X):
-    i = np.sqrt(np.arange(1, X.shape[1] + 1))
-    return 1.0 + np.sum(X * X, axis=1) / 4000.0 - np.prod(np.cos(X / i), axis=1)
-
-
-#: NumPy versions (a batch of rows at once) for the peers; checked against jaxfric's at start.
-NUMPY_BATCH = {
-    "rosenbrock": rosen_batch,
-    "ackley": ackley_batch,
-    "griewank": griewank_batch,
-    "sphere": lambda X: np.sum(X * X, axis=1),
-    "schwefel": lambda X: np.sum(np.abs(X), axis=1) + np.prod(np.abs(X), axis=1),
-    "rastrigin": lambda X: np.sum(X * X - 10.0 * np.cos(2 * np.pi * X) + 10.0, axis=1),
-}
+from baselines import NUMPY_BATCH  # noqa: E402
 
 
 def median_time(fn, repeats):
