@@ -34,7 +34,6 @@ import csv
 import math
 import platform
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -51,26 +50,11 @@ from jaxfric import functions as F  # noqa: E402
 # (`jaxfric bench table1`) loads the script by path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import table1_rows  # noqa: E402
+from table1_rows import timed_batch  # noqa: E402
 from _harness import results_dir  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
-
-
-def timed_batch(fn_name, solver, dim, keys):
-    """Run the batch twice: the first call includes compilation, the second does not."""
-    t = F.get(fn_name)
-    bounds = t.bounds(dim)
-    obj = F.objective(fn_name)
-    t0 = time.perf_counter()
-    sol = jf.minimise_many(obj, solver, bounds, keys=keys)
-    jax.block_until_ready(sol)
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sol = jf.minimise_many(obj, solver, bounds, keys=keys)
-    jax.block_until_ready(sol)
-    run = time.perf_counter() - t0
-    return sol, max(first - run, 0.0), run
 
 
 def evals_to_success(sol):
@@ -180,7 +164,7 @@ def main(argv=None):
             sol, c, r = timed_batch(name, pso, dim, keys)
             results.append(("PSO (equal evaluations)", sol, c, r))
             if table1_rows.have_evosax():  # issue 16 item 3: CMA-ES, CMA-ES→NM at this budget
-                results += table1_rows.evosax_runs(name, dim, keys, budget, timed_batch)
+                results += table1_rows.evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
                 rows.append(row)

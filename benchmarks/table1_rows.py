@@ -72,8 +72,9 @@ def evosax_solvers(dim: int, budget: int) -> list[tuple[str, object]]:
     return [("CMA-ES (evosax)", cma), ("CMA-ES→NM", chain)]
 
 
-def _timed(fn_name, solver, dim, keys):
-    """The batch twice: the first call includes compilation, the second does not."""
+def timed_batch(fn_name, solver, dim, keys):
+    """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run twice: the
+    first call includes compilation, the second does not (table1.py times every row so)."""
     jf = _jf()
     t = jf.functions.get(fn_name)
     obj, bounds = jf.functions.objective(fn_name), t.bounds(dim)
@@ -86,10 +87,9 @@ def _timed(fn_name, solver, dim, keys):
     return sol, max(first - run, 0.0), run
 
 
-def evosax_runs(fn_name: str, dim: int, keys, budget: int, timed_batch=None):
+def evosax_runs(fn_name: str, dim: int, keys, budget: int):
     """``[(label, solution batch, compile s, run s)]`` of the evosax rows for one
-    function, in table1.py's shape (``timed_batch(fn_name, solver, dim, keys)``)."""
-    timed_batch = timed_batch or _timed
+    function, timed with :func:`timed_batch` as table1.py times its own rows."""
     return [(label, *timed_batch(fn_name, s, dim, keys)) for label, s in evosax_solvers(dim, budget)]
 
 
@@ -132,7 +132,7 @@ def evosax_rows(functions, dims, runs: int, budget: int | None = None, *, seed: 
                      ("PSO (equal evaluations)",
                       jf.PSO(num_particles=25, num_generations=max(1, math.ceil(b / 25) - 1)))]
         for name in functions:
-            batches = [(label, *_timed(name, s, dim, keys)) for label, s in extra]
+            batches = [(label, *timed_batch(name, s, dim, keys)) for label, s in extra]
             batches += evosax_runs(name, dim, keys, b)
             for label, sol, c, r in batches:
                 row = summary(label, name, dim, sol, c, r)
