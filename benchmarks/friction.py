@@ -44,7 +44,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 
 # ----------------------------------------------------------------- options
@@ -188,15 +188,6 @@ def table(runner, configs_methods, columns, header):
         cells += extra
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def write_csv(rows, path):
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
 def paper_fit(fit):

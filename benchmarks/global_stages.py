@@ -31,8 +31,6 @@ Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import csv
-import math
 import os
 import platform
 import sys
@@ -51,7 +49,7 @@ except ImportError:  # a source checkout without installing
 from jaxfric.identification._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
 
@@ -138,10 +136,7 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
 
 def write(out: Path, rows, a):
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "global_stages.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "global_stages.csv", float_format="")
     lines = [
         "# Global stages on the main job: MAPSO vs CMA-ES vs PSO, then the same Nelder–Mead",
         "",

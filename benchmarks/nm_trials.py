@@ -19,7 +19,6 @@ Writes ``nm_trials.md`` and ``nm_trials.csv`` to ``--out`` (default ``benchmarks
 from __future__ import annotations
 
 import argparse
-import csv
 import platform
 import statistics
 import time
@@ -38,7 +37,7 @@ import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 
 def rosenbrock(y, args):
@@ -130,10 +129,7 @@ def main(argv=None):
         rows += measure(label, fn, y0, args, options, steps, reps)
     out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "nm_trials.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "nm_trials.csv", float_format="")
     lines = [
         "# Nelder–Mead trial points: sequential rule vs one batch per step",
         "",

@@ -22,7 +22,6 @@ with fewer starts.
 from __future__ import annotations
 
 import argparse
-import csv
 import platform
 import sys
 from pathlib import Path
@@ -38,7 +37,7 @@ import scipy.optimize
 import jaxfric as jf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 FUNCTIONS = ("sphere", "rosenbrock")
 
@@ -127,10 +126,7 @@ def main(argv=None):
                       f"median f {np.median(f):.1e}", flush=True)
     out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "nm_vs_scipy.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "nm_vs_scipy.csv", float_format="")
     lines = [
         "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
         "",

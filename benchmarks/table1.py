@@ -30,7 +30,6 @@ run, and time: compile time apart from the run time of the whole batch and per r
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import platform
 import sys
@@ -40,7 +39,6 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # benchmarks choose x64 at start-up
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
@@ -51,7 +49,7 @@ from jaxfric import functions as F  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import table1_rows  # noqa: E402
 from table1_rows import timed_batch  # noqa: E402
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
@@ -177,17 +175,10 @@ def main(argv=None):
                     flush=True,
                 )
 
-    write_csv(out / "table1.csv", rows)
+    write_csv(rows, out / "table1.csv", float_format="")
     write_md(out / "table1.md", rows, a, dims)
     plot(out / "table1_convergence.png", curves, a)
     print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
-
-
-def write_csv(path, rows):
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def write_md(path, rows, a, dims):

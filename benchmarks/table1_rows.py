@@ -22,7 +22,6 @@ All runs of a row are one vmapped call (:func:`jaxfric.minimise_many`).
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import platform
 import sys
@@ -33,7 +32,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 SUCCESS = 1e-8
 #: Share of the budget CMA-ES gets in CMA-ES → NM (Nelder–Mead gets the rest).
@@ -146,10 +145,7 @@ def evosax_rows(functions, dims, runs: int, budget: int | None = None, *, seed: 
 
 def write(out: Path, rows, argv_line: str):
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "table1_evosax.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "table1_evosax.csv", float_format="")
     jf = _jf()
     lines = [
         "# Table 1 rows: evosax CMA-ES and CMA-ES → Nelder–Mead",
