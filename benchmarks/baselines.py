@@ -18,6 +18,9 @@ LuGre rollouts (exact zero-order-hold update, docs/algorithms.md §8.2), for
 inside the time loop, as MATLAB code would run it), :func:`lugre_numpy_hoisted` (the
 v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_loop`
 (scalar Python, one candidate at a time).
+
+NumPy test functions on a batch of rows (:data:`NUMPY_BATCH`), for the peers that take a
+vectorised objective (pyswarms) in ``speed_optim.py``, ``peers.py`` and ``scaling.py``.
 """
 
 from __future__ import annotations
@@ -27,11 +30,15 @@ import math
 import numpy as np
 
 __all__ = [
+    "NUMPY_BATCH",
+    "ackley_batch",
     "elman_rollout_loop",
+    "griewank_batch",
     "elman_rollout_vectorised",
     "lugre_numpy_hoisted",
     "lugre_numpy_per_step",
     "lugre_python_loop",
+    "rosen_batch",
     "unpack_elman",
 ]
 
@@ -141,3 +148,30 @@ def lugre_python_loop(p, v, dt):
             phi = 1.0 - 0.5 * x if x < 1e-8 else -math.expm1(-x) / x
             z = math.exp(-x) * z + vk * dt * phi
     return out
+
+
+# ------------------------------------------------------------- test functions
+def rosen_batch(X):
+    return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
+
+
+def ackley_batch(X):
+    d = X.shape[1]
+    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
+            - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / d) + 20.0 + np.e)
+
+
+def griewank_batch(X):
+    i = np.sqrt(np.arange(1, X.shape[1] + 1))
+    return 1.0 + np.sum(X * X, axis=1) / 4000.0 - np.prod(np.cos(X / i), axis=1)
+
+
+#: NumPy versions (a batch of rows at once) for the peers; checked against jaxfric's at start.
+NUMPY_BATCH = {
+    "rosenbrock": rosen_batch,
+    "ackley": ackley_batch,
+    "griewank": griewank_batch,
+    "sphere": lambda X: np.sum(X * X, axis=1),
+    "schwefel": lambda X: np.sum(np.abs(X), axis=1) + np.prod(np.abs(X), axis=1),
+    "rastrigin": lambda X: np.sum(X * X - 10.0 * np.cos(2 * np.pi * X) + 10.0, axis=1),
+}

@@ -22,6 +22,7 @@ import csv
 import platform
 import statistics
 import time
+import sys
 from pathlib import Path
 
 import jax
@@ -31,6 +32,9 @@ import numpy as np
 import jaxfric as jf
 from jaxfric import _xla
 from jaxfric import functions as F
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
 
 NO_SINGLE = "auto without single-kernel loops"  # 0.6.0's variant; the loops are gone (0.7.0)
 
@@ -201,7 +205,7 @@ def main(argv=None):
     p.add_argument("--rounds", type=int, default=15)
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--identify", action="store_true", help="also time a default ENN identify")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     p.add_argument("--tag", default="", help="suffix for the output files")
     a = p.parse_args(argv)
     if jax.default_backend() != "cpu":
@@ -212,7 +216,7 @@ def main(argv=None):
     rows = measure(cases, a.rounds)
     if a.identify:
         rows += measure([_identify_case()], max(2, a.rounds // 5))
-    out = Path(a.out)
+    out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = "compiler_options" + (f"_{a.tag}" if a.tag else "")
     with open(out / f"{stem}.csv", "w", newline="") as fh:

@@ -43,6 +43,9 @@ except ImportError:  # running from a source checkout without installing
 import jax
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
+
 
 # ----------------------------------------------------------------- options
 def parse(argv=None):
@@ -185,15 +188,6 @@ def table(runner, configs_methods, columns, header):
         cells += extra
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def write_csv(rows, path):
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
 def paper_fit(fit):
@@ -537,9 +531,7 @@ def main(argv=None):
         jax.config.update("jax_enable_x64", True)
     from jaxfric import rig
 
-    results = Path(__file__).resolve().parent / "results"
-    out = Path(args.out) if args.out else (results / "quick" if args.quick else results)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(args.out, quick=args.quick)
     load = os.getloadavg()[0]
     t_start = time.perf_counter()
     print("simulating the rig ...", flush=True)

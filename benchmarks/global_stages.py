@@ -31,8 +31,6 @@ Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import csv
-import math
 import os
 import platform
 import sys
@@ -49,6 +47,9 @@ except ImportError:  # a source checkout without installing
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import jaxfric as jf
 from jaxfric.identification._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
 
 EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
 
@@ -135,10 +136,7 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
 
 def write(out: Path, rows, a):
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "global_stages.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "global_stages.csv", float_format="")
     lines = [
         "# Global stages on the main job: MAPSO vs CMA-ES vs PSO, then the same Nelder–Mead",
         "",
@@ -181,8 +179,9 @@ def main(argv=None):
     p.add_argument("--keys", type=int, default=5)
     p.add_argument("--generations", type=int, default=100, help="MAPSO generations")
     p.add_argument("--nm-evals", type=int, default=2000)
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=getattr(a, "quick", False))
     rows = []
     for dname, data in datasets(a.data.split(",")).items():
         for model_name in a.models.split(","):

@@ -19,10 +19,10 @@ Writes ``nm_trials.md`` and ``nm_trials.csv`` to ``--out`` (default ``benchmarks
 from __future__ import annotations
 
 import argparse
-import csv
 import platform
 import statistics
 import time
+import sys
 from pathlib import Path
 
 import jax
@@ -35,6 +35,9 @@ import optimistix as optx  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
 
 
 def rosenbrock(y, args):
@@ -111,7 +114,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--quick", action="store_true")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     scale = 0.2 if a.quick else 1.0
     reps = 3 if a.quick else a.repeats
@@ -124,12 +127,9 @@ def main(argv=None):
     rows = []
     for label, fn, y0, args, options, steps in cases:
         rows += measure(label, fn, y0, args, options, steps, reps)
-    out = Path(a.out)
+    out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "nm_trials.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "nm_trials.csv", float_format="")
     lines = [
         "# Nelder–Mead trial points: sequential rule vs one batch per step",
         "",

@@ -22,8 +22,8 @@ with fewer starts.
 from __future__ import annotations
 
 import argparse
-import csv
 import platform
+import sys
 from pathlib import Path
 
 import jax
@@ -35,6 +35,9 @@ import scipy
 import scipy.optimize
 
 import jaxfric as jf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
 
 FUNCTIONS = ("sphere", "rosenbrock")
 
@@ -110,7 +113,7 @@ def main(argv=None):
     p.add_argument("--tol", type=float, default=1e-10, help="xatol = fatol")
     p.add_argument("--solved", type=float, default=1e-8)
     p.add_argument("--dims", default="4,8,12")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     rows = []
     for name in FUNCTIONS:
@@ -121,12 +124,9 @@ def main(argv=None):
                              "median_evals": med_ev, "median_f": float(np.median(f)), "worst_f": float(np.max(f))})
                 print(f"{name:10s} n={n:2d} {label:36s} solved {ok:2d}/{a.starts}  median evals {med_ev:8.0f}  "
                       f"median f {np.median(f):.1e}", flush=True)
-    out = Path(a.out)
+    out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "nm_vs_scipy.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "nm_vs_scipy.csv", float_format="")
     lines = [
         "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
         "",

@@ -71,15 +71,15 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import rollout_speed  # noqa: E402  (section 2 ENN rows)
-import speed_optim  # noqa: E402  (NumPy test functions; appendix)
+import speed_optim  # noqa: E402  (appendix)
 from _harness import (Case, add_output_arguments, render, render_blocks, results_dir,  # noqa: E402
                       run_round_robin, write_csv)
-from baselines import lugre_numpy_hoisted, lugre_numpy_per_step, lugre_python_loop  # noqa: E402
+from baselines import NUMPY_BATCH, lugre_numpy_hoisted, lugre_numpy_per_step, lugre_python_loop  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 from jaxfric.fit import predict, rollout_model  # noqa: E402
-from jaxfric.identification import OutputErrorCost, as_record, default_solver, identify  # noqa: E402
+from jaxfric.identification import OutputErrorCost, as_record, identify, paper_solver  # noqa: E402
 from jaxfric.identification._objective import cost_data  # noqa: E402
 from jaxfric.identification._timing import Stopwatch  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
@@ -230,7 +230,7 @@ def section_test_functions(sz: Sizes, rows: list, log) -> None:
 
     for fname in sz.functions:
         log(f"[1] {fname}: {D}-D, {P} agents, budget {budget} evaluations")
-        tf, obj, fb = F.get(fname), F.objective(fname), speed_optim.NUMPY_BATCH[fname]
+        tf, obj, fb = F.get(fname), F.objective(fname), NUMPY_BATCH[fname]
         lo, hi = tf.bounds(D, np.float32)
         lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
         vmax = 0.2 * float(hi64[0] - lo64[0])
@@ -460,7 +460,7 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
         return float(one(jnp.asarray(x, dtype), cdata))
 
     lo, hi = model.bounds()
-    pop = (sz.id_solver or default_solver(model)).mapso.num_agents
+    pop = (sz.id_solver or paper_solver(model)).mapso.num_agents
     n_global = f1.stages[0]["num_evals"]
     n_local = sum(st["num_evals"] for st in f1.stages) - n_global
     de_gens = max(1, math.ceil((n_global - pop) / pop))
@@ -526,7 +526,7 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
         return
     # Where identify's time goes: each stage alone on the same cost (one call each; run time =
     # wall - compile spans).
-    ds = sz.id_solver or default_solver(model)
+    ds = sz.id_solver or paper_solver(model)
     for label, s, y0 in (
         ("MAPSO stage alone", ds.mapso, None),
         ("MAPSO stage without self-learning (sl_size=1)", dataclasses.replace(ds.mapso, sl_size=1), None),
@@ -833,7 +833,7 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
 
 def solver_text(sz: Sizes) -> str:
     model = Elman(neurons=sz.neurons)
-    ds = sz.id_solver or default_solver(model)
+    ds = sz.id_solver or paper_solver(model)
     m, nm = ds.mapso, ds.nelder_mead
     return (f"MAPSO {m.lattice_size}×{m.lattice_size}, {m.num_generations} generations, then "
             f"Nelder–Mead capped at {nm.max_evals} evaluations")

@@ -53,6 +53,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
 #: Nelder–Mead evaluations granted per BFGS step of the jaxfric pipeline (DE → NM row).
@@ -198,8 +201,7 @@ def main(argv=None):
         return 0
     seeds = args.seeds or (5 if args.record == "rig" else 1)
     paper_seeds = args.paper_seeds or seeds
-    out = Path(args.out) if args.out else HERE / "results" / ("quick" if args.quick else "")
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(args.out, quick=args.quick)
     skip = set(filter(None, args.skip.split(",")))
     v, f, n = np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
     base = ls_baseline(v, f, n)

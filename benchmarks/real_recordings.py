@@ -39,6 +39,9 @@ except ImportError:  # running from a source checkout without installing
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
+
 DROP = 15  # first rows dropped, as the authors do ("deviating starting values")
 V_MOVE = 3e-3  # m/s, sliding threshold of make_summary.py
 COLUMNS = {"t": 0, "x": 4, "p2": 5, "load": 6}
@@ -88,14 +91,6 @@ def analyse(data_dir: str, cutoff: float = 5.0) -> tuple[list[dict], dict]:
         ))
         records[name] = (meas, data)
     return rows, records
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.5g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
 def write_markdown(rows: list[dict], path: Path, data_dir: str, cutoff: float) -> None:
@@ -202,7 +197,7 @@ def write_figures(rows: list[dict], records: dict, out: Path) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("data_dir", help="the pneumatic_seal_friction folder (raw/*.csv, friction_summary.csv)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"),
+    ap.add_argument("--out", default=None,
                     help="output folder (default: benchmarks/results)")
     ap.add_argument("--cutoff", type=float, default=5.0, help="low-pass cutoff [Hz] (default 5)")
     args = ap.parse_args(argv)
@@ -213,10 +208,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"real_recordings: no data at {args.data_dir!r} (expected raw/*.csv and friction_summary.csv); "
               "skipped, nothing written.", file=sys.stderr)
         return 0
-    out = Path(args.out)
+    out = results_dir(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows, records = analyse(args.data_dir, args.cutoff)
-    write_csv(rows, out / "real_recordings.csv")
+    write_csv(rows, out / "real_recordings.csv", float_format=".5g")
     write_markdown(rows, out / "real_recordings.md", args.data_dir, args.cutoff)
     figs = write_figures(rows, records, out)
     worst = max(abs(r["rel_diff_pct"]) for r in rows)

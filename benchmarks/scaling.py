@@ -50,13 +50,13 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import speed_optim  # noqa: E402  (NumPy Rosenbrock for pyswarms)
+from _harness import results_dir  # noqa: E402
 from peers import load_now, write_csv  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
 from jaxfric.models import Elman  # noqa: E402
-from baselines import elman_rollout_vectorised  # noqa: E402
+from baselines import elman_rollout_vectorised, rosen_batch  # noqa: E402
 
 DIM, NEURONS, SAMPLES, FS = 30, 30, 1600, 128.0
 
@@ -135,7 +135,7 @@ def pyswarms_row(a, log) -> dict:
             100, DIM, options={"c1": 2.0, "c2": 2.0, "w": 0.9}, bounds=(lo, hi),
             oh_strategy={"w": "lin_variation"}, bh_strategy="nearest",
             velocity_clamp=(-vmax, vmax), vh_strategy="zero")
-        cost, _ = opt.optimize(speed_optim.rosen_batch, iters=iters, verbose=False)
+        cost, _ = opt.optimize(rosen_batch, iters=iters, verbose=False)
         return cost
 
     first, med, cost = timed(once, a.repeats)
@@ -272,8 +272,9 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
     p.add_argument("--tag", default="", help="suffix of the output files, e.g. gpu -> scaling_gpu.md")
-    p.add_argument("--out", type=Path, default=HERE / "results")
+    p.add_argument("--out", type=Path, default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=a.quick)
     if a.quick:
         a.seeds, a.particles, a.lattices, a.candidates = [1, 4], [16, 64], [3], [8, 32]
         a.pso_generations, a.mapso_generations, a.repeats = 10, 3, 2

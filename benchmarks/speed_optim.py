@@ -27,31 +27,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
-
-def rosen_batch(X):
-    return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
-
-
-def ackley_batch(X):
-    d = X.shape[1]
-    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
-            - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / d) + 20.0 + np.e)
-
-
-def griewank_batch(X):
-    i = np.sqrt(np.arange(1, X.shape[1] + 1))
-    return 1.0 + np.sum(X * X, axis=1) / 4000.0 - np.prod(np.cos(X / i), axis=1)
-
-
-#: NumPy versions (a batch of rows at once) for the peers; checked against jaxfric's at start.
-NUMPY_BATCH = {
-    "rosenbrock": rosen_batch,
-    "ackley": ackley_batch,
-    "griewank": griewank_batch,
-    "sphere": lambda X: np.sum(X * X, axis=1),
-    "schwefel": lambda X: np.sum(np.abs(X), axis=1) + np.prod(np.abs(X), axis=1),
-    "rastrigin": lambda X: np.sum(X * X - 10.0 * np.cos(2 * np.pi * X) + 10.0, axis=1),
-}
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir  # noqa: E402
+from baselines import NUMPY_BATCH  # noqa: E402
 
 
 def median_time(fn, repeats):
@@ -73,8 +51,8 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"),
-                   help="output folder (quick runs: point it elsewhere, never over committed results)")
+    p.add_argument("--out", default=None,
+                   help="output folder (default benchmarks/results)")
     p.add_argument("--tag", default="", help="suffix for the output files (e.g. gpu)")
     a = p.parse_args(argv)
     if a.dtype == "float64":
@@ -238,7 +216,7 @@ def main(argv=None):
         ratios.append(f"jaxfric PSO / evosax PSO, {a.seeds} seeds vmapped (evals/s): "
                       f"{mine['evals_per_s'] / evo['evals_per_s']:.2f}; median final f "
                       f"{mine['median_f']:.3g} vs {evo['median_f']:.3g} at equal evaluations")
-    out = Path(a.out)
+    out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
             + (f"_{a.tag}" if a.tag else ""))

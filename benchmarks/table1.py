@@ -30,18 +30,15 @@ run, and time: compile time apart from the run time of the whole batch and per r
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import platform
 import sys
-import time
 from pathlib import Path
 
 import jax
 
 jax.config.update("jax_enable_x64", True)  # benchmarks choose x64 at start-up
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
@@ -51,25 +48,11 @@ from jaxfric import functions as F  # noqa: E402
 # (`jaxfric bench table1`) loads the script by path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import table1_rows  # noqa: E402
+from table1_rows import timed_batch  # noqa: E402
+from _harness import results_dir, write_csv  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
-
-
-def timed_batch(fn_name, solver, dim, keys):
-    """Run the batch twice: the first call includes compilation, the second does not."""
-    t = F.get(fn_name)
-    bounds = t.bounds(dim)
-    obj = F.objective(fn_name)
-    t0 = time.perf_counter()
-    sol = jf.minimise_many(obj, solver, bounds, keys=keys)
-    jax.block_until_ready(sol)
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sol = jf.minimise_many(obj, solver, bounds, keys=keys)
-    jax.block_until_ready(sol)
-    run = time.perf_counter() - t0
-    return sol, max(first - run, 0.0), run
 
 
 def evals_to_success(sol):
@@ -151,7 +134,7 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=2017)
     p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     dims = [a.dim] if a.dim is not None else [int(d) for d in a.dims.split(",")]
     if a.quick:
@@ -163,7 +146,7 @@ def main(argv=None):
     swarm = jf.MAPSO(num_generations=a.restart_generations, sl_generations=a.restart_sl_generations)
     if swarm.evaluations() >= a.budget:
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
-    out = Path(a.out)
+    out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
 
     keys = jax.random.split(jax.random.key(a.seed), a.runs)
@@ -179,7 +162,7 @@ def main(argv=None):
             sol, c, r = timed_batch(name, pso, dim, keys)
             results.append(("PSO (equal evaluations)", sol, c, r))
             if table1_rows.have_evosax():  # issue 16 item 3: CMA-ES, CMA-ES→NM at this budget
-                results += table1_rows.evosax_runs(name, dim, keys, budget, timed_batch)
+                results += table1_rows.evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
                 rows.append(row)
@@ -192,17 +175,10 @@ def main(argv=None):
                     flush=True,
                 )
 
-    write_csv(out / "table1.csv", rows)
+    write_csv(rows, out / "table1.csv", float_format="")
     write_md(out / "table1.md", rows, a, dims)
     plot(out / "table1_convergence.png", curves, a)
     print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
-
-
-def write_csv(path, rows):
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def write_md(path, rows, a, dims):

@@ -22,7 +22,6 @@ All runs of a row are one vmapped call (:func:`jaxfric.minimise_many`).
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import platform
 import sys
@@ -31,6 +30,9 @@ from pathlib import Path
 
 import jax
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
+from _harness import results_dir, write_csv  # noqa: E402
 
 SUCCESS = 1e-8
 #: Share of the budget CMA-ES gets in CMA-ES → NM (Nelder–Mead gets the rest).
@@ -69,8 +71,9 @@ def evosax_solvers(dim: int, budget: int) -> list[tuple[str, object]]:
     return [("CMA-ES (evosax)", cma), ("CMA-ES→NM", chain)]
 
 
-def _timed(fn_name, solver, dim, keys):
-    """The batch twice: the first call includes compilation, the second does not."""
+def timed_batch(fn_name, solver, dim, keys):
+    """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run twice: the
+    first call includes compilation, the second does not (table1.py times every row so)."""
     jf = _jf()
     t = jf.functions.get(fn_name)
     obj, bounds = jf.functions.objective(fn_name), t.bounds(dim)
@@ -83,10 +86,9 @@ def _timed(fn_name, solver, dim, keys):
     return sol, max(first - run, 0.0), run
 
 
-def evosax_runs(fn_name: str, dim: int, keys, budget: int, timed_batch=None):
+def evosax_runs(fn_name: str, dim: int, keys, budget: int):
     """``[(label, solution batch, compile s, run s)]`` of the evosax rows for one
-    function, in table1.py's shape (``timed_batch(fn_name, solver, dim, keys)``)."""
-    timed_batch = timed_batch or _timed
+    function, timed with :func:`timed_batch` as table1.py times its own rows."""
     return [(label, *timed_batch(fn_name, s, dim, keys)) for label, s in evosax_solvers(dim, budget)]
 
 
@@ -129,7 +131,7 @@ def evosax_rows(functions, dims, runs: int, budget: int | None = None, *, seed: 
                      ("PSO (equal evaluations)",
                       jf.PSO(num_particles=25, num_generations=max(1, math.ceil(b / 25) - 1)))]
         for name in functions:
-            batches = [(label, *_timed(name, s, dim, keys)) for label, s in extra]
+            batches = [(label, *timed_batch(name, s, dim, keys)) for label, s in extra]
             batches += evosax_runs(name, dim, keys, b)
             for label, sol, c, r in batches:
                 row = summary(label, name, dim, sol, c, r)
@@ -143,10 +145,7 @@ def evosax_rows(functions, dims, runs: int, budget: int | None = None, *, seed: 
 
 def write(out: Path, rows, argv_line: str):
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "table1_evosax.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(rows, out / "table1_evosax.csv", float_format="")
     jf = _jf()
     lines = [
         "# Table 1 rows: evosax CMA-ES and CMA-ES → Nelder–Mead",
@@ -184,8 +183,9 @@ def main(argv=None):
     p.add_argument("--budget", type=int, default=None)
     p.add_argument("--with-paper-rows", action="store_true",
                    help="also run MAPSO-NMDS (G = 1000) and PSO")
-    p.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    p.add_argument("--out", default=None)
     a = p.parse_args(argv)
+    a.out = results_dir(a.out, quick=getattr(a, "quick", False))
     functions = a.functions.split(",")
     for name in functions:
         jf.functions.get(name)

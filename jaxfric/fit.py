@@ -17,9 +17,10 @@ non-finite weights, scalers or sample time (they would predict NaN).
 Prediction is honest about its data (:meth:`Fit.predict`, :meth:`Fit.predict_at`): one
 output sample per input sample; a sample time other than the fit's is resampled onto
 the fit's grid for every model whose output depends on it (:class:`ResamplingWarning`);
-velocities outside the training range give an :class:`ExtrapolationWarning`. Writes go to a
-temporary file in the target directory, then ``os.replace``: a crash never leaves
-a half-written fit under the final name.
+velocities outside the training range give an :class:`ExtrapolationWarning`. Writes go through
+:func:`jaxfric.files.atomic_write` (a temporary file in the target directory, then
+``os.replace``, with the user's usual permissions): a crash never leaves a half-written
+fit under the final name.
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import dataclasses
 import io
 import json
 import os
-import tempfile
 import warnings
 import zipfile
 from typing import Any
@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import models as _models
+from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 
 __all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit",
@@ -69,19 +70,6 @@ def _jaxfric_version() -> str:
     return __version__
 
 
-def _jsonable(x):
-    """Python scalars/lists from NumPy/JAX values and tuples (recursively)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.ndarray, jax.Array)):
-        return _jsonable(np.asarray(x).tolist())
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
-
-
 def _tuples(x):
     """JSON lists back to tuples (model fields are hashable static values)."""
     if isinstance(x, list):
@@ -91,7 +79,7 @@ def _tuples(x):
 
 def model_config(model: AbstractFrictionModel) -> dict[str, Any]:
     """The constructor arguments of ``model`` (its dataclass fields) as JSON values."""
-    return {f.name: _jsonable(getattr(model, f.name)) for f in dataclasses.fields(model)}
+    return {f.name: jsonable(getattr(model, f.name)) for f in dataclasses.fields(model)}
 
 
 def model_from_config(class_name: str, config: dict[str, Any]) -> AbstractFrictionModel:
@@ -415,22 +403,22 @@ class Fit:
             "n_samples": self.n_samples,
             "scalers": {"velocity": scaler(self.velocity_scaler),
                         "friction": scaler(self.friction_scaler)},
-            "metrics": _jsonable(self.metrics),
-            "stages": _jsonable(self.stages),
-            "timings": _jsonable(self.timings),
+            "metrics": jsonable(self.metrics),
+            "stages": jsonable(self.stages),
+            "timings": jsonable(self.timings),
             "key": {"data": self.key_data, "impl": self.key_impl, "seed": self.seed},
-            "settings": _jsonable(self.settings),
+            "settings": jsonable(self.settings),
             "jaxfric_version": self.version,
             "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
-            "diagnostics": _jsonable(self.diagnostics),
+            "diagnostics": jsonable(self.diagnostics),
         }
         if self.ensemble:
-            out["ensemble"] = _jsonable({k: v for k, v in self.ensemble.items()
+            out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items()
                                          if include_theta or k != "theta"})
         if not self.model.needs_scaling:
-            out["params"] = {k: _jsonable(v) for k, v in self.params.items()}
+            out["params"] = {k: jsonable(v) for k, v in self.params.items()}
         if include_theta:
-            out["theta"] = _jsonable(self.theta)
+            out["theta"] = jsonable(self.theta)
             out["theta_dtype"] = str(self.theta.dtype)
         return out
 
@@ -510,19 +498,12 @@ class Fit:
         }
         if self.ensemble and "theta" in self.ensemble:
             arrays["ensemble_theta"] = np.asarray(self.ensemble["theta"])
-        path = os.fspath(path)
-        directory = os.path.dirname(os.path.abspath(path))
-        fd, tmp = tempfile.mkstemp(prefix=".jaxfric-fit-", suffix=".tmp", dir=directory)
-        try:
-            with os.fdopen(fd, "wb") as fh:
+        def write(tmp):
+            # np.savez on a name would append ".npz" to the temporary's; give it the file
+            with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+
+        atomic_write(os.fspath(path), write)
 
 
 def _read(path) -> tuple[dict, dict[str, np.ndarray]]:

@@ -148,15 +148,10 @@ def fit_num_params(fit) -> int | None:
     return int(n) if n is not None else None
 
 
-def _jsonable(x):
-    """JSON types for results.json (non-finite floats as text, so it stays standard JSON)."""
-    return jsonable(x, finite=True)
-
-
 def fit_dict(fit) -> dict:
     """``fit.to_dict()`` when available, made JSON-safe."""
     to_dict = getattr(fit, "to_dict", None)
-    return _jsonable(to_dict()) if callable(to_dict) else {}
+    return jsonable(to_dict(), finite=True) if callable(to_dict) else {}
 
 
 # ------------------------------------------------------------------ tables
@@ -347,7 +342,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         "command": command,
         "source": source,
         "environment": _environment(),
-        "settings": _jsonable(dict(settings or {})),
+        "settings": jsonable(dict(settings or {}), finite=True),
         "data": _data_summary(data),
         "validation_records": {k: _data_summary(v) for k, v in records.items()},
         "metric_definitions": METRIC_FORMULAS,

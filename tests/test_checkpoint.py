@@ -62,7 +62,7 @@ def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
                           timeout=600, env=dict(os.environ, JAX_PLATFORMS="cpu"))
     assert proc.returncode == 17, proc.stderr[-2000:]
     assert path.exists()
-    assert not list(tmp_path.glob("*.tmp")), "a temporary file was left behind"
+    assert not list(tmp_path.glob("*tmp")), "a temporary file was left behind"  # .tmp, .jaxfric-tmp
     from jaxfric.optim.checkpoint import read_meta
 
     assert read_meta(path)["steps_done"] == 21

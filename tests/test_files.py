@@ -56,9 +56,6 @@ def test_saved_fit_in_a_report_gets_the_usual_permissions(tmp_path, umask022):
     assert jf.load_fit(p).theta.tolist() == [40.0, 3.0]
 
 
-@pytest.mark.xfail(reason="jaxfric/fit.py (another branch) still writes with mkstemp's 0600; "
-                          "fixed when Fit.save calls jaxfric.files.atomic_write at merge",
-                   strict=False)
 def test_fit_save_gets_the_usual_permissions(tmp_path, umask022):
     import jaxfric as jf
 

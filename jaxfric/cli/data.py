@@ -34,8 +34,9 @@ class Table:
         spec = str(spec).strip()
         if self.header.count(spec) > 1:
             at = [i for i, h in enumerate(self.header) if h == spec]
-            raise UserError(f"{option}: {self.path} has {len(at)} columns named {spec!r} (indices "
-                            f"{', '.join(map(str, at))}); rename them or give the 0-based index")
+            raise UserError(f"{option}: column {spec!r} appears {len(at)} times in {self.path}: {len(at)} "
+                            f"columns named {spec!r} (indices {', '.join(map(str, at))}); rename them or "
+                            "give the 0-based index")
         if spec in self.header:
             try:
                 i = column_index(self.header, spec, path=self.path, what=option)

@@ -3,9 +3,9 @@
 The run advances in chunks of ``every`` steps, each chunk one call of the driver's
 compiled ``_run``; after each chunk the loop's carry (solver state, history, steps) is
 written with equinox's serialisation (``eqx.tree_serialise_leaves``) after a one-line
-JSON header, to a temporary file that then replaces the checkpoint (``os.replace``), so
-an interrupt never leaves a half-written file. Files get the user's usual permissions
-(``0o666 & ~umask``). Calling :func:`jaxfric.minimise` again with the same path resumes
+JSON header, through :func:`jaxfric.files.atomic_write` (a temporary file that then
+replaces the checkpoint with ``os.replace``), so an interrupt never leaves a half-written
+file. Files get the user's usual permissions (``0o666 & ~umask``). Calling :func:`jaxfric.minimise` again with the same path resumes
 from the last completed chunk and returns exactly what the uninterrupted run returns:
 a chunked run performs the same steps, in the same order, with the same compiled loop.
 
@@ -21,8 +21,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
-import tempfile
 import types
 from pathlib import Path
 
@@ -31,6 +29,8 @@ import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
+
+from ..files import atomic_write
 
 FORMAT = "jaxfric-checkpoint"
 VERSION = 3  # 3: the driver's carry, equinox serialisation (0.7.0)
@@ -153,27 +153,17 @@ def _typed(raw, like, impl):
         lambda r, x: jax.random.wrap_key_data(r, impl=impl) if _is_key(x) else r, raw, like)
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def save(path: Path, meta: dict, carry) -> None:
-    """Write ``carry`` after a JSON header, atomically, with the user's permissions."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
+    """Write ``carry`` after a JSON header, atomically, with the user's permissions
+    (:func:`jaxfric.files.atomic_write`)."""
+
+    def write(tmp: Path):
+        with open(tmp, "wb") as fh:
             fh.write(MAGIC)
             fh.write(json.dumps(meta).encode() + b"\n")
             eqx.tree_serialise_leaves(fh, _raw(carry))
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+
+    atomic_write(path, write)
 
 
 def read_meta(path) -> dict:

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..files import column_index, read_rows
 from ._checks import as_channel, check_increasing, check_positive, is_uniform
 from .data import FrictionData, Measurements
 
@@ -68,36 +69,17 @@ def _read_table(path, columns: Mapping, delimiter, skip_rows: int, comments: str
     and text: a cell that is not a number (text in a numeric column, an empty cell) is
     an error here rather than a NaN that fails later as "non-finite samples".
     """
-    if not os.path.exists(path):
-        raise ValueError(f"file not found: {path}")
-    if os.path.isdir(path):
-        raise ValueError(f"{path} is a folder, not a data file")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            numbered = [(i, ln) for i, ln in enumerate(fh, start=1)
-                        if ln.strip() and not (comments and ln.lstrip().startswith(comments))]
-    except UnicodeDecodeError:
-        raise ValueError(f"{path} is not a text (CSV) file") from None
-    except OSError as err:
-        raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
-
-    def cells(line: str) -> list[str]:
-        if comments and comments in line:
-            line = line.split(comments, 1)[0]
-        parts = line.split(delimiter) if delimiter is not None else line.split()
-        return [c.strip().strip('"').strip("'") for c in parts]
-
+    numbered = read_rows(path, delimiter=delimiter, comments=comments)
     by_name = any(isinstance(c, str) for c in columns.values())
     header = []
     if by_name:
         if not numbered:
             raise ValueError(f"{path}: empty file, no header to map column names")
-        header = cells(numbered[0][1])
+        header = numbered[0][1]
         numbered = numbered[1:]
-    numbered = numbered[skip_rows:]
-    if not numbered:
+    rows = numbered[skip_rows:]
+    if not rows:
         raise ValueError(f"{path}: no data rows")
-    rows = [(lineno, cells(line)) for lineno, line in numbered]
     width = len(rows[0][1])
     for lineno, row in rows:
         if len(row) != width:
@@ -106,15 +88,12 @@ def _read_table(path, columns: Mapping, delimiter, skip_rows: int, comments: str
     index, names = {}, {}
     for channel, col in columns.items():
         if isinstance(col, str):
-            if col not in header:
-                raise ValueError(f"{path}: column '{col}' (for channel '{channel}') is missing; "
-                                 f"the header has {header}")
-            if header.count(col) > 1:
+            if header.count(col) > 1:  # the rig loaders' wording (tests/test_bad_input_catalogue.py)
                 at = [i for i, h in enumerate(header) if h == col]
                 raise ValueError(f"{path}: the header names column '{col}' (for channel '{channel}') "
                                  f"{len(at)} times (at indices {at}); rename the columns or map the "
                                  "channel by its 0-based index")
-            index[channel] = header.index(col)
+            index[channel] = column_index(header, col, path=path, what=f"for channel '{channel}'")
             names[channel] = f"column '{col}'"
         else:
             index[channel] = int(col)
