@@ -5,10 +5,10 @@ Usage::
     python benchmarks/friction.py [--seeds 3] [--out benchmarks/results] [--x64] [--quick]
 
 Data: ``jaxfric.rig.synthetic_friction_data`` at its default noise (2000 samples at
-128 Hz, 5 Hz Butterworth, 1600 training / 400 validation samples; ALGORITHMS.md §7).
+128 Hz, 5 Hz Butterworth, 1600 training / 400 validation samples; docs/algorithms.md §7).
 Each configuration runs ``--seeds`` independent optimiser keys on the *same* record.
 
-What it measures (ALGORITHMS.md §12):
+What it measures (docs/algorithms.md §12):
 
 1. one full default ENN identification (``identify("elman", data, key=...)``), compile
    time apart, and the same call again (served from the jit cache);
@@ -328,7 +328,7 @@ def write_markdown(out, rows, files, meta):
     add(f"Data: `jaxfric.rig.synthetic_friction_data(jax.random.key({meta['data_seed']}))` at the "
         f"default sensor noise: {meta['n_samples']} samples at {meta['fs']:.0f} Hz, "
         f"{meta['n_train']} training / {meta['n_samples'] - meta['n_train']} validation samples "
-        "(ALGORITHMS.md §7). The rig's seal friction is a pressure-dependent, asymmetric "
+        "(docs/algorithms.md §7). The rig's seal friction is a pressure-dependent, asymmetric "
         "Maxwell-slip model (Coulomb level 270 N extending, 150 N retracting), richer than "
         "LuGre on purpose.\n")
     add(f"Search dtype {meta['dtype']}; {n_keys} optimiser keys per configuration on the same "

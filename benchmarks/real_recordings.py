@@ -10,7 +10,7 @@ repository; this script only reads them.
 
 Per file: the irregular ~100 Hz stamps are resampled to a uniform grid, all
 channels pass the zero-phase Butterworth low-pass, velocity comes from the
-filtered position, and friction from the force balance of ALGORITHMS.md §7
+filtered position, and friction from the force balance of docs/algorithms.md §7
 with the pneumatic sign convention of SOURCE.md: ``F_f = F_loadcell - p A``
 (one pressurised chamber of bore D acting towards -x, the load cell pushing
 towards +x, inertia neglected as the authors do). The Coulomb level is the
@@ -105,7 +105,7 @@ def write_markdown(rows: list[dict], path: Path, data_dir: str, cutoff: float) -
         "Pipeline (jaxfric.rig): irregular stamps resampled linearly to a uniform grid "
         f"(median step), zero-phase Butterworth order 4 at {cutoff:g} Hz on every channel, velocity by "
         "central differences of the filtered position, friction `F_f = F_loadcell - p A` "
-        "(ALGORITHMS §7 force balance with p2 = chamber pressure, rod = 0, load = -F_loadcell, mass 0). "
+        "(docs/algorithms.md §7 force balance with p2 = chamber pressure, rod = 0, load = -F_loadcell, mass 0). "
         f"Coulomb level = half-range of the mean friction while |v| > {V_MOVE * 1e3:g} mm/s (make_summary.py).",
         "",
         f"**{ok}/{len(rows)} files within ±{100 * TOLERANCE:.0f} % of friction_summary.csv; "

@@ -1,4 +1,4 @@
-"""The result of :func:`jaxfric.identify`, and saving/loading it (ALGORITHMS.md §6, §11 step 8).
+"""The result of :func:`jaxfric.identify`, and saving/loading it (docs/algorithms.md §6, §11 step 8).
 
 A :class:`Fit` holds everything needed to *use* an identified model — the model
 configuration, θ in search coordinates, the training-window scalers of §2.4 and
@@ -65,9 +65,13 @@ class ExtrapolationWarning(UserWarning):
 
 
 def _jaxfric_version() -> str:
-    from . import __version__
+    # from the installed metadata, not the package root (an import only goes down)
+    from importlib.metadata import PackageNotFoundError, version
 
-    return __version__
+    try:
+        return version("jaxfric")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0.0.0+unknown"
 
 
 def _tuples(x):

@@ -1,4 +1,4 @@
-"""Benchmark test functions (ALGORITHMS.md §9) with their standard domains and optima.
+"""Benchmark test functions (docs/algorithms.md §9) with their standard domains and optima.
 
 Every function takes a 1-D array ``x`` of any length ``D`` and returns a scalar; all
 are jit-, vmap- and grad-safe (where the function is differentiable) and keep the

@@ -34,7 +34,7 @@ SMALL_ENN = jaxfric.mapso_nmds(lattice_size=3, num_generations=10, sl_generation
 
 
 def velocity_profile(n: int = N) -> np.ndarray:
-    """ALGORITHMS.md §7 stand-in profile: two sines with reversals, 128 Hz."""
+    """docs/algorithms.md §7 stand-in profile: two sines with reversals, 128 Hz."""
     t = np.arange(n) / FS
     return 0.010 * np.sin(2 * np.pi * 0.2 * t) + 0.004 * np.sin(2 * np.pi * 0.53 * t)
 
@@ -214,7 +214,7 @@ def test_named_models_get_the_documented_defaults_and_options():
     assert _api.resolve_model("lugre", None) == LuGre()
     enn = _api.resolve_model("elman", None)
     for solver in (_api.paper_solver(enn), _api.default_solver(enn, "paper")):
-        assert solver.mapso.num_agents == 64  # ALGORITHMS §3.5: Lsize 8 for the ENN
+        assert solver.mapso.num_agents == 64  # docs/algorithms.md §3.5: Lsize 8 for the ENN
         assert solver.nelder_mead.max_evals == 200 * 180  # fminsearch's MaxFunEvals
     # The default pipeline's global stage: the same lattice, a short run (BFGS follows).
     fast = _api.default_solver(enn)

@@ -1,4 +1,4 @@
-"""Friction metrics (ALGORITHMS.md §6, MATLAB FIT %) against hand-computed values."""
+"""Friction metrics (docs/algorithms.md §6, MATLAB FIT %) against hand-computed values."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Elman networks (ALGORITHMS.md §2.2, §2.3): parameter counts, the recursion against
+"""Elman networks (docs/algorithms.md §2.2, §2.3): parameter counts, the recursion against
 hand-computed values and an independent NumPy loop, batching, errors."""
 
 from __future__ import annotations

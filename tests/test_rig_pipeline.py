@@ -14,7 +14,7 @@ FS = 128.0
 
 
 def nmse_percent(ref, est):
-    """ALGORITHMS §6: 100 mean((F - F_hat)^2) / var(F)."""
+    """docs/algorithms.md §6: 100 mean((F - F_hat)^2) / var(F)."""
     ref, est = np.asarray(ref, np.float64), np.asarray(est, np.float64)
     return 100.0 * np.mean((ref - est) ** 2) / np.var(ref)
 

@@ -28,7 +28,7 @@ def test_default_record_shape_profile_and_determinism(default_record):
     rec = default_record
     assert rec.t.shape == (2000,) and rec.friction.shape == (2000,)
     np.testing.assert_allclose(np.diff(np.asarray(rec.t)), 1 / 128, rtol=1e-5)
-    # the PI loop reproduces the ALGORITHMS §7 velocity profile (mm/s range, reversals)
+    # the PI loop reproduces the docs/algorithms.md §7 velocity profile (mm/s range, reversals)
     v_ref = np.asarray(rig.default_velocity_profile(rec.t))
     v = np.asarray(rec.velocity)
     assert np.sqrt(np.mean((v - v_ref) ** 2)) < 0.05 * np.std(v_ref)

@@ -1,4 +1,4 @@
-"""Friction identification: model + data + optimiser → :class:`jaxfric.Fit` (ALGORITHMS.md §11).
+"""Friction identification: model + data + optimiser → :class:`jaxfric.Fit` (docs/algorithms.md §11).
 
 ``from jaxfric.identification import identify`` (re-exported as ``jaxfric.identify``).
 """

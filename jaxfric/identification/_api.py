@@ -1,4 +1,4 @@
-"""``jaxfric.identify``: model + data + optimiser → :class:`jaxfric.Fit` (ALGORITHMS.md §11).
+"""``jaxfric.identify``: model + data + optimiser → :class:`jaxfric.Fit` (docs/algorithms.md §11).
 
 The end-to-end algorithm of §11: split and scale the record (steps 2–3), build the
 cost J (step 4), run the optimiser (steps 5–7), then report metrics on the
@@ -348,7 +348,7 @@ def identify(
     method: str = "jaxfric",
     **options,
 ) -> Fit:
-    """Identify a friction model from a velocity/friction record (ALGORITHMS.md §11).
+    """Identify a friction model from a velocity/friction record (docs/algorithms.md §11).
 
     Args:
         model: a model instance (:class:`jaxfric.models.Elman`, :class:`~jaxfric.models.LuGre`,

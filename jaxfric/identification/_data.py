@@ -1,4 +1,4 @@
-"""Turn what the user passes as data into checked records (ALGORITHMS.md §1, §11 step 2).
+"""Turn what the user passes as data into checked records (docs/algorithms.md §1, §11 step 2).
 
 :func:`as_record` (one record, split into a training and a validation window) and
 :func:`as_records` (several records, each wholly for training or for validation)

@@ -1,4 +1,4 @@
-"""The identification cost J(θ) (ALGORITHMS.md §2.4, §11 step 4).
+"""The identification cost J(θ) (docs/algorithms.md §2.4, §11 step 4).
 
     J(θ) = c · (1/N_train) Σ_k (y(k) − ŷ(k; θ))²
 

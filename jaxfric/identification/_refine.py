@@ -1,4 +1,4 @@
-"""Gradient refinement of a fit — beyond the paper (ALGORITHMS.md §2.4 last bullet, §11 step 7).
+"""Gradient refinement of a fit — beyond the paper (docs/algorithms.md §2.4 last bullet, §11 step 7).
 
 The models are pure JAX, so ``jax.grad`` through the ``lax.scan`` rollout gives J's
 exact gradient (for the Elman network by its hand-written adjoint, BPTT,

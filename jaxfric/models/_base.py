@@ -15,7 +15,7 @@ Every model maps a flat search vector ``theta`` (what the optimisers see, in
     F_hat = model.simulate(theta, v, dt)     # free-run rollout, (T,)
     F_hat = model.simulate_batch(thetas, v, dt)  # (P, n) -> (P, T)
 
-``simulate`` is the output-error (free-run) prediction of ALGORITHMS.md §2.4 /
+``simulate`` is the output-error (free-run) prediction of docs/algorithms.md §2.4 /
 §11 step 4: the measured friction is never fed back.
 
 A model that needs measured signals besides the velocity (the cylinder friction
@@ -141,7 +141,7 @@ class AbstractFrictionModel(eqx.Module):
     Class attributes:
 
     - ``needs_scaling``: ``True`` for black-box models fitted on data scaled
-      to [-1, 1] (the Elman network, ALGORITHMS.md §2.4). Physical models work
+      to [-1, 1] (the Elman network, docs/algorithms.md §2.4). Physical models work
       in SI units (velocity in m/s, friction in N) and leave it ``False``.
     - ``uses_dt``: ``False`` for static maps, whose output ignores ``dt``.
     """

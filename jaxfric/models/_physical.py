@@ -1,7 +1,7 @@
 """Shared machinery of the physical (SI-unit) friction models: search coordinates,
 default and data-centred search ranges, and a least-squares initial guess.
 
-Search coordinates (ALGORITHMS.md §8.5): stiffnesses, damping and the Stribeck
+Search coordinates (docs/algorithms.md §8.5): stiffnesses, damping and the Stribeck
 velocity span decades, so they are searched as log10; forces are linear; the
 static force is searched as the ratio ``Fs / Fc`` in [1, 3], which keeps
 ``Fs >= Fc`` inside the box without a penalty (a linear ratio rather than
@@ -24,7 +24,7 @@ from jaxtyping import Array, ArrayLike
 from ._base import AbstractFrictionModel, Unidentifiable, friction_scales, record_velocity
 
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
-    # ALGORITHMS.md §8.5 [D]: order-of-magnitude ranges for hydraulic cylinders.
+    # docs/algorithms.md §8.5 [D]: order-of-magnitude ranges for hydraulic cylinders.
     "sigma0": (1e4, 1e9),
     "sigma1": (1e1, 1e6),
     "sigma2": (1e1, 1e5),
@@ -194,7 +194,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
     kind ``"log10"`` (theta = log10 p), ``"linear"`` (theta = p) or
     ``"ratio"`` (theta = Fs / Fc, physical_name ``"Fs"``). Each physical
     parameter ``p`` has an optional ``p_range`` field ((low, high) in
-    physical units, ``None`` = default of ALGORITHMS.md §8.5); the ratio uses
+    physical units, ``None`` = default of docs/algorithms.md §8.5); the ratio uses
     ``Fs_ratio_range``. Units: see the module docstring.
     """
 
@@ -428,7 +428,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
 
 
 def stribeck_curve(v: Array, Fc: Array, Fs: Array, vs: Array, exponent) -> Array:
-    """g(v) = Fc + (Fs - Fc) exp(-|v / vs|^delta), ALGORITHMS.md §8.1 (delta = 2 there).
+    """g(v) = Fc + (Fs - Fc) exp(-|v / vs|^delta), docs/algorithms.md §8.1 (delta = 2 there).
 
     For a non-integer or traced ``exponent`` the power is guarded with the
     double-``where`` trick so gradients stay finite at v = 0.

@@ -1,4 +1,4 @@
-"""Min/max scaling to [-1, 1] (MATLAB ``mapminmax`` convention, ALGORITHMS.md §2.4).
+"""Min/max scaling to [-1, 1] (MATLAB ``mapminmax`` convention, docs/algorithms.md §2.4).
 
 The Elman network is fitted on velocity and friction scaled with the minimum
 and maximum of the *training* segment; the same :class:`Scaler` is then applied

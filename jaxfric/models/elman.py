@@ -1,4 +1,4 @@
-"""Elman recurrent networks as friction models (ALGORITHMS.md §2).
+"""Elman recurrent networks as friction models (docs/algorithms.md §2).
 
 Both networks map (scaled) piston velocity u(k) to (scaled) friction y(k) in
 free run: the measured friction is never fed back (§2.4). They are fitted on
@@ -63,7 +63,7 @@ def _check_unroll(unroll) -> None:
 
 
 class Elman(AbstractFrictionModel):
-    """Locally recurrent (diagonal-context) Elman network, ALGORITHMS.md §2.2 (Option A).
+    """Locally recurrent (diagonal-context) Elman network, docs/algorithms.md §2.2 (Option A).
 
     For hidden neurons j = 1..N, with scaled velocity u(k) as input::
 
@@ -202,7 +202,7 @@ class Elman(AbstractFrictionModel):
         return y
 
     def simulate_vjp(self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"]):
-        """Free run of one network and its hand-written adjoint (BPTT, ALGORITHMS.md §2.2).
+        """Free run of one network and its hand-written adjoint (BPTT, docs/algorithms.md §2.2).
 
         Returns ``(y, pullback)`` with ``y`` as :meth:`simulate` and
         ``pullback(g_y) = (∂y/∂θ)ᵀ g_y``. With ``a_k = w u_k + r c_k + b``,
@@ -254,7 +254,7 @@ class Elman(AbstractFrictionModel):
 
 
 class ElmanFull(AbstractFrictionModel):
-    """Classic Elman network with a full context matrix, ALGORITHMS.md §2.3 (Option B)::
+    """Classic Elman network with a full context matrix, docs/algorithms.md §2.3 (Option B)::
 
         h(k)   = tanh(w u(k) + W_c c(k) + b)
         y(k)   = v . h(k) + b_o

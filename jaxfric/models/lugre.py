@@ -1,6 +1,6 @@
 """Bristle (LuGre, Dahl) friction models with an exact zero-order-hold update.
 
-ALGORITHMS.md §8.1-8.3. Both models share the internal state equation
+docs/algorithms.md §8.1-8.3. Both models share the internal state equation
 
     dz/dt = v - a(v) z,      a(v) = sigma0 |v| / g(v) >= 0,
 
@@ -97,7 +97,7 @@ def bristle_friction(
 
 
 class LuGre(AbstractPhysicalModel):
-    """LuGre friction model (Canudas de Wit et al. 1995), ALGORITHMS.md §8.1-8.2, §8.5.
+    """LuGre friction model (Canudas de Wit et al. 1995), docs/algorithms.md §8.1-8.2, §8.5.
 
     ::
 
@@ -171,7 +171,7 @@ class LuGre(AbstractPhysicalModel):
 
 
 class Dahl(AbstractPhysicalModel):
-    """Dahl friction model, ALGORITHMS.md §8.3 (exponent i = 1)::
+    """Dahl friction model, docs/algorithms.md §8.3 (exponent i = 1)::
 
         dF/dt = sigma0 v - sigma0 |v| F / Fc     (+ sigma2 v if viscous)
 

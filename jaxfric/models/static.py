@@ -1,6 +1,6 @@
 """Static (memoryless) friction maps: Coulomb + viscous and the Stribeck curve.
 
-ALGORITHMS.md §8.1 (the steady state of LuGre is the Stribeck map) and §8.3
+docs/algorithms.md §8.1 (the steady state of LuGre is the Stribeck map) and §8.3
 background. The sign function is smoothed as tanh(v / v_eps): a hard sign
 makes the friction at v = 0 arbitrary and the output discontinuous in the
 data, which derivative-free and gradient fits both dislike. ``v_eps`` is a

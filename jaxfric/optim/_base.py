@@ -209,7 +209,7 @@ def scalar_objective(fn: Callable, args) -> Callable:
 
 
 def linear_inertia(i, num, w_max, w_min):
-    """Inertia weight falling linearly from ``w_max`` to ``w_min`` (ALGORITHMS §3.3, §10):
+    """Inertia weight falling linearly from ``w_max`` to ``w_min`` (docs/algorithms.md §3.3, §10):
     ``w(i) = w_max - (w_max - w_min) * i / G``."""
     return w_max - (w_max - w_min) * i / jnp.maximum(num, 1)
 

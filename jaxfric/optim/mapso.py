@@ -1,4 +1,4 @@
-"""Multi-agent particle swarm optimisation (MAPSO, ALGORITHMS.md §3; Zhao et al. 2005).
+"""Multi-agent particle swarm optimisation (MAPSO, docs/algorithms.md §3; Zhao et al. 2005).
 
 Agents sit on an ``L×L`` torus held as one ``(L·L, D)`` array. Each generation:
 
@@ -101,7 +101,7 @@ def competition(u, x, f, side, lower, upper, po, strict_segment=False):
 
 
 class MAPSO(AbstractSwarm):
-    """Multi-agent PSO on an ``L×L`` torus (ALGORITHMS.md §3.5 defaults).
+    """Multi-agent PSO on an ``L×L`` torus (docs/algorithms.md §3.5 defaults).
 
     Args:
         lattice_size: lattice side ``Lsize``; population ``Lsize²`` (5 → 25 agents).

@@ -1,4 +1,4 @@
-"""Hydraulic test rig: simulator, measurement pipeline and loaders (ALGORITHMS.md §7).
+"""Hydraulic test rig: simulator, measurement pipeline and loaders (docs/algorithms.md §7).
 
 Typical use::
 

@@ -1,6 +1,6 @@
 """True friction of the simulated rig: asymmetric, pressure-dependent Maxwell-slip.
 
-Implements the generalised Maxwell-slip idea of ALGORITHMS.md §8.4 with
+Implements the generalised Maxwell-slip idea of docs/algorithms.md §8.4 with
 rate-independent (instantly slipping) elements: each element is a spring that
 saturates at its share of the Stribeck level. The element update
 ``F_i <- clip(F_i + k_i dx, -w_i s_-, +w_i s_+)`` is the exact solution of the

@@ -1,4 +1,4 @@
-"""Parameters of the simulated low-speed press-cylinder rig (ALGORITHMS.md §7).
+"""Parameters of the simulated low-speed press-cylinder rig (docs/algorithms.md §7).
 
 Every number is a pytree leaf (a float or an array), so a batch of rigs is just a
 ``Rig`` whose leaves carry a leading axis and ``jax.vmap`` runs them in one call.
@@ -41,7 +41,7 @@ def _check_geometry(bore, rod) -> None:
 
 
 def piston_areas(bore, rod):
-    """Cap-side and rod-side areas ``A1 = pi D^2/4``, ``A2 = pi (D^2 - d^2)/4`` in m^2 (ALGORITHMS §7)."""
+    """Cap-side and rod-side areas ``A1 = pi D^2/4``, ``A2 = pi (D^2 - d^2)/4`` in m^2 (docs/algorithms.md §7)."""
     _check_geometry(bore, rod)
     a1 = jnp.pi * bore**2 / 4.0
     a2 = jnp.pi * (bore**2 - rod**2) / 4.0
@@ -128,7 +128,7 @@ class Load(eqx.Module):
 
 
 class SealFriction(eqx.Module):
-    """True friction of the rig: richer than LuGre on purpose (ALGORITHMS §7, §8.4).
+    """True friction of the rig: richer than LuGre on purpose (docs/algorithms.md §7, §8.4).
 
     Generalised Maxwell-slip form with rate-independent elements. Element i is
     a spring of stiffness ``k_i`` [N/m] that slips at ``weights_i * s(v, p)``:

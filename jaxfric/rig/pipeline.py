@@ -1,4 +1,4 @@
-"""Measurement pipeline: raw rig channels -> friction by force balance (ALGORITHMS.md §7, paper eq. 31).
+"""Measurement pipeline: raw rig channels -> friction by force balance (docs/algorithms.md §7, paper eq. 31).
 
 1. zero-phase Butterworth low-pass of every channel (order 4, 5 Hz at 128 Hz by
    default; ``scipy.signal.butter(..., output="sos")`` + ``sosfiltfilt``, so the

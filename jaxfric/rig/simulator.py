@@ -1,4 +1,4 @@
-"""Simulated low-speed hydraulic press rig (the synthetic stand-in of ALGORITHMS.md §7).
+"""Simulated low-speed hydraulic press rig (the synthetic stand-in of docs/algorithms.md §7).
 
 A single-rod double-acting cylinder, driven by a proportional valve under a PI
 position controller (or an open-loop valve command), pushes a moving mass
@@ -41,7 +41,7 @@ from .params import Rig
 
 # --------------------------------------------------------------------------- inputs
 def default_velocity_profile(t):
-    """Reference velocity [m/s] of ALGORITHMS §7: ``0.010 sin(2 pi 0.2 t) + 0.004 sin(2 pi 0.53 t)``."""
+    """Reference velocity [m/s] of docs/algorithms.md §7: ``0.010 sin(2 pi 0.2 t) + 0.004 sin(2 pi 0.53 t)``."""
     return 0.010 * jnp.sin(2 * jnp.pi * 0.2 * t) + 0.004 * jnp.sin(2 * jnp.pi * 0.53 * t)
 
 
@@ -278,7 +278,7 @@ def simulate(
     sensors: Sensors = Sensors(),
     settle_time: float = 1.0,
 ) -> RigRecord:
-    """Simulate the rig and return sampled measurements plus the ground truth (ALGORITHMS §7).
+    """Simulate the rig and return sampled measurements plus the ground truth (docs/algorithms.md §7).
 
     rig: parameters (a pytree; vmap over a batched ``Rig`` for many rigs at once).
     key: PRNG key for the sensor noise; same key, same record.

@@ -1,4 +1,4 @@
-"""The synthetic stand-in data set of ALGORITHMS.md §7 in one call: simulate, then measure."""
+"""The synthetic stand-in data set of docs/algorithms.md §7 in one call: simulate, then measure."""
 
 from __future__ import annotations
 
