@@ -315,7 +315,7 @@ class Fit:
             raise ValueError(f"time stamps must increase strictly (index {int(np.argmax(steps <= 0)) + 1})")
         self._warn_extrapolation(v)
         scalers = (self.velocity_scaler, self.friction_scaler)
-        dtype = np.asarray(self.theta).dtype
+        dtype = jnp.asarray(self.theta).dtype  # float32 unless x64 is on: never ask JAX for a dtype it lacks
         uniform = steps.size == 0 or (np.ptp(steps) <= 1e-6 * self.dt and _same_step(float(steps.mean()), self.dt))
         if not self.model.uses_dt or uniform:
             return predict(self.model, self.theta, scalers, jnp.asarray(v, dtype), self.dt)
