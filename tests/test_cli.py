@@ -211,7 +211,7 @@ def _fill(args, csv):
 
 def _assert_one_line(stderr, message):
     assert "Traceback" not in stderr
-    lines = stderr.strip().splitlines()
+    lines = [line for line in stderr.strip().splitlines() if line.strip()]
     assert len(lines) == 1, stderr
     assert lines[0].startswith("jaxfric: error: ") and message in lines[0], lines[0]
 
@@ -269,7 +269,10 @@ def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path):
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
-    assert stderr.strip() == f"jaxfric: interrupted; kept 1 finished file(s) in {out / 'models'}: lugre.npz"
+    lines = [line for line in stderr.strip().splitlines() if line.strip()]
+    # the finished fit may have said something (e.g. a parameter on its bound) before the interrupt
+    assert all(line.startswith("jaxfric: warning: ") for line in lines[:-1]), stderr
+    assert lines[-1] == f"jaxfric: interrupted; kept 1 finished file(s) in {out / 'models'}: lugre.npz"
     assert (out / "models" / "lugre.npz").is_file()
     assert not (out / "report.md").exists()
     assert not [p for p in out.rglob(".*")]

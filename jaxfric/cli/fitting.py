@@ -140,6 +140,8 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         for w in caught:
             if issubclass(w.category, (RuntimeWarning, UserWarning)):
                 text = " ".join(str(w.message).split())
+                own = f"{type(model).__name__}: "
+                text = text[len(own):] if text.startswith(own) else text  # the label says it
                 print(f"jaxfric: warning: {label(name, model)}: {text}", file=sys.stderr, flush=True)
                 if notes is not None:
                     notes.append(f"{label(name, model)}: {text}")

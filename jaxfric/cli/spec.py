@@ -80,17 +80,13 @@ class FitSpec:
     def build_solver(self, model=None):
         """The optimiser; ``None`` when ``identify``'s default solver is used unchanged."""
         import jaxfric as jf
-        from jaxfric.identification import _api, paper_solver
+        from jaxfric.identification import paper_solver
 
         if self.solver == "mapso-nmds" and self.default_budget:
             return None
         model = self.build_model() if model is None else model
         base = paper_solver(model)  # MAPSO–NMDS sized for the model; a budget replaces a field
         g, nm = self.generations, self.nm_evals
-        if self.solver == "mapso-nmds" and not self.paper and _api._fast_pipeline(model, "jaxfric"):
-            # the default pipeline's global stage (then identify's BFGS) at the given budget
-            fast = _api.default_solver(model)
-            return fast if g is None else dataclasses.replace(fast, num_generations=g)
         if self.solver == "mapso-nmds":
             mapso = base.mapso if g is None else dataclasses.replace(base.mapso, num_generations=g)
             local = base.nelder_mead if nm is None else dataclasses.replace(base.nelder_mead, max_evals=nm)
