@@ -220,3 +220,46 @@ def test_int_seed_is_the_same_key():
     b = jf.minimise(sphere, pso, (LO, HI), key=jax.random.key(3))
     c = jf.minimise(sphere, pso, (LO, HI), key=np.uint32(3))
     assert bool(eqx.tree_equal(a.value, b.value)) and bool(eqx.tree_equal(a.value, c.value))
+
+
+class _Clock:
+    def __init__(self):
+        self.t = 1000.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_first_eta_counts_generations_not_compilation():
+    """Issue 20.10: the first report comes after compilation; the bar's rate (and so its
+    ETA) is measured from there. Here 10 s of 'compilation' then 10 generations per
+    second: the ETA after the second report is 48 s (480 generations left), not the
+    ~500 s a clock started at the bar's creation would give."""
+    clock = _Clock()
+    out = io.StringIO()
+    sink = TqdmProgress(500, None, file=out, ascii=True, mininterval=0, smoothing=0)
+    sink.bar._time = clock
+    sink.bar.reset(total=500)  # the bar's creation time on the fake clock
+    clock.t += 10.0  # compilation
+    sink(0, 10, 100, 1.0)  # first report: 10 generations done
+    clock.t += 1.0
+    sink(0, 20, 200, 0.5)  # ten more in one second
+    d = sink.bar.format_dict
+    rate = (d["n"] - d["initial"]) / d["elapsed"]
+    eta = (d["total"] - d["n"]) / rate
+    assert rate == pytest.approx(10.0)
+    assert eta == pytest.approx(48.0)
+    sink.close()
+
+
+def test_gradient_stage_has_its_own_labelled_bar():
+    """The gradient stage reports as phase 2 ('gradient'), drawn as its own bar with its
+    own label, not as a Nelder–Mead bar."""
+    out = io.StringIO()
+    sink = TqdmProgress(10, 100, file=out, ascii=True, gradient_total=50)
+    sink(0, 10, 100, 1.0)
+    sink(2, 25, 25, 0.5)
+    sink.close()
+    text = out.getvalue()
+    assert "(gradient)" in text and "Nelder" not in text
+    assert "25/25" in text and "/50" not in text.split("(gradient)")[-1]  # ended early at 100 %

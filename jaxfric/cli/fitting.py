@@ -77,16 +77,17 @@ class LazyBar:
     half-drawn on the terminal (and glued to the error line) when that check fails.
     """
 
-    def __init__(self, total, local_total, desc: str):
+    def __init__(self, total, local_total, desc: str, gradient_total=None):
         self.args = (total, local_total)
         self.desc = desc
+        self.gradient_total = gradient_total
         self.bar = None
 
     def __call__(self, phase, step, evals, f_best):
         if self.bar is None:
             from jaxfric.optim.progress import TqdmProgress
 
-            self.bar = TqdmProgress(*self.args, desc=self.desc)
+            self.bar = TqdmProgress(*self.args, desc=self.desc, gradient_total=self.gradient_total)
         self.bar(phase, step, evals, f_best)
 
     def close(self):
@@ -94,19 +95,24 @@ class LazyBar:
             self.bar.close()
 
 
-def progress_bar(solver, model, desc: str):
+def progress_bar(solver, model, desc: str, paper: bool = False, refine=None):
     """A lazily drawn tqdm bar named after the model (see :class:`LazyBar`), or ``None``
     when tqdm is not installed (it is not a declared dependency of jaxfric: the bar is
-    then left out rather than failing inside the compiled run's callback)."""
+    then left out rather than failing inside the compiled run's callback). The gradient
+    stage's bar knows its step cap when ``identify`` chooses the stage itself
+    (``refine=None`` on a model whose method has one)."""
     import importlib.util
 
-    from jaxfric.identification import default_solver
+    from jaxfric.identification import _api
 
     if importlib.util.find_spec("tqdm") is None:
         return None
-    s = default_solver(model) if solver is None else solver
+    method = "paper" if paper else "jaxfric"
+    s = _api.default_solver(model, method) if solver is None else solver
     total, local_total = s.progress_totals()
-    return LazyBar(total, local_total, desc)
+    gradient_total = (_api.FAST_REFINE_STEPS
+                      if refine is None and _api._fast_pipeline(model, method) else None)
+    return LazyBar(total, local_total, desc, gradient_total)
 
 
 def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> dict:
@@ -127,7 +133,9 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
             f"{describe_solver(solver, model, spec.paper)}")
         t0 = time.perf_counter()
-        bar = None if args.quiet else progress_bar(solver, model, label(name, model))
+        bar = None if args.quiet else progress_bar(
+            solver, model, label(name, model), spec.paper,
+            None if spec.refine == "none" else spec.refine)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")

@@ -148,8 +148,9 @@ class RefineOutcome(eqx.Module):
 REFINE_CHUNK = 50
 
 _TAGS = frozenset()
-#: Phase number of the gradient stage's reports to a callable progress sink.
-LOCAL_PHASE = 1
+#: Phase number of the gradient stage's reports to a callable progress sink
+#: (``jaxfric.optim.progress.PHASES``).
+GRADIENT_PHASE = 2
 
 
 def _fn(settings: GradientRefinement):
@@ -238,9 +239,9 @@ def _progress_sink(progress, settings: GradientRefinement):
 
         return update, close
     if callable(progress):
-        # Phase 1 is the local phase of jaxfric.optim's progress protocol (PHASES):
-        # existing sinks take it without change; ``evals`` carries the step count.
-        return (lambda steps, f: progress(LOCAL_PHASE, steps, steps, f)), (lambda steps: None)
+        # Phase 2 of jaxfric.optim's progress protocol (PHASES); ``evals`` carries the
+        # step count.
+        return (lambda steps, f: progress(GRADIENT_PHASE, steps, steps, f)), (lambda steps: None)
     raise ValueError(f"progress must be None, True (a tqdm bar) or a callable, got {progress!r}")
 
 
@@ -250,7 +251,7 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
 
     The optimistix solver (``init``/``step``/``terminate``) runs in compiled chunks of
     :data:`REFINE_CHUNK` steps; ``progress`` (``True`` for a tqdm bar, or a callable
-    ``sink(LOCAL_PHASE, step, step, J)``) is told after each chunk. ``compiler_options``:
+    ``sink(GRADIENT_PHASE, step, step, J)``) is told after each chunk. ``compiler_options``:
     a :func:`jaxfric._xla.resolve` tuple for the compiled chunks.
 
     ``cost(theta, data)`` is J; the start's own J is evaluated too, so the

@@ -20,8 +20,11 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-PHASES = ("global", "local")
-"""Phase 0 is a swarm's generations, phase 1 Nelder–Mead's steps."""
+PHASES = ("global", "local", "gradient")
+"""Phase 0 is a swarm's generations, phase 1 Nelder–Mead's steps, phase 2 the steps of
+:func:`jaxfric.identify`'s gradient stage."""
+
+_STAGE_LABEL = {1: (" (Nelder–Mead)", "step"), 2: (" (gradient)", "step")}
 
 _SINKS: dict[int, Callable] = {}
 _LOCK = threading.Lock()
@@ -85,18 +88,33 @@ class TqdmProgress:
         total: number of generations of the global phase (``None`` if unknown).
         local_total: Nelder–Mead's step cap, shown once the local phase starts.
         desc: bar label.
+        gradient_total: the gradient stage's step cap (``None``: count only).
+
+    Each stage draws its own bar, labelled by the stage, whose clock starts at the
+    stage's first report.
     """
 
-    def __init__(self, total=None, local_total=None, desc="jaxfric", **tqdm_kwargs):
+    def __init__(self, total=None, local_total=None, desc="jaxfric", gradient_total=None,
+                 **tqdm_kwargs):
         from tqdm.auto import tqdm
 
         self._tqdm = tqdm
-        self.local_total = local_total
+        self.totals = {1: local_total, 2: gradient_total}
         self.kwargs = dict(desc=desc, dynamic_ncols=True, leave=True, **tqdm_kwargs)
         self.bar = tqdm(total=total, unit="gen", **self.kwargs)
         self.phase = 0
         self.best = float("inf")
         self.start = time.perf_counter()
+        self._started = False
+
+    def _start_clock(self, step):
+        """Start the bar's clock at the first report of a stage, counting ``step`` as done
+        before it: that report comes after compilation (or after the previous stage), so
+        a rate measured from the bar's creation would include it and the first ETA would
+        be several times too long (issue 20.10)."""
+        self.bar.reset(total=self.bar.total)
+        self.bar.initial = self.bar.n = self.bar.last_print_n = step
+        self._started = True
 
     def _finish_bar(self):
         """A stage that ended early (stall, tolerance, budget) ends its bar at 100 %."""
@@ -109,12 +127,16 @@ class TqdmProgress:
         if phase != self.phase:
             self._finish_bar()
             self.phase = phase
+            suffix, unit = _STAGE_LABEL[phase]
             self.bar = self._tqdm(
-                total=self.local_total, unit="step",
-                **{**self.kwargs, "desc": self.kwargs["desc"] + " (Nelder–Mead)"},
+                total=self.totals[phase], unit=unit,
+                **{**self.kwargs, "desc": self.kwargs["desc"] + suffix},
             )
+            self._started = False
         self.best = min(self.best, f_best)
-        if step > self.bar.n:
+        if not self._started:
+            self._start_clock(step)
+        elif step > self.bar.n:
             self.bar.update(step - self.bar.n)
         self.bar.set_postfix(best=f"{self.best:.4g}", evals=evals, refresh=False)
 
