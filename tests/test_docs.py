@@ -101,3 +101,15 @@ def test_citations_point_at_the_shipped_file():
             if "ALGORITHMS.md" in line:
                 stale.append(f"{where}:{i}")
     assert not stale, "citations of the specification outside the repository: " + ", ".join(stale[:10])
+
+
+def test_readme_test_command_is_what_ci_runs():
+    """The README's second set-up command runs exactly the pytest line of `.ci/run`."""
+    root = Path(__file__).resolve().parents[1]
+    ci = (root / ".ci" / "run").read_text()
+    ci_pytest = [ln for ln in ci.splitlines() if ln.startswith("python -m pytest")][0]
+    readme = (root / "README.md").read_text()
+    line = [ln for ln in readme.splitlines() if ln.startswith('pip install -e ".[test]" && ')][0]
+    readme_pytest = line.split(" && ", 1)[1]
+    # CI adds only -p no:cacheprovider (a clean clone keeps no cache)
+    assert readme_pytest.split() == [w for w in ci_pytest.split() if w not in ("-p", "no:cacheprovider")]
