@@ -351,9 +351,9 @@ API_CASES = [
     ("identify/lengths-differ", lambda f: jf.identify("lugre", (V, F[:-1], 0.01), key=0), ValueError,
      ["same length", "50", "49"]),
     ("identify/nan-friction", lambda f: jf.identify("lugre", (V, _with(F, 7, np.nan), 0.01), key=0), ValueError,
-     ["friction holds 1 non-finite samples", "NaN first at index 7"]),
+     ["friction has 1 non-finite samples", "NaN first at index 7"]),
     ("identify/inf-velocity", lambda f: jf.identify("lugre", (_with(V, 3, -np.inf), F, 0.01), key=0), ValueError,
-     ["velocity holds 1 non-finite samples", "inf"]),
+     ["velocity has 1 non-finite samples", "inf"]),
     pytest.param(
         "identify/empty-record", lambda f: jf.identify("lugre", (np.zeros(0), np.zeros(0), 0.01), key=0),
         ValueError, ["0 samples", "at least 3"],
