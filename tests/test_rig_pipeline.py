@@ -9,36 +9,26 @@ import pytest
 import scipy.signal
 
 from jaxfric import rig
+from model_recovery import nmse_percent
 
 FS = 128.0
 
 
-def nmse_percent(ref, est):
-    """docs/algorithms.md §6: 100 mean((F - F_hat)^2) / var(F)."""
-    ref, est = np.asarray(ref, np.float64), np.asarray(est, np.float64)
-    return 100.0 * np.mean((ref - est) ** 2) / np.var(ref)
-
-
-@pytest.fixture(scope="module")
-def record():
-    return rig.simulate(rig.Rig(), jax.random.key(0))
-
-
 # --------------------------------------------------------------------------- accuracy
-def test_pipeline_friction_matches_true_friction(record):
-    data = rig.estimate_friction(record.measurements(), rig.Cylinder())
+def test_pipeline_friction_matches_true_friction(rig_record):
+    data = rig.estimate_friction(rig_record.measurements(), rig.Cylinder())
     assert data.n_samples == 2000 and data.n_train == 1600
-    f_true, f_est = np.asarray(record.friction), np.asarray(data.friction)
+    f_true, f_est = np.asarray(rig_record.friction), np.asarray(data.friction)
     assert nmse_percent(f_true, f_est) < 1.0
     assert nmse_percent(f_true[:1600], f_est[:1600]) < 1.0
     assert nmse_percent(f_true[1600:], f_est[1600:]) < 1.0
-    assert nmse_percent(record.velocity, data.velocity) < 0.1
+    assert nmse_percent(rig_record.velocity, data.velocity) < 0.1
     np.testing.assert_allclose(float(data.dt), 1 / FS, rtol=1e-6)
 
 
-def test_synthetic_friction_data_is_simulate_then_measure(record):
+def test_synthetic_friction_data_is_simulate_then_measure(rig_record):
     one_call = rig.synthetic_friction_data(jax.random.key(0))
-    two_steps = rig.estimate_friction(record.measurements(), rig.Rig())
+    two_steps = rig.estimate_friction(rig_record.measurements(), rig.Rig())
     np.testing.assert_array_equal(np.asarray(one_call.friction), np.asarray(two_steps.friction))
     assert one_call.n_train == 1600
 
@@ -127,8 +117,8 @@ def test_force_balance_areas():
 
 
 # --------------------------------------------------------------------------- FrictionData
-def test_friction_data_split_views_and_pytree(record):
-    data = rig.estimate_friction(record.measurements(), rig.Cylinder())
+def test_friction_data_split_views_and_pytree(rig_record):
+    data = rig.estimate_friction(rig_record.measurements(), rig.Cylinder())
     tr, va = data.train(), data.valid()
     assert (tr.n_samples, tr.n_train) == (1600, 1600)
     assert (va.n_samples, va.n_train) == (400, 0)
