@@ -215,3 +215,21 @@ def test_filter_and_geometry_errors_come_before_computation():
         rig.estimate_friction(meas, bore=0.1, rod=0.05, mass=-1.0)
     with pytest.raises(ValueError, match="'mass' is required"):
         rig.estimate_friction(meas, bore=0.1, rod=0.05)
+
+
+def test_one_record_type_and_one_split_rule():
+    """Issue 19 item 1: the loaders' FrictionData is identify's record, split by one rule
+    (round(fraction * n) training samples), and its channels stay float64 under x32."""
+    from jaxfric.identification import Record, as_record
+
+    assert Record is rig.FrictionData
+    v = np.sin(np.linspace(0, 6, 101)) + 1e-9 * np.arange(101)  # not representable in float32
+    f = 2 * v + 0.1 * v**3
+    for n in (20, 101):
+        for frac in (0.3, 0.5, 0.8, 0.95):
+            d = rig.FrictionData.from_arrays(v[:n], f[:n], 0.01, frac)
+            rec = as_record((v[:n], f[:n], 0.01), frac)
+            assert d.n_train == rec.n_train == int(round(frac * n))
+            assert type(rec) is rig.FrictionData and as_record(d).n_train == d.n_train
+    assert d.velocity.dtype == np.float64 and np.array_equal(d.velocity, v)
+    assert d.with_split(n_train=7).n_train == 7 and d.with_split(1).n_train == 101
