@@ -95,14 +95,15 @@ def check_positive(name: str, value, allow_zero: bool = False) -> float:
     return v
 
 
-def check_sample_time(dt) -> float:
-    """A scalar, positive, finite sample time [s] (time stamps go to :meth:`FrictionData.from_arrays`)."""
+_STAMPS_HINT = "for time stamps build the record with jaxfric.rig.FrictionData.from_arrays(v, F, t)"
+
+
+def check_sample_time(dt, *, stamps_hint: str = _STAMPS_HINT) -> float:
+    """A scalar, positive, finite sample time [s]; ``stamps_hint`` says what to do with
+    time stamps instead (default: :meth:`FrictionData.from_arrays` takes them)."""
     arr = np.asarray(dt)
     if arr.ndim != 0:
-        raise ValueError(
-            f"dt must be a scalar sample time in seconds, got shape {arr.shape}; for time "
-            "stamps build the record with jaxfric.rig.FrictionData.from_arrays(v, F, t)"
-        )
+        raise ValueError(f"dt must be a scalar sample time in seconds, got shape {arr.shape}; {stamps_hint}")
     try:
         value = float(arr)
     except (TypeError, ValueError):
@@ -149,8 +150,9 @@ def _given_split(n: int, train_fraction, n_train) -> int:
     """:func:`split_count` for the ``train_fraction`` / ``n_train`` pair of :class:`FrictionData`."""
     if n_train is not None:
         return split_count(n, int(n_train), name="n_train")
-    if isinstance(train_fraction, numbers.Integral) and not isinstance(train_fraction, bool):
-        train_fraction = float(train_fraction)  # train_fraction=1 means all samples, not one
+    if isinstance(train_fraction, bool) or not isinstance(train_fraction, numbers.Real):
+        raise ValueError(f"train_fraction must be a fraction in (0, 1], got {train_fraction!r}")
+    train_fraction = float(train_fraction)  # train_fraction=1 means all samples, not one
     return split_count(n, train_fraction, name="train_fraction", fraction_name="train_fraction")
 
 

@@ -77,7 +77,8 @@ class MotionData:
         ld = np.zeros_like(f) if load is None else _series("load", load)
         if ld.shape != f.shape:
             raise ValueError(f"load must have the length of force ({f.size}), got {ld.size}")
-        dt = check_sample_time(dt)
+        dt = check_sample_time(dt, stamps_hint="for time stamps resample the channels onto a uniform "
+                                                "grid first (jaxfric.rig.resample_uniform)")
         fs = 1.0 / dt
         cutoff = 0.1 * fs if cutoff is None else float(cutoff)
         if not 0.0 < cutoff < 0.5 * fs:
