@@ -579,7 +579,7 @@ API_CASES = [
      lambda f: jf.identify("coulomb", (V, F, 0.01), key=0, keys=jax.random.split(KEY, 2)), ValueError,
      ["not both"]),
     ("rig/load-pairs-duplicate-header", lambda f: C(f["dup_header"], COLS), ValueError,
-     ["names column 'v' (for channel 'velocity') 2 times", "indices [1, 2]"]),
+     ["column 'v' (for channel 'velocity') appears 2 times", "columns 1, 2"]),
     ("fit/predict-at-lengths-differ", lambda f: _fit().predict_at(T, V[:-1]), ValueError,
      ["t and velocity must have the same length"]),
 ]
@@ -657,7 +657,7 @@ CLI_CASES = [
     ("cli predict/nan-scaler-model", ["predict", "{nan_scaler}", "{good}", "--velocity-col", "v", "--time-col", "t",
                                       *QUIET], ["cannot load the fit", "friction scaler holds NaN or inf"]),
     ("cli identify/duplicate-header", ["identify", "{dup_header}", *PAIRS, *QUIET],
-     ["--velocity-col", "2 columns named 'v' (indices 1, 2)"]),
+     ["--velocity-col", "column 'v' (--velocity-col) appears 2 times", "(columns 1, 2)"]),
     ("cli identify/validation-window-too-short", ["identify", "{good}", *PAIRS, "--train-fraction", "0.97", *QUIET],
      ["the validation window has 2 sample(s)"]),
     ("cli demo/negative-seed", ["demo", "--seed", "-1", *QUIET], ["argument --seed: must be >= 0"]),
