@@ -676,6 +676,41 @@ def show(value, unit):
     return f"{value:.1f}x"
 
 
+def section_head(title: str, prose: str, header: str, align: str) -> list[str]:
+    """The opening lines of a report section: its heading, its prose, a table's header rows."""
+    return ["", f"## {title}", "", prose, "", header, align]
+
+
+#: The sections whose report is one table of their rows: number -> (heading, prose
+#: block, table header, alignment row, one row's cells).
+TABLE_SECTIONS = {
+    "2": ("2. Friction-model rollouts: 64 candidates × 1600 samples", "s2",
+          "| model | implementation | dtype | first call s | median ms | model evals/s | vs NumPy vectorised | vs hoisted NumPy | vs per-candidate loop |",
+          "|---|---|---|---:|---:|---:|---:|---:|---:|",
+          lambda r: (f"| {r['case']} | {r['implementation']} | {r['dtype']} | {r['first_call_s']:.3f} | "
+                     f"{1e3 * r['seconds']:.2f} | {r['evals_per_s']:,.0f} | {fmt(r.get('ratio_vec'), '.1f')} | "
+                     f"{fmt(r.get('ratio_hoisted'), '.1f')} | {fmt(r.get('ratio_loop'), '.0f')} |")),
+    "4": ("4. Compile time", "s4",
+          "| call | dtype | first call s | second call s | first − second s | compile s | trace s | lower s | XLA s | XLA compiles | recompiles on 2nd call |",
+          "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+          lambda r: (f"| {r['case']} | {r['dtype']} | {r['first_call_s']:.1f} | {r['second_call_s']:.1f} | "
+                     f"{r['first_minus_second_s']:.1f} | {r['compile_s']:.1f} | {r['trace_s']:.1f} | {r['lower_s']:.1f} | "
+                     f"{r['xla_s']:.1f} | {r['xla_compiles']} | {r['recompiles_second']} |")),
+    "5": ("5. Scan efficiency of the ENN rollout", "s5",
+          "| implementation | dtype | median ms | neuron-steps/s | efficiency |",
+          "|---|---|---:|---:|---:|",
+          lambda r: (f"| {r['implementation']} ({r['case']}) | {r['dtype']} | {1e3 * r['seconds']:.2f} | "
+                     f"{r['neuron_steps_per_s']:.3g} | {100 * r['efficiency']:.0f} % |")),
+}
+
+
+def table_section(rows: list, number: str) -> list[str]:
+    """A :data:`TABLE_SECTIONS` section's report lines (none when it has no rows)."""
+    title, prose, header, align, cells = TABLE_SECTIONS[number]
+    chosen = [r for r in rows if r["section"] == number]
+    return section_head(title, PROSE(prose), header, align) + [cells(r) for r in chosen] if chosen else []
+
+
 def to_markdown(rows, tgts, meta, appendix) -> str:
     L = []
     a = L.append
@@ -732,31 +767,15 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
                 a("")
                 a("DE: " + "; ".join(notes) + ".")
 
-    # -- section 2
-    s2 = [r for r in rows if r["section"] == "2"]
-    if s2:
-        a("")
-        a("## 2. Friction-model rollouts: 64 candidates × 1600 samples")
-        a("")
-        a(PROSE("s2"))
-        a("")
-        a("| model | implementation | dtype | first call s | median ms | model evals/s | vs NumPy vectorised | vs hoisted NumPy | vs per-candidate loop |")
-        a("|---|---|---|---:|---:|---:|---:|---:|---:|")
-        for r in s2:
-            a(f"| {r['case']} | {r['implementation']} | {r['dtype']} | {r['first_call_s']:.3f} | {1e3 * r['seconds']:.2f} | "
-              f"{r['evals_per_s']:,.0f} | {fmt(r.get('ratio_vec'), '.1f')} | {fmt(r.get('ratio_hoisted'), '.1f')} | "
-              f"{fmt(r.get('ratio_loop'), '.0f')} |")
+    L += table_section(rows, "2")
 
     # -- section 3
     s3 = [r for r in rows if r["section"] == "3"]
     if s3:
-        a("")
-        a("## 3. End to end: ENN identification at an equal evaluation budget")
-        a("")
-        a(PROSE("s3", s3=meta["s3"], e2e_rounds=meta["e2e_rounds"]))
-        a("")
-        a("| implementation | dtype | evals (global + local) | run s | evals/s | J (train cost) | train MSE % | validation MSE % | est. s with NumPy objective |")
-        a("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+        L += section_head("3. End to end: ENN identification at an equal evaluation budget",
+                          PROSE("s3", s3=meta["s3"], e2e_rounds=meta["e2e_rounds"]),
+                          "| implementation | dtype | evals (global + local) | run s | evals/s | J (train cost) | train MSE % | validation MSE % | est. s with NumPy objective |",
+                          "|---|---|---:|---:|---:|---:|---:|---:|---:|")
         diag = [r for r in s3 if r["case"].endswith("stages")]
         s3 = [r for r in s3 if not r["case"].endswith("stages")]
         for r in s3:
@@ -778,43 +797,12 @@ def to_markdown(rows, tgts, meta, appendix) -> str:
                 a(f"| {r['implementation']} | {r['evals']} | {r['seconds']:.1f} | {r['evals_per_s']:.3g} | "
                   f"{r['compile_s']:.1f} | {r['J']:.4g} |")
 
-    # -- section 4
-    s4 = [r for r in rows if r["section"] == "4"]
-    if s4:
-        a("")
-        a("## 4. Compile time")
-        a("")
-        a(PROSE("s4"))
-        a("")
-        a("| call | dtype | first call s | second call s | first − second s | compile s | trace s | lower s | XLA s | XLA compiles | recompiles on 2nd call |")
-        a("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-        for r in s4:
-            a(f"| {r['case']} | {r['dtype']} | {r['first_call_s']:.1f} | {r['second_call_s']:.1f} | "
-              f"{r['first_minus_second_s']:.1f} | {r['compile_s']:.1f} | {r['trace_s']:.1f} | {r['lower_s']:.1f} | "
-              f"{r['xla_s']:.1f} | {r['xla_compiles']} | {r['recompiles_second']} |")
-
-    # -- section 5
-    s5 = [r for r in rows if r["section"] == "5"]
-    if s5:
-        a("")
-        a("## 5. Scan efficiency of the ENN rollout")
-        a("")
-        a(PROSE("s5"))
-        a("")
-        a("| implementation | dtype | median ms | neuron-steps/s | efficiency |")
-        a("|---|---|---:|---:|---:|")
-        for r in s5:
-            a(f"| {r['implementation']} ({r['case']}) | {r['dtype']} | {1e3 * r['seconds']:.2f} | "
-              f"{r['neuron_steps_per_s']:.3g} | {100 * r['efficiency']:.0f} % |")
+    L += table_section(rows, "4") + table_section(rows, "5")
 
     if appendix:
-        a("")
-        a("## Appendix: `benchmarks/speed_optim.py`, called from this run")
-        a("")
-        a(PROSE("appendix"))
-        a("")
-        a("| implementation | evals | s (median) | evals/s | × peer | compile s | best f |")
-        a("|---|---:|---:|---:|---:|---:|---:|")
+        L += section_head("Appendix: `benchmarks/speed_optim.py`, called from this run", PROSE("appendix"),
+                          "| implementation | evals | s (median) | evals/s | × peer | compile s | best f |",
+                          "|---|---:|---:|---:|---:|---:|---:|")
         for r in appendix:
             a(f"| {r['implementation']} | {r['evals']} | {float(r['seconds']):.3f} | {float(r['evals_per_s']):.3g} | "
               f"{float(r['ratio_vs_peer']):.1f} | {float(r['compile_s']):.1f} | {float(r['best_f']):.3g} |")

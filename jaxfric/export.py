@@ -364,7 +364,7 @@ def c_header(fit, path=None, *, prefix: str = "jaxfric") -> str:
              "", f"#endif /* {guard} */", ""]
     text = "\n".join(lines)
     if path is not None:
-        from .report import atomic_write_text
+        from .files import atomic_write_text
 
         atomic_write_text(os.fspath(path), text)
     return text

@@ -15,9 +15,11 @@ Figures (paper numbering from docs/algorithms.md §1):
 - :func:`plot_convergence` -- best objective against function evaluations (log scale);
 - :func:`plot_table1` -- final values of the Table 1 benchmark, per function and solver.
 
-Fits are duck-typed: anything with ``predict(velocity, dt)`` returning friction in N
-works, and a plain prediction array (``F_hat`` in N on the data's time grid) is
-accepted wherever a fit is.
+They take jaxfric's own types: data a :class:`jaxfric.FrictionData`, a fit a
+:class:`jaxfric.Fit` (or a plain prediction array, ``F_hat`` in N on the data's time
+grid), a history a :class:`jaxfric.History`, a :class:`jaxfric.Solution` or a fit
+(or an ``(evals, f)`` pair of arrays). Anything else is a :class:`TypeError` naming
+what was given.
 """
 
 from __future__ import annotations
@@ -25,8 +27,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import jax
 import numpy as np
 from matplotlib.figure import Figure
+
+from .fit import ExtrapolationWarning, Fit
+from .optim import History, Solution
+from .records import FrictionData
 
 __all__ = [
     "fit_label",
@@ -60,12 +67,18 @@ def velocity_unit(velocity) -> tuple[float, str]:
     return (1e3, "mm/s") if vmax < 0.5 else (1.0, "m/s")
 
 
+def _checked(data) -> FrictionData:
+    if not isinstance(data, FrictionData):
+        raise TypeError(f"data must be a jaxfric.FrictionData, got {type(data).__name__}")
+    return data
+
+
 def _time(data) -> np.ndarray:
-    return _np(data.t)
+    return _np(_checked(data).t)
 
 
 def _n_train(data) -> int:
-    return int(getattr(data, "n_train", len(_np(data.velocity))))
+    return _checked(data).n_train
 
 
 def _mark_split(ax, data) -> None:
@@ -87,39 +100,32 @@ def _split_legend_note(data) -> str:
 
 
 def fit_label(fit, default: str = "model") -> str:
-    """A short display name for a fit: its ``label``/``name``, else its model's class name
-    (with the neuron count for an Elman network)."""
-    for attr in ("label", "name"):
-        value = getattr(fit, attr, None)
-        if isinstance(value, str) and value:
-            return value
-    model = getattr(fit, "model", None)
-    if model is None:
+    """A short display name: a :class:`jaxfric.Fit`'s model class name (with the neuron
+    count for an Elman network), ``default`` for anything else (a prediction array, a
+    history)."""
+    if not isinstance(fit, Fit):
         return default
-    name = type(model).__name__
-    neurons = getattr(model, "neurons", None)
-    if name == "Elman" and neurons is not None:
-        return f"ENN ({neurons} neurons)"
-    return name
+    name = type(fit.model).__name__
+    return f"ENN ({fit.model.neurons} neurons)" if name == "Elman" else name
 
 
 def predict_on(fit, data) -> np.ndarray:
     """Friction [N] predicted by ``fit`` on ``data``'s velocity (free run over the record).
 
-    ``fit`` may be an object with ``predict(velocity, dt)`` or an array of
-    predictions already on the data's grid.
+    ``fit`` is a :class:`jaxfric.Fit` or an array of predictions already on the data's grid.
     """
-    if hasattr(fit, "predict"):
+    _checked(data)
+    if isinstance(fit, Fit):
         import warnings
-
-        from .fit import ExtrapolationWarning
 
         with warnings.catch_warnings():
             # a figure of the validation data shows the extrapolation; no console line for it
             warnings.simplefilter("ignore", ExtrapolationWarning)
             y_hat = _np(fit.predict(data.velocity, data.dt))
-    else:
+    elif isinstance(fit, (np.ndarray, jax.Array)):
         y_hat = _np(fit)
+    else:
+        raise TypeError(f"a fit must be a jaxfric.Fit or an array of predictions, got {type(fit).__name__}")
     n = _np(data.velocity).size
     if y_hat.shape != (n,):
         raise ValueError(f"prediction has shape {y_hat.shape}, the data have {n} samples")
@@ -151,9 +157,7 @@ def _mse_percent(y, y_hat) -> float:
 def plot_data(data, *, title: str | None = None) -> Figure:
     """Velocity and computed friction against time (the paper's Figs 9 and 10).
 
-    ``data`` is a :class:`jaxfric.rig.FrictionData` (or anything with ``t``,
-    ``velocity`` [m/s], ``friction`` [N] and ``n_train``). The validation window
-    is shaded.
+    ``data`` is a :class:`jaxfric.FrictionData`. The validation window is shaded.
     """
     t = _time(data)
     scale, unit = velocity_unit(data.velocity)
@@ -163,7 +167,7 @@ def plot_data(data, *, title: str | None = None) -> Figure:
     ax_v.axhline(0.0, color="0.6", lw=0.6)
     ax_v.set_ylabel(f"piston velocity [{unit}]")
     # Records from the rig pipeline carry pressures; velocity/friction pairs loaded as such do not.
-    from_pipeline = getattr(data, "p1", None) is not None
+    from_pipeline = data.p1 is not None
     ax_v.set_title("Piston velocity (filtered position, differentiated)" if from_pipeline else "Piston velocity")
     ax_f.plot(t, _np(data.friction), label="friction (force balance)", **_MEASURED)
     ax_f.axhline(0.0, color="0.6", lw=0.6)
@@ -330,6 +334,9 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
     """An ensemble's prediction band (``fit.predict_band``: min-max over the members of
     ``identify(..., keys=K)``) around the best member's prediction, with the measured
     friction, against time; the validation window is shaded."""
+    if not (isinstance(fit, Fit) and fit.ensemble):
+        raise TypeError(f"plot_band needs a jaxfric.Fit of identify(..., keys=K), got {type(fit).__name__}"
+                        + (" without an ensemble" if isinstance(fit, Fit) else ""))
     label = label or fit_label(fit)
     t = _time(data)
     y = _np(data.friction)
@@ -352,38 +359,36 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
 
 # ------------------------------------------------------------------ convergence
 def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
-    """``(evals, f)`` from a History, a Solution, a fit holding one, a ``{"evals", "f"}``
-    mapping, or an ``(evals, f)`` pair.
+    """``(evals, f)`` from a :class:`History`, a :class:`Solution`, a :class:`Fit` or an
+    ``(evals, f)`` pair.
 
     Batched histories (from ``minimise_many``) come back 2-D, one row per run.
     """
     if isinstance(item, tuple) and len(item) == 2:
         return _np(item[0]), _np(item[1])
-    if isinstance(item, Mapping) and "evals" in item and "f" in item:  # Fit.history
-        return _np(item["evals"]), _np(item["f"])
-    if all(hasattr(item, a) for a in ("evals", "f", "length")):
+    if isinstance(item, Fit):  # its history is the {"evals", "f"} record it saves
+        return _np(item.history["evals"]), _np(item.history["f"])
+    if isinstance(item, Solution):
+        item = item.history
+    if isinstance(item, History):
         evals, f, length = _np(item.evals), _np(item.f), np.asarray(item.length)
         if evals.ndim == 1:
             n = max(int(length), 1)
             return evals[:n], f[:n]
         return evals, f
-    for attr in ("history", "solution"):
-        inner = getattr(item, attr, None)
-        if inner is not None:
-            return _history_arrays(inner)
-    raise ValueError(f"cannot find an optimiser history in {type(item).__name__}")
+    raise TypeError("a convergence curve needs a jaxfric History, Solution or Fit (or an (evals, f) "
+                    f"pair) holding an optimiser history, got {type(item).__name__}")
 
 
 def _global_phase_evals(item):
     """Evaluations spent by the global phase of a hybrid run, if recorded."""
-    for obj in (item, getattr(item, "solution", None)):
-        stats = getattr(obj, "stats", None)
-        if isinstance(stats, Mapping) and "num_evals_global" in stats:
-            g = np.asarray(stats["num_evals_global"])
-            return float(np.median(g)) if g.ndim else float(g)
-    stages = getattr(item, "stages", None)  # a Fit loaded from disk keeps its stages only
-    if isinstance(stages, (list, tuple)) and len(stages) > 1 and isinstance(stages[0], Mapping):
-        if stages[0].get("stage") == "mapso" and "num_evals" in stages[0]:
+    solution = item.solution if isinstance(item, Fit) else item
+    if isinstance(solution, Solution) and "num_evals_global" in solution.stats:
+        g = np.asarray(solution.stats["num_evals_global"])
+        return float(np.median(g)) if g.ndim else float(g)
+    if isinstance(item, Fit):  # a Fit loaded from disk keeps its stages only
+        stages = item.stages
+        if len(stages) > 1 and stages[0].get("stage") == "mapso" and "num_evals" in stages[0]:
             return float(stages[0]["num_evals"])
     return None
 

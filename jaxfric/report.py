@@ -18,8 +18,8 @@ with ``os.replace``, so an interrupted run never leaves a half-written file unde
 final name (temporaries match :data:`TEMP_PATTERNS`; :func:`remove_temporaries`
 clears them).
 
-Fits are duck-typed (see :mod:`jaxfric.plot`): the writer needs ``predict``, and uses
-``metrics``, ``model``, ``to_dict``, ``save`` and the timings when the fit has them.
+The writer takes jaxfric's own types: :class:`jaxfric.Fit` objects and a
+:class:`jaxfric.FrictionData`; anything else is a ``TypeError`` before a file is written.
 """
 
 from __future__ import annotations
@@ -35,9 +35,10 @@ from typing import Any
 import numpy as np
 
 from . import plot as _plot
-from .fit import unidentifiable_names
+from .fit import Fit, unidentifiable_names
 from .files import TEMP_SUFFIX, atomic_write, atomic_write_bytes, atomic_write_text, jsonable, write_json
 from .metrics import METRIC_FORMULAS, friction_metrics
+from .records import FrictionData
 
 __all__ = [
     "FIGURES",
@@ -90,11 +91,16 @@ def remove_temporaries(folder) -> list[Path]:
     return removed
 
 
+def _check_fit(fit) -> Fit:
+    if not isinstance(fit, Fit):
+        raise TypeError(f"a fit must be a jaxfric.Fit (from jaxfric.identify or jaxfric.load_fit), "
+                        f"got {type(fit).__name__}")
+    return fit
+
+
 def save_fit(fit, path) -> Path:
     """``fit.save`` into a temporary file, then moved to ``path`` (atomic)."""
-    if not hasattr(fit, "save"):
-        raise ValueError(f"{type(fit).__name__} cannot be saved (no save method)")
-    return _atomic(path, lambda tmp: fit.save(tmp))
+    return _atomic(path, lambda tmp: _check_fit(fit).save(tmp))
 
 
 # ----------------------------------------------------------- reading a fit
@@ -118,7 +124,7 @@ def fit_metrics(fit, data) -> dict[str, dict[str, float]]:
     Taken from ``fit.metrics`` when the fit carries them for these windows (the library is
     the authority), otherwise computed from the prediction on ``data``.
     """
-    own = getattr(fit, "metrics", None)
+    own = _check_fit(fit).metrics
     if isinstance(own, Mapping) and all(isinstance(own.get(w), Mapping) for w in ("train", "all")):
         return {w: {k: float(v) for k, v in own[w].items()} for w in WINDOWS if isinstance(own.get(w), Mapping)}
     y = np.asarray(data.friction, dtype=np.float64)
@@ -127,31 +133,18 @@ def fit_metrics(fit, data) -> dict[str, dict[str, float]]:
 
 
 def fit_seconds(fit) -> float | None:
-    """Wall time of the identification [s], when the fit records it."""
-    t = getattr(fit, "timings", None)
-    if isinstance(t, Mapping):
-        for key in ("total", "total_s", "wall", "wall_s"):
-            if key in t:
-                return float(t[key])
-        vals = [float(v) for v in t.values() if isinstance(v, (int, float))]
-        return float(sum(vals)) if vals else None
-    for attr in ("seconds", "wall_time", "time_s"):
-        v = getattr(fit, attr, None)
-        if isinstance(v, (int, float)):
-            return float(v)
-    return None
+    """Wall time of the identification [s] (``fit.timings["total_s"]``), when recorded."""
+    total = _check_fit(fit).timings.get("total_s")
+    return None if total is None else float(total)
 
 
-def fit_num_params(fit) -> int | None:
-    model = getattr(fit, "model", None)
-    n = getattr(model, "num_params", None)
-    return int(n) if n is not None else None
+def fit_num_params(fit) -> int:
+    return int(_check_fit(fit).model.num_params)
 
 
 def fit_dict(fit) -> dict:
-    """``fit.to_dict()`` when available, made JSON-safe."""
-    to_dict = getattr(fit, "to_dict", None)
-    return jsonable(to_dict(), finite=True) if callable(to_dict) else {}
+    """``fit.to_dict()``, made JSON-safe."""
+    return jsonable(_check_fit(fit).to_dict(), finite=True)
 
 
 # ------------------------------------------------------------------ tables
@@ -256,8 +249,9 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
 
     Args:
         out: folder (created if needed; existing report files are replaced).
-        data: the :class:`jaxfric.rig.FrictionData` the fits were made on.
-        fits: mapping model name (used in file names) -> fit.
+        data: the :class:`jaxfric.FrictionData` the fits were made on.
+        fits: mapping model name (used in file names) -> :class:`jaxfric.Fit` (anything
+            else is a ``TypeError``).
         title: report title.
         command: the command line that produced it (shown under "Reproduce").
         source: one sentence on where the data came from.
@@ -281,6 +275,10 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
     out.mkdir(parents=True, exist_ok=True)
     if not fits:
         raise ValueError("no fits to report")
+    for fit in fits.values():  # before any figure is drawn
+        _check_fit(fit)
+    if not isinstance(data, FrictionData):
+        raise TypeError(f"data must be a jaxfric.FrictionData, got {type(data).__name__}")
     written: list[Path] = []
 
     def done(p: Path) -> None:
@@ -314,7 +312,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
                 f"Validation record {rec_name}: {r['label']}")
             record_figs.setdefault(r["name"], {})[rec_name] = name
     for r in rows:
-        if getattr(fits[r["name"]], "ensemble", None) and hasattr(fits[r["name"]], "predict_band"):
+        if fits[r["name"]].ensemble:
             name = f"band_{slug(r['name'])}.png"
             figure(name, lambda r=r: _plot.plot_band(fits[r["name"]], data, label=r["label"]),
                    f"Ensemble prediction band: {r['label']}")
@@ -330,11 +328,9 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
     model_files = {}
     if save_models:
         for r in rows:
-            fit = fits[r["name"]]
-            if hasattr(fit, "save"):
-                p = save_fit(fit, out / "models" / f"{slug(r['name'])}.npz")
-                model_files[r["name"]] = str(p.relative_to(out))
-                done(p)
+            p = save_fit(fits[r["name"]], out / "models" / f"{slug(r['name'])}.npz")
+            model_files[r["name"]] = str(p.relative_to(out))
+            done(p)
 
     results = {
         "title": title,
@@ -350,8 +346,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
                                "metrics": r["metrics"], "file": model_files.get(r["name"]),
                                "records": _fit_records(fits[r["name"]]),
                                "on_bound": _on_bound(fits[r["name"]]),
-                               "unidentifiable": list((getattr(fits[r["name"]], "diagnostics", None)
-                                                       or {}).get("unidentifiable", [])),
+                               "unidentifiable": list(fits[r["name"]].diagnostics.get("unidentifiable", [])),
                                "ensemble": _ensemble(fits[r["name"]]),
                                "record_figures": record_figs.get(r["name"], {}),
                                "fit": fit_dict(fits[r["name"]])} for r in rows},
@@ -367,16 +362,16 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
 
 def _fit_records(fit) -> list[dict]:
     """Per-record metrics of a fit (``fit.metrics["records"]``), when it has several records."""
-    recs = (getattr(fit, "metrics", None) or {}).get("records") or []
+    recs = (fit.metrics or {}).get("records") or []
     return list(recs) if len(recs) > 1 else []
 
 
 def _on_bound(fit) -> list[dict]:
-    return list((getattr(fit, "diagnostics", None) or {}).get("on_bound", []))
+    return list(fit.diagnostics.get("on_bound", []))
 
 
 def _ensemble(fit) -> dict | None:
-    e = getattr(fit, "ensemble", None)
+    e = fit.ensemble
     return None if not e else {k: v for k, v in e.items() if k != "theta"}
 
 
@@ -428,9 +423,8 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
                   "pools the samples of the training and of the validation records."]
             for rec_name, fig in m["record_figures"].items():
                 L += ["", f"![{r['label']} on {rec_name}]({fig})"]
-        params = getattr(fit, "params", None) or getattr(fit, "physical", None)
-        if isinstance(params, Mapping) and not getattr(getattr(fit, "model", None), "needs_scaling", False):
-            pl = _fmt_params(params, {d["name"] for d in m["on_bound"]}, unidentifiable_names(m["unidentifiable"]))
+        if not fit.model.needs_scaling:
+            pl = _fmt_params(fit.params, {d["name"] for d in m["on_bound"]}, unidentifiable_names(m["unidentifiable"]))
             if pl:
                 L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
         for d in m["on_bound"]:
@@ -450,10 +444,9 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             band = f"band_{slug(r['name'])}.png"
             if band in results["figures"]:
                 L += ["", f"![ensemble band]({band})"]
-        stages = getattr(fit, "stages", None)
-        if stages:
+        if fit.stages:
             parts = []
-            for st in stages:
+            for st in fit.stages:
                 n = st.get("num_evals", st.get("num_steps"))
                 unit = "evaluations" if "num_evals" in st else "steps"
                 parts.append(f"{st.get('stage', '?')}: J = {float(st.get('J', float('nan'))):.5g} ({n} {unit})")

@@ -36,8 +36,6 @@ print(f"budget: {BUDGET}")
 
 # %%
 # %matplotlib inline
-import time
-
 import jax
 
 # Notebooks (like the CLI and the benchmarks) choose the precision at start-up;
@@ -90,23 +88,20 @@ print(f"D = {DIM}, {RUNS} runs, MAPSO generations G = {GENERATIONS}, functions: 
 # count of the MAPSO–NMDS runs.
 
 # %%
-def timed(fn_name, solver, keys):
-    bounds, obj = F.get(fn_name).bounds(DIM), F.objective(fn_name)
-    t0 = time.perf_counter()
-    jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sol = jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
-    run = time.perf_counter() - t0
-    return sol, max(first - run, 0.0), run
+import sys
+from pathlib import Path
 
+# The batch timing of `benchmarks/table1.py` (this notebook runs in notebooks/).
+sys.path.insert(0, str(Path.cwd().resolve().parent / "benchmarks"))
+from table1_rows import timed_batch
 
 keys = jax.random.split(jax.random.key(2017), RUNS)
 results, table = {}, []
 for name in FUNCTIONS:
-    hybrid, c1, r1 = timed(name, jf.mapso_nmds(num_generations=GENERATIONS), keys)
+    hybrid, c1, r1 = timed_batch(name, jf.mapso_nmds(num_generations=GENERATIONS), DIM, keys)
     budget = int(np.max(np.asarray(hybrid.stats["num_evals"])))
-    pso, c2, r2 = timed(name, jf.PSO(num_particles=25, num_generations=max(1, budget // 25 - 1)), keys)
+    pso, c2, r2 = timed_batch(name, jf.PSO(num_particles=25, num_generations=max(1, budget // 25 - 1)),
+                             DIM, keys)
     results[name] = {"MAPSO-NMDS": hybrid, "PSO": pso}
     for label, sol, c, r in (("MAPSO-NMDS", hybrid, c1, r1), ("PSO", pso, c2, r2)):
         f = np.asarray(sol.f, dtype=float)

@@ -125,3 +125,33 @@ def _fresh_compilation_caches():
     yield
     jax.clear_caches()
     gc.collect()
+
+
+@pytest.fixture(scope="session")
+def rig_record():
+    """The default rig simulated once with key 0 (2000 samples at 128 Hz, ground truth)."""
+    from jaxfric import rig
+
+    return rig.simulate(rig.Rig(), jax.random.key(0))
+
+
+@pytest.fixture(scope="session")
+def make_fit():
+    """Builds a real :class:`jaxfric.Fit` directly, without an identification run:
+    ``make_fit(model, theta, dt=..., n_train=..., n_samples=...)`` with a two-stage
+    optimiser record (MAPSO then Nelder-Mead), a 20-point history and timings
+    (``total_s`` 3.5 s), for the tests of the report and the figures."""
+    from jaxfric import Fit
+
+    def build(model, theta, *, dt=0.01, n_train=400, n_samples=500, **fields):
+        defaults = dict(
+            metrics={},
+            stages=[{"stage": "mapso", "J": 0.1, "num_evals": 120},
+                    {"stage": "nelder_mead", "J": 1e-3, "num_evals": 80}],
+            history={"evals": np.arange(1, 21) * 10, "f": np.geomspace(1.0, 1e-3, 20)},
+            timings={"compile_s": 1.0, "run_s": 2.0, "total_s": 3.5},
+        )
+        return Fit(model=model, theta=np.asarray(theta, dtype=np.float64), velocity_scaler=None,
+                   friction_scaler=None, dt=dt, n_train=n_train, n_samples=n_samples, **{**defaults, **fields})
+
+    return build

@@ -1,4 +1,5 @@
-"""Shared helper of the model tests: recover known parameters from noise-free data."""
+"""Shared helpers of the model and rig tests: recover known parameters from noise-free
+data, and the normalised MSE of docs/algorithms.md §6 written out independently."""
 
 from __future__ import annotations
 
@@ -24,3 +25,9 @@ def lm_recovery(model, velocity, dt, truth, start, tol=1e-15) -> dict[str, float
 def assert_within(got: dict, expected: dict, rel: float = 0.02) -> None:
     for name, value in expected.items():
         assert abs(got[name] - value) <= rel * abs(value), (name, got[name], value)
+
+
+def nmse_percent(ref, est) -> float:
+    """docs/algorithms.md §6: 100 mean((F - F_hat)^2) / var(F), in float64."""
+    ref, est = np.asarray(ref, np.float64), np.asarray(est, np.float64)
+    return 100.0 * np.mean((ref - est) ** 2) / np.var(ref)

@@ -108,11 +108,14 @@ def test_matches_independent_numpy_loop(output_bias):
     np.testing.assert_allclose(y32, y, atol=5e-5)
 
 
+def _candidates(model, *, seed, size, t_end, n):
+    """``size`` random parameter sets of ``model`` and a sine input of ``n`` samples on [0, t_end]."""
+    return random_theta(model, np.random.default_rng(seed), size=size), np.sin(np.linspace(0, t_end, n))
+
+
 def test_vmapped_rollout_equals_per_candidate_rollouts():
-    rng = np.random.default_rng(0)
     model = Elman(neurons=30)
-    thetas = random_theta(model, rng, size=6)
-    u = np.sin(np.linspace(0, 20, 200))
+    thetas, u = _candidates(model, seed=0, size=6, t_end=20, n=200)
     with jax.enable_x64(True):
         per = np.stack([np.asarray(model.simulate(th, u, None)) for th in thetas])
         vm = np.asarray(jax.vmap(model.simulate, in_axes=(0, None, None))(thetas, u, None))
@@ -219,10 +222,8 @@ def test_context_weight_bound_narrows_only_r():
 
 
 def test_unroll_does_not_change_results():
-    rng = np.random.default_rng(8)
     base = Elman(neurons=4)
-    thetas = random_theta(base, rng, size=3)
-    u = np.sin(np.linspace(0, 3, 33))
+    thetas, u = _candidates(base, seed=8, size=3, t_end=3, n=33)
     with jax.enable_x64(True):
         ref = np.asarray(base.simulate_batch(thetas, u, None))
         for unroll in (1, 3):

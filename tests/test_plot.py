@@ -20,19 +20,6 @@ def data():
     return FrictionData.from_arrays(v, f, 1 / 128.0, n_train=320)
 
 
-class FakeFit:
-    """What the plots need from a fit: predict(), a model, a solution with a history."""
-
-    def __init__(self, y_hat, label="fake"):
-        self.y_hat = np.asarray(y_hat)
-        self.label = label
-        evals = np.arange(1, 51) * 25
-        self.history = jf.History.from_arrays(evals, 10.0 ** -np.linspace(0, 3, 50))
-
-    def predict(self, velocity, dt):
-        return self.y_hat
-
-
 def _pixels(fig: Figure) -> np.ndarray:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=60)
@@ -65,11 +52,10 @@ def test_plot_friction_velocity_with_and_without_fits(data):
     assert "model" in [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
 
 
-def test_plot_fit_titles_with_mse(data):
-    y = np.asarray(data.friction)
-    fig = plot.plot_fit(FakeFit(y * 0.95, "ENN"), data)
+def test_plot_fit_titles_with_mse(data, make_fit):
+    fig = plot.plot_fit(make_fit(jf.Coulomb(), [300.0, 1.0], dt=1 / 128.0, n_train=320, n_samples=400), data)
     _check(fig)
-    assert "ENN" in fig._suptitle.get_text()
+    assert "Coulomb" in fig._suptitle.get_text()
     assert "valid" in fig.axes[0].get_title()
 
 
@@ -78,15 +64,15 @@ def test_plot_fit_rejects_wrong_length(data):
         plot.plot_fit(np.zeros(3), data)
 
 
-def test_plot_error_one_curve_per_fit(data):
-    y = np.asarray(data.friction)
-    fig = plot.plot_error([FakeFit(y * 0.9, "a"), FakeFit(y * 1.1, "b")], data)
+def test_plot_error_one_curve_per_fit(data, make_fit):
+    fits = [make_fit(jf.Coulomb(), [fc, 1.0], dt=1 / 128.0, n_train=320, n_samples=400) for fc in (270.0, 330.0)]
+    fig = plot.plot_error(fits, data)
     _check(fig)
     assert len(fig.axes[0].get_legend().get_texts()) == 2
 
 
-def test_plot_convergence_accepts_histories_solutions_and_pairs(data):
-    fit = FakeFit(np.asarray(data.friction))
+def test_plot_convergence_accepts_histories_solutions_and_pairs(data, make_fit):
+    fit = make_fit(jf.Coulomb(), [300.0, 1.0], dt=1 / 128.0, n_train=320, n_samples=400)
     hist = jf.History.from_arrays(np.arange(1, 11) * 10, np.geomspace(5.0, 0.1, 10))
     sol = jf.Solution(value=np.zeros(2), f=np.float64(0.1), result=jf.RESULTS.successful,
                       stats={"num_evals": 100, "num_evals_global": 60}, history=hist)
@@ -96,7 +82,7 @@ def test_plot_convergence_accepts_histories_solutions_and_pairs(data):
     assert fig.axes[0].get_yscale() == "log"
     with pytest.raises(ValueError, match="labels"):
         plot.plot_convergence([fit], ["a", "b"])
-    with pytest.raises(ValueError, match="history"):
+    with pytest.raises(TypeError, match="history"):
         plot.plot_convergence([object()], ["x"])
 
 
@@ -113,3 +99,14 @@ def test_plot_table1(data):
 def test_velocity_unit():
     assert plot.velocity_unit(np.array([0.01, -0.02])) == (1e3, "mm/s")
     assert plot.velocity_unit(np.array([1.0])) == (1.0, "m/s")
+
+
+def test_figures_take_jaxfric_types_only(data):
+    class Duck:
+        def predict(self, velocity, dt=None):
+            return np.asarray(data.friction)
+
+    with pytest.raises(TypeError, match="a fit must be a jaxfric.Fit.*got Duck"):
+        plot.plot_fit(Duck(), data)
+    with pytest.raises(TypeError, match="data must be a jaxfric.FrictionData, got tuple"):
+        plot.plot_data((data.velocity, data.friction, 1 / 128.0))

@@ -7,39 +7,10 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
+import jaxfric as jf
 from jaxfric import report
 from jaxfric.metrics import friction_metrics
 from jaxfric.rig import FrictionData
-
-
-class _Model:
-    def __init__(self, n, needs_scaling=False):
-        self.num_params = n
-        self.needs_scaling = needs_scaling
-
-
-class FakeFit:
-    """A fit as the report sees it: predict, model, history, stages, timings, save."""
-
-    def __init__(self, y_hat, n_params, label):
-        self.y_hat = np.asarray(y_hat, dtype=float)
-        self.model = _Model(n_params)
-        self.label = label
-        self.history = {"evals": np.arange(1, 21) * 10, "f": np.geomspace(1.0, 1e-3, 20)}
-        self.stages = [{"stage": "mapso", "J": 0.1, "num_evals": 120},
-                       {"stage": "nelder_mead", "J": 1e-3, "num_evals": 80}]
-        self.timings = {"compile_s": 1.0, "run_s": 2.0, "total_s": 3.5}
-        self.params = {"Fc": np.float64(300.0)}
-
-    def predict(self, velocity, dt=None):
-        return self.y_hat
-
-    def to_dict(self):
-        return {"label": self.label, "theta": np.zeros(3)}
-
-    def save(self, path):
-        with open(path, "wb") as fh:
-            fh.write(b"fit:" + self.label.encode())
 
 
 @pytest.fixture(scope="module")
@@ -51,10 +22,10 @@ def data():
 
 
 @pytest.fixture(scope="module")
-def written(data, tmp_path_factory):
+def written(data, tmp_path_factory, make_fit):
     out = tmp_path_factory.mktemp("report")
-    y = np.asarray(data.friction)
-    fits = {"good": FakeFit(y * 0.98 + 1.0, 12, "good model"), "poor": FakeFit(y * 0.7, 3, "poor model")}
+    # Fc = 300 N, sigma2 = 10 N s/m; a Stribeck curve with Fc = 100 N, Fs = 150 N, vs = 1 mm/s
+    fits = {"good": make_fit(jf.Coulomb(), [300.0, 1.0]), "poor": make_fit(jf.Stribeck(), [100.0, 1.5, -3.0, 1.0])}
     seen = []
     res = report.write_report(out, data, fits, title="test report", command="jaxfric test",
                               source="synthetic", settings={"seed": 1}, notes=["a note"],
@@ -72,8 +43,8 @@ def test_every_file_is_there_and_figures_are_not_blank(written):
             assert (out / name).stat().st_size > 10_000
             img = mpimg.imread(out / name)
             assert img[..., :3].std() > 0.05, f"{name} looks blank"
-    for n in fits:
-        assert (out / "models" / f"{n}.npz").read_bytes().startswith(b"fit:")
+    for n, fit in fits.items():
+        np.testing.assert_array_equal(jf.load_fit(out / "models" / f"{n}.npz").theta, fit.theta)
     assert sorted(map(str, seen)) == sorted(map(str, res["files"]))
     assert not list(out.glob(".*")), "temporary files left behind"
 
@@ -89,15 +60,16 @@ def test_results_json_matches_metrics(written, data):
         assert m["num_params"] == fit.model.num_params
         assert m["seconds"] == pytest.approx(3.5)
         assert m["file"] == f"models/{name}.npz"
-        expect = friction_metrics(y[400:], fit.y_hat[400:])
+        y_hat = np.asarray(fit.predict(data.velocity, data.dt), dtype=np.float64)
+        expect = friction_metrics(y[400:], y_hat[400:])
         assert m["metrics"]["valid"]["mse_percent"] == pytest.approx(expect["mse_percent"])
-        assert m["fit"]["theta"] == [0.0, 0.0, 0.0]
+        assert m["fit"]["theta"] == pytest.approx(list(fit.theta))
 
 
 def test_markdown_and_text_tables(written):
     out, _, res, _ = written
     md = (out / "report.md").read_text()
-    for piece in ("# test report", "| good model | 12 |", "| poor model | 3 |", "a note",
+    for piece in ("# test report", "| Coulomb | 2 |", "| Stribeck | 4 |", "a note",
                   "![convergence](convergence.png)", "jaxfric test", "print('hi')", "| Fc | 300 |"):
         assert piece in md, piece
     lines = res["table"].splitlines()
@@ -106,8 +78,8 @@ def test_markdown_and_text_tables(written):
     assert len(lines) == 4
 
 
-def test_fit_metrics_prefers_the_fits_own(data):
-    fit = FakeFit(np.asarray(data.friction), 2, "own")
+def test_fit_metrics_prefers_the_fits_own(data, make_fit):
+    fit = make_fit(jf.Coulomb(), [300.0, 1.0])
     fit.metrics = {"train": {"mse_percent": 1.5}, "valid": None, "all": {"mse_percent": 2.0}}
     m = report.fit_metrics(fit, data)
     assert m == {"train": {"mse_percent": 1.5}, "all": {"mse_percent": 2.0}}
@@ -209,3 +181,16 @@ def test_unidentifiable_parameters_are_named_with_reasons_in_summary_json_and_re
     assert f"physically meaningless):** sigma1: {by_name['sigma1']}" in text
     res = json.loads((tmp_path / "results.json").read_text())["models"]["lugre"]
     assert res["unidentifiable"] == list(texts)
+
+
+def test_only_jaxfric_types_are_reported(tmp_path, data, make_fit):
+    class Duck:
+        def predict(self, velocity, dt=None):
+            return np.asarray(data.friction)
+
+    with pytest.raises(TypeError, match="a fit must be a jaxfric.Fit.*got Duck"):
+        report.write_report(tmp_path, data, {"duck": Duck()}, title="x")
+    with pytest.raises(TypeError, match="data must be a jaxfric.FrictionData, got tuple"):
+        report.write_report(tmp_path, (data.velocity, data.friction, 0.01),
+                            {"c": make_fit(jf.Coulomb(), [300.0, 1.0])}, title="x")
+    assert not list(tmp_path.iterdir())

@@ -9,36 +9,26 @@ import pytest
 import scipy.signal
 
 from jaxfric import rig
+from model_recovery import nmse_percent
 
 FS = 128.0
 
 
-def nmse_percent(ref, est):
-    """docs/algorithms.md §6: 100 mean((F - F_hat)^2) / var(F)."""
-    ref, est = np.asarray(ref, np.float64), np.asarray(est, np.float64)
-    return 100.0 * np.mean((ref - est) ** 2) / np.var(ref)
-
-
-@pytest.fixture(scope="module")
-def record():
-    return rig.simulate(rig.Rig(), jax.random.key(0))
-
-
 # --------------------------------------------------------------------------- accuracy
-def test_pipeline_friction_matches_true_friction(record):
-    data = rig.estimate_friction(record.measurements(), rig.Cylinder())
+def test_pipeline_friction_matches_true_friction(rig_record):
+    data = rig.estimate_friction(rig_record.measurements(), rig.Cylinder())
     assert data.n_samples == 2000 and data.n_train == 1600
-    f_true, f_est = np.asarray(record.friction), np.asarray(data.friction)
+    f_true, f_est = np.asarray(rig_record.friction), np.asarray(data.friction)
     assert nmse_percent(f_true, f_est) < 1.0
     assert nmse_percent(f_true[:1600], f_est[:1600]) < 1.0
     assert nmse_percent(f_true[1600:], f_est[1600:]) < 1.0
-    assert nmse_percent(record.velocity, data.velocity) < 0.1
+    assert nmse_percent(rig_record.velocity, data.velocity) < 0.1
     np.testing.assert_allclose(float(data.dt), 1 / FS, rtol=1e-6)
 
 
-def test_synthetic_friction_data_is_simulate_then_measure(record):
+def test_synthetic_friction_data_is_simulate_then_measure(rig_record):
     one_call = rig.synthetic_friction_data(jax.random.key(0))
-    two_steps = rig.estimate_friction(record.measurements(), rig.Rig())
+    two_steps = rig.estimate_friction(rig_record.measurements(), rig.Rig())
     np.testing.assert_array_equal(np.asarray(one_call.friction), np.asarray(two_steps.friction))
     assert one_call.n_train == 1600
 
@@ -127,8 +117,8 @@ def test_force_balance_areas():
 
 
 # --------------------------------------------------------------------------- FrictionData
-def test_friction_data_split_views_and_pytree(record):
-    data = rig.estimate_friction(record.measurements(), rig.Cylinder())
+def test_friction_data_split_views_and_pytree(rig_record):
+    data = rig.estimate_friction(rig_record.measurements(), rig.Cylinder())
     tr, va = data.train(), data.valid()
     assert (tr.n_samples, tr.n_train) == (1600, 1600)
     assert (va.n_samples, va.n_train) == (400, 0)
@@ -225,3 +215,21 @@ def test_filter_and_geometry_errors_come_before_computation():
         rig.estimate_friction(meas, bore=0.1, rod=0.05, mass=-1.0)
     with pytest.raises(ValueError, match="'mass' is required"):
         rig.estimate_friction(meas, bore=0.1, rod=0.05)
+
+
+def test_one_record_type_and_one_split_rule():
+    """Issue 19 item 1: the loaders' FrictionData is identify's record, split by one rule
+    (round(fraction * n) training samples), and its channels stay float64 under x32."""
+    from jaxfric.identification import Record, as_record
+
+    assert Record is rig.FrictionData
+    v = np.sin(np.linspace(0, 6, 101)) + 1e-9 * np.arange(101)  # not representable in float32
+    f = 2 * v + 0.1 * v**3
+    for n in (20, 101):
+        for frac in (0.3, 0.5, 0.8, 0.95):
+            d = rig.FrictionData.from_arrays(v[:n], f[:n], 0.01, frac)
+            rec = as_record((v[:n], f[:n], 0.01), frac)
+            assert d.n_train == rec.n_train == int(round(frac * n))
+            assert type(rec) is rig.FrictionData and as_record(d).n_train == d.n_train
+    assert d.velocity.dtype == np.float64 and np.array_equal(d.velocity, v)
+    assert d.with_split(n_train=7).n_train == 7 and d.with_split(1).n_train == 101

@@ -12,20 +12,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from jaxfric import rig
+from model_recovery import nmse_percent
 
 
-def nmse_percent(ref, est):
-    ref, est = np.asarray(ref, np.float64), np.asarray(est, np.float64)
-    return 100.0 * np.mean((ref - est) ** 2) / np.var(ref)
-
-
-@pytest.fixture(scope="module")
-def default_record():
-    return rig.simulate(rig.Rig(), jax.random.key(0))
-
-
-def test_default_record_shape_profile_and_determinism(default_record):
-    rec = default_record
+def test_default_record_shape_profile_and_determinism(rig_record):
+    rec = rig_record
     assert rec.t.shape == (2000,) and rec.friction.shape == (2000,)
     np.testing.assert_allclose(np.diff(np.asarray(rec.t)), 1 / 128, rtol=1e-5)
     # the PI loop reproduces the docs/algorithms.md §7 velocity profile (mm/s range, reversals)
@@ -41,9 +32,9 @@ def test_default_record_shape_profile_and_determinism(default_record):
     np.testing.assert_array_equal(np.asarray(other.friction), np.asarray(rec.friction))
 
 
-def test_sliding_friction_follows_its_stated_law(default_record):
+def test_sliding_friction_follows_its_stated_law(rig_record):
     """Fully sliding, every element is saturated: F = s(v, p) + viscous v (params.SealFriction)."""
-    rec, fr = default_record, rig.SealFriction()
+    rec, fr = rig_record, rig.SealFriction()
     v, p2, f = (np.asarray(a, np.float64) for a in (rec.velocity, rec.p2_true, rec.friction))
     for sel, fc, fs, sign in ((v > 0.008, fr.coulomb_pos, fr.static_pos, 1.0),
                               (v < -0.008, fr.coulomb_neg, fr.static_neg, -1.0)):

@@ -9,7 +9,6 @@ Ctrl-C can say what stayed on disk.
 from __future__ import annotations
 
 import importlib.util
-import io
 import os
 import shlex
 import sys
@@ -50,19 +49,10 @@ def _prepare_out(path: str) -> Path:
     return out
 
 
-def _csv_text(columns: dict[str, np.ndarray]) -> str:
-    """CSV with a header row; full float precision so a round trip is exact."""
-    buf = io.StringIO()
-    buf.write(",".join(columns) + "\n")
-    np.savetxt(buf, np.column_stack([np.asarray(c, dtype=np.float64) for c in columns.values()]),
-               delimiter=",", fmt="%.17g")
-    return buf.getvalue()
-
-
 def _write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
-    from jaxfric.report import atomic_write_text
+    from jaxfric.files import write_csv
 
-    p = atomic_write_text(path, _csv_text(columns))
+    p = write_csv(path, columns)
     KEPT.add(p)
     return p
 
@@ -247,8 +237,8 @@ def cmd_identify(args, argv) -> int:
 # ------------------------------------------------------------------- predict
 def cmd_predict(args, argv) -> int:
     """Load a saved fit and write its friction prediction for a velocity record."""
+    from jaxfric.files import atomic_write_text, csv_text
     from jaxfric.metrics import friction_metrics
-    from jaxfric.report import atomic_write_text
 
     from .data import prediction_input
 
@@ -276,7 +266,7 @@ def cmd_predict(args, argv) -> int:
     if measured is not None:
         cols["friction_measured"] = measured
         cols["error"] = measured - pred
-    text = _csv_text(cols)
+    text = csv_text(cols)
     if args.out == "-":
         sys.stdout.write(text)
     else:

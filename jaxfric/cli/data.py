@@ -32,12 +32,7 @@ class Table:
         """The column named ``spec`` (header name, or a 0-based index), after checking
         it has no empty or NaN cell (other columns may: they are not used)."""
         spec = str(spec).strip()
-        if self.header.count(spec) > 1:
-            at = [i for i, h in enumerate(self.header) if h == spec]
-            raise UserError(f"{option}: column {spec!r} appears {len(at)} times in {self.path}: {len(at)} "
-                            f"columns named {spec!r} (indices {', '.join(map(str, at))}); rename them or "
-                            "give the 0-based index")
-        if spec in self.header:
+        if spec in self.header:  # column_index also refuses a name the header holds twice
             try:
                 i = column_index(self.header, spec, path=self.path, what=option)
             except ValueError as err:

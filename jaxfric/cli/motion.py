@@ -91,7 +91,8 @@ def cmd_identify_motion(args, argv) -> int:
     from jaxfric.identification import default_solver
     from jaxfric.motion import identify_motion
     from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
-    from jaxfric.report import atomic_write_text, save_figure
+    from jaxfric.files import atomic_write_text
+    from jaxfric.report import save_figure
 
     from .commands import _prepare_out, _say
 

@@ -355,8 +355,8 @@ def identify(
             ...) or its name (``"elman"``, ``"lugre"``, ...; see
             :func:`jaxfric.models.available`). Names get :data:`NAMED_MODEL_DEFAULTS`
             (Elman: ``context_weight_bound=1``) unless ``model_options`` override them.
-        data: a ``jaxfric.rig.FrictionData`` (or any object with ``.velocity`` [m/s],
-            ``.friction`` [N], ``.dt`` [s] and ``.n_train``) or ``(velocity, friction, dt)``,
+        data: a :class:`jaxfric.FrictionData` (the one record type, what every loader of
+            :mod:`jaxfric.rig` returns) or ``(velocity, friction, dt)`` [m/s, N, s],
             split into a training and a validation window by ``train``. Leave it out to
             train on whole records (``train=[...]``, ``valid=...``).
             Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that

@@ -4,9 +4,14 @@
 :func:`as_records` (several records, each wholly for training or for validation)
 accept
 
-* a ``FrictionData`` (``jaxfric.rig``) or any object with ``.velocity``,
-  ``.friction``, ``.dt`` and a training count ``.n_train``;
+* a :class:`~jaxfric.records.FrictionData` (``jaxfric.FrictionData``, what every
+  loader of :mod:`jaxfric.rig` returns), its split ``n_train`` used unless ``train=``
+  overrides it;
 * a tuple ``(velocity, friction, dt)``.
+
+Both become the same checked :class:`~jaxfric.records.FrictionData` (``Record`` is
+that class under the name this module used to give it), split by the one rule
+:func:`jaxfric.records.split_count`.
 
 A :class:`RecordSet` holds the checked records of one identification; the cost pools
 the squared errors of every training sample over the training records, each rolled
@@ -25,122 +30,21 @@ from collections.abc import Mapping
 
 import numpy as np
 
-#: The paper's split: the first 1600 of 2000 samples for estimation (§1).
-DEFAULT_TRAIN_FRACTION = 0.8
-#: Shortest validation window :func:`jaxfric.identify` accepts. A window of one or two
-#: samples has (almost) no variance, so its normalised MSE (§6, divided by the window's
-#: variance) reads 1e5 % and means nothing; ten samples also cover the start-up
-#: transient of the §7 pipeline's order-4 Butterworth filter at its edge.
-MIN_VALID_SAMPLES = 10
+from ..records import (DEFAULT_TRAIN_FRACTION, MIN_VALID_SAMPLES, FrictionData, as_channel,
+                       check_sample_time, split_count)
 
-
-@dataclasses.dataclass(frozen=True)
-class Record:
-    """A checked velocity/friction record: float64 NumPy arrays, SI units.
-
-    ``velocity`` [m/s] and ``friction`` [N] have the same length ``n``; ``dt`` [s]
-    is the sample time; the first ``n_train`` samples are the training window and
-    the remaining ``n - n_train`` the validation window. A record used wholly for
-    training has ``n_train == n``, one used wholly for validation ``n_train == 0``.
-    ``name`` labels the record in per-record metrics.
-    """
-
-    velocity: np.ndarray
-    friction: np.ndarray
-    dt: float
-    n_train: int
-    #: Chamber pressures [Pa] when the data carry them (docs/algorithms.md §13.1).
-    p1: np.ndarray | None = None
-    p2: np.ndarray | None = None
-    name: str = ""
-
-    @property
-    def role(self) -> str:
-        """``"train"``, ``"valid"`` or ``"split"`` (training then validation window)."""
-        if self.n_train == self.n_samples:
-            return "train"
-        return "valid" if self.n_train == 0 else "split"
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.velocity.shape[0])
-
-    @property
-    def n_valid(self) -> int:
-        return self.n_samples - self.n_train
-
-    @property
-    def train_velocity(self) -> np.ndarray:
-        return self.velocity[: self.n_train]
-
-    @property
-    def train_friction(self) -> np.ndarray:
-        return self.friction[: self.n_train]
-
-
-def _channel(name: str, values) -> np.ndarray:
-    if np.iscomplexobj(values):
-        raise ValueError(
-            f"{name} holds complex numbers; pass the real-valued signal "
-            "(the imaginary part would otherwise be dropped silently)"
-        )
-    try:
-        arr = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} is not numeric: {err}") from None
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be a 1-D time series, got shape {arr.shape}")
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        first = int(np.flatnonzero(bad)[0])
-        kind = "NaN" if np.isnan(arr[first]) else "inf"
-        raise ValueError(
-            f"{name} holds {int(bad.sum())} non-finite samples ({kind} first at index {first}); "
-            "remove or interpolate them before identification"
-        )
-    return arr
-
-
-def _sample_time(dt) -> float:
-    arr = np.asarray(dt)
-    if arr.ndim != 0:
-        raise ValueError(
-            f"dt must be a scalar sample time in seconds, got shape {arr.shape}; for time "
-            "stamps build the record with jaxfric.rig.FrictionData.from_arrays(v, F, t)"
-        )
-    try:
-        value = float(arr)
-    except (TypeError, ValueError):
-        raise ValueError(f"dt must be a number (seconds), got {dt!r}") from None
-    if not (np.isfinite(value) and value > 0.0):
-        raise ValueError(f"dt must be a positive, finite sample time in seconds, got {value!r}")
-    return value
+#: The one record type; identification code calls it a record.
+Record = FrictionData
 
 
 def _train_count(n: int, train, data_count) -> int:
-    """Resolve the split: ``train`` (count or fraction) beats the data's own count."""
+    """Resolve the split: ``train`` (count or fraction) beats the data's own count;
+    identification needs two training samples and a non-empty validation window."""
     if train is None:
         train = data_count if data_count is not None else DEFAULT_TRAIN_FRACTION
-    if isinstance(train, bool) or not isinstance(train, numbers.Real):
-        raise ValueError(f"train must be a sample count (int) or a fraction in (0, 1), got {train!r}")
-    if isinstance(train, numbers.Integral):
-        count = int(train)
-        if count < 2:
-            raise ValueError(f"train must be at least 2 samples, got {count}")
-        if count > n:
-            raise ValueError(
-                f"the record ({n} samples) is shorter than the training split ({count} samples)"
-            )
-    else:
-        frac = float(train)
-        if not 0.0 < frac < 1.0:
-            raise ValueError(f"a train fraction must lie in (0, 1), got {frac!r}")
-        count = int(round(frac * n))
-    if count >= n:
-        raise ValueError(
-            f"the validation window is empty: all {n} samples are used for training "
-            f"(train={count}); keep some samples for validation"
-        )
+    if isinstance(train, numbers.Integral) and not isinstance(train, bool) and int(train) < 2:
+        raise ValueError(f"train must be at least 2 samples, got {int(train)}")
+    count = split_count(n, train, whole=False)
     if count < 2:
         raise ValueError(f"the training window has {count} sample(s); need at least 2")
     return count
@@ -154,26 +58,21 @@ def _unpack(data):
             )
         v, f, dt = data
         return v, f, dt, None
-    missing = [a for a in ("velocity", "friction", "dt") if not hasattr(data, a)]
-    if missing:
+    if not isinstance(data, FrictionData):
         raise ValueError(
-            "data must be a FrictionData-like object (with .velocity, .friction, .dt and "
-            f".n_train) or a tuple (velocity, friction, dt); {type(data).__name__} has no "
-            f"{', '.join('.' + m for m in missing)}"
+            "data must be a FrictionData (not merely a FrictionData-like object: build one with "
+            "jaxfric.FrictionData.from_arrays or a loader of jaxfric.rig) or a tuple "
+            f"(velocity, friction, dt), got {type(data).__name__}"
         )
-    count = getattr(data, "n_train", None)
-    if count is not None:
-        count = int(count)
-        if count == 0:
-            count = None  # a validation-only view carries no split of its own
-    return data.velocity, data.friction, data.dt, count
+    # A validation-only view (n_train 0) carries no split of its own.
+    return data.velocity, data.friction, data.dt, (data.n_train or None)
 
 
 def as_record(data, train=None, *, min_valid: int = 1) -> Record:
     """Check ``data`` and split it (§1, §11 step 2); see the module docstring.
 
     Args:
-        data: a FrictionData-like object or ``(velocity, friction, dt)``.
+        data: a :class:`FrictionData` or ``(velocity, friction, dt)``.
         train: training samples (int) or fraction (float in (0, 1)); default the
             data's own ``n_train``, else 0.8 (the paper's 1600 of 2000).
         min_valid: fewest validation samples accepted (:func:`jaxfric.identify` asks
@@ -186,8 +85,8 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
             divide by zero) or constant velocity (nothing to identify from).
     """
     v, f, dt, data_count = _unpack(data)
-    velocity = _channel("velocity", v)
-    friction = _channel("friction", f)
+    velocity = as_channel("velocity", v, label="velocity", allow_empty=True)
+    friction = as_channel("friction", f, label="friction", allow_empty=True)
     if velocity.shape != friction.shape:
         raise ValueError(
             f"velocity and friction must have the same length, got {velocity.shape[0]} "
@@ -199,7 +98,7 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
             f"the record has {n} sample{'' if n == 1 else 's'}; identification needs at "
             "least 3 (2 to train, 1 to validate)"
         )
-    dt = _sample_time(dt)
+    dt = check_sample_time(dt)
     n_train = _train_count(n, train, data_count)
     if n - n_train < min_valid:
         raise ValueError(
@@ -220,16 +119,18 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
         )
     # Checked by the model that uses them (AbstractFrictionModel.inputs_from), so a bad
     # channel no model needs does not stop the run.
-    pressures = {name: np.asarray(getattr(data, name), dtype=np.float64) for name in ("p1", "p2")
-                 if getattr(data, name, None) is not None}
-    return Record(velocity=velocity, friction=friction, dt=dt, n_train=n_train, **pressures)
+    given = (data.p1, data.p2) if isinstance(data, FrictionData) else (None, None)
+    pressures = {name: None if p is None else np.asarray(p, dtype=np.float64)
+                 for name, p in zip(("p1", "p2"), given)}
+    return FrictionData(t=np.arange(n) * dt, velocity=velocity, friction=friction, acceleration=None,
+                        dt=dt, n_train=n_train, **pressures)
 
 
 def _checked_whole(data, role: str, name: str) -> Record:
     """One record used whole for training (``n_train = n``) or validation (``0``)."""
     v, f, dt, _ = _unpack(data)
-    velocity = _channel(f"{name}: velocity", v)
-    friction = _channel(f"{name}: friction", f)
+    velocity = as_channel("velocity", v, label=f"{name}: velocity", allow_empty=True)
+    friction = as_channel("friction", f, label=f"{name}: friction", allow_empty=True)
     if velocity.shape != friction.shape:
         raise ValueError(
             f"{name}: velocity and friction must have the same length, got "
@@ -239,11 +140,11 @@ def _checked_whole(data, role: str, name: str) -> Record:
     need = 2 if role == "train" else MIN_VALID_SAMPLES
     if n < need:
         raise ValueError(f"{name} has {n} sample(s); a {role} record needs at least {need}")
-    dt = _sample_time(dt)
+    dt = check_sample_time(dt)
     if role == "train" and not np.ptp(velocity) > 0.0:
         raise ValueError(f"{name}: velocity is constant; a friction model cannot be identified from it")
-    return Record(velocity=velocity, friction=friction, dt=dt,
-                  n_train=n if role == "train" else 0, name=name)
+    return FrictionData(t=np.arange(n) * dt, velocity=velocity, friction=friction, acceleration=None,
+                        p1=None, p2=None, dt=dt, n_train=n if role == "train" else 0, name=name)
 
 
 def _record_list(x, what: str) -> list[tuple[str, object]]:
@@ -251,7 +152,7 @@ def _record_list(x, what: str) -> list[tuple[str, object]]:
     sequence of them (named ``what[i]``) or a mapping name -> record (e.g. file names)."""
     if x is None:
         return []
-    if hasattr(x, "velocity"):
+    if isinstance(x, FrictionData):
         return [(f"{what}[0]", x)]
     if isinstance(x, tuple) and len(x) == 3 and np.ndim(x[2]) == 0 and np.ndim(x[0]) == 1:
         return [(f"{what}[0]", x)]

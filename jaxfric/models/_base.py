@@ -159,8 +159,8 @@ class AbstractFrictionModel(eqx.Module):
 
     def inputs_from(self, data, length: int | None = None) -> np.ndarray | None:
         """The ``(C, T)`` ``inputs`` array read from ``data``'s attributes named in
-        :attr:`input_names` (a :class:`jaxfric.rig.FrictionData` or an identify
-        ``Record``), or ``None`` for a model that needs none.
+        :attr:`input_names` (a :class:`jaxfric.FrictionData`, the record type of the
+        loaders and of :func:`jaxfric.identify`), or ``None`` for a model that needs none.
 
         Raises ``ValueError`` naming the missing channels when ``data`` lacks them,
         and when a channel is not ``length`` samples long.

@@ -31,7 +31,7 @@ from ..identification._timing import Stopwatch
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
-from ..rig._checks import as_channel
+from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._step import friction_step
 
@@ -77,9 +77,9 @@ class MotionData:
         ld = np.zeros_like(f) if load is None else _series("load", load)
         if ld.shape != f.shape:
             raise ValueError(f"load must have the length of force ({f.size}), got {ld.size}")
-        if not (isinstance(dt, numbers.Real) and np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
-        fs = 1.0 / float(dt)
+        dt = check_sample_time(dt, stamps_hint="for time stamps resample the channels onto a uniform "
+                                                "grid first (jaxfric.rig.resample_uniform)")
+        fs = 1.0 / dt
         cutoff = 0.1 * fs if cutoff is None else float(cutoff)
         if not 0.0 < cutoff < 0.5 * fs:
             raise ValueError(f"cutoff must lie in (0, fs/2) = (0, {0.5 * fs}) Hz, got {cutoff}")
@@ -116,15 +116,12 @@ def _as_motion_data(data) -> MotionData:
 
 
 def _split(n: int, train) -> int:
-    if train is None:
-        train = 0.8
-    if isinstance(train, float) and not isinstance(train, bool):
-        if not 0.0 < train < 1.0:
-            raise ValueError(f"train fraction must lie in (0, 1), got {train}")
-        train = int(round(train * n))
-    if isinstance(train, bool) or not isinstance(train, numbers.Integral) or not 2 <= train <= n - 2:
+    """The records' split rule (:func:`jaxfric.records.split_count`); the mechanics need
+    two samples on each side of it to start a free run from."""
+    count = split_count(n, DEFAULT_TRAIN_FRACTION if train is None else train, whole=False)
+    if not 2 <= count <= n - 2:
         raise ValueError(f"train must be a fraction or a sample count in [2, {n - 2}], got {train!r}")
-    return int(train)
+    return count
 
 
 class Layout(eqx.Module):

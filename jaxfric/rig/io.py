@@ -88,11 +88,6 @@ def _read_table(path, columns: Mapping, delimiter, skip_rows: int, comments: str
     index, names = {}, {}
     for channel, col in columns.items():
         if isinstance(col, str):
-            if header.count(col) > 1:  # the rig loaders' wording (tests/test_bad_input_catalogue.py)
-                at = [i for i, h in enumerate(header) if h == col]
-                raise ValueError(f"{path}: the header names column '{col}' (for channel '{channel}') "
-                                 f"{len(at)} times (at indices {at}); rename the columns or map the "
-                                 "channel by its 0-based index")
             index[channel] = column_index(header, col, path=path, what=f"for channel '{channel}'")
             names[channel] = f"column '{col}'"
         else:
