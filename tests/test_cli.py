@@ -330,11 +330,11 @@ def test_predict_keeps_one_row_per_input_row_and_warns_even_when_quiet(cli_env, 
     from jaxfric.fit import Fit
     from jaxfric.models import LuGre
 
-    model = LuGre(Fc_range=(5.0, 100.0))
+    model = LuGre()
     theta = np.asarray(model.from_physical(sigma0=1e5, sigma1=300.0, sigma2=800.0, Fc=40.0, Fs=60.0,
                                            vs=3e-3), np.float32)
     fit = Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=0.01,
-              n_train=80, n_samples=100, metrics={}, velocity_range=(-0.03, 0.03))
+              n_train=80, n_samples=100, metrics={}, velocity_range=(-0.03, 0.03), box={"Fc": (5.0, 100.0)})
     fit.save(tmp_path / "lugre.npz")
     t = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.5, 1.5, 59)]) * 0.01
     v = 0.02 * np.sin(2 * np.pi * 0.5 * t)

@@ -234,8 +234,7 @@ def test_static_map_recovered_by_levenberg_marquardt():
     model = Coulomb()
     truth = dict(Fc=180.0, sigma2=2.5e3)
     f = np.asarray(model.simulate(model.from_physical(**truth), jnp.asarray(v)))
-    fitted = model.with_data_bounds(v[:480], f[:480])
-    lo, hi = fitted.bounds()
+    lo, hi = model.bounds(model.search_box(None, v[:480], f[:480]))
     fit = identify(model, (v, f, DT), key=0, solver=jaxfric.NelderMead(max_steps=5),
                    theta0=0.5 * (lo + hi), refine="lm")
     assert fit.stages[-1]["stage"] == "lm" and fit.stages[-1]["improved"]
