@@ -202,6 +202,12 @@ IN_PROCESS_ERRORS = [
     (["bench", "nonsense"], "argument name: invalid choice"),
     (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t", "--out", "."],
      "--out . is a folder; give a file name"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc=10,1"],
+     "argument --box: search box: Fc range must satisfy low < high"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc"],
+     "argument --box: give NAME=LO,HI"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--model", "coulomb",
+      "--box", "sigma0=1e4,1e6"], "--box sigma0: none of the models coulomb has this parameter"),
 ]
 
 
@@ -248,6 +254,22 @@ def test_bad_data_fail_before_any_stage_message_or_bar(tmp_path, monkeypatch, ca
     assert err.splitlines()[-1].startswith("jaxfric: error: friction has zero variance"), err
     assert "identifying" not in err and "%|" not in err
     assert sorted(x.name for x in tmp_path.iterdir()) == ["constant.csv"]
+
+
+def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, monkeypatch):
+    """``--box NAME=LO,HI`` goes into the FitSpec (its repr is the report's Reproduce line)
+    and from there to identify(box=...): the saved fit searched that box."""
+    from jaxfric.cli import main
+    from jaxfric.fit import load_fit
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "report"
+    assert main(["identify", str(small_csv), "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
+                 "--model", "coulomb", "--box", "Fc=1,50", "--box", "sigma2=1,1000", "--quick", "--quiet",
+                 "--no-cache", "--out", str(out)]) == 0
+    fit = load_fit(out / "models" / "coulomb.npz")
+    assert fit.box["Fc"] == (1.0, 50.0) and fit.box["sigma2"] == (1.0, 1000.0)
+    assert "box=(('Fc', (1.0, 50.0)), ('sigma2', (1.0, 1000.0)))" in (out / "report.md").read_text()
 
 
 # -------------------------------------------------------------------- Ctrl-C
