@@ -457,7 +457,7 @@ class Fit:
                 f"{' [not identifiable]' if k in loose else ''}"
                 for k, v in self.params.items()))
         if self.box is not None:
-            lines.append("box: " + ", ".join(f"{k} [{lo:.4g}, {hi:.4g}]" for k, (lo, hi) in self.box.items()))
+            lines.append(f"box: {self.box}")
         for d in self.diagnostics.get("on_bound", []):
             lines.append(f"! {d['message']}")
         for text in self.diagnostics.get("unidentifiable", []):

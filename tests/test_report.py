@@ -174,6 +174,7 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
     text = (tmp_path / "report.md").read_text()
     assert "| run2 | valid | 299 |" in text and "Validation record `run2`" in text
     assert "190 **(on a bound: widen its range)**" in text and "box={'Fc': (10, 370)}" in text
+    assert "Search box (SI; `Fs_ratio` = Fs/Fc): Fc [10, 190], sigma2 [10, 1e+05]." in text
     assert "Ensemble of 3 runs" in text and "![ensemble band](band_coulomb.png)" in text
     for name in ("band_coulomb.png", "fit_coulomb_run2.png"):
         img = mpimg.imread(tmp_path / name)

@@ -125,6 +125,10 @@ class SearchBox(Mapping):
     def __repr__(self) -> str:
         return f"SearchBox({dict(self._ranges)!r})"
 
+    def __str__(self) -> str:
+        """``Fc [1, 50], sigma2 [1, 1000]``: the line reports and summaries show."""
+        return ", ".join(f"{k} [{lo:.4g}, {hi:.4g}]" for k, (lo, hi) in self._ranges.items())
+
     def to_json(self) -> dict[str, list[float]]:
         """``{name: [low, high]}`` (plain floats) for fit files and reports."""
         return {k: [lo, hi] for k, (lo, hi) in self._ranges.items()}

@@ -57,6 +57,14 @@ def _sample_time(dt, dtype) -> Array:
     return dt
 
 
+def _bristle_columns(model, thetas, velocity, dt):
+    """A bristle model's inputs: physical parameters as ``(P, 1)`` columns, the velocity
+    ``(T,)`` and the checked sample time, in the dtype ``_prepare`` promotes to."""
+    thetas, v = model._prepare(thetas, velocity)
+    p = {k: x[:, None] for k, x in model.to_physical(thetas).items()}
+    return p, v, _sample_time(dt, v.dtype)
+
+
 def _phi(x: Array) -> Array:
     """phi(x) = (1 - e^{-x}) / x with the double-``where`` guard (§8.2).
 
@@ -148,9 +156,7 @@ class LuGre(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
     ) -> Float[Array, "P T"]:
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = _sample_time(dt, v.dtype)
+        p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         vv = v[None, :]
         if self.asymmetric:
             g_pos = stribeck_curve(vv, p["Fc_pos"], p["Fs_pos"], p["vs"], self.stribeck_exponent)
@@ -195,11 +201,9 @@ class Dahl(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
     ) -> Float[Array, "P T"]:
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = _sample_time(dt, v.dtype)
+        p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         zero = jnp.zeros_like(p["sigma0"])
         vv = v[None, :]
         sigma2 = by_direction(p, "sigma2", vv) if self.viscous else zero
-        g = jnp.broadcast_to(by_direction(p, "Fc", vv), (thetas.shape[0], v.shape[0]))
+        g = jnp.broadcast_to(by_direction(p, "Fc", vv), (zero.shape[0], v.shape[0]))
         return add_offset(bristle_friction(p["sigma0"], zero, sigma2, g, v, dt), p)

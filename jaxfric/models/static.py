@@ -44,10 +44,12 @@ def _check_v_eps(v_eps: float) -> None:
 
 def _columns(model, thetas, velocity):
     """A static model's inputs for broadcasting: physical parameters as ``(P, 1)``
-    columns and the velocity as a ``(1, T)`` row (dtypes promoted by ``_prepare``)."""
+    columns, the velocity as a ``(1, T)`` row (dtypes promoted by ``_prepare``) and the
+    smoothed sign ``t = tanh(v / v_eps)`` of that row. ``dt`` is never needed."""
     thetas, v = model._prepare(thetas, velocity)
     p = {k: x[:, None] for k, x in model.to_physical(thetas).items()}
-    return p, v[None, :]
+    vv = v[None, :]
+    return p, vv, jnp.tanh(vv / jnp.asarray(model.v_eps, vv.dtype))
 
 
 class Coulomb(AbstractPhysicalModel):
@@ -91,9 +93,7 @@ class Coulomb(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        p, vv, t = _columns(self, thetas, velocity)
         if self.asymmetric:
             f = signed_level(t, p, "Fc", p["Fc_pos"], p["Fc_neg"])
         else:
@@ -187,10 +187,8 @@ class Stribeck(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
+        p, vv, t = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
         if not (self.asymmetric or self.offset):
             g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
             return t * g + p["sigma2"] * vv
@@ -275,8 +273,7 @@ class Cylinder(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt, inputs
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s] and ``inputs = [p1, p2]`` [Pa]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
+        p, vv, t = _columns(self, thetas, velocity)
         inputs = jnp.asarray(inputs, vv.dtype)
         if inputs.shape[-1] != vv.shape[-1]:
             raise ValueError(
@@ -286,5 +283,4 @@ class Cylinder(AbstractPhysicalModel):
         level = f_c
         if self.breakaway:
             level = stribeck_curve(vv, f_c, p["K_brk"] * f_c, p["vs"], self.exponent)
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
         return add_offset(t * level + p["sigma2"] * vv, p)
