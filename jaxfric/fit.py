@@ -351,7 +351,7 @@ class Fit:
             for theta in np.asarray(self.ensemble["theta"]):
                 member = Fit(model=self.model, theta=theta, velocity_scaler=self.velocity_scaler,
                              friction_scaler=self.friction_scaler, dt=self.dt, n_train=self.n_train,
-                             n_samples=self.n_samples, metrics={})
+                             n_samples=self.n_samples, metrics={}, box=self.box)
                 out.append(np.asarray(member.predict(velocity, dt), np.float64))
         return np.stack(out)
 
