@@ -174,7 +174,7 @@ def test_stages_never_get_worse_and_record_their_work(enn_fit):
     assert {"compile_s", "run_s", "refine_compile_s", "refine_run_s", "total_s"} <= set(t)
     assert all(v >= 0 for v in t.values())
     # theta stays inside the box (the sine reparametrisation keeps it there)
-    lo, hi = fit.model.bounds()
+    lo, hi = fit.model.bounds(fit.box)
     assert np.all(fit.theta >= lo) and np.all(fit.theta <= hi)
 
 
