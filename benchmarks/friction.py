@@ -344,7 +344,7 @@ def write_markdown(out, rows, files, meta):
         "stage (not in the paper, `refine=\"bfgs\"`): BFGS on J through the scan (exact BPTT "
         "gradient), at most 2000 steps, box kept by the sine reparametrisation. LuGre: "
         "MAPSO 5×5, G = 200, Nelder–Mead 1200 iterations, then Levenberg–Marquardt "
-        "(`refine=\"lm\"`, 200 steps); data-centred bounds (`with_data_bounds`). "
+        "(`refine=\"lm\"`, 200 steps); data-centred search box (`identify`'s default, `models.data_ranges`). "
         "\"MAPSO only\" and \"MAPSO + BFGS\" are separate runs with `solver=MAPSO(...)` "
         "(the same lattice and G).\n")
 

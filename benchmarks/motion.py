@@ -79,25 +79,31 @@ def _solver(n_params, quick):
                      nelder_mead=NelderMead(max_steps=nm, max_evals=nm))
 
 
+#: The EMPS search box (fixed, not data-centred); each model searches the entries it has.
+EMPS_BOX = {"Fc": (1.0, 100.0), "sigma2": (10.0, 1000.0), "F_off": (-20.0, 20.0), "sigma0": (1e4, 1e9),
+            "sigma1": (1.0, 1e5), "vs": (1e-4, 0.1), "k": (1e4, 1e9), "C": (1.0, 1e5)}
+
+
+def emps_box(model):
+    """:data:`EMPS_BOX` restricted to ``model``'s entries (``None`` for the networks)."""
+    keys = getattr(model, "box_keys", None)
+    return None if keys is None else {k: r for k, r in EMPS_BOX.items() if k in keys}
+
+
 def asymmetric_coulomb():
     """The library's asymmetric Coulomb + viscous friction with its own output offset
     (docs/algorithms.md §13.1): F = Fc+ [v>0] - Fc- [v<0] + Fv+- v + F_off."""
-    return models.Coulomb(asymmetric=True, offset=True, v_eps=1e-4, Fc_range=(1.0, 100.0),
-                          sigma2_range=(10.0, 1000.0), F_off_range=(-20.0, 20.0))
+    return models.Coulomb(asymmetric=True, offset=True, v_eps=1e-4)
 
 
 def emps_candidates():
     """name -> friction model; a model with its own ``F_off`` (``offset=True``) is fitted
     without the mechanics' separate offset (the two would be one parameter twice)."""
     return {
-        "static+offset (Coulomb+viscous)": models.Coulomb(v_eps=1e-4, Fc_range=(1.0, 100.0),
-                                                          sigma2_range=(10.0, 1000.0)),
+        "static+offset (Coulomb+viscous)": models.Coulomb(v_eps=1e-4),
         "asymmetric+offset": asymmetric_coulomb(),
-        "LuGre+offset": models.LuGre(Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0),
-                                     sigma0_range=(1e4, 1e9), sigma1_range=(1.0, 1e5),
-                                     vs_range=(1e-4, 0.1)),
-        "GMS(3)+offset": models.GMS(num_elements=3, Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0),
-                                    k_range=(1e4, 1e9), C_range=(1.0, 1e5), vs_range=(1e-4, 0.1)),
+        "LuGre+offset": models.LuGre(),
+        "GMS(3)+offset": models.GMS(num_elements=3),
         "Elman(10)+offset": models.Elman(neurons=10, context_weight_bound=1.0),
     }
 
@@ -110,7 +116,7 @@ def total_offset(fit) -> float:
 def run_emps(path, quick, key=0, only=None):
     data, n_train = emps_motion_data(path)
     rows = []
-    coul = models.Coulomb(v_eps=1e-4, Fc_range=(1.0, 100.0), sigma2_range=(10.0, 1000.0))
+    coul = models.Coulomb(v_eps=1e-4)
     ref = reference_fit(coul, coul.from_physical(Fc=IDIM["Fc"], sigma2=IDIM["Fv"]), IDIM["M"],
                         IDIM["offset"], data, n_train)
     rows.append(("IDIM-LS reference (published)", ref, 0.0))
@@ -130,7 +136,8 @@ def run_emps(path, quick, key=0, only=None):
         fit = identify_motion(model, data, key=key, mass=(50.0, 200.0), train=n_train, horizon=horizon,
                               solver=_solver(model.num_params + 2 - own_offset, quick),
                               fit_offset=not own_offset,
-                              offset_range=(-20.0, 20.0), data_bounds=False, dtype=jnp.float64,
+                              offset_range=(-20.0, 20.0), box=emps_box(model), data_bounds=False,
+                              dtype=jnp.float64,
                               metric_horizon=K_STEP)
         secs = time.perf_counter() - t0
         print(name, fit.summary(), f"{secs:.1f} s", sep="\n", flush=True)

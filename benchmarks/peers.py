@@ -78,7 +78,7 @@ from baselines import NUMPY_BATCH, lugre_numpy_hoisted, lugre_numpy_per_step, lu
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
-from jaxfric.fit import predict, rollout_model  # noqa: E402
+from jaxfric.fit import predict  # noqa: E402
 from jaxfric.identification import OutputErrorCost, as_record, identify, paper_solver  # noqa: E402
 from jaxfric.identification._objective import cost_data  # noqa: E402
 from jaxfric.identification._timing import Stopwatch  # noqa: E402
@@ -444,7 +444,7 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
     scalers = (f1.velocity_scaler, f1.friction_scaler)
     dtype = jnp.dtype(f1.settings["dtype"])
     cdata = cost_data(model, record, scalers, dtype)
-    cost = OutputErrorCost(rollout_model(model))
+    cost = OutputErrorCost(model)
     # scipy's objective compiled with the options jaxfric's own rollouts use (the
     # faster choice on this CPU): the peer gets the same kernels, not slower ones.
     jit = functools.partial(jax.jit, compiler_options=jf.compiler_options("rollout") or None)
@@ -459,7 +459,7 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
     def f_one(x):
         return float(one(jnp.asarray(x, dtype), cdata))
 
-    lo, hi = model.bounds()
+    lo, hi = model.bounds(f1.box)
     pop = (sz.id_solver or paper_solver(model)).mapso.num_agents
     n_global = f1.stages[0]["num_evals"]
     n_local = sum(st["num_evals"] for st in f1.stages) - n_global

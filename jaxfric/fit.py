@@ -8,7 +8,7 @@ solution and history, the stage-by-stage cost, timings, the key and the settings
 
 File format (one ``.npz`` file, no pickles): member ``header`` holds UTF-8 JSON
 (``format``, ``format_version``, jaxfric version, model class and configuration,
-metrics, settings, ...); members ``theta``, ``velocity_scaler``, ``friction_scaler``
+the search box, metrics, settings, ...); members ``theta``, ``velocity_scaler``, ``friction_scaler``
 (``[lo, hi]``, float64) and ``history_evals``/``history_f`` hold the arrays with
 their exact dtypes, so save → load → predict is bit-identical; a fit from
 ``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). :func:`load_fit` refuses
@@ -41,8 +41,7 @@ from . import models as _models
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 
-__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit",
-           "rollout_model"]
+__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit"]
 
 FORMAT_NAME = "jaxfric.fit"
 #: Version of the file layout written by :meth:`Fit.save`; :func:`load_fit` reads
@@ -87,14 +86,24 @@ def model_config(model: AbstractFrictionModel) -> dict[str, Any]:
 
 
 def model_from_config(class_name: str, config: dict[str, Any]) -> AbstractFrictionModel:
-    """Rebuild a model saved by :func:`model_config`; only jaxfric's own model classes."""
+    """Rebuild a model saved by :func:`model_config`; only jaxfric's own model classes.
+    The ``*_range`` keys of a 0.6/0.7 file are left out (:func:`old_box_entries`)."""
     cls = getattr(_models, class_name, None)
     if not (isinstance(cls, type) and issubclass(cls, AbstractFrictionModel)):
         raise ValueError(f"unknown friction model class {class_name!r} in the fit file")
+    old = {f"{k}_range" for k in _models.DEFAULT_RANGES}
     try:
-        return cls(**{k: _tuples(v) for k, v in config.items()})
+        return cls(**{k: _tuples(v) for k, v in config.items() if k not in old})
     except (TypeError, ValueError) as err:
         raise ValueError(f"cannot rebuild {class_name} from the fit file: {err}") from None
+
+
+def old_box_entries(config: dict[str, Any]) -> dict[str, Any]:
+    """The search box of a fit written by jaxfric 0.6/0.7, whose model configuration held
+    it as ``*_range`` fields (``Fc_range`` -> ``Fc``; unset ones, ``None``, were the
+    defaults): ``{name: (low, high)}``."""
+    return {k: config[f"{k}_range"] for k in _models.DEFAULT_RANGES
+            if config.get(f"{k}_range") is not None}
 
 
 def model_name(model: AbstractFrictionModel) -> str | None:
@@ -103,21 +112,6 @@ def model_name(model: AbstractFrictionModel) -> str | None:
         if type(_models.get(name)) is type(model):
             return name
     return None
-
-
-def rollout_model(model: AbstractFrictionModel) -> AbstractFrictionModel:
-    """``model`` with its search ranges reset, for rollouts.
-
-    Physical models keep their search box in ``*_range`` fields, which never enter
-    the rollout (``AbstractPhysicalModel``'s contract) but do enter the jit cache
-    key, since the model is static. Rolling out with the ranges cleared lets fits
-    on different records (hence different data-centred boxes) share one compiled
-    rollout and one compiled optimiser.
-    """
-    if not isinstance(model, _models.AbstractPhysicalModel):
-        return model
-    reset = {f.name: None for f in dataclasses.fields(model) if f.name.endswith("_range")}
-    return dataclasses.replace(model, **reset) if reset else model
 
 
 def _velocity_np(velocity) -> np.ndarray:
@@ -162,7 +156,6 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     dtype = theta.dtype
     v = _check_velocity(velocity, dtype)
     dt = jnp.asarray(_check_dt(dt), dtype)
-    model = rollout_model(model)
     if inputs is not None and model.input_names:
         inputs = jnp.asarray(inputs, dtype)
     if model.needs_scaling:
@@ -175,7 +168,10 @@ class Fit:
     """An identified friction model and its report (returned by :func:`jaxfric.identify`).
 
     Attributes:
-        model: the friction model (with the search box actually used).
+        model: the friction model.
+        box: the :class:`jaxfric.models.SearchBox` the fit searched (complete: defaults,
+            data-centred entries and the user's), ``None`` for the Elman networks,
+            whose box is part of their configuration.
         theta: parameters in search coordinates (NumPy, the search dtype).
         velocity_scaler, friction_scaler: the §2.4 training-window :class:`Scaler`
             of a model with ``needs_scaling``, else ``None``.
@@ -207,8 +203,9 @@ class Fit:
     def __init__(self, *, model, theta, velocity_scaler, friction_scaler, dt, n_train,
                  n_samples, metrics, stages=(), history=None, solution=None, timings=None,
                  key_data=None, key_impl=None, seed=None, settings=None, version=None,
-                 velocity_range=None, diagnostics=None, ensemble=None):
+                 velocity_range=None, diagnostics=None, ensemble=None, box=None):
         self.model = model
+        self.box = model.search_box(box)
         self.theta = model.check_theta(np.asarray(theta))
         self.velocity_scaler = velocity_scaler
         self.friction_scaler = friction_scaler
@@ -354,7 +351,7 @@ class Fit:
             for theta in np.asarray(self.ensemble["theta"]):
                 member = Fit(model=self.model, theta=theta, velocity_scaler=self.velocity_scaler,
                              friction_scaler=self.friction_scaler, dt=self.dt, n_train=self.n_train,
-                             n_samples=self.n_samples, metrics={})
+                             n_samples=self.n_samples, metrics={}, box=self.box)
                 out.append(np.asarray(member.predict(velocity, dt), np.float64))
         return np.stack(out)
 
@@ -401,6 +398,7 @@ class Fit:
                 "config": model_config(self.model),
                 "param_names": list(self.model.param_names),
             },
+            "box": None if self.box is None else self.box.to_json(),
             "num_params": self.num_params,
             "dt": self.dt,
             "n_train": self.n_train,
@@ -458,6 +456,8 @@ class Fit:
                 f"{k}={float(v):.4g}{' [on bound]' if k in flagged else ''}"
                 f"{' [not identifiable]' if k in loose else ''}"
                 for k, v in self.params.items()))
+        if self.box is not None:
+            lines.append(f"box: {self.box}")
         for d in self.diagnostics.get("on_bound", []):
             lines.append(f"! {d['message']}")
         for text in self.diagnostics.get("unidentifiable", []):
@@ -547,6 +547,10 @@ def _finite_array(path, name: str, a: np.ndarray) -> np.ndarray:
 def load_fit(path) -> Fit:
     """Read a fit written by :meth:`Fit.save`.
 
+    A file written by jaxfric 0.6/0.7 kept the search box in the model configuration
+    (``Fc_range``, ``sigma0_range``, ...): those entries become :attr:`Fit.box` (the
+    unset ones its defaults, as they were then).
+
     Raises:
         ValueError: ``path`` is not a file name (an int would be a file descriptor); the
             file is not an ``.npz`` archive, is corrupted or truncated, is not a
@@ -568,6 +572,7 @@ def load_fit(path) -> Fit:
     try:
         m = header["model"]
         model = model_from_config(m["class"], m["config"])
+        box = header["box"] if "box" in header else old_box_entries(m["config"])
 
         def scaler(name):
             a = arrays[name]
@@ -611,6 +616,7 @@ def load_fit(path) -> Fit:
             velocity_range=vrange,
             diagnostics=header.get("diagnostics"),
             ensemble=ensemble,
+            box=box,
         )
     except (KeyError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None

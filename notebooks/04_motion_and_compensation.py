@@ -49,7 +49,8 @@ print(f"budget: {'small' if SMALL else 'full'}")
 # step (stable for stiff friction and a near-hard sign).
 
 # %%
-true = models.Coulomb(v_eps=1e-3, Fc_range=(2.0, 40.0), sigma2_range=(5.0, 500.0))
+true = models.Coulomb(v_eps=1e-3)
+box = {"Fc": (2.0, 40.0), "sigma2": (5.0, 500.0)}  # the search box: data for identify_motion
 theta_true = true.from_physical(Fc=12.0, sigma2=60.0)
 dt, n = 1e-3, 2000
 t = np.arange(n) * dt
@@ -72,7 +73,7 @@ gens, nm = (8, 150) if SMALL else (30, 600)
 solver = MAPSONMDS(mapso=MAPSO(lattice_size=4, num_generations=gens),
                    nelder_mead=NelderMead(max_steps=nm, max_evals=nm))
 fit = identify_motion(true, data, key=0, mass=(0.5, 10.0), fit_offset=True, solver=solver,
-                      data_bounds=False, dtype=jnp.float64)
+                      box=box, data_bounds=False, dtype=jnp.float64)
 print(fit.summary())
 print("truth: Fc=12, sigma2=60, mass=2.5, offset=3")
 

@@ -202,6 +202,12 @@ IN_PROCESS_ERRORS = [
     (["bench", "nonsense"], "argument name: invalid choice"),
     (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t", "--out", "."],
      "--out . is a folder; give a file name"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc=10,1"],
+     "argument --box: search box: Fc range must satisfy low < high"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc"],
+     "argument --box: give NAME=LO,HI"),
+    (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--model", "coulomb",
+      "--box", "sigma0=1e4,1e6"], "--box sigma0: none of the models coulomb has this parameter"),
 ]
 
 
@@ -248,6 +254,22 @@ def test_bad_data_fail_before_any_stage_message_or_bar(tmp_path, monkeypatch, ca
     assert err.splitlines()[-1].startswith("jaxfric: error: friction has zero variance"), err
     assert "identifying" not in err and "%|" not in err
     assert sorted(x.name for x in tmp_path.iterdir()) == ["constant.csv"]
+
+
+def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, monkeypatch):
+    """``--box NAME=LO,HI`` goes into the FitSpec (its repr is the report's Reproduce line)
+    and from there to identify(box=...): the saved fit searched that box."""
+    from jaxfric.cli import main
+    from jaxfric.fit import load_fit
+
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "report"
+    assert main(["identify", str(small_csv), "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
+                 "--model", "coulomb", "--box", "Fc=1,50", "--box", "sigma2=1,1000", "--quick", "--quiet",
+                 "--no-cache", "--out", str(out)]) == 0
+    fit = load_fit(out / "models" / "coulomb.npz")
+    assert fit.box["Fc"] == (1.0, 50.0) and fit.box["sigma2"] == (1.0, 1000.0)
+    assert "box=(('Fc', (1.0, 50.0)), ('sigma2', (1.0, 1000.0)))" in (out / "report.md").read_text()
 
 
 # -------------------------------------------------------------------- Ctrl-C
@@ -330,11 +352,11 @@ def test_predict_keeps_one_row_per_input_row_and_warns_even_when_quiet(cli_env, 
     from jaxfric.fit import Fit
     from jaxfric.models import LuGre
 
-    model = LuGre(Fc_range=(5.0, 100.0))
+    model = LuGre()
     theta = np.asarray(model.from_physical(sigma0=1e5, sigma1=300.0, sigma2=800.0, Fc=40.0, Fs=60.0,
                                            vs=3e-3), np.float32)
     fit = Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=0.01,
-              n_train=80, n_samples=100, metrics={}, velocity_range=(-0.03, 0.03))
+              n_train=80, n_samples=100, metrics={}, velocity_range=(-0.03, 0.03), box={"Fc": (5.0, 100.0)})
     fit.save(tmp_path / "lugre.npz")
     t = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.5, 1.5, 59)]) * 0.01
     v = 0.02 * np.sin(2 * np.pi * 0.5 * t)

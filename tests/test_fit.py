@@ -44,11 +44,11 @@ def make_enn_fit(seed=0, dtype=np.float32):
 
 
 def make_lugre_fit(dtype=np.float32):
-    model = LuGre(Fc_range=(20.0, 400.0))
+    model = LuGre()
     theta = np.asarray(model.from_physical(sigma0=1e6, sigma1=1e3, sigma2=2e3, Fc=120.0,
                                            Fs=180.0, vs=2e-3), dtype)
     return Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=DT,
-               n_train=240, n_samples=300, metrics={"num_params": 6})
+               n_train=240, n_samples=300, metrics={"num_params": 6}, box={"Fc": (20.0, 400.0)})
 
 
 # ----------------------------------------------------------------- prediction
@@ -108,7 +108,7 @@ def test_save_load_predict_is_bit_identical(tmp_path, make):
     v = profile(400)
     assert np.array_equal(np.asarray(fit.predict(v)), np.asarray(back.predict(v)))
     assert back.theta.dtype == fit.theta.dtype and np.array_equal(back.theta, fit.theta)
-    assert back.model == fit.model
+    assert back.model == fit.model and back.box == fit.box
     assert back.metrics == json.loads(json.dumps(fit.metrics))
     assert back.stages == fit.stages and back.timings == fit.timings
     assert back.dt == fit.dt and back.n_train == fit.n_train
@@ -218,6 +218,30 @@ def test_unknown_model_class_or_missing_fields(saved):
     _rewrite(saved, dt=None)
     with pytest.raises(ValueError, match="incomplete or corrupted"):
         load_fit(saved)
+
+
+def test_a_0_7_fit_file_with_range_fields_loads_its_box(tmp_path):
+    """jaxfric 0.6/0.7 kept the search box in the model configuration (``Fc_range``, ...;
+    ``None`` = the default) and wrote no ``box``: load_fit maps those keys into Fit.box."""
+    fit = make_lugre_fit()
+    path = tmp_path / "old.npz"
+    fit.save(path)
+    with np.load(path) as z:
+        header = json.loads(z["header"].tobytes().decode())
+    # the 0.7 LuGre configuration: every range a field, two of them set
+    config = {"stribeck_exponent": 2.0, "sigma0_range": None, "sigma1_range": None, "sigma2_range": None,
+              "Fc_range": [20.0, 400.0], "Fs_ratio_range": None, "vs_range": [1e-4, 1e-2],
+              "asymmetric": False, "offset": False, "F_off_range": None}
+    _rewrite(path, box=None, model={**header["model"], "config": config})
+    back = load_fit(path)
+    assert back.model == LuGre()
+    expected = {"sigma0": (1e4, 1e9), "sigma1": (1e1, 1e6), "sigma2": (1e1, 1e5), "Fc": (20.0, 400.0),
+                "Fs_ratio": (1.0, 3.0), "vs": (1e-4, 1e-2)}  # §8.5 defaults where unset
+    assert dict(back.box) == expected
+    lo, hi = back.model.bounds(back.box)
+    assert (lo[3], hi[3]) == (20.0, 400.0) and np.allclose((lo[5], hi[5]), (-4.0, -2.0))
+    v = profile(400)
+    assert np.array_equal(np.asarray(fit.predict(v)), np.asarray(back.predict(v)))
 
 
 def test_missing_file_is_file_not_found(tmp_path):

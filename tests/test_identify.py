@@ -174,7 +174,7 @@ def test_stages_never_get_worse_and_record_their_work(enn_fit):
     assert {"compile_s", "run_s", "refine_compile_s", "refine_run_s", "total_s"} <= set(t)
     assert all(v >= 0 for v in t.values())
     # theta stays inside the box (the sine reparametrisation keeps it there)
-    lo, hi = fit.model.bounds()
+    lo, hi = fit.model.bounds(fit.box)
     assert np.all(fit.theta >= lo) and np.all(fit.theta <= hi)
 
 
@@ -234,8 +234,7 @@ def test_static_map_recovered_by_levenberg_marquardt():
     model = Coulomb()
     truth = dict(Fc=180.0, sigma2=2.5e3)
     f = np.asarray(model.simulate(model.from_physical(**truth), jnp.asarray(v)))
-    fitted = model.with_data_bounds(v[:480], f[:480])
-    lo, hi = fitted.bounds()
+    lo, hi = model.bounds(model.search_box(None, v[:480], f[:480]))
     fit = identify(model, (v, f, DT), key=0, solver=jaxfric.NelderMead(max_steps=5),
                    theta0=0.5 * (lo + hi), refine="lm")
     assert fit.stages[-1]["stage"] == "lm" and fit.stages[-1]["improved"]

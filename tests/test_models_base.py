@@ -92,10 +92,10 @@ def test_initial_guess_inside_bounds_and_data_bounds(name):
     model = make(name)
     v = 0.01 * np.sin(np.linspace(0, 12, 300))
     F = 100 * np.tanh(v / 1e-3) + 600 * v
-    adapted = model.with_data_bounds(v, F)
-    assert type(adapted) is type(model)
-    lower, upper = adapted.bounds()
-    guess = adapted.initial_guess(v, F)
+    box = model.search_box(None, v, F)
+    assert box is None if model.needs_scaling else set(box) == set(model.box_keys)
+    lower, upper = model.bounds(box)
+    guess = model.initial_guess(v, F, box)
     assert guess.shape == (model.num_params,)
     assert np.all((guess >= lower) & (guess <= upper))
 
@@ -111,11 +111,18 @@ def test_check_theta_helper():
 
 
 def test_models_are_immutable_hashable_static_configs():
-    a, b = models.LuGre(Fc_range=(1, 2)), models.LuGre(Fc_range=[1.0, 2.0])
+    a, b = models.LuGre(stribeck_exponent=1), models.LuGre(stribeck_exponent=1.0)
     assert a == b and hash(a) == hash(b)
     assert jax.tree_util.tree_leaves(models.Elman()) == []  # no data inside a model
     with pytest.raises(Exception):
-        a.Fc_range = (3, 4)
+        a.stribeck_exponent = 3.0
+    # the search box is data beside the model, and as immutable and hashable
+    box, same = models.SearchBox(Fc=(1, 2)), models.SearchBox({"Fc": [1.0, 2.0]})
+    assert box == same and hash(box) == hash(same) and box == {"Fc": (1.0, 2.0)}
+    with pytest.raises(Exception):
+        box.Fc = (3, 4)
+    with pytest.raises(TypeError):
+        box["Fc"] = (3, 4)
 
 
 def test_scaler_maps_training_range_to_unit_interval_and_back():

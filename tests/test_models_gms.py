@@ -139,7 +139,7 @@ def test_gms_recovers_known_parameters_by_least_squares():
     (never at the Coulomb level) a one-parameter family (alpha1, C, Fc, Fs) fits
     exactly, and from 10 % off LM stops in a local minimum (the stick/slip events
     make the cost non-smooth); a global search (identify) is the tool for that."""
-    model = GMS(num_elements=2, C_range=(1e1, 1e6))
+    model = GMS(num_elements=2)
     p = dict(k1=3e4, k2=3e5, alpha1=0.6, alpha2=0.4, C=3e3, Fc=100.0, Fs=140.0, vs=3e-3, sigma2=500.0)
     v = profile(1500)
     with jax.enable_x64(True):

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from jaxfric.models import Dahl, LuGre
+from jaxfric.models import DEFAULT_RANGES, Dahl, LuGre
 
 FS = 128.0
 DT = 1.0 / FS
@@ -106,7 +106,7 @@ def test_dahl_is_lugre_with_fs_equal_fc_and_no_damping():
     v = reversal_profile()
     with jax.enable_x64(True):
         dahl = Dahl(viscous=True)
-        lugre = LuGre(sigma1_range=(1e-12, 1e6))
+        lugre = LuGre()
         F_d = dahl.simulate(dahl.from_physical(sigma0=2e6, Fc=90.0, sigma2=300.0), v, DT)
         F_l = lugre.simulate(
             lugre.from_physical(sigma0=2e6, sigma1=1e-12, sigma2=300.0, Fc=90.0, Fs=90.0, vs=1e-3), v, DT
@@ -224,34 +224,36 @@ def test_lugre_search_coordinates():
 
 
 def test_lugre_user_ranges_and_data_bounds():
-    model = LuGre(Fc_range=(50, 500), vs_range=[1e-3, 1e-2])
-    lower, upper = model.bounds()
+    model = LuGre()
+    user = {"Fc": (50, 500), "vs": [1e-3, 1e-2]}
+    lower, upper = model.bounds(user)
     assert (lower[3], upper[3]) == (50.0, 500.0)
     np.testing.assert_allclose((lower[5], upper[5]), (-3.0, -2.0))
 
     v = reversal_profile()
     F = 150.0 * np.tanh(v / 1e-3) + 800.0 * v
-    fitted = model.with_data_bounds(v, F)
-    assert fitted.Fc_range == (50.0, 500.0)  # explicit ranges are kept
-    assert fitted.sigma0_range is not None  # unset ranges are filled from the data
+    fitted = model.search_box(user, v, F)
+    assert fitted["Fc"] == (50.0, 500.0)  # explicit ranges are kept
+    assert fitted["sigma0"] != DEFAULT_RANGES["sigma0"]  # unset ranges are filled from the data
     level = np.percentile(np.abs(F), 95)
-    auto = LuGre.for_data(v, F)
-    assert auto.Fc_range == pytest.approx((0.05 * level, 1.2 * level))
+    auto = model.search_box(None, v, F)
+    assert auto["Fc"] == pytest.approx((0.05 * level, 1.2 * level))
     # the data-centred box contains the generating Coulomb level and the guess lies inside
-    lo, hi = auto.bounds()
-    guess = auto.initial_guess(v, F)
+    lo, hi = model.bounds(auto)
+    guess = model.initial_guess(v, F, auto)
     assert np.all((guess >= lo) & (guess <= hi))
     assert lo[3] < 150.0 < hi[3]
-    assert auto.to_physical(guess)["Fc"] == pytest.approx(150.0, rel=0.1)
+    assert model.to_physical(guess)["Fc"] == pytest.approx(150.0, rel=0.1)
 
 
 @pytest.mark.parametrize(
-    "kwargs",
-    [dict(Fc_range=(0.0, 10.0)), dict(sigma0_range=(1e5, 1e4)), dict(Fs_ratio_range=(0.5, 2.0)), dict(stribeck_exponent=0.0)],
+    "box, kwargs",
+    [({"Fc": (0.0, 10.0)}, {}), ({"sigma0": (1e5, 1e4)}, {}), ({"Fs_ratio": (0.5, 2.0)}, {}),
+     (None, dict(stribeck_exponent=0.0))],
 )
-def test_lugre_rejects_bad_ranges(kwargs):
+def test_lugre_rejects_bad_ranges(box, kwargs):
     with pytest.raises(ValueError):
-        LuGre(**kwargs)
+        LuGre(**kwargs).bounds(box)
 
 
 def test_lugre_from_physical_requires_all_names():

@@ -245,7 +245,7 @@ def test_asymmetric_lugre_recovers_known_parameters_by_least_squares():
     """Noise-free record with pre-sliding: LM from a start 10-20 % off recovers all 10."""
     p = dict(sigma0=3e4, sigma1=50.0, sigma2_pos=30.0, sigma2_neg=60.0, Fc_pos=40.0, Fc_neg=25.0,
              Fs_pos=100.0, Fs_neg=45.0, vs=1e-3, F_off=-2.5)
-    model = LuGre(asymmetric=True, offset=True, sigma2_range=(1.0, 1e4))
+    model = LuGre(asymmetric=True, offset=True)
     v = reversal_profile(600)
     with jax.enable_x64(True):
         truth = np.asarray(model.from_physical(**p))
@@ -298,17 +298,18 @@ def test_registry_and_data_bounds_of_new_options():
     assert {"gms", "cylinder"} <= set(models.available())
     v = 0.01 * np.sin(np.linspace(0, 12, 300))
     F = 100 * np.tanh(v / 1e-3) + 600 * v - 5.0
-    m = LuGre(asymmetric=True, offset=True).with_data_bounds(v, F)
-    lo, hi = m.bounds()
+    m = LuGre(asymmetric=True, offset=True)
+    box = m.search_box(None, v, F)
+    lo, hi = m.bounds(box)
     i = m.param_names.index("F_off")
     assert lo[i] < 0 < hi[i] and hi[i] < 100
-    guess = m.initial_guess(v, F)
+    guess = m.initial_guess(v, F, box)
     assert np.all((guess >= lo) & (guess <= hi))
     pr = _pressures(300)
-    c = Cylinder().with_data_bounds(v, F, pr)
+    c = Cylinder()
     j = c.param_names.index("f_cfr")
     level = np.median(pr[0] + pr[1])
-    assert c.bounds()[1][j] * level == pytest.approx(1.2 * np.percentile(np.abs(F), 95))
+    assert c.bounds(c.search_box(None, v, F, pr))[1][j] * level == pytest.approx(1.2 * np.percentile(np.abs(F), 95))
 
 
 @pytest.mark.parametrize("model", [LuGre(asymmetric=True, offset=True), models.GMS(num_elements=2),

@@ -195,7 +195,7 @@ def test_identify_motion_recovers_parameters(tmp_path):
     """Noise-free simulated motion: Coulomb + viscous friction, mass and offset recovered
     within 2 % from force and position alone (free-run position error)."""
     with jax.enable_x64(True):
-        model = models.Coulomb(v_eps=1e-3, Fc_range=(2.0, 40.0), sigma2_range=(5.0, 500.0))
+        model = models.Coulomb(v_eps=1e-3)
         truth = dict(Fc=12.0, sigma2=60.0)
         theta = model.from_physical(**truth)
         u, x, v = _recording(model, theta, 2.5, n=2000, offset=3.0)
@@ -203,7 +203,8 @@ def test_identify_motion_recovers_parameters(tmp_path):
         solver = MAPSONMDS(mapso=MAPSO(lattice_size=4, num_generations=30),
                            nelder_mead=NelderMead(max_steps=600, max_evals=600))
         fit = identify_motion(model, data, key=0, mass=(0.5, 10.0), solver=solver,
-                              fit_offset=True, data_bounds=False, dtype=jnp.float64)
+                              fit_offset=True, box={"Fc": (2.0, 40.0), "sigma2": (5.0, 500.0)},
+                              data_bounds=False, dtype=jnp.float64)
         got = {k: float(v) for k, v in fit.params.items()}
         for k, val in truth.items():
             assert abs(got[k] - val) <= 0.02 * abs(val), (k, got[k], val)

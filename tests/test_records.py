@@ -52,8 +52,7 @@ def lugre_record(phase: float, n: int = 300):
 def test_pooled_cost_rolls_each_record_out_from_its_own_state():
     """J pools squared errors over records, each rolled out alone (no state across)."""
     recs = [lugre_record(0.0, 200), lugre_record(1.0, 300)]
-    model = LuGre().with_data_bounds(np.concatenate([r[0] for r in recs]),
-                                     np.concatenate([r[1] for r in recs]))
+    model = LuGre()
     rs = as_records(train=recs)
     with jax.enable_x64(True):
         theta = jnp.asarray(model.from_physical(sigma0=2e5, sigma1=200.0, sigma2=700.0, Fc=35.0,
@@ -147,10 +146,11 @@ def test_ensemble_survives_save_and_load(tmp_path):
 # --------------------------------------------------------------- bounds, options
 def test_a_parameter_stopped_by_its_range_is_flagged():
     data = coulomb_record(0.0)
-    with pytest.warns(BoundWarning, match=r"Fc = 20 ended on the upper bound.*Fc_range"):
-        fit = identify("coulomb", data, key=0, solver=TINY, Fc_range=(1.0, 20.0))
+    with pytest.warns(BoundWarning, match=r"Fc = 20 ended on the upper bound.*box=\{'Fc'"):
+        fit = identify("coulomb", data, key=0, solver=TINY, box={"Fc": (1.0, 20.0)})
     (flag,) = fit.diagnostics["on_bound"]
-    assert flag["name"] == "Fc" and flag["side"] == "upper" and flag["option"] == "Fc_range"
+    assert flag["name"] == "Fc" and flag["side"] == "upper" and flag["box_key"] == "Fc"
+    assert fit.box["Fc"] == (1.0, 20.0)
     assert flag["range"] == [1.0, 20.0] and flag["value"] == pytest.approx(20.0)
     assert "Fc=20 [on bound]" in fit.summary() and "widen" in fit.summary()
     assert json.loads(json.dumps(fit.to_dict()))["diagnostics"]["on_bound"][0]["name"] == "Fc"
@@ -184,11 +184,12 @@ def test_model_options_as_keywords_reach_the_model(monkeypatch):
 
 # ---------------------------------------------------------------------- predict
 def _lugre_fit():
-    model = LuGre(Fc_range=(5.0, 100.0))
+    model = LuGre()
     theta = np.asarray(model.from_physical(sigma0=1e5, sigma1=300.0, sigma2=800.0, Fc=40.0,
                                            Fs=60.0, vs=3e-3), np.float32)
     return Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=DT,
-               n_train=200, n_samples=300, metrics={}, velocity_range=(-0.03, 0.03))
+               n_train=200, n_samples=300, metrics={}, velocity_range=(-0.03, 0.03),
+               box={"Fc": (5.0, 100.0)})
 
 
 def _enn_fit():

@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 
 import jaxfric as jf
 from jaxfric import report
-from jaxfric.fit import Fit, rollout_model
+from jaxfric.fit import Fit
 from jaxfric.identification._data import as_record
 from jaxfric.identification._objective import OutputErrorCost, cost_data, fit_scalers
 from jaxfric.rig import FrictionData
@@ -57,7 +57,7 @@ def _minimise_recorded(model, data, bounds, seed=0, solver=SOLVER):
     """Minimise ``model``'s output-error cost with every evaluation recorded."""
     record = as_record(data, train=0.75)
     args = cost_data(model, record, fit_scalers(model, record), jnp.float32)
-    cost = OutputErrorCost(rollout_model(model))
+    cost = OutputErrorCost(model)
     rec = Recorder()
     sol = jf.minimise(rec.wrap(cost), solver, bounds, args=args, key=jax.random.key(seed), dtype=jnp.float32)
     points, values = rec.arrays()
@@ -66,8 +66,8 @@ def _minimise_recorded(model, data, bounds, seed=0, solver=SOLVER):
 
 def test_lugre_with_overflowing_parameters_is_never_reported_as_best():
     # sigma0 and sigma1 up to 1e45 and 1e40 N/m: 10**theta overflows float32 for part of the box.
-    model = jf.LuGre(sigma0_range=(1e4, 1e45), sigma1_range=(10.0, 1e40))
-    lo, hi = model.bounds()
+    model = jf.LuGre()
+    lo, hi = model.bounds({"sigma0": (1e4, 1e45), "sigma1": (10.0, 1e40)})
     bounds = (lo.astype(np.float32), hi.astype(np.float32))
     sol, points, values, cost, args = _minimise_recorded(model, _lugre_record(), bounds)
     assert np.isnan(values).any() or np.isinf(values).any(), "the box should hold non-finite costs"

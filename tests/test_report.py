@@ -120,7 +120,7 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
     from jaxfric.identification import on_bound
     from jaxfric.models import Coulomb
 
-    model = Coulomb(Fc_range=(10.0, 190.0))
+    model, box = Coulomb(), {"Fc": (10.0, 190.0)}
     v = np.asarray(data.velocity)
     thetas = np.asarray([model.from_physical(Fc=190.0, sigma2=s) for s in (1.0, 50.0, 300.0)], np.float64)
     valid = FrictionData.from_arrays(v[:300], np.asarray(data.friction)[:300], 0.01, n_train=1).valid()
@@ -137,7 +137,7 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
                        "all": friction_metrics(f_all, f_all + 1.5),
                        "records": [rec("run1", "train", f_all, f_all + 1.0),
                                    rec("run2", "valid", f_all[1:300], f_all[1:300] + 2.0)]},
-              diagnostics={"on_bound": on_bound(model, thetas[0])},
+              diagnostics={"on_bound": on_bound(model, thetas[0], box)}, box=box,
               ensemble={"theta": thetas, "J": [0.1, 0.2, 0.3], "best": 0, "valid_mse_percent": [1.0, 2.0, 3.0],
                         "keys": [[0, 1], [0, 2], [0, 3]], "spread": {"Fc": {k: 190.0 for k in
                                                                              ("min", "p5", "median", "p95", "max")}}})
@@ -145,7 +145,8 @@ def test_report_shows_records_bounds_and_the_ensemble_band(data, tmp_path):
                         records={"run2": valid})
     text = (tmp_path / "report.md").read_text()
     assert "| run2 | valid | 299 |" in text and "Validation record `run2`" in text
-    assert "190 **(on a bound: widen its range)**" in text and "Fc_range=(10, 370)" in text
+    assert "190 **(on a bound: widen its range)**" in text and "box={'Fc': (10, 370)}" in text
+    assert "Search box (SI; `Fs_ratio` = Fs/Fc): Fc [10, 190], sigma2 [10, 1e+05]." in text
     assert "Ensemble of 3 runs" in text and "![ensemble band](band_coulomb.png)" in text
     for name in ("band_coulomb.png", "fit_coulomb_run2.png"):
         img = mpimg.imread(tmp_path / name)

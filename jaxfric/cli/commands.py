@@ -116,7 +116,7 @@ def cmd_demo(args, argv) -> int:
 
     from .data import simulated_rig
 
-    check_models(args.models)
+    check_models(args.models, args.box)
     out = _prepare_out(args.out)
     say = _say(args)
     data_key, fit_key = jax.random.split(jax.random.key(args.seed))
@@ -193,7 +193,7 @@ def cmd_identify(args, argv) -> int:
 
     from jaxfric.identification import as_records
 
-    check_models(args.models)
+    check_models(args.models, args.box)
     say = _say(args)
     data, desc, notes = identification_data(args)
     valid = {}

@@ -24,14 +24,20 @@ LABELS = {"elman": "ENN", "elman_full": "ENN (full context)", "lugre": "LuGre", 
           "stribeck": "Stribeck", "coulomb": "Coulomb"}
 
 
-def check_models(names) -> list[str]:
-    """Validate model names against :func:`jaxfric.models.available` (one-line error)."""
+def check_models(names, box=None) -> list[str]:
+    """Validate model names against :func:`jaxfric.models.available`, and that every
+    ``--box`` entry is searched by one of them (one-line errors)."""
     from jaxfric import models
 
     known = models.available()
     for name in names:
         if name not in known:
             raise UserError(f"unknown model {name!r}; choose from {', '.join(known)}")
+    used = {k for name in names for k in getattr(models.get(name), "box_keys", ())}
+    for key, _ in box or ():
+        if key not in used:
+            raise UserError(f"--box {key}: none of the models {', '.join(names)} has this parameter"
+                            + (f" (theirs: {', '.join(sorted(used))})" if used else ""))
     return list(names)
 
 
@@ -126,7 +132,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
     shown even with ``--quiet``, and are appended to ``notes`` for the report.
     """
     fits = {}
-    for name in check_models(args.models):
+    for name in check_models(args.models, getattr(args, "box", None)):
         spec = FitSpec.from_args(name, args)
         model = spec.build_model()
         solver = spec.build_solver(model)

@@ -71,24 +71,37 @@ def fraction(text: str) -> float:
     return value
 
 
-def positive_int(text: str) -> int:
+def _whole(text: str, minimum: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {text!r}")
     return value
+
+
+def positive_int(text: str) -> int:
+    return _whole(text, 1)
+
+
+def box_entry(text: str) -> tuple[str, tuple[float, float]]:
+    """``NAME=LO,HI`` -> ``(NAME, (LO, HI))``, checked by :class:`jaxfric.models.SearchBox`."""
+    from jaxfric.models import SearchBox
+
+    name, sep, pair = text.partition("=")
+    parts = pair.split(",")
+    if not sep or len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"give NAME=LO,HI (e.g. Fc=1,100), got {text!r}")
+    try:
+        box = SearchBox({name.strip(): (_number(parts[0]), _number(parts[1]))})
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return next(iter(box.items()))
 
 
 def seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
-    return value
+    return _whole(text, 0)
 
 
 def model_list(text: str) -> list[str]:
@@ -208,6 +221,10 @@ def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
     g.add_argument("--paper", action="store_true",
                    help="the paper's method exactly: MAPSO-NMDS, no gradient stage (default: jaxfric's "
                    "faster, more accurate pipeline; for the networks a short MAPSO then BFGS)")
+    g.add_argument("--box", action="append", type=box_entry, default=None, metavar="NAME=LO,HI",
+                   help="search range of a physical model's parameter in SI units (repeatable), e.g. "
+                   "--box Fc=1,100 --box vs=1e-4,0.1; each model takes the entries it has, the rest of its "
+                   "box is centred on the data")
     g.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
     g.add_argument("--quick", action="store_true", help="tiny budget: a smoke test in seconds, not a real fit")
     g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="report folder (created if needed)")

@@ -36,6 +36,8 @@ class FitSpec:
         paper: the paper's method exactly (``identify(method="paper")``: MAPSO–NMDS, no
             gradient stage) instead of the library's default pipeline.
         seed: the key is ``jax.random.key(seed)`` unless a key is passed to :meth:`identify`.
+        box: search-box entries ``((name, (low, high)), ...)`` (``--box``) handed to
+            ``identify(box=...)``; the rest of the box is the library's (data-centred).
     """
 
     model: str
@@ -46,6 +48,7 @@ class FitSpec:
     refine: str = "none"
     paper: bool = False
     seed: int = 0
+    box: tuple = ()
 
     def __post_init__(self):
         if self.solver not in SOLVERS:
@@ -59,9 +62,12 @@ class FitSpec:
             generations = generations or QUICK_GENERATIONS
             nm_evals = nm_evals or QUICK_NM_EVALS
         neurons = args.neurons if name in ("elman", "elman_full") else None
-        return cls(model=name, neurons=neurons, solver=args.solver, generations=generations,
+        spec = cls(model=name, neurons=neurons, solver=args.solver, generations=generations,
                    nm_evals=nm_evals, refine=getattr(args, "refine", "none"),
                    paper=getattr(args, "paper", False), seed=args.seed)
+        entries = dict(getattr(args, "box", None) or ())
+        keys = getattr(spec.build_model(), "box_keys", ())  # each model takes the entries it searches
+        return dataclasses.replace(spec, box=tuple((k, r) for k, r in entries.items() if k in keys))
 
     @property
     def model_options(self) -> dict | None:
@@ -110,6 +116,8 @@ class FitSpec:
 
         kwargs = {"solver": self.build_solver(), "model_options": self.model_options,
                   "key": jax.random.key(self.seed) if key is None else key}
+        if self.box:
+            kwargs["box"] = dict(self.box)
         if self.refine != "none":
             kwargs["refine"] = self.refine
         if self.paper:

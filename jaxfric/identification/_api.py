@@ -39,7 +39,7 @@ import numpy as np
 
 from .. import _xla
 from .. import models as _models
-from ..fit import Fit, model_config, model_name, predict, rollout_model
+from ..fit import Fit, model_config, model_name, predict
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
@@ -153,9 +153,13 @@ def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
         valid = [f.name for f in dataclasses.fields(type(_models.get(model)))]
         unknown = sorted(set(options or {}) - set(valid))
         if unknown:
+            ranges = [k[: -len("_range")] for k in unknown
+                      if k.endswith("_range") and k[: -len("_range")] in _models.DEFAULT_RANGES]
+            hint = (f"; a search range is not a model option but the box: pass box={{{ranges[0]!r}: "
+                    "(low, high)}" if ranges else "")
             raise ValueError(
                 f"invalid options for model {model!r}: {', '.join(map(repr, unknown))}; "
-                f"its options are {', '.join(valid) or '(none)'}"
+                f"its options are {', '.join(valid) or '(none)'}{hint}"
             )
         try:
             return _models.get(model, **kwargs)
@@ -341,6 +345,7 @@ def identify(
     refine=None,
     theta0=None,
     dtype=None,
+    box=None,
     data_bounds: bool = True,
     model_options: dict | None = None,
     progress=None,
@@ -392,12 +397,20 @@ def identify(
             of a swarm). Must be finite and inside the box.
         dtype: floating dtype of the search; default JAX's default float (float32
             unless the caller enabled x64).
-        data_bounds: centre the unset search ranges of physical models on the training
-            data (``model.with_data_bounds``); no effect on the Elman networks.
+        box: the search box of a physical model, a mapping physical name -> (low, high)
+            in SI units (a :class:`jaxfric.models.SearchBox`; ``"Fs_ratio"`` for Fs/Fc,
+            ``"k"`` for every GMS element stiffness), e.g. ``box={"vs": (1e-4, 1.0)}``.
+            May be partial: its entries replace those of the data-centred (or default)
+            box, :meth:`~jaxfric.models.AbstractPhysicalModel.search_box`. The box is data,
+            not part of the model, so fits with different boxes share one compiled cost.
+            The Elman networks take none (their bounds are model options).
+        data_bounds: centre the entries of the box the user left out on the training
+            data (:func:`jaxfric.models.data_ranges`); else they are the §8.5 defaults.
+            No effect on the Elman networks.
         model_options: constructor options for a model given by name
             (e.g. ``{"neurons": 20}``).
         **options: the same, as keywords: ``identify("elman", data, key=0, neurons=20)``,
-            ``identify("lugre", data, key=0, vs_range=(1e-4, 1.0))``. Unknown ones are a
+            ``identify("lugre", data, key=0, stribeck_exponent=1.0)``. Unknown ones are a
             ``ValueError`` listing the model's options.
         progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
             the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
@@ -428,8 +441,8 @@ def identify(
     ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
 
     Parameters on a bound: for physical models every parameter that ends on an edge
-    of its search box is named with a :class:`BoundWarning` (which range to widen,
-    e.g. ``vs_range``) and in ``fit.diagnostics["on_bound"]``; parameters the model
+    of its search box is named with a :class:`BoundWarning` (which box entry to widen,
+    e.g. ``box={"vs": ...}``) and in ``fit.diagnostics["on_bound"]``; parameters the model
     declares unidentifiable from these data go to ``fit.diagnostics["unidentifiable"]``.
 
     Returns:
@@ -440,7 +453,8 @@ def identify(
             options (e.g. ``neurons < 1``), velocity and friction of different lengths,
             NaN/inf in the data, a record shorter than the split or a validation
             window shorter than ``MIN_VALID_SAMPLES``, records with different sample
-            times, zero-variance friction, a non-finite or out-of-box ``theta0``, an
+            times, zero-variance friction, an invalid ``box`` entry or one the model does
+            not search (the message names it), a non-finite or out-of-box ``theta0``, an
             invalid solver, refinement or key.
     """
     if model_options and options and set(model_options) & set(options):
@@ -457,10 +471,9 @@ def identify(
                 "identify it on one record (data=...), not on train=[...]/valid=...")
         inputs = (None if records.single is None
                   else model.inputs_from(records.single, records.single.n_samples))  # fails early
-        if data_bounds:
-            model = model.with_data_bounds(
-                records.train_velocity, records.train_friction,
-                None if inputs is None else inputs[:, : records.single.n_train])
+        box = model.search_box(box, *(
+            (records.train_velocity, records.train_friction,
+             None if inputs is None else inputs[:, : records.single.n_train]) if data_bounds else ()))
         _check_method(method)
         coarse = solver is None and _fast_pipeline(model, method)
         if solver is None:
@@ -475,7 +488,7 @@ def identify(
         solver.check()
         settings_refine = as_refinement(refine, model.num_params)
         refine_options = _xla.resolve(compiler_options, "rollout")
-        lower, upper = model.bounds()
+        lower, upper = model.bounds(box)
         theta0 = _check_theta0(model, theta0, lower, upper)
         if keys is None:
             key, seed = _as_key(key)
@@ -486,16 +499,14 @@ def identify(
         dtype = search_dtype(dtype)
 
         scalers = fit_scalers(model, records)
-        # The cost holds the model as a *static* field (its jit cache key). Search
-        # ranges shape only the box, which travels as arrays, so the cost gets the
-        # model with its ranges cleared: a new record (new data-centred box) does
-        # not recompile.
+        # The cost holds the model as a static field (its jit cache key); the box
+        # travels as the (lower, upper) arrays, so a new box does not recompile.
         if records.single is not None:
             data_j = cost_data(model, records.single, scalers, dtype)
-            cost = OutputErrorCost(rollout_model(model))
+            cost = OutputErrorCost(model)
         else:
             data_j = pooled_cost_data(model, records, scalers, dtype)
-            cost = PooledOutputErrorCost(rollout_model(model))
+            cost = PooledOutputErrorCost(model)
         # Coarse-to-fine: the default pipeline's swarm sees the first samples only.
         data_global = data_j
         if coarse and records.single is not None and records.single.n_train > GLOBAL_STAGE_SAMPLES:
@@ -563,7 +574,7 @@ def identify(
         key_data, key_impl = _key_record(key_used)
         _warn_if_divergent(metrics)
         diagnostics = {
-            "on_bound": on_bound(model, theta),
+            "on_bound": on_bound(model, theta, box),
             "unidentifiable": list(unidentifiable(model, records.train_velocity)),
         }
         for d in diagnostics["on_bound"]:
@@ -586,6 +597,7 @@ def identify(
             velocity_range=(float(records.train_velocity.min()), float(records.train_velocity.max())),
             diagnostics=diagnostics,
             ensemble=ensemble,
+            box=box,
             settings={
                 "model_name": model_name(model),
                 "model_config": model_config(model),

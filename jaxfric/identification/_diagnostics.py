@@ -28,31 +28,35 @@ class BoundWarning(UserWarning):
 
 
 def _coordinates(model: AbstractFrictionModel):
-    """``(search name, physical name, kind, range field)`` per entry of ``theta``."""
+    """``(search name, physical name, kind, box entry)`` per entry of ``theta`` (no
+    entry for a range the model fixes, e.g. GMS's splits, nor for the networks)."""
     if isinstance(model, AbstractPhysicalModel):
         for search, phys, kind in model._coords:
             key = model._range_key(phys, kind)
-            yield search, phys, kind, f"{key}_range"
+            yield search, phys, kind, key if key in model.box_keys else None
     else:
         for name in model.param_names:
             yield name, name, "linear", None
 
 
-def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) -> list[dict]:
-    """Parameters of ``theta`` (search coordinates) within ``tol`` box widths of a bound.
+def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_TOLERANCE) -> list[dict]:
+    """Parameters of ``theta`` (search coordinates) within ``tol`` box widths of a bound
+    of ``box`` (the fit's :class:`jaxfric.models.SearchBox`; ``None``: the defaults).
 
     Returns one dict per such parameter: ``name`` (physical), ``search_name``,
     ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units
-    (for LuGre's ``Fs`` the ratio Fs/Fc, whose range is ``Fs_ratio_range``),
-    ``option`` (the model option that sets the range, e.g. ``"vs_range"``) and a
-    one-line ``message`` naming all of it. Empty for models fitted on scaled data.
+    (for LuGre's ``Fs`` the ratio Fs/Fc, whose box entry is ``Fs_ratio``),
+    ``box_key`` (the box entry that sets the range, e.g. ``"vs"``), ``option`` (what
+    to pass, e.g. ``"box['vs']"``) and a one-line ``message`` naming all of it. Empty
+    for models fitted on scaled data.
     """
     if model.needs_scaling:
         return []
     theta = np.asarray(theta, np.float64)
-    lower, upper = model.bounds()
+    lower, upper = model.bounds(box)
     out = []
-    for i, (search, name, kind, option) in enumerate(_coordinates(model)):
+    for i, (search, name, kind, key) in enumerate(_coordinates(model)):
+        option = None if key is None else f"box[{key!r}]"
         width = upper[i] - lower[i]
         side = ("lower" if theta[i] <= lower[i] + tol * width
                 else "upper" if theta[i] >= upper[i] - tol * width else None)
@@ -60,14 +64,15 @@ def on_bound(model: AbstractFrictionModel, theta, tol: float = BOUND_TOLERANCE) 
             continue
         phys = (lambda x: 10.0 ** x) if kind == "log10" else (lambda x: x)
         value, lo, hi = float(phys(theta[i])), float(phys(lower[i])), float(phys(upper[i]))
-        widen = (f"pass {option}=({lo / 10 if kind == 'log10' else lo - width:.4g}, {hi:.4g})" if side == "lower"
-                 else f"pass {option}=({lo:.4g}, {hi * 10 if kind == 'log10' else hi + width:.4g})")
-        if option is None:
+        widen = (f"pass box={{{key!r}: ({lo / 10 if kind == 'log10' else lo - width:.4g}, {hi:.4g})}}"
+                 if side == "lower"
+                 else f"pass box={{{key!r}: ({lo:.4g}, {hi * 10 if kind == 'log10' else hi + width:.4g})}}")
+        if key is None:
             widen = "widen the search box"
         shown = f"{name}/Fc" if kind == "ratio" else name
         out.append({
             "name": name, "search_name": search, "side": side, "value": value, "range": [lo, hi],
-            "option": option,
+            "box_key": key, "option": option,
             "message": (f"{shown} = {value:.4g} ended on the {side} bound of its search range "
                         f"[{lo:.4g}, {hi:.4g}]: the box, not the data, fixed it; widen the range "
                         f"({widen}) and fit again"),

@@ -1,7 +1,8 @@
 """Friction models for jaxfric (docs/algorithms.md §2, §8 and §13.1).
 
 Every model implements :class:`AbstractFrictionModel`: a flat search vector
-``theta`` with :meth:`~AbstractFrictionModel.bounds`, named physical
+``theta`` with :meth:`~AbstractFrictionModel.bounds` (of a :class:`SearchBox`, for
+the physical models: data given to ``identify``, not a model field), named physical
 parameters via ``to_physical`` / ``from_physical``, and a pure-JAX free-run
 rollout ``simulate(theta, velocity, dt)`` / ``simulate_batch(thetas, velocity, dt)``.
 
@@ -18,7 +19,8 @@ record may not determine.
 from __future__ import annotations
 
 from ._base import AbstractFrictionModel, Unidentifiable, check_theta, friction_scales
-from ._physical import AbstractPhysicalModel, DEFAULT_RANGES, data_ranges, stribeck_curve
+from ._box import DEFAULT_RANGES, SearchBox, data_ranges
+from ._physical import AbstractPhysicalModel, stribeck_curve
 from ._scaling import Scaler
 from .elman import Elman, ElmanFull
 from .gms import GMS
@@ -37,6 +39,7 @@ __all__ = [
     "GMS",
     "LuGre",
     "Scaler",
+    "SearchBox",
     "Stribeck",
     "Unidentifiable",
     "available",

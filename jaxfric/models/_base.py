@@ -1,7 +1,9 @@
 """The interface every jaxfric friction model implements.
 
 A friction model is a small immutable ``eqx.Module`` that holds only *static
-hyperparameters* (number of neurons, which parameters are free, search ranges).
+hyperparameters* (number of neurons, which parameters are free). A physical
+model's search box is data (:class:`jaxfric.models.SearchBox`), passed to
+:meth:`~AbstractFrictionModel.bounds` and :func:`jaxfric.identify`.
 Measured data -- velocity, friction, sample time -- always arrive as function
 arguments, so a new data set never triggers recompilation and data sets can be
 vmapped (DESIGN.md, "Conventions").
@@ -9,7 +11,7 @@ vmapped (DESIGN.md, "Conventions").
 Every model maps a flat search vector ``theta`` (what the optimisers see, in
 *search coordinates*, e.g. log10 of a stiffness) to a friction prediction::
 
-    lower, upper = model.bounds()            # NumPy, search coordinates
+    lower, upper = model.bounds(box)         # NumPy, search coordinates
     params = model.to_physical(theta)        # {"sigma0": ..., "Fc": ...}
     theta = model.from_physical(**params)    # the inverse
     F_hat = model.simulate(theta, v, dt)     # free-run rollout, (T,)
@@ -200,8 +202,9 @@ class AbstractFrictionModel(eqx.Module):
         return len(self.param_names)
 
     @abc.abstractmethod
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Search box ``(lower, upper)`` in search coordinates (1-D float64 NumPy)."""
+    def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
+        """Search box ``(lower, upper)`` in search coordinates (1-D float64 NumPy), for
+        the search box ``box`` of a physical model (``None``: its defaults)."""
 
     @abc.abstractmethod
     def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
@@ -297,22 +300,24 @@ class AbstractFrictionModel(eqx.Module):
         """Eager validation of ``theta`` (shape, length, finiteness); see :func:`check_theta`."""
         return check_theta(theta, self.num_params)
 
-    def initial_guess(self, velocity: ArrayLike, friction: ArrayLike) -> np.ndarray:
+    def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
         """A starting point inside :meth:`bounds`; the default is the box centre."""
-        lower, upper = self.bounds()
+        lower, upper = self.bounds(box)
         return 0.5 * (lower + upper)
 
-    def with_data_bounds(
-        self, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None
-    ) -> "AbstractFrictionModel":
-        """Return a copy whose unset search ranges are centred on the data's levels
-        (``inputs``: the :attr:`input_names` channels, for models that have some).
-
-        Models fitted on scaled data (or without data-dependent ranges) return
-        ``self`` unchanged.
-        """
+    def search_box(self, box=None, velocity: ArrayLike | None = None, friction: ArrayLike | None = None,
+                   inputs: ArrayLike | None = None):
+        """The search box to give :meth:`bounds`: ``None`` for a model whose box is
+        part of its configuration (the Elman networks' weight bounds, fitted on
+        scaled data); a given non-empty ``box`` is then refused (``ValueError``).
+        Physical models complete ``box`` from their defaults and the data
+        (:meth:`jaxfric.models.AbstractPhysicalModel.search_box`)."""
         del velocity, friction, inputs
-        return self
+        if box:
+            raise ValueError(
+                f"{type(self).__name__} takes no search box: its box is set by its own options "
+                "(e.g. the Elman networks' weight_bound, context_weight_bound)")
+        return None
 
     # ------------------------------------------------------------- internals
     def _prepare(self, thetas, velocity) -> tuple[Array, Array]:

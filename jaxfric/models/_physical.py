@@ -1,5 +1,6 @@
 """Shared machinery of the physical (SI-unit) friction models: search coordinates,
-default and data-centred search ranges, and a least-squares initial guess.
+the search box they span (defaults and data-centred boxes, :mod:`._box`), and a
+least-squares initial guess.
 
 Search coordinates (docs/algorithms.md §8.5): stiffnesses, damping and the Stribeck
 velocity span decades, so they are searched as log10; forces are linear; the
@@ -14,7 +15,6 @@ vs [m/s], delta [-].
 from __future__ import annotations
 
 import abc
-import dataclasses
 from typing import ClassVar
 
 import jax.numpy as jnp
@@ -22,34 +22,11 @@ import numpy as np
 from jaxtyping import Array, ArrayLike
 
 from ._base import AbstractFrictionModel, Unidentifiable, friction_scales, record_velocity
-
-DEFAULT_RANGES: dict[str, tuple[float, float]] = {
-    # docs/algorithms.md §8.5 [D]: order-of-magnitude ranges for hydraulic cylinders.
-    "sigma0": (1e4, 1e9),
-    "sigma1": (1e1, 1e6),
-    "sigma2": (1e1, 1e5),
-    "Fc": (10.0, 2000.0),
-    "Fs_ratio": (1.0, 3.0),
-    "vs": (1e-4, 5e-2),
-    "delta": (0.5, 3.0),
-    # docs/algorithms.md §13.1 [D]: output offset, of the order of a Coulomb level.
-    "F_off": (-200.0, 200.0),
-    # docs/algorithms.md §8.4 [D]: GMS element stiffness (as sigma0) and slip rate C [N/s].
-    "k": (1e4, 1e9),
-    "C": (1e1, 1e7),
-    # docs/algorithms.md §13.1 [D]: Simscape cylinder friction, preload [N],
-    # pressure coefficient [N/Pa] (Simscape's default 1e-6) and break-away ratio [-].
-    "F_pr": (0.0, 2000.0),
-    "f_cfr": (0.0, 1e-4),
-    "K_brk": (1.0, 3.0),
-}
+from ._box import DEFAULT_RANGES, SearchBox, data_ranges
 
 #: Suffixes of direction-dependent parameters (docs/algorithms.md §13.1): ``Fc_pos``
 #: acts for v > 0, ``Fc_neg`` for v < 0; both share the range of ``Fc``.
 DIRECTIONS = ("_pos", "_neg")
-
-_LOG_RANGED = ("sigma0", "sigma1", "sigma2", "vs", "k", "C")
-
 
 def base_name(phys: str) -> str:
     """``Fc_pos`` -> ``Fc``: the range key of a direction-dependent parameter."""
@@ -106,52 +83,6 @@ def _ratio_base(phys: str) -> str:
     return "Fc" + phys[len(base_name(phys)):]
 
 
-def as_range(value) -> tuple[float, float] | None:
-    """Field converter: ``None`` or a hashable ``(low, high)`` pair of floats."""
-    if value is None:
-        return None
-    try:
-        lo, hi = (float(x) for x in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"a search range must be a (low, high) pair of numbers, got {value!r}") from None
-    return (lo, hi)
-
-
-def data_ranges(velocity: ArrayLike, friction: ArrayLike) -> dict[str, tuple[float, float]]:
-    """Search ranges centred on a record's friction level ``F`` and speed ``V``.
-
-    With ``F`` = 95th percentile of |friction| and ``V`` = max |velocity|
-    (:func:`friction_scales`), the rules are [D]:
-
-    - Fc in [0.05, 1.2] F (Coulomb level cannot much exceed the observed force);
-    - sigma0 in [F / 1e-2, F / 1e-7] N/m (bristle deflection at Fc between
-      0.1 um and 10 mm);
-    - sigma1 in [1e-3, 1e2] F / V and sigma2 in [1e-3, 2] F / V N s/m
-      (damping/viscous force at V between 0.1 % and 100x resp. 200 % of F);
-    - vs in [1e-3, 1] V m/s.
-
-    - F_off in [-0.5, 0.5] F (§13.1);
-    - GMS element stiffness k like sigma0, slip rate C in [1e-1, 1e4] F/s
-      (relaxation times 10 s to 0.1 ms at the Coulomb level);
-    - cylinder preload F_pr in [0, 1.2] F.
-
-    For F = 200 N and V = 14 mm/s these reproduce the §8.5 table to within a
-    factor of about 2. Fs/Fc and delta keep their defaults.
-    """
-    f, v = friction_scales(velocity, friction)
-    return {
-        "Fc": (0.05 * f, 1.2 * f),
-        "F_off": (-0.5 * f, 0.5 * f),
-        "k": (f / 1e-2, f / 1e-7),
-        "C": (1e-1 * f, 1e4 * f),
-        "F_pr": (0.0, 1.2 * f),
-        "sigma0": (f / 1e-2, f / 1e-7),
-        "sigma1": (1e-3 * f / v, 1e2 * f / v),
-        "sigma2": (1e-3 * f / v, 2.0 * f / v),
-        "vs": (1e-3 * v, v),
-    }
-
-
 def coulomb_viscous_ls(velocity: ArrayLike, friction: ArrayLike, *, viscous: bool = True) -> tuple[float, float]:
     """Least-squares fit of ``F = Fc sign(v) + sigma2 v`` on the sliding samples.
 
@@ -192,10 +123,12 @@ class AbstractPhysicalModel(AbstractFrictionModel):
 
     Subclasses list ``_coords``: ``(search_name, physical_name, kind)`` with
     kind ``"log10"`` (theta = log10 p), ``"linear"`` (theta = p) or
-    ``"ratio"`` (theta = Fs / Fc, physical_name ``"Fs"``). Each physical
-    parameter ``p`` has an optional ``p_range`` field ((low, high) in
-    physical units, ``None`` = default of docs/algorithms.md §8.5); the ratio uses
-    ``Fs_ratio_range``. Units: see the module docstring.
+    ``"ratio"`` (theta = Fs / Fc, physical_name ``"Fs"``). The search box is not
+    part of the model: it is a :class:`SearchBox` (physical name -> (low, high) in
+    physical units; the ratio's entry is ``Fs_ratio``) given to :meth:`bounds` and
+    :func:`jaxfric.identify`, completed by :meth:`search_box` from the defaults of
+    docs/algorithms.md §8.5 and, for a record, the data-centred ranges. Units: see
+    the module docstring.
     """
 
     needs_scaling: ClassVar[bool] = False
@@ -218,34 +151,53 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         """Keys of :meth:`to_physical` (and arguments of :meth:`from_physical`)."""
         return tuple(c[1] for c in self._coords)
 
+    #: Search coordinates whose range is fixed by the model, not by the box (GMS's
+    #: stick-breaking fractions live in [0, 1]).
+    _fixed_ranges: ClassVar[dict[str, tuple[float, float]]] = {}
+
     def _range_key(self, phys: str, kind: str) -> str:
         return "Fs_ratio" if kind == "ratio" else base_name(phys)
 
-    def physical_range(self, key: str) -> tuple[float, float]:
-        """Range of physical parameter ``key`` (or ``"Fs_ratio"``) in use."""
-        value = getattr(self, f"{key}_range", None)
-        return DEFAULT_RANGES[key] if value is None else value
+    @property
+    def box_keys(self) -> tuple[str, ...]:
+        """The :class:`SearchBox` entries this model's search coordinates use, in order."""
+        keys = (self._range_key(phys, kind) for _, phys, kind in self._coords)
+        return tuple(dict.fromkeys(k for k in keys if k not in self._fixed_ranges))
 
-    def _check_ranges(self) -> None:
-        for _, phys, kind in self._coords:
-            key = self._range_key(phys, kind)
-            lo, hi = self.physical_range(key)
-            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-                raise ValueError(f"{key}_range must satisfy low < high (finite), got {(lo, hi)}")
-            if (key in _LOG_RANGED or key == "Fc") and lo <= 0.0:
-                raise ValueError(f"{key}_range must be positive, got {(lo, hi)}")
-            if key == "Fs_ratio" and lo < 1.0:
-                raise ValueError(f"Fs_ratio_range must start at >= 1 so that Fs >= Fc, got {(lo, hi)}")
-            if key == "K_brk" and lo < 1.0:
-                raise ValueError(f"K_brk_range must start at >= 1 (break-away >= Coulomb), got {(lo, hi)}")
-            if key in ("F_pr", "f_cfr") and lo < 0.0:
-                raise ValueError(f"{key}_range must be non-negative, got {(lo, hi)}")
+    def search_box(self, box=None, velocity: ArrayLike | None = None, friction: ArrayLike | None = None,
+                   inputs: ArrayLike | None = None) -> SearchBox:
+        """The complete box of this model: :data:`DEFAULT_RANGES` (docs/algorithms.md §8.5),
+        then, when a record's ``velocity`` [m/s] and ``friction`` [N] are given, the
+        data-centred entries (:func:`data_ranges`; with ``inputs``, the entries that
+        scale with the measured channels), then the entries of the user's partial
+        ``box`` (a mapping name -> (low, high) or a :class:`SearchBox`).
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Search box from the physical ranges (log10 for the ``log10`` coordinates)."""
+        Raises ``ValueError`` naming the entry for an invalid range or a name this
+        model does not search (listing the ones it does), before any computation.
+        """
+        given = box if isinstance(box, SearchBox) else SearchBox(box)
+        keys = self.box_keys
+        unknown = [k for k in given if k not in keys]
+        if unknown:
+            raise ValueError(f"search box: {type(self).__name__} has no parameter "
+                             f"{', '.join(map(repr, unknown))}; its box entries are {', '.join(keys)}")
+        ranges = {k: DEFAULT_RANGES[k] for k in keys}
+        if velocity is not None:
+            suggested = data_ranges(velocity, friction)
+            if inputs is not None and self.input_names:
+                suggested.update(self._input_ranges(friction_scales(velocity, friction)[0], inputs))
+            ranges.update({k: r for k, r in suggested.items() if k in keys})
+        ranges.update(given)
+        return SearchBox(ranges)
+
+    def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
+        """Search-coordinate bounds of ``box`` (completed by :meth:`search_box`; log10
+        for the ``log10`` coordinates)."""
+        box = self.search_box(box)
         lower, upper = [], []
         for _, phys, kind in self._coords:
-            lo, hi = self.physical_range(self._range_key(phys, kind))
+            key = self._range_key(phys, kind)
+            lo, hi = self._fixed_ranges.get(key) or box[key]
             if kind == "log10":
                 lo, hi = np.log10(lo), np.log10(hi)
             lower.append(lo)
@@ -388,34 +340,10 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         del friction_level, inputs
         return {}
 
-    def with_data_bounds(
-        self, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None
-    ) -> "AbstractPhysicalModel":
-        """Copy with every *unset* range centred on the data (:func:`data_ranges`;
-        ranges that scale with measured ``inputs`` when the model has and gets them).
-
-        Ranges given explicitly to the constructor are kept.
-        """
-        suggested = data_ranges(velocity, friction)
-        if inputs is not None and self.input_names:
-            suggested.update(self._input_ranges(friction_scales(velocity, friction)[0], inputs))
-        updates = {}
-        for field in dataclasses.fields(self):
-            if field.name.endswith("_range") and getattr(self, field.name) is None:
-                key = field.name[: -len("_range")]
-                if key in suggested:
-                    updates[field.name] = suggested[key]
-        return dataclasses.replace(self, **updates)
-
-    @classmethod
-    def for_data(cls, velocity: ArrayLike, friction: ArrayLike, inputs: ArrayLike | None = None,
-                 **kwargs) -> "AbstractPhysicalModel":
-        """``cls(**kwargs).with_data_bounds(velocity, friction, inputs)``."""
-        return cls(**kwargs).with_data_bounds(velocity, friction, inputs)
-
-    def initial_guess(self, velocity: ArrayLike, friction: ArrayLike) -> np.ndarray:
-        """Box centre, with Fc and sigma2 from :func:`coulomb_viscous_ls` (clipped to the box)."""
-        lower, upper = self.bounds()
+    def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
+        """Centre of ``box`` (:meth:`bounds`), with Fc and sigma2 from
+        :func:`coulomb_viscous_ls` (clipped to the box)."""
+        lower, upper = self.bounds(box)
         theta = 0.5 * (lower + upper)
         viscous = any(base_name(p) == "sigma2" for p in self.physical_names)
         fc, s2 = coulomb_viscous_ls(velocity, friction, viscous=viscous)

@@ -123,8 +123,10 @@ class Elman(AbstractFrictionModel):
     def num_params(self) -> int:
         return 6 * self.neurons + int(self.output_bias)
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Search box of §2.4: w, r, b in ±5; v in ±2; alpha in [0, 0.99]; c0, b_o in ±1."""
+    def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
+        """Search box of §2.4: w, r, b in ±5; v in ±2; alpha in [0, 0.99]; c0, b_o in ±1
+        (set by the options; a ``box`` is refused, :meth:`search_box`)."""
+        self.search_box(box)
         n = self.neurons
         half = np.concatenate(
             [
@@ -316,7 +318,8 @@ class ElmanFull(AbstractFrictionModel):
     def num_params(self) -> int:
         return sum(size for _, size in self._sizes())
 
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
+        self.search_box(box)
         half = {
             "w": self.weight_bound,
             "W_c": self.context_bound,

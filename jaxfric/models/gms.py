@@ -41,7 +41,6 @@ from jaxtyping import Array, ArrayLike, Float
 from ._physical import (
     AbstractPhysicalModel,
     add_offset,
-    as_range,
     by_direction,
     directional_coords,
     stribeck_curve,
@@ -75,14 +74,14 @@ class GMS(AbstractPhysicalModel):
     """Generalised Maxwell-slip friction, docs/algorithms.md §8.4 (module docstring).
 
     Search coordinates: ``log10_k1 .. log10_kN`` (element stiffness [N/m],
-    range ``k_range``), ``split1 .. split{N-1}`` (stick-breaking fractions in
+    box entry ``k``), ``split1 .. split{N-1}`` (stick-breaking fractions in
     [0, 1] that give the weights alpha_i, see :func:`_splits_to_weights`),
     ``log10_C`` (attraction rate [N/s]), ``Fc``, ``Fs_over_Fc``, ``log10_vs``,
     ``log10_sigma2``: 2N + 4 in all. Physical parameters (:meth:`to_physical`):
     ``k1 .. kN``, ``alpha1 .. alphaN`` (sum 1), ``C``, ``Fc``, ``Fs``, ``vs``,
     ``sigma2``. Hyperparameters: ``num_elements`` N (default 3),
-    ``stribeck_exponent`` delta (default 2) and the ``*_range`` fields (as
-    :class:`LuGre`; ``k`` and ``C`` are data-centred by :meth:`with_data_bounds`).
+    ``stribeck_exponent`` delta (default 2); the search box is data (as
+    :class:`LuGre`; ``k`` and ``C`` are data-centred by :meth:`search_box`).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): the slip
     level is s_pos(v) (``Fc_pos``, ``Fs_pos``) for v > 0 and s_neg(v) for v <= 0,
@@ -93,25 +92,18 @@ class GMS(AbstractPhysicalModel):
 
     num_elements: int = eqx.field(default=3, static=True, converter=int)
     stribeck_exponent: float = eqx.field(default=2.0, static=True, converter=float)
-    k_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    C_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     asymmetric: bool = eqx.field(default=False, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
     _presliding = ("k", "C", "alpha")
+    _fixed_ranges = {"split": (0.0, 1.0)}
 
     def __check_init__(self):
         if self.num_elements < 1:
             raise ValueError(f"num_elements must be at least 1, got {self.num_elements}")
         if not self.stribeck_exponent > 0.0:
             raise ValueError(f"stribeck_exponent must be positive, got {self.stribeck_exponent}")
-        self._check_ranges()
 
     # ------------------------------------------------------------ coordinates
     @property
@@ -134,9 +126,6 @@ class GMS(AbstractPhysicalModel):
     def _group(self, phys: str) -> str:
         match = re.match(r"(k|alpha)\d+$", phys)
         return match.group(1) if match else super()._group(phys)
-
-    def physical_range(self, key: str) -> tuple[float, float]:
-        return (0.0, 1.0) if key == "split" else super().physical_range(key)
 
     @property
     def physical_names(self) -> tuple[str, ...]:

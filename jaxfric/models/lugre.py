@@ -37,7 +37,6 @@ from jaxtyping import Array, ArrayLike, Float
 from ._physical import (
     AbstractPhysicalModel,
     add_offset,
-    as_range,
     by_direction,
     directional_coords,
     stribeck_curve,
@@ -56,6 +55,14 @@ def _sample_time(dt, dtype) -> Array:
     if dt.ndim != 0:
         raise ValueError(f"dt must be a scalar sample time in seconds, got shape {dt.shape}")
     return dt
+
+
+def _bristle_columns(model, thetas, velocity, dt):
+    """A bristle model's inputs: physical parameters as ``(P, 1)`` columns, the velocity
+    ``(T,)`` and the checked sample time, in the dtype ``_prepare`` promotes to."""
+    thetas, v = model._prepare(thetas, velocity)
+    p = {k: x[:, None] for k, x in model.to_physical(thetas).items()}
+    return p, v, _sample_time(dt, v.dtype)
 
 
 def _phi(x: Array) -> Array:
@@ -111,10 +118,11 @@ class LuGre(AbstractPhysicalModel):
     [N s/m], ``sigma2`` [N s/m], ``Fc`` [N], ``Fs`` [N], ``vs`` [m/s].
 
     Hyperparameters (static): ``stribeck_exponent`` delta (default 2, the
-    original model); the ``*_range`` fields give (low, high) search ranges in
-    physical units (``Fs_ratio_range`` for Fs/Fc); ``None`` means the §8.5
-    default, or the data-centred range after :meth:`with_data_bounds` /
-    :meth:`for_data`. ``dt`` in :meth:`simulate` is the sample time in s.
+    original model). The search box is not a field: :func:`jaxfric.identify`
+    takes it as data, ``box={"Fc": (5, 100), "Fs_ratio": (1, 2)}`` ((low, high) in
+    physical units, ``Fs_ratio`` for Fs/Fc, a :class:`~jaxfric.models.SearchBox`);
+    entries left out are the §8.5 defaults or the data-centred ranges
+    (:meth:`search_box`). ``dt`` in :meth:`simulate` is the sample time in s.
 
     ``asymmetric=True`` (docs/algorithms.md §13.1, module docstring) replaces
     ``log10_sigma2``, ``Fc``, ``Fs_over_Fc`` by their ``_pos`` / ``_neg`` pairs
@@ -122,15 +130,8 @@ class LuGre(AbstractPhysicalModel):
     """
 
     stribeck_exponent: float = eqx.field(default=2.0, static=True, converter=float)
-    sigma0_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma1_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     asymmetric: bool = eqx.field(default=False, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
     _presliding = ("sigma0", "sigma1")
@@ -138,7 +139,6 @@ class LuGre(AbstractPhysicalModel):
     def __check_init__(self):
         if not self.stribeck_exponent > 0.0:
             raise ValueError(f"stribeck_exponent must be positive, got {self.stribeck_exponent}")
-        self._check_ranges()
 
     @property
     def _coords(self):
@@ -156,9 +156,7 @@ class LuGre(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
     ) -> Float[Array, "P T"]:
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = _sample_time(dt, v.dtype)
+        p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         vv = v[None, :]
         if self.asymmetric:
             g_pos = stribeck_curve(vv, p["Fc_pos"], p["Fs_pos"], p["vs"], self.stribeck_exponent)
@@ -186,18 +184,11 @@ class Dahl(AbstractPhysicalModel):
     """
 
     viscous: bool = eqx.field(default=False, static=True)
-    sigma0_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     asymmetric: bool = eqx.field(default=False, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     _checks_dt = True
     _presliding = ("sigma0",)
-
-    def __check_init__(self):
-        self._check_ranges()
 
     @property
     def _coords(self):
@@ -210,11 +201,9 @@ class Dahl(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
     ) -> Float[Array, "P T"]:
         """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
-        thetas, v = self._prepare(thetas, velocity)
-        p = {k: x[:, None] for k, x in self.to_physical(thetas).items()}
-        dt = _sample_time(dt, v.dtype)
+        p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         zero = jnp.zeros_like(p["sigma0"])
         vv = v[None, :]
         sigma2 = by_direction(p, "sigma2", vv) if self.viscous else zero
-        g = jnp.broadcast_to(by_direction(p, "Fc", vv), (thetas.shape[0], v.shape[0]))
+        g = jnp.broadcast_to(by_direction(p, "Fc", vv), (zero.shape[0], v.shape[0]))
         return add_offset(bristle_friction(p["sigma0"], zero, sigma2, g, v, dt), p)

@@ -28,7 +28,6 @@ from ._physical import (
     AbstractPhysicalModel,
     Unidentifiable,
     add_offset,
-    as_range,
     by_direction,
     directional_coords,
     signed_level,
@@ -45,10 +44,12 @@ def _check_v_eps(v_eps: float) -> None:
 
 def _columns(model, thetas, velocity):
     """A static model's inputs for broadcasting: physical parameters as ``(P, 1)``
-    columns and the velocity as a ``(1, T)`` row (dtypes promoted by ``_prepare``)."""
+    columns, the velocity as a ``(1, T)`` row (dtypes promoted by ``_prepare``) and the
+    smoothed sign ``t = tanh(v / v_eps)`` of that row. ``dt`` is never needed."""
     thetas, v = model._prepare(thetas, velocity)
     p = {k: x[:, None] for k, x in model.to_physical(thetas).items()}
-    return p, v[None, :]
+    vv = v[None, :]
+    return p, vv, jnp.tanh(vv / jnp.asarray(model.v_eps, vv.dtype))
 
 
 class Coulomb(AbstractPhysicalModel):
@@ -56,8 +57,9 @@ class Coulomb(AbstractPhysicalModel):
 
     Search coordinates ``Fc`` (+ ``log10_sigma2`` when ``viscous=True``, the
     default). Physical parameters: ``Fc`` [N], ``sigma2`` [N s/m].
-    Hyperparameters: ``v_eps`` [m/s] (default 1e-4), ``viscous``, and the
-    ``Fc_range`` / ``sigma2_range`` search ranges (see :class:`LuGre`).
+    Hyperparameters: ``v_eps`` [m/s] (default 1e-4) and ``viscous``; the search box
+    (entries ``Fc``, ``sigma2``) is data given to :func:`jaxfric.identify` (see
+    :class:`LuGre`).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1, the EMPS
     reference model of Janot et al. 2019 with a smoothed sign t = tanh(v / v_eps))::
@@ -65,24 +67,20 @@ class Coulomb(AbstractPhysicalModel):
         F = Fc_pos max(t, 0) - Fc_neg max(-t, 0) + sigma2_pos v [v > 0] + sigma2_neg v [v < 0] + F_off
 
     with search coordinates ``Fc_pos``, ``Fc_neg``, ``log10_sigma2_pos``,
-    ``log10_sigma2_neg``, ``F_off`` (``F_off_range``, default data-centred
+    ``log10_sigma2_neg``, ``F_off`` (box entry ``F_off``, default data-centred
     +-0.5 F). Linear in its physical parameters: :meth:`fit_least_squares`
     solves it exactly.
     """
 
     v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
     viscous: bool = eqx.field(default=True, static=True)
-    Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     asymmetric: bool = eqx.field(default=False, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     uses_dt = False
 
     def __check_init__(self):
         _check_v_eps(self.v_eps)
-        self._check_ranges()
 
     @property
     def _coords(self):
@@ -95,9 +93,7 @@ class Coulomb(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
+        p, vv, t = _columns(self, thetas, velocity)
         if self.asymmetric:
             f = signed_level(t, p, "Fc", p["Fc_pos"], p["Fc_neg"])
         else:
@@ -147,11 +143,11 @@ class Stribeck(AbstractPhysicalModel):
         F = tanh(v / v_eps) (Fc + (Fs - Fc) exp(-|v / vs|^delta)) + sigma2 v
 
     Search coordinates ``Fc``, ``Fs_over_Fc``, ``log10_vs``, ``log10_sigma2``
-    and, with ``fit_exponent=True``, ``delta`` (linear, ``delta_range``
+    and, with ``fit_exponent=True``, ``delta`` (linear, box entry ``delta``,
     default [0.5, 3]). Physical parameters: ``Fc`` [N], ``Fs`` [N], ``vs``
     [m/s], ``sigma2`` [N s/m] (+ ``delta`` [-]). Hyperparameters: ``v_eps``
     [m/s] (default 1e-4), ``exponent`` (the fixed delta, default 2),
-    ``fit_exponent`` and the ``*_range`` fields (see :class:`LuGre`).
+    ``fit_exponent``; the search box is data (see :class:`LuGre`).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): with
     ``g_pos``, ``g_neg`` the Stribeck curves of (``Fc_pos``, ``Fs_pos``) and
@@ -165,14 +161,8 @@ class Stribeck(AbstractPhysicalModel):
     v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
     exponent: float = eqx.field(default=2.0, static=True, converter=float)
     fit_exponent: bool = eqx.field(default=False, static=True)
-    Fc_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    Fs_ratio_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    delta_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
     asymmetric: bool = eqx.field(default=False, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     uses_dt = False
 
@@ -180,9 +170,6 @@ class Stribeck(AbstractPhysicalModel):
         _check_v_eps(self.v_eps)
         if not self.exponent > 0.0:
             raise ValueError(f"exponent must be positive, got {self.exponent}")
-        self._check_ranges()
-        if self.fit_exponent and self.physical_range("delta")[0] <= 0.0:
-            raise ValueError("delta_range must be positive")
 
     @property
     def _coords(self):
@@ -200,10 +187,8 @@ class Stribeck(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
+        p, vv, t = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
         if not (self.asymmetric or self.offset):
             g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
             return t * g + p["sigma2"] * vv
@@ -229,24 +214,18 @@ class Cylinder(AbstractPhysicalModel):
     ``inputs`` (a ``(2, T)`` array) or identify from a record that holds them.
 
     Search coordinates ``F_pr`` [N], ``f_cfr`` [N/Pa] (both linear, >= 0),
-    ``K_brk`` [-] (linear, range [1, 3]), ``log10_vs``, ``log10_sigma2``
+    ``K_brk`` [-] (linear, box entry default [1, 3]), ``log10_vs``, ``log10_sigma2``
     (+ ``F_off`` with ``offset=True``); with ``breakaway=False`` the Stribeck
     term and ``K_brk``, ``vs`` are dropped and the model is linear in
     ``F_pr``, ``f_cfr``, ``sigma2``. ``f_cfr``'s data-centred range is
     [0, 1.2 F / median(p1 + p2)], which needs the pressures
-    (``with_data_bounds(v, F, inputs)``).
+    (``search_box(None, v, F, inputs)``).
     """
 
     v_eps: float = eqx.field(default=1e-4, static=True, converter=float)
     exponent: float = eqx.field(default=1.0, static=True, converter=float)
     breakaway: bool = eqx.field(default=True, static=True)
     offset: bool = eqx.field(default=False, static=True)
-    F_pr_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    f_cfr_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    K_brk_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    vs_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    sigma2_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
-    F_off_range: tuple[float, float] | None = eqx.field(default=None, static=True, converter=as_range)
 
     uses_dt = False
     _low_speed = ("K_brk", "vs")
@@ -255,7 +234,6 @@ class Cylinder(AbstractPhysicalModel):
         _check_v_eps(self.v_eps)
         if not self.exponent > 0.0:
             raise ValueError(f"exponent must be positive, got {self.exponent}")
-        self._check_ranges()
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -295,8 +273,7 @@ class Cylinder(AbstractPhysicalModel):
         self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt, inputs
     ) -> Float[Array, "P T"]:
         """Friction [N] for velocity [m/s] and ``inputs = [p1, p2]`` [Pa]; ``dt`` is ignored."""
-        del dt
-        p, vv = _columns(self, thetas, velocity)
+        p, vv, t = _columns(self, thetas, velocity)
         inputs = jnp.asarray(inputs, vv.dtype)
         if inputs.shape[-1] != vv.shape[-1]:
             raise ValueError(
@@ -306,5 +283,4 @@ class Cylinder(AbstractPhysicalModel):
         level = f_c
         if self.breakaway:
             level = stribeck_curve(vv, f_c, p["K_brk"] * f_c, p["vs"], self.exponent)
-        t = jnp.tanh(vv / jnp.asarray(self.v_eps, vv.dtype))
         return add_offset(t * level + p["sigma2"] * vv, p)

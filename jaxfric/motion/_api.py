@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ..fit import Fit, load_fit, model_config, model_name, rollout_model
+from ..fit import Fit, load_fit, model_config, model_name
 from ..identification._api import _as_key, _history, _key_record, _stages, default_solver, resolve_model
 from ..identification._objective import search_dtype
 from ..identification._timing import Stopwatch
@@ -224,7 +224,7 @@ class MotionFit(Fit):
 
     def friction_step(self):
         """The per-sample :class:`jaxfric.motion.FrictionStep` of this fit's model."""
-        return friction_step(rollout_model(self.model), (self.velocity_scaler, self.friction_scaler))
+        return friction_step(self.model, (self.velocity_scaler, self.friction_scaler))
 
     def simulate(self, force, x0, v0, dt=None, *, load=None, state0=None) -> dict:
         """Free-run ``{"x", "v", "friction"}`` for actuator force [N] (``load`` opposing
@@ -346,6 +346,7 @@ def identify_motion(
     fit_offset: bool = False,
     fit_v0: bool = False,
     offset_range=None,
+    box=None,
     data_bounds: bool = True,
     dtype=None,
     model_options: dict | None = None,
@@ -369,7 +370,9 @@ def identify_motion(
             reference model's offset); range ``offset_range`` (default +-0.25 of the
             95th percentile of |force|).
         fit_v0: identify a correction of the initial velocity (range +-0.05 max|v|).
-        data_bounds: centre unset physical search ranges on the record, using the
+        box: the friction model's search box, a partial mapping physical name ->
+            (low, high) (a :class:`jaxfric.models.SearchBox`, as in :func:`jaxfric.identify`).
+        data_bounds: centre the box entries left out on the record, using the
             filtered velocity and the net force as the friction scale.
         metric_horizon: k of the k-step metrics reported beside the free run.
 
@@ -399,8 +402,7 @@ def identify_motion(
         f_level = float(np.percentile(np.abs(ut), 95.0))
         if f_level <= 0 or np.ptp(data.position[:n_train]) <= 0:
             raise ValueError("the training window has no force or no motion: nothing to identify")
-        if data_bounds:
-            model = model.with_data_bounds(vt, ut)
+        box = model.search_box(box, *((vt, ut) if data_bounds else ()))
         scalers = (None, None)
         if model.needs_scaling:
             scalers = (Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
@@ -413,7 +415,7 @@ def identify_motion(
         dtype = search_dtype(dtype)
 
         layout = Layout(model.num_params, mass_range is not None, bool(fit_offset), bool(fit_v0))
-        lower, upper = (list(b) for b in model.bounds())
+        lower, upper = (list(b) for b in model.bounds(box))
         if mass_range is not None:
             lower.append(np.log10(mass_range[0]))
             upper.append(np.log10(mass_range[1]))
@@ -436,7 +438,7 @@ def identify_motion(
             "inv_var_v": jnp.asarray(1.0 / max(np.var(vt), 1e-300), dtype),
             "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
         }
-        cost = MotionCost(rollout_model(model), layout, error, None if horizon is None else int(horizon))
+        cost = MotionCost(model, layout, error, None if horizon is None else int(horizon))
         with Stopwatch() as sw:
             sol = jax.block_until_ready(minimise(cost, solver, (lower, upper), args=args, key=key,
                                                  dtype=dtype, progress=progress))
@@ -447,7 +449,7 @@ def identify_motion(
             model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
             dt=data.dt, n_train=n_train, n_samples=n, metrics={}, stages=_stages(sol, solver),
             history=_history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
-            timings={"compile_s": sw.compile_s, "run_s": sw.run_s},
+            timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
             settings={
                 "model_name": model_name(model), "model_config": model_config(model),
                 "solver": repr(solver), "dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
