@@ -427,7 +427,7 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             pl = _fmt_params(fit.params, {d["name"] for d in m["on_bound"]}, unidentifiable_names(m["unidentifiable"]))
             if pl:
                 L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
-            if getattr(fit, "box", None):
+            if fit.box is not None:
                 L += ["", f"Search box (SI; `Fs_ratio` = Fs/Fc): {fit.box}."]
         for d in m["on_bound"]:
             L += ["", f"**On a bound:** {d['message']}."]
