@@ -1,4 +1,4 @@
-"""The paper's Table 1: MAPSO–NMDS against PSO on five test functions (+ Rastrigin).
+"""The paper's Table 1: MAPSO–NMDS against PSO and CMA-ES on five test functions (+ Rastrigin).
 
 For each dimension (default D = 30 and D = 10), each function and each solver,
 ``--runs`` independent runs (default 30) go through ONE vmapped call
@@ -13,11 +13,15 @@ For each dimension (default D = 30 and D = 10), each function and each solver,
   ``--budget`` (200 000 evaluations) is spent;
 * ``MAPSO-NMDS (sR=0.2, MAGA)``: MAGA's self-learning radius (the paper's value is
   unknown; jaxfric's default is 1.0, see ``jaxfric.MAPSO``), unless ``--no-maga``;
-* ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row.
+* ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row;
+* ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (when evosax is installed): evosax's CMA-ES
+  through :class:`jaxfric.Evosax`, alone and followed by Nelder–Mead
+  (:func:`jaxfric.cmaes_nm`), within the same budget as PSO (see ``table1_rows.py``).
 
 Writes ``table1.md``, ``table1.csv`` and ``table1_convergence.png`` to ``--out``
-(default ``benchmarks/results``). Columns: mean, sample variance (n − 1, MATLAB's
-``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
+(default ``benchmarks/results``; all three are rewritten after every function, so an
+interrupted run keeps what finished). Columns: mean, sample standard deviation and
+variance (n − 1, MATLAB's ``std``/``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
 first history entry ≤ 1e-8, over the successful runs; the history is a fixed-size
 record, so this is exact to within one history stride), evaluations per
 run, and time: compile time apart from the run time of the whole batch and per run.
@@ -31,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import platform
 import sys
 from pathlib import Path
@@ -73,6 +78,7 @@ def summarise(label, fn_name, dim, sol, compile_s, run_s):
         "function": fn_name,
         "solver": label,
         "mean": float(np.mean(f)),
+        "std": float(np.std(f, ddof=1)) if f.size > 1 else 0.0,
         "variance": float(np.var(f, ddof=1)) if f.size > 1 else 0.0,
         "best": float(np.min(f)),
         "worst": float(np.max(f)),
@@ -149,6 +155,7 @@ def main(argv=None):
     out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
 
+    a.load = os.getloadavg()[0]  # the machine may be shared: say how busy it was at the start
     keys = jax.random.split(jax.random.key(a.seed), a.runs)
     rows, curves = [], {}
     for dim in dims:
@@ -174,43 +181,53 @@ def main(argv=None):
                     f"(max {row['evals_max']}) compile={c:.1f}s run={r:.1f}s",
                     flush=True,
                 )
-
-    write_csv(rows, out / "table1.csv", float_format="")
-    write_md(out / "table1.md", rows, a, dims)
-    plot(out / "table1_convergence.png", curves, a)
+            write_csv(rows, out / "table1.csv", float_format="")
+            write_md(out / "table1.md", rows, a, dims)
+            plot(out / "table1_convergence.png", curves, a)
     print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
 
 
 def write_md(path, rows, a, dims):
     lines = [
-        "# Table 1: MAPSO–NMDS against PSO",
+        "# Table 1: MAPSO–NMDS against PSO and CMA-ES",
         "",
         f"D = {', '.join(map(str, dims))}; {a.runs} independent runs per function and solver (one vmapped "
         f"call each), lattice 5×5, float64. Paper row: MAPSO G = {a.generations}, then Nelder–Mead with "
         f"fminsearch's budget. Restart row: G = {a.restart_generations}, sGen = {a.restart_sl_generations}, "
         "then Nelder–Mead restarted from "
         f"its own result (at most {a.nm_restarts} restarts) within {a.budget} evaluations in total. "
-        "PSO (25 particles) gets the largest evaluation count of the paper row. Success: f ≤ 1e-8; "
+        "PSO (25 particles), CMA-ES (evosax, population 4 + ⌊3 ln D⌋, σ₀ = 0.3 box widths) and "
+        "CMA-ES→NM (80 % of the budget to CMA-ES, the rest to Nelder–Mead) get the largest evaluation "
+        "count of the paper row. Success: f ≤ 1e-8; "
         "evaluations to success: median over the successful runs of the first history entry ≤ 1e-8. "
         "Variance: sample (n − 1). Time: compile once, then the whole batch of runs; per run = batch / runs.",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {jax.device_count()} "
         f"{jax.default_backend()} device(s), jax {jax.__version__}, jaxfric {jf.__version__}, "
-        f"Python {sys.version.split()[0]}. Re-run: `python benchmarks/table1.py`"
+        f"Python {sys.version.split()[0]}; {os.cpu_count()} CPU(s) shared with other jobs, load average "
+        f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py`"
         + (" --quick" if a.quick else "")
+        + (" --no-maga" if a.no_maga else "")
         + ".",
         "",
-        "| D | function | solver | mean | variance | best | worst | success | evals to success (median) "
+        "| D | function | solver | mean | std | variance | best | worst | success | evals to success (median) "
         "| evals/run (mean, max) | compile s | batch s | s/run |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         e2s = "–" if math.isnan(r["evals_to_success"]) else f"{r['evals_to_success']:.0f}"
         lines.append(
-            f"| {r['dim']} | {r['function']} | {r['solver']} | {r['mean']:.3e} | {r['variance']:.3e} | "
+            f"| {r['dim']} | {r['function']} | {r['solver']} | {r['mean']:.3e} | {r['std']:.2e} | {r['variance']:.3e} | "
             f"{r['best']:.3e} | {r['worst']:.3e} | {r['solved']}/{r['runs']} | {e2s} | "
             f"{r['evals']}, {r['evals_max']} | {r['compile_s']:.1f} | {r['batch_s']:.1f} | {r['per_run_s']:.2f} |"
         )
+    lines += ["", "## What each row reached", ""]
+    for (dim, name) in dict.fromkeys((r["dim"], r["function"]) for r in rows):
+        parts = []
+        for r in (r for r in rows if r["dim"] == dim and r["function"] == name):
+            e2s = "" if math.isnan(r["evals_to_success"]) else f" (median {r['evals_to_success']:.0f} evals)"
+            parts.append(f"{r['solver']} {r['solved']}/{r['runs']}{e2s}")
+        lines.append(f"- D = {dim}, {name}: " + "; ".join(parts) + ".")
     Path(path).write_text("\n".join(lines) + "\n")
 
 
