@@ -24,7 +24,8 @@ interrupted run keeps what finished). Columns: mean, sample standard deviation a
 variance (n − 1, MATLAB's ``std``/``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
 first history entry ≤ 1e-8, over the successful runs; the history is a fixed-size
 record, so this is exact to within one history stride), evaluations per
-run, and time: compile time apart from the run time of the whole batch and per run.
+run, and time: one call per row, its compile time (JAX's compile events) apart from
+the run time of the whole batch and per run.
 
     python benchmarks/table1.py                 # the full table (tens of minutes on 2 cores)
     python benchmarks/table1.py --dims 30 --functions rosenbrock --no-maga
@@ -200,7 +201,8 @@ def write_md(path, rows, a, dims):
         "CMA-ES→NM (80 % of the budget to CMA-ES, the rest to Nelder–Mead) get the largest evaluation "
         "count of the paper row. Success: f ≤ 1e-8; "
         "evaluations to success: median over the successful runs of the first history entry ≤ 1e-8. "
-        "Variance: sample (n − 1). Time: compile once, then the whole batch of runs; per run = batch / runs.",
+        "Std and variance: sample (n − 1). Time: one call per row (all runs), split into compilation "
+        "(JAX's compile events) and the run of the whole batch; per run = batch / runs.",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {jax.device_count()} "
         f"{jax.default_backend()} device(s), jax {jax.__version__}, jaxfric {jf.__version__}, "
