@@ -7,7 +7,8 @@ Two entry points:
   and summary then treat these rows like MAPSO–NMDS's and PSO's);
 * :func:`evosax_rows` / ``python benchmarks/table1_rows.py`` — standalone: the rows with
   mean, std, best, worst, success (f ≤ 1e-8), median evaluations to success and time,
-  written to ``table1_evosax.md``/``.csv``.
+  written to ``table1_evosax.md``/``.csv`` (a quick look at these rows alone; the
+  committed table is ``table1.md``, where ``table1.py`` includes them).
 
 Budgets. ``budget`` is the most evaluations a run may use (default: MAPSO–NMDS's own
 worst case at G = 1000, ``mapso_nmds(num_generations=1000).max_evaluations(D)``).
