@@ -30,6 +30,12 @@ the run time of the whole batch and per run.
     python benchmarks/table1.py                 # the full table (tens of minutes on 2 cores)
     python benchmarks/table1.py --dims 30 --functions rosenbrock --no-maga
     python benchmarks/table1.py --quick         # D = 10, 5 runs, 100 generations
+    # the two dimensions as two processes (twice the CPU share on a busy machine), then one table:
+    python benchmarks/table1.py --dims 30 --out a & python benchmarks/table1.py --dims 10 --out b
+    python benchmarks/table1.py --merge a,b     # rows and curves of both into --out
+
+Besides the table, every run saves its median curves (``table1_curves.npz``) so
+``--merge`` can redraw the figure.
 """
 
 from __future__ import annotations
@@ -142,6 +148,11 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
     p.add_argument("--out", default=None)
+    p.add_argument("--merge", default=None,
+                   help="comma-separated output folders of runs on other dimensions: write one table "
+                        "from them (no runs; the settings given here must match theirs)")
+    p.add_argument("--load", type=float, default=None,
+                   help="with --merge: the load average at the runs' start, for the header")
     a = p.parse_args(argv)
     dims = [a.dim] if a.dim is not None else [int(d) for d in a.dims.split(",")]
     if a.quick:
@@ -155,6 +166,9 @@ def main(argv=None):
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
     out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
+    if a.merge:
+        a.load = a.load if a.load is not None else float("nan")
+        return merge(a, out)
 
     a.load = os.getloadavg()[0]  # the machine may be shared: say how busy it was at the start
     keys = jax.random.split(jax.random.key(a.seed), a.runs)
@@ -182,10 +196,41 @@ def main(argv=None):
                     f"(max {row['evals_max']}) compile={c:.1f}s run={r:.1f}s",
                     flush=True,
                 )
-            write_csv(rows, out / "table1.csv", float_format="")
-            write_md(out / "table1.md", rows, a, dims)
-            plot(out / "table1_convergence.png", curves, a)
+            write_all(out, rows, curves, a, dims)
     print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
+
+
+def write_all(out, rows, curves, a, dims):
+    write_csv(rows, out / "table1.csv", float_format="")
+    np.savez_compressed(out / "table1_curves.npz",
+                        **{f"{d}|{fn}|{label}": np.stack(gm) for (d, fn, label), gm in curves.items()})
+    write_md(out / "table1.md", rows, a, dims)
+    plot(out / "table1_convergence.png", curves, a)
+
+
+def merge(a, out):
+    """One table from the outputs of runs on disjoint dimensions (``--merge a,b``)."""
+    import csv
+
+    def num(v):
+        for t in (int, float):
+            try:
+                return t(v)
+            except ValueError:
+                pass
+        return v
+
+    rows, curves = [], {}
+    for d in a.merge.split(","):
+        with open(Path(d) / "table1.csv") as fh:
+            rows += [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        with np.load(Path(d) / "table1_curves.npz") as z:
+            for k in z.files:
+                dim, fn, label = k.split("|", 2)
+                curves[(int(dim), fn, label)] = tuple(z[k])
+    dims = list(dict.fromkeys(r["dim"] for r in rows))
+    write_all(out, rows, curves, a, dims)
+    print(f"merged {a.merge} into {out / 'table1.md'}")
 
 
 def write_md(path, rows, a, dims):
