@@ -182,8 +182,9 @@ def write(out: Path, rows, a):
         f"then NelderMead(max_evals={a.nm_evals}); then, for the ENN only, identify's default "
         "gradient stage (500 BFGS steps on the training window), for LuGre none. "
         f"Keys 0..{a.keys - 1}. "
-        "Median [min – max] over keys. Run s: optimiser run without compilation "
-        "(identify's timing).",
+        "Median [min – max] over keys; global evals: min–max over keys (CMA-ES ends early when "
+        "its step size underflows). Run s: median over keys of the global + Nelder–Mead run "
+        "without compilation (identify's timing; the BFGS stage's time not included).",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} CPU(s) shared with other jobs "
         f"(load average {a.load:.1f} at the start; timings noisy), jax {jax.__version__}, "
@@ -202,9 +203,13 @@ def write(out: Path, rows, a):
         return f"{fmt(np.median(v))} [{fmt(v.min())} – {fmt(v.max())}]"
 
     g3 = lambda x: f"{x:.3g}"  # noqa: E731
+
+    def evals(rs):
+        v = sorted({int(r["num_evals_global"]) for r in rs})
+        return str(v[0]) if len(v) == 1 else f"{v[0]}–{v[-1]}"
     for (d, m, g), rs in groups.items():
         lines.append(
-            f"| {d} | {m} | {g} | {rs[0]['num_evals_global']} | "
+            f"| {d} | {m} | {g} | {evals(rs)} | "
             f"{mm([r['valid_mse_pct'] for r in rs], g3)} | {mm([r['train_mse_pct'] for r in rs], g3)} | "
             f"{mm([r['J_global'] for r in rs], g3)} | {mm([r['J'] for r in rs], g3)} | "
             f"{np.median([r['run_s'] for r in rs]):.1f} |")
