@@ -148,6 +148,9 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
     p.add_argument("--out", default=None)
+    p.add_argument("--rows", choices=("all", "swarm", "cmaes"), default="all",
+                   help="swarm: the MAPSO-NMDS rows and PSO; cmaes: the paper row (it sets the "
+                        "budget) and the CMA-ES rows; split to run as separate processes, then --merge")
     p.add_argument("--merge", default=None,
                    help="comma-separated output folders of runs on other dimensions: write one table "
                         "from them (no runs; the settings given here must match theirs)")
@@ -176,14 +179,16 @@ def main(argv=None):
     for dim in dims:
         for name in a.functions.split(","):
             results = []
-            for label, solver in variants(a, dim):
+            rows_here = variants(a, dim) if a.rows != "cmaes" else variants(a, dim)[:1]
+            for label, solver in rows_here:  # the paper row also sets the others' budget
                 sol, c, r = timed_batch(name, solver, dim, keys)
                 results.append((label, sol, c, r))
             budget = int(np.max(np.asarray(results[0][1].stats["num_evals"])))
-            pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
-            sol, c, r = timed_batch(name, pso, dim, keys)
-            results.append(("PSO (equal evaluations)", sol, c, r))
-            if table1_rows.have_evosax():  # issue 16 item 3: CMA-ES, CMA-ES→NM at this budget
+            if a.rows != "cmaes":
+                pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
+                sol, c, r = timed_batch(name, pso, dim, keys)
+                results.append(("PSO (equal evaluations)", sol, c, r))
+            if a.rows != "swarm" and table1_rows.have_evosax():  # CMA-ES, CMA-ES→NM at this budget
                 results += table1_rows.evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
@@ -229,6 +234,15 @@ def merge(a, out):
                 dim, fn, label = k.split("|", 2)
                 curves[(int(dim), fn, label)] = tuple(z[k])
     dims = list(dict.fromkeys(r["dim"] for r in rows))
+    # one row per (D, function, solver), in the order a single run writes them
+    fn_order = list(F.PAPER_TABLE1 + tuple(F.REGISTRY))
+    labels = ["MAPSO-NMDS (paper)", "MAPSO-NMDS + NM restarts", "MAPSO-NMDS (sR=0.2, MAGA)",
+              "PSO (equal evaluations)", "CMA-ES (evosax)", "CMA-ES→NM"]
+    unique = {}
+    for r in rows:
+        unique.setdefault((r["dim"], r["function"], r["solver"]), r)
+    rows = sorted(unique.values(), key=lambda r: (dims.index(r["dim"]), fn_order.index(r["function"]),
+                                                  labels.index(r["solver"]) if r["solver"] in labels else 99))
     write_all(out, rows, curves, a, dims)
     print(f"merged {a.merge} into {out / 'table1.md'}")
 
