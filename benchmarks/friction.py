@@ -338,7 +338,11 @@ def write_markdown(out, rows, files, meta):
         "stated window (§6); MAX = max|e| [N]; FIT % = 100·(1 − ‖e‖/‖F − mean F‖). "
         f"Machine: {meta['machine']}, {meta['cores']} CPU cores, load average "
         f"{meta['load']:.1f} at the start: other jobs shared the machine, so times are upper "
-        f"bounds. jax {meta['jax']}.\n")
+        f"bounds. jax {meta['jax']}, "
+        + (f"jaxfric {meta['jaxfric']}" if "jaxfric" in meta else
+           "jaxfric version not recorded (a run before 0.7: its default rows predate the 0.7 "
+           "pipeline described below)")
+        + ".\n")
     add("`identify`'s default pipeline for the networks (`method=\"jaxfric\"`, 0.7): MAPSO on an 8×8 "
         f"lattice for G = {FAST_GENERATIONS_BLACK_BOX} generations on the first "
         f"{GLOBAL_STAGE_SAMPLES} training samples (all {meta['n_train']} here), then "
@@ -546,6 +550,7 @@ def main(argv=None):
     args = parse(argv)
     if args.x64:
         jax.config.update("jax_enable_x64", True)
+    import jaxfric
     from jaxfric import rig
 
     out = results_dir(args.out, quick=args.quick)
@@ -565,7 +570,8 @@ def main(argv=None):
                 "n_train": data.n_train, "fs": 1.0 / float(data.dt),
                 "dtype": "float64" if args.x64 else "float32",
                 "machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                "load": load, "jax": jax.__version__, "wall": time.perf_counter() - t_start}
+                "load": load, "jax": jax.__version__, "jaxfric": jaxfric.__version__,
+                "wall": time.perf_counter() - t_start}
         meta_path.write_text(json.dumps(meta, indent=1) + "\n")
     write_markdown(out, rows, files, meta)
     print(f"wrote {out / 'friction.md'}, friction.csv and {len(files)} figures")
