@@ -266,10 +266,13 @@ def write_md(path, rows, a, dims):
         f"Machine: {platform.processor() or platform.machine()}, {jax.device_count()} "
         f"{jax.default_backend()} device(s), jax {jax.__version__}, jaxfric {jf.__version__}, "
         f"Python {sys.version.split()[0]}; {os.cpu_count()} CPU(s) shared with other jobs, load average "
-        f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py`"
+        f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py"
         + (" --quick" if a.quick else "")
         + (" --no-maga" if a.no_maga else "")
-        + ".",
+        + "`."
+        + (f" This table was merged (`--merge`) from {len(a.merge.split(','))} processes that ran "
+           "the same settings on parts of it at the same time (`--dims`, `--rows`, `--functions`), "
+           "so their times are each other's load too." if a.merge else ""),
         "",
         "| D | function | solver | mean | std | variance | best | worst | success | evals to success (median) "
         "| evals/run (mean, max) | compile s | batch s | s/run |",
