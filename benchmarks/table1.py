@@ -243,6 +243,10 @@ def merge(a, out):
         unique.setdefault((r["dim"], r["function"], r["solver"]), r)
     rows = sorted(unique.values(), key=lambda r: (dims.index(r["dim"]), fn_order.index(r["function"]),
                                                   labels.index(r["solver"]) if r["solver"] in labels else 99))
+    wanted = [lab for lab in labels if not (a.no_maga and "MAGA" in lab)]
+    a.missing = [f"D = {d}, {fn}: {', '.join(lab for lab in wanted if (d, fn, lab) not in unique)}"
+                 for d in [int(x) for x in a.dims.split(",")] for fn in a.functions.split(",")
+                 if any((d, fn, lab) not in unique for lab in wanted)]
     write_all(out, rows, curves, a, dims)
     print(f"merged {a.merge} into {out / 'table1.md'}")
 
@@ -292,6 +296,9 @@ def write_md(path, rows, a, dims):
             e2s = "" if math.isnan(r["evals_to_success"]) else f" (median {r['evals_to_success']:.0f} evals)"
             parts.append(f"{r['solver']} {r['solved']}/{r['runs']}{e2s}")
         lines.append(f"- D = {dim}, {name}: " + "; ".join(parts) + ".")
+    if getattr(a, "missing", None):
+        lines += ["", "## Not run (the processes were stopped at the deadline)", ""]
+        lines += [f"- {m}" for m in a.missing]
     Path(path).write_text("\n".join(lines) + "\n")
 
 
