@@ -14,11 +14,17 @@ no gradient stage) on
   at each end, then every ``--emps-decimate``-th sample (default 10: 100 Hz, about
   2480 samples, so one rollout costs about what the rig's does); last 20 % validation.
 
-Equal budgets: MAPSO runs ``--generations`` generations (lattice 8×8 for the ENN, 5×5
-for LuGre, as :func:`jaxfric.identification.default_solver`); PSO (same number of
-particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`, population
-4 + ⌊3 ln D⌋) get generations so that their evaluations do not exceed MAPSO's. The
-same ``NelderMead(max_evals=--nm-evals)`` follows each. Per key: validation and
+Equal budgets: MAPSO runs ``--generations`` generations for LuGre (5×5 lattice) and
+``--enn-generations`` for the ENN (8×8, as :func:`jaxfric.identification.default_solver`);
+PSO (same number of particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`,
+population 4 + ⌊3 ln D⌋) get generations so that their evaluations do not exceed MAPSO's.
+For models with more than ``LARGE_MODEL_PARAMS`` parameters (the ENN, 180) the CMA-ES
+row is evosax's ``Sep_CMA_ES`` (diagonal covariance): full CMA-ES eigendecomposes its
+D×D covariance every generation, and ``jnp.linalg.eigh`` of a 180×180 matrix takes
+0.2–0.9 s on this CPU (measured), 40 ms per evaluation against MAPSO's 0.16 ms. The
+same ``NelderMead(max_evals=--nm-evals)`` follows each; for the ENN ``identify`` then
+runs its default gradient stage (``refine=None``: 500 BFGS steps under the default
+``method="jaxfric"``), for LuGre none. Per key: validation and
 training MSE %, the global stage's J, evaluations, run time; the first key's call
 includes compilation (reported apart).
 
@@ -93,22 +99,33 @@ def datasets(names):
     return out
 
 
+def cma_strategy(n: int) -> str:
+    """Full CMA-ES for small models, the diagonal Sep-CMA-ES for the networks (module docstring)."""
+    return "Sep_CMA_ES" if n > LARGE_MODEL_PARAMS else "CMA_ES"
+
+
 def solvers(model_name: str, n: int, generations: int, nm_evals: int):
     """The three chains at equal global budgets (MAPSO's evaluation count)."""
     lattice = 8 if n > LARGE_MODEL_PARAMS else 5
     mapso = jf.MAPSO(lattice_size=lattice, num_generations=generations)
     budget = mapso.evaluations()
     pso = jf.PSO(num_particles=lattice**2, num_generations=max(1, budget // lattice**2 - 1))
-    cma = jf.Evosax("CMA_ES", num_generations=1)
-    cma = jf.Evosax("CMA_ES", num_generations=max(1, (budget - 1) // cma.population(n)))
+    strategy = cma_strategy(n)
+    cma = jf.Evosax(strategy, num_generations=1)
+    cma = jf.Evosax(strategy, num_generations=max(1, (budget - 1) // cma.population(n)))
     nm = jf.NelderMead(max_steps=200 * n, max_evals=nm_evals)
-    return budget, {"MAPSO": jf.chain(mapso, nm), "CMA-ES": jf.chain(cma, nm),
+    label = "Sep-CMA-ES" if strategy == "Sep_CMA_ES" else "CMA-ES"
+    return budget, {"MAPSO": jf.chain(mapso, nm), label: jf.chain(cma, nm),
                     "PSO": jf.chain(pso, nm)}
 
 
 def run(data_name, data, model_name, keys, generations, nm_evals):
     """Yields one row per (global stage, key)."""
     model = jf.models.get(model_name, **NAMED_MODEL_DEFAULTS.get(model_name, {}))
+    if model.num_params > LARGE_MODEL_PARAMS:
+        generations = generations[1]
+    else:
+        generations = generations[0]
     budget, chains = solvers(model_name, model.num_params, generations, nm_evals)
     for label, solver in chains.items():
         for i, k in enumerate(keys):
@@ -134,6 +151,22 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
             yield row
 
 
+def read_csv(path: Path) -> list[dict]:
+    import csv
+
+    def num(v):
+        try:
+            return int(v)
+        except ValueError:
+            try:
+                return float(v)
+            except ValueError:
+                return v
+
+    with open(path) as fh:
+        return [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
 def write(out: Path, rows, a):
     out.mkdir(parents=True, exist_ok=True)
     write_csv(rows, out / "global_stages.csv", float_format="")
@@ -141,18 +174,25 @@ def write(out: Path, rows, a):
         "# Global stages on the main job: MAPSO vs CMA-ES vs PSO, then the same Nelder–Mead",
         "",
         f"`python benchmarks/global_stages.py --data {a.data} --models {a.models} --keys {a.keys} "
-        f"--generations {a.generations} --nm-evals {a.nm_evals}`. MAPSO G = {a.generations} "
-        "(8×8 for the ENN, 5×5 for LuGre); PSO (same particle count) and CMA-ES (evosax, "
-        "population 4 + ⌊3 ln D⌋, box-scaled σ₀ = 0.3) get at most MAPSO's evaluations; "
-        f"then NelderMead(max_evals={a.nm_evals}); no gradient stage. Keys 0..{a.keys - 1}. "
-        "Median [min – max] over keys. Run s: optimiser run without compilation "
-        "(identify's timing).",
+        f"--generations {a.generations} --enn-generations {a.enn_generations} --nm-evals {a.nm_evals}`. "
+        f"MAPSO G = {a.generations} (LuGre, 5×5 lattice), {a.enn_generations} (ENN, 8×8); PSO (same "
+        "particle count) and CMA-ES (evosax, population 4 + ⌊3 ln D⌋, box-scaled σ₀ = 0.3; for the "
+        "ENN's 180 parameters the diagonal Sep-CMA-ES, because full CMA-ES's 180×180 "
+        "eigendecomposition per generation costs 0.2–0.9 s here) get at most MAPSO's evaluations; "
+        f"then NelderMead(max_evals={a.nm_evals}); then, for the ENN only, identify's default "
+        "gradient stage (500 BFGS steps on the training window), for LuGre none. "
+        f"Keys 0..{a.keys - 1}. "
+        "Median [min – max] over keys; global evals: min–max over keys (CMA-ES ends early when "
+        "its step size underflows). Run s: median over keys of the global + Nelder–Mead run "
+        "without compilation (identify's timing; the BFGS stage's time not included).",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} CPU(s) shared with other jobs "
-        f"(timings noisy), jax {jax.__version__}, jaxfric {jf.__version__}.",
+        f"(load average {a.load:.1f} at the start; timings noisy), jax {jax.__version__}, "
+        f"jaxfric {jf.__version__}.",
         "",
-        "| data | model | global stage | global evals | valid MSE % | train MSE % | J after global | run s |",
-        "|---|---|---|---|---|---|---|---|",
+        "| data | model | global stage | global evals | valid MSE % | train MSE % | J after global "
+        "| J final | run s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     groups = {}
     for r in rows:
@@ -163,11 +203,16 @@ def write(out: Path, rows, a):
         return f"{fmt(np.median(v))} [{fmt(v.min())} – {fmt(v.max())}]"
 
     g3 = lambda x: f"{x:.3g}"  # noqa: E731
+
+    def evals(rs):
+        v = sorted({int(r["num_evals_global"]) for r in rs})
+        return str(v[0]) if len(v) == 1 else f"{v[0]}–{v[-1]}"
     for (d, m, g), rs in groups.items():
         lines.append(
-            f"| {d} | {m} | {g} | {rs[0]['num_evals_global']} | "
+            f"| {d} | {m} | {g} | {evals(rs)} | "
             f"{mm([r['valid_mse_pct'] for r in rs], g3)} | {mm([r['train_mse_pct'] for r in rs], g3)} | "
-            f"{mm([r['J_global'] for r in rs], g3)} | {np.median([r['run_s'] for r in rs]):.1f} |")
+            f"{mm([r['J_global'] for r in rs], g3)} | {mm([r['J'] for r in rs], g3)} | "
+            f"{np.median([r['run_s'] for r in rs]):.1f} |")
     (out / "global_stages.md").write_text("\n".join(lines) + "\n")
 
 
@@ -177,15 +222,27 @@ def main(argv=None):
     p.add_argument("--data", default="rig,emps")
     p.add_argument("--models", default="lugre,elman")
     p.add_argument("--keys", type=int, default=5)
-    p.add_argument("--generations", type=int, default=100, help="MAPSO generations")
-    p.add_argument("--nm-evals", type=int, default=2000)
+    p.add_argument("--generations", type=int, default=100, help="MAPSO generations (LuGre)")
+    p.add_argument("--enn-generations", type=int, default=50,
+                   help="MAPSO generations for the ENN (identify's default network pipeline uses 50)")
+    p.add_argument("--nm-evals", type=int, default=1000)
     p.add_argument("--out", default=None)
+    p.add_argument("--report-only", action="store_true",
+                   help="rewrite global_stages.md from global_stages.csv in --out (no runs)")
+    p.add_argument("--report-only-load", default=None, help="load average at the original run's start")
     a = p.parse_args(argv)
     a.out = results_dir(a.out, quick=getattr(a, "quick", False))
+    a.load = os.getloadavg()[0]
+    if a.report_only:  # rewrite the table from the CSV of an earlier run
+        rows = read_csv(Path(a.out) / "global_stages.csv")
+        a.load = float(a.report_only_load) if a.report_only_load is not None else a.load
+        write(Path(a.out), rows, a)
+        return
     rows = []
     for dname, data in datasets(a.data.split(",")).items():
         for model_name in a.models.split(","):
-            for row in run(dname, data, model_name, range(a.keys), a.generations, a.nm_evals):
+            for row in run(dname, data, model_name, range(a.keys),
+                           (a.generations, a.enn_generations), a.nm_evals):
                 rows.append(row)
                 write(Path(a.out), rows, a)  # partial results survive an interruption
     print(f"wrote {Path(a.out) / 'global_stages.md'}")

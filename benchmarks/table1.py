@@ -1,4 +1,4 @@
-"""The paper's Table 1: MAPSO–NMDS against PSO on five test functions (+ Rastrigin).
+"""The paper's Table 1: MAPSO–NMDS against PSO and CMA-ES on five test functions (+ Rastrigin).
 
 For each dimension (default D = 30 and D = 10), each function and each solver,
 ``--runs`` independent runs (default 30) go through ONE vmapped call
@@ -13,24 +13,36 @@ For each dimension (default D = 30 and D = 10), each function and each solver,
   ``--budget`` (200 000 evaluations) is spent;
 * ``MAPSO-NMDS (sR=0.2, MAGA)``: MAGA's self-learning radius (the paper's value is
   unknown; jaxfric's default is 1.0, see ``jaxfric.MAPSO``), unless ``--no-maga``;
-* ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row.
+* ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row;
+* ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (when evosax is installed): evosax's CMA-ES
+  through :class:`jaxfric.Evosax`, alone and followed by Nelder–Mead
+  (:func:`jaxfric.cmaes_nm`), within the same budget as PSO (see ``table1_rows.py``).
 
 Writes ``table1.md``, ``table1.csv`` and ``table1_convergence.png`` to ``--out``
-(default ``benchmarks/results``). Columns: mean, sample variance (n − 1, MATLAB's
-``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
+(default ``benchmarks/results``; all three are rewritten after every function, so an
+interrupted run keeps what finished). Columns: mean, sample standard deviation and
+variance (n − 1, MATLAB's ``std``/``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
 first history entry ≤ 1e-8, over the successful runs; the history is a fixed-size
 record, so this is exact to within one history stride), evaluations per
-run, and time: compile time apart from the run time of the whole batch and per run.
+run, and time: one call per row, its compile time (JAX's compile events) apart from
+the run time of the whole batch and per run.
 
     python benchmarks/table1.py                 # the full table (tens of minutes on 2 cores)
     python benchmarks/table1.py --dims 30 --functions rosenbrock --no-maga
     python benchmarks/table1.py --quick         # D = 10, 5 runs, 100 generations
+    # the two dimensions as two processes (twice the CPU share on a busy machine), then one table:
+    python benchmarks/table1.py --dims 30 --out a & python benchmarks/table1.py --dims 10 --out b
+    python benchmarks/table1.py --merge a,b     # rows and curves of both into --out
+
+Besides the table, every run saves its median curves (``table1_curves.npz``) so
+``--merge`` can redraw the figure.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import platform
 import sys
 from pathlib import Path
@@ -73,6 +85,7 @@ def summarise(label, fn_name, dim, sol, compile_s, run_s):
         "function": fn_name,
         "solver": label,
         "mean": float(np.mean(f)),
+        "std": float(np.std(f, ddof=1)) if f.size > 1 else 0.0,
         "variance": float(np.var(f, ddof=1)) if f.size > 1 else 0.0,
         "best": float(np.min(f)),
         "worst": float(np.max(f)),
@@ -135,6 +148,14 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
     p.add_argument("--out", default=None)
+    p.add_argument("--rows", choices=("all", "swarm", "cmaes"), default="all",
+                   help="swarm: the MAPSO-NMDS rows and PSO; cmaes: the paper row (it sets the "
+                        "budget) and the CMA-ES rows; split to run as separate processes, then --merge")
+    p.add_argument("--merge", default=None,
+                   help="comma-separated output folders of runs on other dimensions: write one table "
+                        "from them (no runs; the settings given here must match theirs)")
+    p.add_argument("--load", type=float, default=None,
+                   help="with --merge: the load average at the runs' start, for the header")
     a = p.parse_args(argv)
     dims = [a.dim] if a.dim is not None else [int(d) for d in a.dims.split(",")]
     if a.quick:
@@ -148,20 +169,26 @@ def main(argv=None):
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
     out = results_dir(a.out, quick=a.quick)
     out.mkdir(parents=True, exist_ok=True)
+    if a.merge:
+        a.load = a.load if a.load is not None else float("nan")
+        return merge(a, out)
 
+    a.load = os.getloadavg()[0]  # the machine may be shared: say how busy it was at the start
     keys = jax.random.split(jax.random.key(a.seed), a.runs)
     rows, curves = [], {}
     for dim in dims:
         for name in a.functions.split(","):
             results = []
-            for label, solver in variants(a, dim):
+            rows_here = variants(a, dim) if a.rows != "cmaes" else variants(a, dim)[:1]
+            for label, solver in rows_here:  # the paper row also sets the others' budget
                 sol, c, r = timed_batch(name, solver, dim, keys)
                 results.append((label, sol, c, r))
             budget = int(np.max(np.asarray(results[0][1].stats["num_evals"])))
-            pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
-            sol, c, r = timed_batch(name, pso, dim, keys)
-            results.append(("PSO (equal evaluations)", sol, c, r))
-            if table1_rows.have_evosax():  # issue 16 item 3: CMA-ES, CMA-ES→NM at this budget
+            if a.rows != "cmaes":
+                pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
+                sol, c, r = timed_batch(name, pso, dim, keys)
+                results.append(("PSO (equal evaluations)", sol, c, r))
+            if a.rows != "swarm" and table1_rows.have_evosax():  # CMA-ES, CMA-ES→NM at this budget
                 results += table1_rows.evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
@@ -174,43 +201,104 @@ def main(argv=None):
                     f"(max {row['evals_max']}) compile={c:.1f}s run={r:.1f}s",
                     flush=True,
                 )
+            write_all(out, rows, curves, a, dims)
+    print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
 
+
+def write_all(out, rows, curves, a, dims):
     write_csv(rows, out / "table1.csv", float_format="")
+    np.savez_compressed(out / "table1_curves.npz",
+                        **{f"{d}|{fn}|{label}": np.stack(gm) for (d, fn, label), gm in curves.items()})
     write_md(out / "table1.md", rows, a, dims)
     plot(out / "table1_convergence.png", curves, a)
-    print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
+
+
+def merge(a, out):
+    """One table from the outputs of runs on disjoint dimensions (``--merge a,b``)."""
+    import csv
+
+    def num(v):
+        for t in (int, float):
+            try:
+                return t(v)
+            except ValueError:
+                pass
+        return v
+
+    rows, curves = [], {}
+    for d in a.merge.split(","):
+        with open(Path(d) / "table1.csv") as fh:
+            rows += [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        with np.load(Path(d) / "table1_curves.npz") as z:
+            for k in z.files:
+                dim, fn, label = k.split("|", 2)
+                curves[(int(dim), fn, label)] = tuple(z[k])
+    dims = list(dict.fromkeys(r["dim"] for r in rows))
+    # one row per (D, function, solver), in the order a single run writes them
+    fn_order = list(F.PAPER_TABLE1 + tuple(F.REGISTRY))
+    labels = ["MAPSO-NMDS (paper)", "MAPSO-NMDS + NM restarts", "MAPSO-NMDS (sR=0.2, MAGA)",
+              "PSO (equal evaluations)", "CMA-ES (evosax)", "CMA-ES→NM"]
+    unique = {}
+    for r in rows:
+        unique.setdefault((r["dim"], r["function"], r["solver"]), r)
+    rows = sorted(unique.values(), key=lambda r: (dims.index(r["dim"]), fn_order.index(r["function"]),
+                                                  labels.index(r["solver"]) if r["solver"] in labels else 99))
+    wanted = [lab for lab in labels if not (a.no_maga and "MAGA" in lab)]
+    a.missing = [f"D = {d}, {fn}: {', '.join(lab for lab in wanted if (d, fn, lab) not in unique)}"
+                 for d in [int(x) for x in a.dims.split(",")] for fn in a.functions.split(",")
+                 if any((d, fn, lab) not in unique for lab in wanted)]
+    write_all(out, rows, curves, a, dims)
+    print(f"merged {a.merge} into {out / 'table1.md'}")
 
 
 def write_md(path, rows, a, dims):
     lines = [
-        "# Table 1: MAPSO–NMDS against PSO",
+        "# Table 1: MAPSO–NMDS against PSO and CMA-ES",
         "",
         f"D = {', '.join(map(str, dims))}; {a.runs} independent runs per function and solver (one vmapped "
         f"call each), lattice 5×5, float64. Paper row: MAPSO G = {a.generations}, then Nelder–Mead with "
         f"fminsearch's budget. Restart row: G = {a.restart_generations}, sGen = {a.restart_sl_generations}, "
         "then Nelder–Mead restarted from "
         f"its own result (at most {a.nm_restarts} restarts) within {a.budget} evaluations in total. "
-        "PSO (25 particles) gets the largest evaluation count of the paper row. Success: f ≤ 1e-8; "
+        "PSO (25 particles), CMA-ES (evosax, population 4 + ⌊3 ln D⌋, σ₀ = 0.3 box widths) and "
+        "CMA-ES→NM (80 % of the budget to CMA-ES, the rest to Nelder–Mead) get the largest evaluation "
+        "count of the paper row. Success: f ≤ 1e-8; "
         "evaluations to success: median over the successful runs of the first history entry ≤ 1e-8. "
-        "Variance: sample (n − 1). Time: compile once, then the whole batch of runs; per run = batch / runs.",
+        "Std and variance: sample (n − 1). Time: one call per row (all runs), split into compilation "
+        "(JAX's compile events) and the run of the whole batch; per run = batch / runs.",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {jax.device_count()} "
         f"{jax.default_backend()} device(s), jax {jax.__version__}, jaxfric {jf.__version__}, "
-        f"Python {sys.version.split()[0]}. Re-run: `python benchmarks/table1.py`"
+        f"Python {sys.version.split()[0]}; {os.cpu_count()} CPU(s) shared with other jobs, load average "
+        f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py"
         + (" --quick" if a.quick else "")
-        + ".",
+        + (" --no-maga" if a.no_maga else "")
+        + "`."
+        + (f" This table was merged (`--merge`) from {len(a.merge.split(','))} processes that ran "
+           "the same settings on parts of it at the same time (`--dims`, `--rows`, `--functions`), "
+           "so their times are each other's load too." if a.merge else ""),
         "",
-        "| D | function | solver | mean | variance | best | worst | success | evals to success (median) "
+        "| D | function | solver | mean | std | variance | best | worst | success | evals to success (median) "
         "| evals/run (mean, max) | compile s | batch s | s/run |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         e2s = "–" if math.isnan(r["evals_to_success"]) else f"{r['evals_to_success']:.0f}"
         lines.append(
-            f"| {r['dim']} | {r['function']} | {r['solver']} | {r['mean']:.3e} | {r['variance']:.3e} | "
+            f"| {r['dim']} | {r['function']} | {r['solver']} | {r['mean']:.3e} | {r['std']:.2e} | {r['variance']:.3e} | "
             f"{r['best']:.3e} | {r['worst']:.3e} | {r['solved']}/{r['runs']} | {e2s} | "
             f"{r['evals']}, {r['evals_max']} | {r['compile_s']:.1f} | {r['batch_s']:.1f} | {r['per_run_s']:.2f} |"
         )
+    lines += ["", "## What each row reached", ""]
+    for (dim, name) in dict.fromkeys((r["dim"], r["function"]) for r in rows):
+        parts = []
+        for r in (r for r in rows if r["dim"] == dim and r["function"] == name):
+            e2s = "" if math.isnan(r["evals_to_success"]) else f" (median {r['evals_to_success']:.0f} evals)"
+            parts.append(f"{r['solver']} {r['solved']}/{r['runs']}{e2s}")
+        lines.append(f"- D = {dim}, {name}: " + "; ".join(parts) + ".")
+    if getattr(a, "missing", None):
+        lines += ["", "## Not run (the processes were stopped at the deadline)", ""]
+        lines += [f"- {m}" for m in a.missing]
     Path(path).write_text("\n".join(lines) + "\n")
 
 

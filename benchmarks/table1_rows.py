@@ -7,7 +7,8 @@ Two entry points:
   and summary then treat these rows like MAPSO–NMDS's and PSO's);
 * :func:`evosax_rows` / ``python benchmarks/table1_rows.py`` — standalone: the rows with
   mean, std, best, worst, success (f ≤ 1e-8), median evaluations to success and time,
-  written to ``table1_evosax.md``/``.csv``.
+  written to ``table1_evosax.md``/``.csv`` (a quick look at these rows alone; the
+  committed table is ``table1.md``, where ``table1.py`` includes them).
 
 Budgets. ``budget`` is the most evaluations a run may use (default: MAPSO–NMDS's own
 worst case at G = 1000, ``mapso_nmds(num_generations=1000).max_evaluations(D)``).
@@ -25,7 +26,6 @@ import argparse
 import math
 import platform
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -72,18 +72,17 @@ def evosax_solvers(dim: int, budget: int) -> list[tuple[str, object]]:
 
 
 def timed_batch(fn_name, solver, dim, keys):
-    """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run twice: the
-    first call includes compilation, the second does not (table1.py times every row so)."""
+    """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run once: the
+    wall time is split into compilation (JAX's compile events, the Stopwatch that
+    ``identify`` uses) and run time, so long rows are not paid twice."""
+    from jaxfric.identification._timing import Stopwatch
+
     jf = _jf()
     t = jf.functions.get(fn_name)
     obj, bounds = jf.functions.objective(fn_name), t.bounds(dim)
-    t0 = time.perf_counter()
-    jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sol = jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
-    run = time.perf_counter() - t0
-    return sol, max(first - run, 0.0), run
+    with Stopwatch() as sw:
+        sol = jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
+    return sol, sw.compile_s, sw.run_s
 
 
 def evosax_runs(fn_name: str, dim: int, keys, budget: int):

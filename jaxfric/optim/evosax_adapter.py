@@ -31,6 +31,13 @@ uniform random population (row 0 = ``y0`` when given), all evaluated.
 run then ends, keeping the last finite state and the best point (no restarts yet). NaN and inf fitness become ``+inf`` before the strategy
 sees them, so they rank last and never become the best.
 
+**Cost in many dimensions.** Full CMA-ES eigendecomposes its D×D covariance every
+generation (``jnp.linalg.eigh``, O(D³)). On a 2-core CPU that took 3–7 ms at D = 30 but
+0.2–0.9 s at D = 180 (the 30-neuron Elman network): 40 ms per evaluation there, against
+0.75 ms for ``"Sep_CMA_ES"`` (diagonal covariance, O(D) per generation) and 0.16 ms for
+MAPSO's 64 agents (benchmarks/global_stages.py). For more than a few tens of parameters
+use ``Evosax("Sep_CMA_ES")`` (or another diagonal strategy such as ``"SNES"``).
+
 **Keys.** Generation ``i`` uses ``fold_in(key, i)`` (split in two for ``ask`` and
 ``tell``), so the same key gives the same run, chunked (checkpoints) or not.
 
