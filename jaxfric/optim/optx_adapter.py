@@ -28,7 +28,7 @@ from ._base import (
     uniform_in_box,
 )
 from .nelder_mead import NelderMead, NelderMeadState
-from .rounds import AbstractAskTellSolver
+from .rounds import AbstractAskTellSolver, relay
 
 _TAGS = frozenset()
 
@@ -56,14 +56,7 @@ def _all_finite(y):
 
 def _no_aux(rounds):
     """Nelder–Mead's rounds (which receive ``(f, aux)``) fed values without aux."""
-    out = None
-    while True:
-        try:
-            req = rounds.send(out)
-        except StopIteration as stop:
-            return stop.value
-        f = yield req
-        out = (f, None)
+    return relay(rounds, answer=lambda f: (f, None))
 
 
 class OptxMinimiser(AbstractAskTellSolver):

@@ -74,47 +74,75 @@ def skipped(x):
     return jnp.full((x.shape[0],), jnp.inf, x.dtype)
 
 
-def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped):
-    """Run ``rounds`` to the end inside a compiled program, evaluating each batch it
-    yields with ``evaluate`` (a conditional one under ``lax.cond``, ``skip`` otherwise);
-    returns the generator's result."""
+def _run(rounds: Rounds, handle: Callable):
+    """Feed ``rounds`` ``handle(batch)`` for every batch it yields; its result."""
     out = None
     while True:
         try:
             req = rounds.send(out)
         except StopIteration as stop:
             return stop.value
-        b = _request(req)
-        out = evaluate(b.x) if b.needed is True else jax.lax.cond(b.needed, evaluate, skip, b.x)
+        out = handle(_request(req))
+
+
+def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped):
+    """Run ``rounds`` to the end inside a compiled program, evaluating each batch it
+    yields with ``evaluate`` (a conditional one under ``lax.cond``, ``skip`` otherwise);
+    returns the generator's result."""
+    return _run(rounds, lambda b: evaluate(b.x) if b.needed is True
+                else jax.lax.cond(b.needed, evaluate, skip, b.x))
+
+
+class _Pending(Exception):
+    def __init__(self, batch):
+        self.batch = batch
 
 
 def replay(rounds: Rounds, told: tuple, skip: Callable = skipped):
     """Feed ``rounds`` the values ``told`` (``None``: a batch that was not needed).
     Returns ``(batch, None)`` for the next :class:`Batch` it asks for, or
     ``(None, result)`` once it has finished."""
-    out = None
-    for k in range(len(told) + 1):
-        try:
-            req = rounds.send(out)
-        except StopIteration as stop:
-            return None, stop.value
-        b = _request(req)
-        if k == len(told):
-            return b, None
-        out = skip(b.x) if told[k] is None else told[k]
+    values = iter(told)
+
+    def handle(b):
+        f = next(values, _Pending)
+        if f is _Pending:
+            raise _Pending(b)
+        return skip(b.x) if f is None else f
+
+    try:
+        return None, _run(rounds, handle)
+    except _Pending as pending:
+        return pending.batch, None
+
+
+class relay:
+    """``rounds`` seen through ``request`` (applied to each :class:`Batch` it yields) and
+    ``answer`` (applied to each value sent back); use as ``yield from relay(...)``."""
+
+    def __init__(self, rounds: Rounds, request: Callable | None = None,
+                 answer: Callable | None = None):
+        self.rounds, self.request, self.answer, self.started = rounds, request, answer, False
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        return self.send(None)
+
+    def send(self, value):
+        if self.started and self.answer is not None:
+            value = self.answer(value)
+        self.started = True
+        b = _request(self.rounds.send(value))  # its StopIteration carries the result
+        return b if self.request is None else self.request(b)
 
 
 def only_if(need, rounds: Rounds) -> Rounds:
     """``rounds`` with every batch needed only where ``need`` (its result is then
     meaningless unless ``need``: the caller selects)."""
-    out = None
-    while True:
-        try:
-            req = rounds.send(out)
-        except StopIteration as stop:
-            return stop.value
-        b = _request(req)
-        out = yield Batch(b.x, need if b.needed is True else need & b.needed)
+    return relay(rounds, request=lambda b: Batch(b.x, need if b.needed is True
+                                                 else need & b.needed))
 
 
 class AskTellState(eqx.Module):
