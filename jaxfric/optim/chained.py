@@ -12,6 +12,20 @@ in one loop and stage 1 (local steps) in the next, so batched runs never compute
 stage's step while in the other. With ``num_starts = k`` the local solver is restarted
 from the ``k`` best personal bests of a swarm, one run after another, and the best
 refined point wins (multi-start local stage).
+
+Every chain has ``ask``/``tell`` (:mod:`jaxfric.optim.rounds`), for an objective outside
+JAX: during the global stage ``ask`` returns the population (and a swarm's further
+batches), then Nelder–Mead's first simplex (``n + 1`` points, one per start), then the
+trial points of each step, one at a time (a shrink: ``n``) under the sequential rule or
+four at once with ``NelderMead(batched_trials=True)``. The switch to the local stage
+follows the compiled run's rule, and the evaluation counts are exact::
+
+    solver = chain(PSO(num_generations=50), NelderMead())
+    st = solver.ask_init(lower, upper, 0)
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)
+        st = solver.tell(st, X, np.array([simulate(x) for x in np.asarray(X)]))
+    solution = solver.ask_result(st)   # minimise(fn, solver, ..., key=0) for a JAX fn
 """
 
 from __future__ import annotations

@@ -161,9 +161,6 @@ class MAPSO(AbstractSwarm):
         check_positive_int("sl_generations", self.sl_generations, minimum=0)
         check_range("po", self.po, 0.0, 1.0)
         check_range("sl_radius", self.sl_radius, 0.0, 1.0)
-        for name in ("w_max", "w_min", "c1", "c2"):
-            check_range(name, getattr(self, name), 0.0)
-        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
         if self.sl_mode not in ("multiplicative", "additive"):
             raise ValueError(
                 f"sl_mode must be 'multiplicative' or 'additive', got {self.sl_mode!r}"

@@ -11,7 +11,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from ._base import check_positive_int, check_range, linear_inertia
+from ._base import check_positive_int, linear_inertia
 from .rng import counter_seed, counter_uniform
 from .swarm import (  # noqa: F401  (SwarmState, init_swarm: their 0.6.0 import path)
     AbstractSwarm,
@@ -67,9 +67,6 @@ class PSO(AbstractSwarm):
     def check(self):
         check_positive_int("num_particles", self.num_particles)
         self.check_swarm()
-        for name in ("w_max", "w_min", "c1", "c2"):
-            check_range(name, getattr(self, name), 0.0)
-        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
 
     @property
     def num_agents(self) -> int:

@@ -142,10 +142,15 @@ class AbstractSwarm(AbstractGenerational):
         raise NotImplementedError
 
     def check_swarm(self) -> None:
+        """Checks of what every swarm has: the budget, early stopping and the PSO
+        operator's coefficients (docs/algorithms.md §3.3)."""
         check_positive_int("num_generations", self.num_generations)
         if self.stall_generations is not None:
             check_positive_int("stall_generations", self.stall_generations)
         check_range("function_tolerance", self.function_tolerance, 0.0)
+        for name in ("w_max", "w_min", "c1", "c2"):
+            check_range(name, getattr(self, name), 0.0)
+        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
 
     # ------------------------------------------------------------------ generators
     def first(self, lower, upper, key, x0=None) -> Rounds:
