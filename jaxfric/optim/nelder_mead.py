@@ -239,7 +239,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         simplex = jnp.clip(simplex, lower[None], upper[None])
         f, aux = yield simplex
         order = jnp.argsort(f)
-        zero = jnp.array(0, jnp.int32)
         hist = History.empty(self.history_size, f.dtype)
         num_evals = jnp.array(x0.shape[0] + 1, jnp.int32)
         return NelderMeadState(
@@ -249,12 +248,9 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             restarts_left=jnp.array(self.restarts, jnp.int32),
             f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
-            num_reflections=zero,
-            num_expansions=zero,
-            num_contractions=zero,
-            num_shrinks=zero,
-            num_restarts=zero,
             history=hist.record(num_evals, f[order][0]),
+            **dict.fromkeys(("num_reflections", "num_expansions", "num_contractions",
+                             "num_shrinks", "num_restarts"), jnp.array(0, jnp.int32)),
         )
 
     def step(self, fn, y, args, options, state, tags):
