@@ -55,14 +55,6 @@ class PSO(AbstractSwarm):
 
     num_particles: int = 25
     num_generations: int = 500
-    w_max: float = 0.9
-    w_min: float = 0.4
-    c1: float = 2.0
-    c2: float = 2.0
-    vmax_fraction: float = 0.2
-    zero_velocity_at_bounds: bool = True
-    stall_generations: int | None = None
-    function_tolerance: float = 1e-6
 
     def check(self):
         check_positive_int("num_particles", self.num_particles)

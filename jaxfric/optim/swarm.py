@@ -119,8 +119,16 @@ class AbstractSwarm(AbstractGenerational):
     """
 
     num_generations: eqx.AbstractVar[int]
-    stall_generations: eqx.AbstractVar[int | None]
-    function_tolerance: eqx.AbstractVar[float]
+    # The PSO operator (docs/algorithms.md §3.3, §10) and early stopping: the same fields
+    # and defaults for every swarm, keyword-only (after each swarm's own fields).
+    w_max: float = eqx.field(default=0.9, kw_only=True)
+    w_min: float = eqx.field(default=0.4, kw_only=True)
+    c1: float = eqx.field(default=2.0, kw_only=True)
+    c2: float = eqx.field(default=2.0, kw_only=True)
+    vmax_fraction: float = eqx.field(default=0.2, kw_only=True)
+    zero_velocity_at_bounds: bool = eqx.field(default=True, kw_only=True)
+    stall_generations: int | None = eqx.field(default=None, kw_only=True)
+    function_tolerance: float = eqx.field(default=1e-6, kw_only=True)
 
     # --------------------------------------------------------------- subclass hooks
     @property
