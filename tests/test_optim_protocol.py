@@ -99,6 +99,19 @@ def test_ask_tell_drives_a_two_stage_chain_as_the_compiled_run(solver):
     assert local.count(n + 1) >= starts  # one first simplex per start
 
 
+def test_ask_tell_drives_nelder_mead_alone():
+    """Nelder–Mead through the optimistix adapter: the first simplex, then one trial
+    point at a time (or a shrink's n), as minimise for the same key."""
+    solver = OptxMinimiser(jf.NelderMead(max_steps=30))
+    key = jax.random.key(6)
+    ref = jf.minimise(separable, jf.NelderMead(max_steps=30), (LO, HI),
+                      args=jnp.asarray(TARGET), key=key)
+    sol, sizes = _drive(solver, key, separable_np)
+    assert sizes[0] == 3 and set(sizes[1:]) <= {1, 2}
+    assert sum(sizes) == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+
+
 @pytest.mark.slow
 def test_ask_tell_drives_evosax_then_nelder_mead():
     pytest.importorskip("evosax")

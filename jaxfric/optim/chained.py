@@ -150,11 +150,14 @@ class AbstractChain(AbstractAskTellSolver):
                 lower, upper, state.local_key(), x0, objective, **extra))))
         second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
         second_done = jax.vmap(lambda s: local.terminate(None, lower, upper, None, s)[0])(second)
-        switched = ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
-                              state.key_impl)
         if state.second is None:  # the placeholders' shapes (see init_rounds)
-            return switched
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), switched, state)
+            return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
+                              state.key_impl)
+        # select only what the switch sets (the global state is the same either way)
+        pick = lambda a, b: jnp.where(done, a, b)  # noqa: E731
+        return ChainState(pick(1, state.stage).astype(jnp.int32), g,
+                          jax.tree_util.tree_map(pick, second, state.second),
+                          pick(second_done, state.second_done), state.key, state.key_impl)
 
     # ------------------------------------------------------------ rounds protocol
     def init_rounds(self, lower, upper, key, x0=None, objective=None):

@@ -16,8 +16,8 @@ is evaluated or counted and the generator receives ``+inf`` values.
   the same key, with the same evaluation count, and switches stages by the same rule.
 
 Every solver built on :class:`AbstractAskTellSolver` has ``ask``/``tell``: PSO, MAPSO,
-:class:`~jaxfric.optim.Evosax`, Nelder–Mead (through the optimistix adapter) and the
-two-stage chains (MAPSO–NMDS, ``chain(PSO(), NelderMead())``, ``cmaes_nm()``). During a
+:class:`~jaxfric.optim.Evosax`, Nelder–Mead (``OptxMinimiser(NelderMead())``, the view
+:func:`jaxfric.minimise` runs it through) and the two-stage chains (MAPSO–NMDS, ``chain(PSO(), NelderMead())``, ``cmaes_nm()``). During a
 chain's global stage ``ask`` returns the population (MAPSO: then its self-learning
 batches); during the Nelder–Mead stage the first simplex (``n + 1`` points), then each
 step's trial points: the reflection, then at most one more point or a shrink's ``n``
