@@ -167,6 +167,45 @@ def test_ask_tell_refuses_what_was_not_asked_for():
         solver.ask_init(np.zeros((2, 2)), np.ones((2, 2)), 0)
 
 
+@pytest.mark.parametrize("build, match", [
+    (lambda: jf.PSO(num_particles=0), "num_particles must be >= 1"),
+    (lambda: jf.PSO(c1=-1.0), "c1 must be >= 0"),
+    (lambda: jf.PSO(stall_generations=0), "stall_generations must be >= 1"),
+    (lambda: jf.MAPSO(po=1.5), "po must be <= 1"),
+    (lambda: jf.MAPSO(vmax_fraction=0.0), "vmax_fraction must be > 0"),
+    (lambda: jf.MAPSO(sl_mode="ring"), "sl_mode must be 'multiplicative' or 'additive'"),
+    (lambda: jf.NelderMead(initial_step=0.0), "initial_step must be > 0"),
+    (lambda: jf.NelderMead(batched_trials=1), "batched_trials must be True or False"),
+    (lambda: jf.chain(jf.PSO(), jf.NelderMead(), num_starts=0), "num_starts must be >= 1"),
+    (lambda: jf.chain(jf.NelderMead(), jf.NelderMead(), num_starts=2), "needs a swarm"),
+    (lambda: jf.chain(jf.PSO(num_particles=4), jf.NelderMead(), num_starts=5),
+     r"num_starts \(5\) exceeds the number of agents \(4\)"),
+    (lambda: jf.chain("pso", jf.NelderMead()), "must be a jaxfric solver"),
+    (lambda: jf.MAPSONMDS(mapso=jf.PSO()), "mapso must be a jaxfric.MAPSO"),
+    (lambda: jf.mapso_nmds(nm_max_steps=0), "max_steps must be >= 1"),
+    (lambda: OptxMinimiser(jf.NelderMead(rtol=-1.0)), "rtol must be >= 0"),
+], ids=lambda v: v if isinstance(v, str) else "")
+def test_solvers_validate_on_construction(build, match):
+    """Issue 19 item 3: a bad hyperparameter fails where the solver is written
+    (``__check_init__``), with the field's name, not later inside minimise."""
+    with pytest.raises(ValueError, match=match):
+        build()
+
+
+def test_evosax_validates_on_construction():
+    pytest.importorskip("evosax")
+    with pytest.raises(ValueError, match="num_generations must be >= 1"):
+        jf.optim.Evosax("CMA_ES", num_generations=0)
+
+
+def test_mapso_nmds_builds_a_mapsonmds():
+    """One object: ``mapso_nmds`` is MAPSONMDS's flat-keyword factory, not a second type."""
+    a = jf.mapso_nmds(num_generations=7, sl_generations=2, nm_max_steps=9, num_starts=2)
+    b = jf.MAPSONMDS(mapso=jf.MAPSO(num_generations=7, sl_generations=2),
+                     nelder_mead=jf.NelderMead(max_steps=9), num_starts=2)
+    assert type(a) is jf.MAPSONMDS and a == b
+
+
 def test_chain_of_any_global_and_local_solver(counter):
     """PSO → Nelder–Mead as a chain: exact evaluation count, never worse than its global
     stage, and MAPSONMDS equals chain(MAPSO, NelderMead) for the same key."""
@@ -328,41 +367,3 @@ def test_int_seed_is_the_same_key():
     c = jf.minimise(sphere, pso, (LO, HI), key=np.uint32(3))
     assert bool(eqx.tree_equal(a.value, b.value)) and bool(eqx.tree_equal(a.value, c.value))
 
-
-@pytest.mark.parametrize("build, match", [
-    (lambda: jf.PSO(num_particles=0), "num_particles must be >= 1"),
-    (lambda: jf.PSO(c1=-1.0), "c1 must be >= 0"),
-    (lambda: jf.PSO(stall_generations=0), "stall_generations must be >= 1"),
-    (lambda: jf.MAPSO(po=1.5), "po must be <= 1"),
-    (lambda: jf.MAPSO(vmax_fraction=0.0), "vmax_fraction must be > 0"),
-    (lambda: jf.MAPSO(sl_mode="ring"), "sl_mode must be 'multiplicative' or 'additive'"),
-    (lambda: jf.NelderMead(initial_step=0.0), "initial_step must be > 0"),
-    (lambda: jf.NelderMead(batched_trials=1), "batched_trials must be True or False"),
-    (lambda: jf.chain(jf.PSO(), jf.NelderMead(), num_starts=0), "num_starts must be >= 1"),
-    (lambda: jf.chain(jf.NelderMead(), jf.NelderMead(), num_starts=2), "needs a swarm"),
-    (lambda: jf.chain(jf.PSO(num_particles=4), jf.NelderMead(), num_starts=5),
-     r"num_starts \(5\) exceeds the number of agents \(4\)"),
-    (lambda: jf.chain("pso", jf.NelderMead()), "must be a jaxfric solver"),
-    (lambda: jf.MAPSONMDS(mapso=jf.PSO()), "mapso must be a jaxfric.MAPSO"),
-    (lambda: jf.mapso_nmds(nm_max_steps=0), "max_steps must be >= 1"),
-    (lambda: OptxMinimiser(jf.NelderMead(rtol=-1.0)), "rtol must be >= 0"),
-], ids=lambda v: v if isinstance(v, str) else "")
-def test_solvers_validate_on_construction(build, match):
-    """Issue 19 item 3: a bad hyperparameter fails where the solver is written
-    (``__check_init__``), with the field's name, not later inside minimise."""
-    with pytest.raises(ValueError, match=match):
-        build()
-
-
-def test_evosax_validates_on_construction():
-    pytest.importorskip("evosax")
-    with pytest.raises(ValueError, match="num_generations must be >= 1"):
-        jf.optim.Evosax("CMA_ES", num_generations=0)
-
-
-def test_mapso_nmds_builds_a_mapsonmds():
-    """One object: ``mapso_nmds`` is MAPSONMDS's flat-keyword factory, not a second type."""
-    a = jf.mapso_nmds(num_generations=7, sl_generations=2, nm_max_steps=9, num_starts=2)
-    b = jf.MAPSONMDS(mapso=jf.MAPSO(num_generations=7, sl_generations=2),
-                     nelder_mead=jf.NelderMead(max_steps=9), num_starts=2)
-    assert type(a) is jf.MAPSONMDS and a == b
