@@ -366,4 +366,3 @@ def test_int_seed_is_the_same_key():
     b = jf.minimise(sphere, pso, (LO, HI), key=jax.random.key(3))
     c = jf.minimise(sphere, pso, (LO, HI), key=np.uint32(3))
     assert bool(eqx.tree_equal(a.value, b.value)) and bool(eqx.tree_equal(a.value, c.value))
-
