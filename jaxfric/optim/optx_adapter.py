@@ -28,7 +28,7 @@ from ._base import (
     uniform_in_box,
 )
 from .nelder_mead import NelderMead, NelderMeadState
-from .rounds import AbstractAskTellSolver, relay
+from .rounds import AbstractAskTellSolver, Batch, relay
 
 _TAGS = frozenset()
 
@@ -56,7 +56,8 @@ def _all_finite(y):
 
 def _no_aux(rounds):
     """Nelder–Mead's rounds (which receive ``(f, aux)``) fed values without aux."""
-    return relay(rounds, answer=lambda f: (f, None))
+    return relay(rounds, request=lambda b: Batch(b.x, b.needed, split=False),
+                 answer=lambda f: (f, None))
 
 
 class OptxMinimiser(AbstractAskTellSolver):

@@ -63,6 +63,9 @@ class Batch(eqx.Module):
 
     x: Array
     needed: Any = True
+    # a population may be split over the devices (jaxfric.optim.sharding); Nelder–Mead's
+    # few points are evaluated whole, as optimistix's own step evaluates them
+    split: bool = eqx.field(static=True, default=True)
 
 
 def _request(req) -> Batch:
@@ -85,12 +88,25 @@ def _run(rounds: Rounds, handle: Callable):
         out = handle(_request(req))
 
 
-def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped):
+def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped,
+          whole: Callable | None = None):
     """Run ``rounds`` to the end inside a compiled program, evaluating each batch it
-    yields with ``evaluate`` (a conditional one under ``lax.cond``, ``skip`` otherwise);
-    returns the generator's result."""
-    return _run(rounds, lambda b: evaluate(b.x) if b.needed is True
-                else jax.lax.cond(b.needed, evaluate, skip, b.x))
+    yields with ``evaluate`` (``whole`` for a batch that is not to be split over
+    devices; a conditional batch under ``lax.cond``, ``skip`` otherwise); returns the
+    generator's result."""
+    def handle(b):
+        ev = evaluate if b.split or whole is None else whole
+        return ev(b.x) if b.needed is True else jax.lax.cond(b.needed, ev, skip, b.x)
+
+    return _run(rounds, handle)
+
+
+def _objectives(fn, args):
+    """``(evaluate, whole)`` for :func:`drive`: the batched objective, and the same
+    without the driver's device layout."""
+    one = fn if getattr(fn, "layout", None) is None else eqx.tree_at(
+        lambda f: f.layout, fn, None, is_leaf=lambda x: x is None)
+    return batch_objective(fn, args), batch_objective(one, args)
 
 
 class _Pending(Exception):
@@ -142,7 +158,7 @@ def only_if(need, rounds: Rounds) -> Rounds:
     """``rounds`` with every batch needed only where ``need`` (its result is then
     meaningless unless ``need``: the caller selects)."""
     return relay(rounds, request=lambda b: Batch(b.x, need if b.needed is True
-                                                 else need & b.needed))
+                                                 else need & b.needed, b.split))
 
 
 class AskTellState(eqx.Module):
@@ -190,15 +206,17 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
 
     # ------------------------------------------------------------ compiled protocol
     def init(self, fn, lower, upper, args, key, x0=None):
-        return drive(self.init_rounds(lower, upper, key, x0, (fn, args)),
-                     batch_objective(fn, args))
+        evaluate, whole = _objectives(fn, args)
+        return drive(self.init_rounds(lower, upper, key, x0, (fn, args)), evaluate,
+                     whole=whole)
 
     def step(self, fn, lower, upper, args, state):
         return self.step_stage(fn, lower, upper, args, state, 0)
 
     def step_stage(self, fn, lower, upper, args, state, stage: int):
-        return drive(self.step_rounds(lower, upper, state, stage, (fn, args)),
-                     batch_objective(fn, args))
+        evaluate, whole = _objectives(fn, args)
+        return drive(self.step_rounds(lower, upper, state, stage, (fn, args)), evaluate,
+                     whole=whole)
 
     # ------------------------------------------------------------------- ask / tell
     def ask_init(self, lower, upper, key, x0=None) -> AskTellState:
