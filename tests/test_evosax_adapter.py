@@ -136,15 +136,15 @@ def test_bad_settings_fail_before_running():
         Evosax("NOPE")
     assert resolve_strategy("cma-es") is resolve_strategy("CMA_ES")
     assert resolve_strategy("de").__name__ == "DifferentialEvolution"
-    for bad, match in [
-        (Evosax("CMA_ES", num_generations=0), "num_generations"),
-        (Evosax("CMA_ES", population_size=1), "population_size"),
-        (Evosax("CMA_ES", std_init=-1.0), "std_init"),
-        (Evosax("DE", params={"nonsense": 1.0}), "no parameter"),
-        (Evosax("DE", population_size=3), "refused"),
+    for bad, match in [  # solvers validate on construction: built inside the check
+        (lambda: Evosax("CMA_ES", num_generations=0), "num_generations"),
+        (lambda: Evosax("CMA_ES", population_size=1), "population_size"),
+        (lambda: Evosax("CMA_ES", std_init=-1.0), "std_init"),
+        (lambda: Evosax("DE", params={"nonsense": 1.0}), "no parameter"),
+        (lambda: Evosax("DE", population_size=3), "refused"),
     ]:
         with pytest.raises(ValueError, match=match):
-            jf.minimise(shifted_sphere, bad, (LOWER, UPPER), args=TARGET, key=0)
+            jf.minimise(shifted_sphere, bad(), (LOWER, UPPER), args=TARGET, key=0)
 
 
 NO_EVOSAX = textwrap.dedent(

@@ -60,6 +60,152 @@ def test_tell_refuses_the_wrong_number_of_values():
         pso.tell(st, X, np.zeros(3))
 
 
+def _drive(solver, key, objective):
+    """Drive ``solver`` by ask/tell; returns the solution and the batch sizes asked."""
+    st = solver.ask_init(LO, HI, key)
+    sizes = []
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)
+        sizes.append(X.shape[0])
+        st = solver.tell(st, X, objective(X))
+    return solver.ask_result(st), sizes
+
+
+@pytest.mark.parametrize("solver", [
+    jf.chain(jf.PSO(num_particles=6, num_generations=4), jf.NelderMead(max_steps=40)),
+    jf.mapso_nmds(lattice_size=3, num_generations=3, sl_generations=2, nm_max_steps=40),
+    pytest.param(jf.mapso_nmds(lattice_size=3, num_generations=2, sl_generations=1,
+                               nm_max_steps=25, nm_batched_trials=True, num_starts=2),
+                 marks=pytest.mark.slow),
+], ids=["pso_nm", "mapso_nmds", "mapso_nmds_batched_two_starts"])
+def test_ask_tell_drives_a_two_stage_chain_as_the_compiled_run(solver):
+    """A NumPy objective drives PSO→NM and MAPSO–NMDS from Python: the same best point,
+    value and evaluation counts as minimise for the same key; after the global stage
+    ask returns the first simplex (n + 1 points), then each step's trial points (one
+    at a time or a shrink's n under the sequential rule; all four when batched)."""
+    key = jax.random.key(4)
+    ref = jf.minimise(separable, solver, (LO, HI), args=jnp.asarray(TARGET), key=key)
+    sol, sizes = _drive(solver, key, separable_np)
+    assert sum(sizes) == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
+    assert int(sol.stats["num_evals_global"]) == int(ref.stats["num_evals_global"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(sol.f, ref.f, rtol=1e-5, atol=1e-7)
+    n, ends = 2, np.cumsum(sizes)
+    local = sizes[int(np.searchsorted(ends, int(ref.stats["num_evals_global"]))) + 1:]
+    starts = solver.num_starts
+    assert local[0] == n + 1
+    trials = {4, n} if solver.local_solver.batched_trials else {1, n}
+    assert set(local[1:]) - {n + 1} <= trials
+    assert local.count(n + 1) >= starts  # one first simplex per start
+
+
+def test_ask_tell_drives_nelder_mead_alone():
+    """Nelder–Mead through the optimistix adapter: the first simplex, then one trial
+    point at a time (or a shrink's n), as minimise for the same key."""
+    solver = OptxMinimiser(jf.NelderMead(max_steps=30))
+    key = jax.random.key(6)
+    ref = jf.minimise(separable, jf.NelderMead(max_steps=30), (LO, HI),
+                      args=jnp.asarray(TARGET), key=key)
+    sol, sizes = _drive(solver, key, separable_np)
+    assert sizes[0] == 3 and set(sizes[1:]) <= {1, 2}
+    assert sum(sizes) == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_ask_tell_drives_evosax_then_nelder_mead():
+    pytest.importorskip("evosax")
+    solver = jf.optim.cmaes_nm(num_generations=3, nm_max_steps=20)
+    key = jax.random.key(5)
+    ref = jf.minimise(separable, solver, (LO, HI), args=jnp.asarray(TARGET), key=key)
+    sol, sizes = _drive(solver, key, separable_np)
+    assert sum(sizes) == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+
+
+def test_ask_tell_takes_an_objective_jax_cannot_trace():
+    """A simulator in Python floats (NaN in part of the box) drives PSO→NM: the count is
+    exact, NaN is never the best, and the known optimum is found."""
+
+    def simulator(x):
+        a, b = (float(np.float64(v)) for v in x)
+        if a > 2.5:
+            return float("nan")
+        return (a - 0.5) ** 2 + 10.0 * (b + 0.25) ** 2
+
+    with pytest.raises((jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError)):
+        jax.jit(simulator)(jnp.zeros(2))
+    solver = jf.chain(jf.PSO(num_particles=8, num_generations=8), jf.NelderMead(max_steps=120))
+    st = solver.ask_init(LO, HI, 0)
+    X, st = solver.ask(st)
+    st_nan = solver.tell(st, X, np.full(X.shape[0], np.nan))
+    assert float(solver.ask_result(st_nan).f) == np.inf  # NaN never becomes a best
+    sol, sizes = _drive(solver, 0, lambda X: [simulator(x) for x in np.asarray(X)])
+    assert int(sol.stats["num_evals"]) == sum(sizes)
+    np.testing.assert_allclose(sol.value, [0.5, -0.25], atol=1e-3)
+    assert float(sol.f) == pytest.approx(simulator(sol.value), abs=1e-6)
+
+
+def test_ask_tell_refuses_what_was_not_asked_for():
+    solver = jf.chain(jf.PSO(num_particles=4, num_generations=1), jf.NelderMead(max_steps=3))
+    st = solver.ask_init(LO, HI, jax.random.key(0))
+    X, st = solver.ask(st)
+    with pytest.raises(ValueError, match="one fitness value per candidate"):
+        solver.tell(st, X, np.zeros(X.shape[0] + 1))
+    with pytest.raises(ValueError, match="the batch ask returned"):
+        solver.tell(st, X[:2], np.zeros(2))
+    done = st
+    while not solver.ask_done(done):
+        X, done = solver.ask(done)
+        done = solver.tell(done, X, separable_np(X))
+    assert int(solver.ask_result(done).stats["num_steps"]) == 1 + 3  # G, then NM's cap
+    with pytest.raises(ValueError, match="finished"):
+        solver.ask(done)
+    with pytest.raises(ValueError, match="ask/tell cannot drive BFGS"):
+        jf.chain(jf.PSO(), optx.BFGS(rtol=1e-6, atol=1e-6)).ask_init(LO, HI, 0)
+    with pytest.raises(ValueError, match="1-D lower and upper"):
+        solver.ask_init(np.zeros((2, 2)), np.ones((2, 2)), 0)
+
+
+@pytest.mark.parametrize("build, match", [
+    (lambda: jf.PSO(num_particles=0), "num_particles must be >= 1"),
+    (lambda: jf.PSO(c1=-1.0), "c1 must be >= 0"),
+    (lambda: jf.PSO(stall_generations=0), "stall_generations must be >= 1"),
+    (lambda: jf.MAPSO(po=1.5), "po must be <= 1"),
+    (lambda: jf.MAPSO(vmax_fraction=0.0), "vmax_fraction must be > 0"),
+    (lambda: jf.MAPSO(sl_mode="ring"), "sl_mode must be 'multiplicative' or 'additive'"),
+    (lambda: jf.NelderMead(initial_step=0.0), "initial_step must be > 0"),
+    (lambda: jf.NelderMead(batched_trials=1), "batched_trials must be True or False"),
+    (lambda: jf.chain(jf.PSO(), jf.NelderMead(), num_starts=0), "num_starts must be >= 1"),
+    (lambda: jf.chain(jf.NelderMead(), jf.NelderMead(), num_starts=2), "needs a swarm"),
+    (lambda: jf.chain(jf.PSO(num_particles=4), jf.NelderMead(), num_starts=5),
+     r"num_starts \(5\) exceeds the number of agents \(4\)"),
+    (lambda: jf.chain("pso", jf.NelderMead()), "must be a jaxfric solver"),
+    (lambda: jf.MAPSONMDS(mapso=jf.PSO()), "mapso must be a jaxfric.MAPSO"),
+    (lambda: jf.mapso_nmds(nm_max_steps=0), "max_steps must be >= 1"),
+    (lambda: OptxMinimiser(jf.NelderMead(rtol=-1.0)), "rtol must be >= 0"),
+], ids=lambda v: v if isinstance(v, str) else "")
+def test_solvers_validate_on_construction(build, match):
+    """Issue 19 item 3: a bad hyperparameter fails where the solver is written
+    (``__check_init__``), with the field's name, not later inside minimise."""
+    with pytest.raises(ValueError, match=match):
+        build()
+
+
+def test_evosax_validates_on_construction():
+    pytest.importorskip("evosax")
+    with pytest.raises(ValueError, match="num_generations must be >= 1"):
+        jf.optim.Evosax("CMA_ES", num_generations=0)
+
+
+def test_mapso_nmds_builds_a_mapsonmds():
+    """One object: ``mapso_nmds`` is MAPSONMDS's flat-keyword factory, not a second type."""
+    a = jf.mapso_nmds(num_generations=7, sl_generations=2, nm_max_steps=9, num_starts=2)
+    b = jf.MAPSONMDS(mapso=jf.MAPSO(num_generations=7, sl_generations=2),
+                     nelder_mead=jf.NelderMead(max_steps=9), num_starts=2)
+    assert type(a) is jf.MAPSONMDS and a == b
+
+
 def test_chain_of_any_global_and_local_solver(counter):
     """PSO → Nelder–Mead as a chain: exact evaluation count, never worse than its global
     stage, and MAPSONMDS equals chain(MAPSO, NelderMead) for the same key."""

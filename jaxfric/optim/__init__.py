@@ -11,15 +11,19 @@ from .nelder_mead import NelderMead, NelderMeadState
 from .optx_adapter import OptxMinimiser, OptxState
 from .progress import ProgressHook, RecordingProgress, TqdmProgress
 from .pso import PSO
+from .rounds import AbstractAskTellSolver, AbstractGenerational, Batch
 from .swarm import AbstractSwarm, AskTellState, SwarmState
 
 __all__ = [
     "RESULTS",
+    "AbstractAskTellSolver",
     "AbstractChain",
+    "AbstractGenerational",
     "AbstractIterativeSolver",
     "AbstractSolver",
     "AbstractSwarm",
     "AskTellState",
+    "Batch",
     "Chain",
     "Evosax",
     "EvosaxState",

@@ -249,12 +249,18 @@ class AbstractSolver(eqx.Module):
     :mod:`jaxfric.optim.optx_adapter`).
     """
 
+    def __check_init__(self):
+        # Solvers validate on construction, as the models do (issue 19 item 3): a bad
+        # hyperparameter fails where it is written, naming the field.
+        self.check()
+
     def progress_totals(self) -> tuple[int | None, int | None]:
         """(global generations, local step cap) for a progress display."""
         return None, None
 
     def check(self) -> None:
-        """Raise ``ValueError`` on invalid hyperparameters (before any tracing)."""
+        """Raise ``ValueError`` on invalid hyperparameters. Run on construction
+        (``__check_init__``) and again by :func:`jaxfric.minimise` before any tracing."""
 
     def steps_for(self, n: int) -> int | None:
         """Most steps of a run on ``n`` parameters (``None``: not known)."""

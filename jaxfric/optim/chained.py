@@ -12,6 +12,20 @@ in one loop and stage 1 (local steps) in the next, so batched runs never compute
 stage's step while in the other. With ``num_starts = k`` the local solver is restarted
 from the ``k`` best personal bests of a swarm, one run after another, and the best
 refined point wins (multi-start local stage).
+
+Every chain has ``ask``/``tell`` (:mod:`jaxfric.optim.rounds`), for an objective outside
+JAX: during the global stage ``ask`` returns the population (and a swarm's further
+batches), then Nelder–Mead's first simplex (``n + 1`` points, one per start), then the
+trial points of each step, one at a time (a shrink: ``n``) under the sequential rule or
+four at once with ``NelderMead(batched_trials=True)``. The switch to the local stage
+follows the compiled run's rule, and the evaluation counts are exact::
+
+    solver = chain(PSO(num_generations=50), NelderMead())
+    st = solver.ask_init(lower, upper, 0)
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)
+        st = solver.tell(st, X, np.array([simulate(x) for x in np.asarray(X)]))
+    solution = solver.ask_result(st)   # minimise(fn, solver, ..., key=0) for a JAX fn
 """
 
 from __future__ import annotations
@@ -30,7 +44,8 @@ from ._base import (
     check_positive_int,
 )
 from .nelder_mead import NelderMead
-from .optx_adapter import OptxMinimiser, as_protocol
+from .optx_adapter import as_protocol
+from .rounds import AbstractAskTellSolver, drive, only_if, skipped
 from .swarm import AbstractSwarm
 
 
@@ -59,7 +74,7 @@ def _put(tree, i, leaf_tree):
     return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
 
 
-class AbstractChain(AbstractIterativeSolver):
+class AbstractChain(AbstractAskTellSolver):
     """A global solver followed by a local one (see the module docstring)."""
 
     # global_solver, local_solver, num_starts, simplex_from_swarm: fields of Chain;
@@ -74,6 +89,12 @@ class AbstractChain(AbstractIterativeSolver):
         return as_protocol(self.local_solver)
 
     def check(self):
+        for name in ("global_solver", "local_solver"):
+            if not isinstance(as_protocol(getattr(self, name)), AbstractAskTellSolver):
+                raise ValueError(
+                    f"{name} must be a jaxfric solver that evaluates in batches (PSO, MAPSO, "
+                    "Evosax, NelderMead) or an optimistix minimiser, got "
+                    f"{type(getattr(self, name)).__name__}")
         self._global.check()
         self._local.check()
         check_positive_int("num_starts", self.num_starts)
@@ -85,6 +106,10 @@ class AbstractChain(AbstractIterativeSolver):
                     f"num_starts ({self.num_starts}) exceeds the number of agents "
                     f"({self.global_solver.num_agents})"
                 )
+
+    def check_ask_tell(self):
+        self._global.check_ask_tell()
+        self._local.check_ask_tell()
 
     # ------------------------------------------------------------------ stages
     def num_stages(self) -> int:
@@ -110,60 +135,62 @@ class AbstractChain(AbstractIterativeSolver):
             return self._global.best(g)[0][None]
         return g.pbest[jnp.argsort(g.pbest_f)[: self.num_starts]]
 
-    def _switch(self, fn, lower, upper, args, state: ChainState) -> ChainState:
-        """Start the local stage from the global stage's best point(s)."""
+    def _switch(self, lower, upper, state: ChainState, objective) -> ChainState:
+        """Rounds that start the local stage from the global stage's best point(s), one
+        start after another, where the global stage has finished (else ``state`` as it is)."""
         g = state.first
+        done, _ = self._global.terminate(None, lower, upper, None, g)
         opts = self._local_options(lower, upper, g)
         local = self._local
-
-        def one(x0):
-            if isinstance(local, OptxMinimiser):
-                return local.init(fn, lower, upper, args, state.local_key(), x0, options=opts)
-            return local.init(fn, lower, upper, args, state.local_key(), x0)
-
+        extra = {} if opts is None else {"options": opts}
         starts = self._starts(g)
-        if self.num_starts == 1:
-            second = jax.tree_util.tree_map(lambda a: a[None], one(starts[0]))
-        else:
-            # one after another, as the runs themselves go (lax.map, not vmap)
-            second = jax.lax.map(one, starts)
-        done = jax.vmap(lambda s: self._local.terminate(fn, lower, upper, args, s)[0])(second)
-        return ChainState(jnp.array(1, jnp.int32), g, second, done, state.key, state.key_impl)
+        runs = []
+        for x0 in starts:
+            runs.append((yield from only_if(done, local.init_rounds(
+                lower, upper, state.local_key(), x0, objective, **extra))))
+        second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
+        second_done = jax.vmap(lambda s: local.terminate(None, lower, upper, None, s)[0])(second)
+        if state.second is None:  # the placeholders' shapes (see init_rounds)
+            return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
+                              state.key_impl)
+        # select only what the switch sets (the global state is the same either way)
+        pick = lambda a, b: jnp.where(done, a, b)  # noqa: E731
+        return ChainState(pick(1, state.stage).astype(jnp.int32), g,
+                          jax.tree_util.tree_map(pick, second, state.second),
+                          pick(second_done, state.second_done), state.key, state.key_impl)
 
-    # ------------------------------------------------------------- step protocol
-    def init(self, fn, lower, upper, args, key, x0=None):
+    # ------------------------------------------------------------ rounds protocol
+    def init_rounds(self, lower, upper, key, x0=None, objective=None):
         k_global, k_local = jax.random.split(key)
-        g = self._global.init(fn, lower, upper, args, k_global, x0)
+        g = yield from self._global.init_rounds(lower, upper, k_global, x0, objective)
         typed = jnp.issubdtype(k_local.dtype, jax.dtypes.prng_key)
         impl = str(jax.random.key_impl(k_local)) if typed else None
         raw = jax.random.key_data(k_local)
+        bare = ChainState(jnp.array(0, jnp.int32), g, None, None, raw, impl)
+        # The local states exist from the start (a loop carries fixed shapes): zeros
+        # until the switch fills them.
         local_shape = jax.eval_shape(
-            lambda: self._switch(fn, lower, upper, args,
-                                 ChainState(jnp.array(0, jnp.int32), g, None, None, raw, impl)))
+            lambda: drive(self._switch(lower, upper, bare, objective), skipped))
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
                                        (local_shape.second, local_shape.second_done))
         state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], raw, impl)
-        done, _ = self._global.terminate(fn, lower, upper, args, g)
-        return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
-                            lambda s: s, state)
+        return (yield from self._switch(lower, upper, state, objective))
 
     def step(self, fn, lower, upper, args, state):
         return jax.lax.cond(state.stage == 0,
                             lambda s: self.step_stage(fn, lower, upper, args, s, 0),
                             lambda s: self.step_stage(fn, lower, upper, args, s, 1), state)
 
-    def step_stage(self, fn, lower, upper, args, state, stage: int):
+    def step_rounds(self, lower, upper, state, stage=0, objective=None):
         """One step of stage ``stage`` (static), which ``state`` is known to be in."""
         if stage == 0:
-            g = self._global.step(fn, lower, upper, args, state.first)
+            g = yield from self._global.step_rounds(lower, upper, state.first, 0, objective)
             state = eqx.tree_at(lambda s: s.first, state, g)
-            done, _ = self._global.terminate(fn, lower, upper, args, g)
-            return jax.lax.cond(done, lambda s: self._switch(fn, lower, upper, args, s),
-                                lambda s: s, state)
+            return (yield from self._switch(lower, upper, state, objective))
         local = self._local
         i = self._current(state)
-        s_i = local.step(fn, lower, upper, args, _index(state.second, i))
-        done_i, _ = local.terminate(fn, lower, upper, args, s_i)
+        s_i = yield from local.step_rounds(lower, upper, _index(state.second, i), 0, objective)
+        done_i, _ = local.terminate(None, lower, upper, None, s_i)
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
             (_put(state.second, i, s_i), state.second_done.at[i].set(done_i)),

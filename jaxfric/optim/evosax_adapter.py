@@ -55,19 +55,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._base import (
-    AbstractIterativeSolver,
-    History,
-    Solution,
-    batch_objective,
-    check_positive_int,
-    check_range,
-    count_dtype,
-    result_from_f,
-    scalar_objective,
-)
+from ._base import check_positive_int, check_range, count_dtype
 from .chained import Chain
 from .nelder_mead import NelderMead
+from .rounds import AbstractGenerational, Rounds
 
 INSTALL_HINT = 'pip install -e ".[evosax]"'
 
@@ -145,7 +136,7 @@ class EvosaxState(eqx.Module):
     broken: Any
 
 
-class Evosax(AbstractIterativeSolver):
+class Evosax(AbstractGenerational):
     """An evosax evolution strategy under jaxfric's driver (see the module docstring).
 
     Args:
@@ -239,8 +230,8 @@ class Evosax(AbstractIterativeSolver):
         return params.replace(**{k: jnp.asarray(v) if k == "std_init" else v
                                  for k, v in over.items()})
 
-    # ------------------------------------------------------------------ step protocol
-    def init(self, fn, lower, upper, args, key, x0=None) -> EvosaxState:
+    # ------------------------------------------------------------------ rounds protocol
+    def init_rounds(self, lower, upper, key, x0=None, objective=None) -> Rounds:
         es, n = self._es(lower), lower.shape[0]
         params = self._es_params(es)
         k_init, k_start, key = jax.random.split(key, 3)
@@ -250,7 +241,7 @@ class Evosax(AbstractIterativeSolver):
             mean = jax.random.uniform(k_start, (n,), lower.dtype) if u0 is None else u0[0]
             inner = es.init(k_init, mean, params)
             x = lower + mean * width
-            f = scalar_objective(fn, args)(x)
+            f = (yield x[None])[0]
             evals = 1
         else:
             P = self.population(n)
@@ -258,21 +249,21 @@ class Evosax(AbstractIterativeSolver):
             if u0 is not None:
                 U = U.at[: u0.shape[0]].set(u0)
             X = lower + U * width
-            F = batch_objective(fn, args)(X)
+            F = yield X
             inner = es.init(k_init, U, F, params)
             i = jnp.argmin(F)
             x, f, evals = X[i], F[i], P
         return EvosaxState(inner, x, f, jnp.array(evals, count_dtype()),
                            jnp.array(0, jnp.int32), key, jnp.array(False))
 
-    def step(self, fn, lower, upper, args, state: EvosaxState) -> EvosaxState:
+    def step_rounds(self, lower, upper, state: EvosaxState, stage=0, objective=None) -> Rounds:
         es = self._es(lower)
         params = self._es_params(es)
         k_ask, k_tell = jax.random.split(jax.random.fold_in(state.key, state.generation))
         U, inner = es.ask(k_ask, state.inner, params)
         U = jnp.clip(U.astype(lower.dtype), 0.0, 1.0)  # projection onto the box
         X = lower + U * (upper - lower)
-        F = batch_objective(fn, args)(X)
+        F = yield X
         inner, _ = es.tell(k_tell, U, F, inner, params)
         # keep the carried state's dtypes (evosax's constants follow JAX's default float)
         inner = jax.tree_util.tree_map(lambda new, old: jnp.asarray(new, jnp.result_type(old)),
@@ -294,34 +285,14 @@ class Evosax(AbstractIterativeSolver):
             broken,
         )
 
-    def terminate(self, fn, lower, upper, args, state):
-        done = (state.generation >= self.num_generations) | state.broken
-        return done, result_from_f(state.f_best)
-
-    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
-        return Solution(
-            value=state.x_best, f=state.f_best, result=result,
-            stats={"num_steps": state.generation, "num_evals": state.num_evals},
-            history=History.empty(1, state.f_best.dtype), state=state,
-        )
+    def stopped(self, state):
+        return state.broken
 
     def best(self, state):
         return state.x_best, state.f_best
 
-    def num_evals(self, state):
-        return state.num_evals
-
-    def max_steps(self, n: int) -> int:
-        return self.num_generations
-
     def max_evaluations(self, n: int) -> int:
         return self.evaluations(n)
-
-    def progress(self, state):
-        return jnp.array(0, jnp.int32), state.generation
-
-    def progress_totals(self):
-        return self.num_generations, None
 
 
 def cmaes_nm(*, population_size: int | None = None, num_generations: int = 1000,

@@ -4,6 +4,24 @@ gBest, the paper's instance of :func:`~jaxfric.optim.chained.chain`.
 ``θ_MAPSO = MAPSO(J, bounds, G)`` and ``θ* = NM(J, start=θ_MAPSO)``. Optionally the
 ``num_starts`` best agents (by personal best) seed Nelder–Mead runs and the best
 refined point wins.
+
+One object, two spellings with different jobs (issue 19 item 3): :class:`MAPSONMDS` is
+the solver, a chain whose stages are named ``mapso`` and ``nelder_mead`` and checked to
+be a :class:`MAPSO` and a :class:`NelderMead`; :func:`mapso_nmds` is its flat-keyword
+factory (``nm_*`` keywords go to Nelder–Mead, the rest to MAPSO), for settings that
+arrive as one flat set of keywords (the CLI, ``identify``'s budgets), as
+:func:`~jaxfric.optim.cmaes_nm` is for CMA-ES → Nelder–Mead. It returns a
+:class:`MAPSONMDS`, never another type, so neither is deprecated.
+
+Like every chain it can be driven from Python by ``ask``/``tell`` (an objective outside
+JAX, see :mod:`jaxfric.optim.rounds`)::
+
+    solver = mapso_nmds(num_generations=100)
+    st = solver.ask_init(lower, upper, jax.random.key(0))
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)            # the lattice, self-learning, then simplex points
+        st = solver.tell(st, X, simulate_rows(X))
+    best = solver.ask_result(st)          # = minimise(...) for the same key
 """
 
 from __future__ import annotations
@@ -51,7 +69,8 @@ class MAPSONMDS(AbstractChain):
 
 
 def mapso_nmds(**kwargs) -> MAPSONMDS:
-    """Convenience constructor: ``mapso_nmds(num_generations=300, nm_max_steps=5000)``.
+    """:class:`MAPSONMDS` from flat keywords: ``mapso_nmds(num_generations=300,
+    nm_max_steps=5000)`` (see the module docstring for why both spellings exist).
 
     Keywords prefixed ``nm_`` go to :class:`NelderMead`; ``num_starts`` and
     ``simplex_from_swarm`` to :class:`MAPSONMDS`; the rest to :class:`MAPSO`.

@@ -141,18 +141,10 @@ class MAPSO(AbstractSwarm):
     sl_radius: float = 1.0
     sl_generations: int = 10
     sl_mode: str = "multiplicative"
-    w_max: float = 0.9
-    w_min: float = 0.4
-    c1: float = 2.0
-    c2: float = 2.0
-    vmax_fraction: float = 0.2
     social: str = "gbest"
     strict_maga_segment: bool = False
     reset_velocity_on_replace: bool = False
     evaluate_replaced: bool = False
-    zero_velocity_at_bounds: bool = True
-    stall_generations: int | None = None
-    function_tolerance: float = 1e-6
 
     def check(self):
         check_positive_int("lattice_size", self.lattice_size)
@@ -161,9 +153,6 @@ class MAPSO(AbstractSwarm):
         check_positive_int("sl_generations", self.sl_generations, minimum=0)
         check_range("po", self.po, 0.0, 1.0)
         check_range("sl_radius", self.sl_radius, 0.0, 1.0)
-        for name in ("w_max", "w_min", "c1", "c2"):
-            check_range(name, getattr(self, name), 0.0)
-        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
         if self.sl_mode not in ("multiplicative", "additive"):
             raise ValueError(
                 f"sl_mode must be 'multiplicative' or 'additive', got {self.sl_mode!r}"

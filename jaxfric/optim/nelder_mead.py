@@ -43,6 +43,7 @@ from ._base import (
     safe_value,
     uniform_in_box,
 )
+from .rounds import Batch, drive, skipped
 
 _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
 
@@ -200,10 +201,14 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return step
 
     @staticmethod
-    def _evaluate(fn, unravel, args, X):
-        """Objective and aux at the rows of ``X``, as one batch; NaN/inf → +inf."""
-        f, aux = jax.vmap(lambda x: fn(unravel(x), args))(X)
-        return safe_value(f), aux
+    def _evaluator(fn, unravel, args):
+        """``X ↦ (f, aux)``: objective and aux at the rows of ``X``, as one batch;
+        NaN/inf → +inf."""
+        def evaluate(X):
+            f, aux = jax.vmap(lambda x: fn(unravel(x), args))(X)
+            return safe_value(f), aux
+
+        return evaluate
 
     def _converged(self, state):
         S, F = state.simplex, state.f_simplex
@@ -222,14 +227,18 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     # ------------------------------------------------------------ optimistix protocol
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         x0, unravel = ravel_pytree(y)
+        return drive(self.init_rounds(x0, options), self._evaluator(fn, unravel, args))
+
+    def init_rounds(self, x0, options):
+        """:meth:`init` as evaluation rounds (:mod:`jaxfric.optim.rounds`) on the flat
+        start ``x0``: yields the first simplex (``n + 1`` points), receives ``(f, aux)``."""
         lower, upper = _flat_bounds(options, x0)
         x0 = jnp.clip(x0, lower, upper)
         step = self._first_steps(x0, lower, upper, options)
         simplex = jnp.concatenate([x0[None], x0[None] + jnp.diag(step)])
         simplex = jnp.clip(simplex, lower[None], upper[None])
-        f, aux = self._evaluate(fn, unravel, args, simplex)
+        f, aux = yield simplex
         order = jnp.argsort(f)
-        zero = jnp.array(0, jnp.int32)
         hist = History.empty(self.history_size, f.dtype)
         num_evals = jnp.array(x0.shape[0] + 1, jnp.int32)
         return NelderMeadState(
@@ -239,31 +248,38 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             restarts_left=jnp.array(self.restarts, jnp.int32),
             f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
-            num_reflections=zero,
-            num_expansions=zero,
-            num_contractions=zero,
-            num_shrinks=zero,
-            num_restarts=zero,
             history=hist.record(num_evals, f[order][0]),
+            **dict.fromkeys(("num_reflections", "num_expansions", "num_contractions",
+                             "num_shrinks", "num_restarts"), jnp.array(0, jnp.int32)),
         )
 
     def step(self, fn, y, args, options, state, tags):
         """One Lagarias step (§5 steps 1–5), or a restart when one is due."""
         _, unravel = ravel_pytree(y)
+
+        def skip(X):
+            aux = jax.tree_util.tree_map(
+                lambda a: jnp.zeros((X.shape[0],) + jnp.shape(a), jnp.result_type(a)), state.aux
+            )
+            return skipped(X), aux
+
+        x, new_state, aux = drive(self.step_rounds(state, options),
+                                  self._evaluator(fn, unravel, args), skip)
+        hook = options.get("progress") if options else None
+        if hook is not None:
+            hook.emit(1, new_state.history.counter, new_state.num_evals, new_state.f_simplex[0])
+        return unravel(x), new_state, aux
+
+    def step_rounds(self, state, options):
+        """:meth:`step` as evaluation rounds (:mod:`jaxfric.optim.rounds`): yields the
+        reflection (all four trial points with ``batched_trials``), then the second
+        trial point (sequential rule) and a shrink's ``n`` points, each only where
+        needed; receives ``(f, aux)``; returns ``(best vertex, state, its aux)``."""
         S, F = state.simplex, state.f_simplex
         n = S.shape[1]
         lower, upper = _flat_bounds(options, S[0])
         rho, chi, gamma, sigma = self.coefficients(n)
         restart = self._restart_due(state)
-
-        def one(x):
-            return self._evaluate(fn, unravel, args, x[None])
-
-        def skip(k):
-            aux = jax.tree_util.tree_map(
-                lambda a: jnp.zeros((k,) + jnp.shape(a), jnp.result_type(a)), state.aux
-            )
-            return jnp.full((k,), jnp.inf, F.dtype), aux
 
         best, worst = S[0], S[-1]
         f_best, f_second, f_worst = F[0], F[-2], F[-1]
@@ -274,12 +290,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         coef = jnp.asarray([rho, rho * chi, rho * gamma, -gamma], S.dtype)
         trials = jnp.clip(centroid[None] + coef[:, None] * d[None], lower[None], upper[None])
 
-        if self.batched_trials:
-            f_t, aux_t = jax.lax.cond(restart, lambda _: skip(4), lambda X: self._evaluate(fn, unravel, args, X), trials)
-            f_r, aux_r = f_t[0], _take(aux_t, 0)
-        else:
-            f_1, aux_1 = jax.lax.cond(restart, lambda _: skip(1), one, trials[0])
-            f_r, aux_r = f_1[0], _take(aux_1, 0)
+        f_t, aux_t = yield Batch(trials if self.batched_trials else trials[:1], ~restart)
+        f_r, aux_r = f_t[0], _take(aux_t, 0)
 
         expand = f_r < f_best
         accept_r = (f_r >= f_best) & (f_r < f_second)
@@ -291,7 +303,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             f_2, aux_2 = f_t[second], _take(aux_t, second)
             trial_evals = jnp.where(restart, 0, 4)
         else:
-            f_2v, aux_2v = jax.lax.cond(need_2, one, lambda _: skip(1), x_2)
+            f_2v, aux_2v = yield Batch(x_2[None], need_2)
             f_2, aux_2 = f_2v[0], _take(aux_2v, 0)
             trial_evals = jnp.where(restart, 0, 1 + _i32(need_2))
 
@@ -310,8 +322,9 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         shrunk = best[None] + sigma * (S[1:] - best[None])
         pts = jnp.clip(jnp.where(restart, fresh, shrunk), lower[None], upper[None])
 
+        f_p, aux_p = yield Batch(pts, shrink | restart)
+
         def do_batch(_):
-            f_p, aux_p = self._evaluate(fn, unravel, args, pts)
             i = jnp.argmin(f_p)
             return (
                 jnp.concatenate([best[None], pts]),
@@ -343,10 +356,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             num_restarts=state.num_restarts + _i32(restart),
             history=state.history.record(num_evals, F2[0]),
         )
-        hook = options.get("progress") if options else None
-        if hook is not None:
-            hook.emit(1, new_state.history.counter, num_evals, F2[0])
-        return unravel(S2[0]), new_state, aux_best
+        return S2[0], new_state, aux_best
 
     def terminate(self, fn, y, args, options, state, tags):
         converged = self._converged(state) & ~self._restart_due(state)

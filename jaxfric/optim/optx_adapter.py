@@ -28,6 +28,7 @@ from ._base import (
     uniform_in_box,
 )
 from .nelder_mead import NelderMead, NelderMeadState
+from .rounds import AbstractAskTellSolver, Batch, relay
 
 _TAGS = frozenset()
 
@@ -53,7 +54,13 @@ def _all_finite(y):
     return jnp.all(jnp.isfinite(y))
 
 
-class OptxMinimiser(AbstractIterativeSolver):
+def _no_aux(rounds):
+    """Nelder–Mead's rounds (which receive ``(f, aux)``) fed values without aux."""
+    return relay(rounds, request=lambda b: Batch(b.x, b.needed, split=False),
+                 answer=lambda f: (f, None))
+
+
+class OptxMinimiser(AbstractAskTellSolver):
     """Adapter: ``minimiser`` (an ``optx.AbstractMinimiser``) as a jaxfric solver.
 
     Args:
@@ -93,35 +100,59 @@ class OptxMinimiser(AbstractIterativeSolver):
     def _options(self, lower, upper, extra=None):
         return {"lower": lower, "upper": upper, **(extra or {})}
 
-    def _best_f(self, fn, args, y, inner):
+    def check_ask_tell(self):
+        if not isinstance(self.minimiser, NelderMead):
+            self._objective(None)
+
+    def _objective(self, objective):
+        if objective is None:
+            raise ValueError(
+                f"ask/tell cannot drive {type(self.minimiser).__name__}: it evaluates its "
+                "objective itself (one point at a time, or with gradients); ask/tell drives "
+                "solvers that evaluate in batches: PSO, MAPSO, Evosax, NelderMead and chains "
+                "of them")
+        return objective
+
+    def _best_f(self, objective, y, inner):
         if isinstance(inner, NelderMeadState):
             return inner.f_simplex[0], 0
+        fn, args = self._objective(objective)
         return safe_value(fn(y, args)), 1
 
-    def _terminate(self, fn, y, args, options, inner):
-        done, result = self.minimiser.terminate(_with_aux(fn), y, args, options, inner, _TAGS)
+    def _terminate(self, y, opts, inner, objective):
+        fn, args = (None, None) if objective is None else objective
+        done, result = self.minimiser.terminate(_with_aux(fn), y, args, opts, inner, _TAGS)
         return done, RESULTS.where(_all_finite(y), result, RESULTS.nonfinite)
 
-    def init(self, fn, lower, upper, args, key, x0=None, options=None):
+    def init_rounds(self, lower, upper, key, x0=None, objective=None, options=None):
         """``options``: extra optimistix options (``NelderMead``: ``"initial_step"``)."""
         if x0 is None:
             x0 = uniform_in_box(key, lower.shape, lower, upper)
         elif x0.ndim != 1:
             raise ValueError("an optimistix minimiser takes one start y0, not a population")
         opts = self._options(lower, upper, options)
-        f_struct = jax.ShapeDtypeStruct((), x0.dtype)
-        inner = self.minimiser.init(_with_aux(fn), x0, args, opts, f_struct, None, _TAGS)
-        done, result = self._terminate(fn, x0, args, opts, inner)
-        f, extra = self._best_f(fn, args, x0, inner)
+        if isinstance(self.minimiser, NelderMead):
+            inner = yield from _no_aux(self.minimiser.init_rounds(x0, opts))
+        else:
+            fn, args = self._objective(objective)
+            f_struct = jax.ShapeDtypeStruct((), x0.dtype)
+            inner = self.minimiser.init(_with_aux(fn), x0, args, opts, f_struct, None, _TAGS)
+        done, result = self._terminate(x0, opts, inner, objective)
+        f, extra = self._best_f(objective, x0, inner)
         return OptxState(x0, inner, jnp.array(0, jnp.int32), done, result, f,
                          jnp.array(extra, count_dtype()))
 
-    def step(self, fn, lower, upper, args, state):
+    def step_rounds(self, lower, upper, state, stage=0, objective=None):
         opts = self._options(lower, upper)
-        y, inner, _ = self.minimiser.step(_with_aux(fn), state.y, args, opts, state.inner, _TAGS)
+        if isinstance(self.minimiser, NelderMead):
+            y, inner, _ = yield from _no_aux(self.minimiser.step_rounds(state.inner, opts))
+        else:
+            fn, args = self._objective(objective)
+            y, inner, _ = self.minimiser.step(_with_aux(fn), state.y, args, opts, state.inner,
+                                              _TAGS)
         # optimistix tests termination on the iterate the step started from
-        done, result = self._terminate(fn, state.y, args, opts, inner)
-        f, extra = self._best_f(fn, args, y, inner)
+        done, result = self._terminate(state.y, opts, inner, objective)
+        f, extra = self._best_f(objective, y, inner)
         return OptxState(y, inner, state.num_steps + 1, done, result, f,
                          state.extra_evals + extra)
 

@@ -88,6 +88,14 @@ def _scipy_bounds(bounds):
     return (pairs[0], pairs[1])
 
 
+def _refuse_first(ok, message):
+    """``ValueError(message(i, count))`` for the first parameter ``i`` where ``ok`` fails
+    (``count`` of them fail)."""
+    bad = np.nonzero(~np.asarray(ok))[0]
+    if bad.size:
+        raise ValueError(message(int(bad[0]), bad.size))
+
+
 def prepare_bounds(bounds, dtype=None):
     """Validate ``bounds`` (``(lower, upper)`` pytrees, or scipy's forms) and flatten them.
 
@@ -121,13 +129,9 @@ def prepare_bounds(bounds, dtype=None):
         raise ValueError("bounds describe zero parameters")
     if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
         raise ValueError("bounds must be finite (found NaN or inf)")
-    bad = np.nonzero(~(lower < upper))[0]
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"every lower bound must be < its upper bound; parameter {i} has "
-            f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({bad.size} such parameter(s))"
-        )
+    _refuse_first(lower < upper, lambda i, count: (
+        f"every lower bound must be < its upper bound; parameter {i} has "
+        f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({count} such parameter(s))"))
     if dtype is None:
         dtype = np.result_type(*[a.dtype for a in lo_leaves + hi_leaves])
         if not np.issubdtype(dtype, np.floating):
@@ -154,20 +158,13 @@ def prepare_bounds(bounds, dtype=None):
     lo_c, hi_c = lower.astype(dtype), upper.astype(dtype)
     with np.errstate(over="ignore", invalid="ignore"):
         width = hi_c - lo_c
-    bad = np.nonzero(~(lo_c < hi_c))[0]
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"every lower bound must be < its upper bound in the search dtype {dtype}; "
-            f"parameter {i} has lower={float(lower[i])!r}, upper={float(upper[i])!r}, "
-            f"which are equal in {dtype} (rescale the parameter or use float64)"
-        )
-    if not np.all(np.isfinite(width)):
-        i = int(np.nonzero(~np.isfinite(width))[0][0])
-        raise ValueError(
-            f"upper - lower overflows the search dtype {dtype} for parameter {i} "
-            f"(lower={float(lower[i])!r}, upper={float(upper[i])!r}); rescale it or use float64"
-        )
+    _refuse_first(lo_c < hi_c, lambda i, _: (
+        f"every lower bound must be < its upper bound in the search dtype {dtype}; "
+        f"parameter {i} has lower={float(lower[i])!r}, upper={float(upper[i])!r}, "
+        f"which are equal in {dtype} (rescale the parameter or use float64)"))
+    _refuse_first(np.isfinite(width), lambda i, _: (
+        f"upper - lower overflows the search dtype {dtype} for parameter {i} "
+        f"(lower={float(lower[i])!r}, upper={float(upper[i])!r}); rescale it or use float64"))
     return (
         jnp.asarray(lo_c, dtype),
         jnp.asarray(hi_c, dtype),

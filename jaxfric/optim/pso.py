@@ -11,7 +11,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from ._base import check_positive_int, check_range, linear_inertia
+from ._base import check_positive_int, linear_inertia
 from .rng import counter_seed, counter_uniform
 from .swarm import (  # noqa: F401  (SwarmState, init_swarm: their 0.6.0 import path)
     AbstractSwarm,
@@ -55,21 +55,10 @@ class PSO(AbstractSwarm):
 
     num_particles: int = 25
     num_generations: int = 500
-    w_max: float = 0.9
-    w_min: float = 0.4
-    c1: float = 2.0
-    c2: float = 2.0
-    vmax_fraction: float = 0.2
-    zero_velocity_at_bounds: bool = True
-    stall_generations: int | None = None
-    function_tolerance: float = 1e-6
 
     def check(self):
         check_positive_int("num_particles", self.num_particles)
         self.check_swarm()
-        for name in ("w_max", "w_min", "c1", "c2"):
-            check_range(name, getattr(self, name), 0.0)
-        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
 
     @property
     def num_agents(self) -> int:

@@ -1,18 +1,19 @@
 """What every swarm shares: the state, personal/global bests, stall-based stopping,
 warm starts and ``ask / tell`` (docs/algorithms.md §3, §10).
 
-A swarm writes one generation as a Python *generator* that yields each batch of
-candidates it needs evaluated and receives their fitness back (``f = yield X``).
-:meth:`AbstractSwarm.step` feeds it the objective, evaluated on the whole batch at
-once inside the compiled program; :meth:`AbstractSwarm.ask` / :meth:`AbstractSwarm.tell`
-feed it values computed anywhere (a simulator outside JAX), one batch per call. The
-same code therefore defines both, and a run driven by ``ask``/``tell`` visits the
-points :func:`jaxfric.minimise` visits for the same key.
+A swarm writes one generation as evaluation *rounds* (:mod:`jaxfric.optim.rounds`): a
+Python generator that yields each batch of candidates it needs evaluated and receives
+their fitness back (``f = yield X``). :meth:`AbstractSwarm.step` feeds it the objective,
+evaluated on the whole batch at once inside the compiled program;
+:meth:`~jaxfric.optim.rounds.AbstractAskTellSolver.ask` / ``tell`` feed it values
+computed anywhere (a simulator outside JAX), one batch per call. The same code therefore
+defines both, and a run driven by ``ask``/``tell`` visits the points
+:func:`jaxfric.minimise` visits for the same key.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable, Generator
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -20,19 +21,19 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from ._base import (
-    AbstractIterativeSolver,
-    History,
-    Solution,
     batch_objective,
     check_positive_int,
     check_range,
     count_dtype,
-    result_from_f,
-    safe_value,
     uniform_in_box,
 )
-
-Rounds = Generator[Array, Array, Any]
+from .rounds import (  # noqa: F401  (drive, replay, AskTellState: their 0.7 import path)
+    AbstractGenerational,
+    AskTellState,
+    Rounds,
+    drive,
+    replay,
+)
 
 
 class SwarmState(eqx.Module):
@@ -104,42 +105,7 @@ def init_swarm(key, f_batch, num, lower, upper, vmax, x0=None) -> SwarmState:
     return swarm_from(x, v, f_batch(x), key)
 
 
-def drive(rounds: Rounds, evaluate: Callable):
-    """Run a generation's generator to the end, evaluating each batch it yields."""
-    X = next(rounds)
-    while True:
-        try:
-            X = rounds.send(evaluate(X))
-        except StopIteration as stop:
-            return stop.value
-
-
-def replay(rounds: Rounds, told: tuple):
-    """Feed a generator the fitness batches ``told``: ``(next batch, None)`` while it
-    wants more, ``(None, result)`` once it has finished."""
-    X = next(rounds)
-    for f in told:
-        try:
-            X = rounds.send(f)
-        except StopIteration as stop:
-            return None, stop.value
-    return X, None
-
-
-class AskTellState(eqx.Module):
-    """State of a run driven by :meth:`AbstractSwarm.ask` / :meth:`AbstractSwarm.tell`:
-    the swarm (``None`` before the first population is told), the box, the key, the
-    optional start, and the fitness batches told so far within the current generation."""
-
-    swarm: SwarmState | None
-    lower: Array
-    upper: Array
-    key: Any
-    x0: Any = None
-    told: tuple = ()
-
-
-class AbstractSwarm(AbstractIterativeSolver):
+class AbstractSwarm(AbstractGenerational):
     """A population solver: a fixed number of generations, optionally stopped early.
 
     Subclasses give ``num_agents``, ``vmax``, ``draw`` (generation ``i``'s random
@@ -153,8 +119,16 @@ class AbstractSwarm(AbstractIterativeSolver):
     """
 
     num_generations: eqx.AbstractVar[int]
-    stall_generations: eqx.AbstractVar[int | None]
-    function_tolerance: eqx.AbstractVar[float]
+    # The PSO operator (docs/algorithms.md §3.3, §10) and early stopping: the same fields
+    # and defaults for every swarm, keyword-only (after each swarm's own fields).
+    w_max: float = eqx.field(default=0.9, kw_only=True)
+    w_min: float = eqx.field(default=0.4, kw_only=True)
+    c1: float = eqx.field(default=2.0, kw_only=True)
+    c2: float = eqx.field(default=2.0, kw_only=True)
+    vmax_fraction: float = eqx.field(default=0.2, kw_only=True)
+    zero_velocity_at_bounds: bool = eqx.field(default=True, kw_only=True)
+    stall_generations: int | None = eqx.field(default=None, kw_only=True)
+    function_tolerance: float = eqx.field(default=1e-6, kw_only=True)
 
     # --------------------------------------------------------------- subclass hooks
     @property
@@ -176,10 +150,15 @@ class AbstractSwarm(AbstractIterativeSolver):
         raise NotImplementedError
 
     def check_swarm(self) -> None:
+        """Checks of what every swarm has: the budget, early stopping and the PSO
+        operator's coefficients (docs/algorithms.md §3.3)."""
         check_positive_int("num_generations", self.num_generations)
         if self.stall_generations is not None:
             check_positive_int("stall_generations", self.stall_generations)
         check_range("function_tolerance", self.function_tolerance, 0.0)
+        for name in ("w_max", "w_min", "c1", "c2"):
+            check_range(name, getattr(self, name), 0.0)
+        check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
 
     # ------------------------------------------------------------------ generators
     def first(self, lower, upper, key, x0=None) -> Rounds:
@@ -211,95 +190,27 @@ class AbstractSwarm(AbstractIterativeSolver):
         s = yield from self.generation(state, lower, upper, f_batch)
         return self._advanced(s)
 
-    # ------------------------------------------------------------- step protocol
-    def init(self, fn, lower, upper, args, key, x0=None) -> SwarmState:
-        return drive(self.first(lower, upper, key, x0), batch_objective(fn, args))
+    # ------------------------------------------------------------ rounds protocol
+    def init_rounds(self, lower, upper, key, x0=None, objective=None) -> Rounds:
+        return self.first(lower, upper, key, x0)
 
-    def step(self, fn, lower, upper, args, state) -> SwarmState:
-        f_batch = batch_objective(fn, args)
-        return drive(self._next(state, lower, upper, f_batch), f_batch)
+    def step_rounds(self, lower, upper, state, stage=0, objective=None) -> Rounds:
+        f_batch = None if objective is None else batch_objective(*objective)
+        return self._next(state, lower, upper, f_batch)
 
-    def terminate(self, fn, lower, upper, args, state):
-        done = state.generation >= self.num_generations
-        if self.stall_generations is not None:
-            done = done | (state.stall >= self.stall_generations)
-        return done, result_from_f(state.gbest_f)
-
-    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
-        return Solution(
-            value=state.gbest, f=state.gbest_f, result=result,
-            stats={"num_steps": state.generation, "num_evals": state.num_evals},
-            history=History.empty(1, state.gbest_f.dtype), state=state,
-        )
+    def stopped(self, state):
+        if self.stall_generations is None:
+            return False
+        return state.stall >= self.stall_generations
 
     def best(self, state):
         return state.gbest, state.gbest_f
 
-    def num_evals(self, state):
-        return state.num_evals
-
-    def max_steps(self, n: int) -> int:
-        return self.num_generations
-
     def max_evaluations(self, n: int) -> int:
         return self.evaluations()
-
-    def progress(self, state):
-        return jnp.array(0, jnp.int32), state.generation
-
-    def progress_totals(self):
-        return self.num_generations, None
 
     def continued(self, state: SwarmState) -> SwarmState:
         """A finished run's state, ready to run on under this solver's budget (warm
         start): the stall count restarts, generation ``i`` keeps its random numbers."""
         zero = jnp.zeros_like(state.stall)
         return eqx.tree_at(lambda s: (s.stall, s.stall_f), state, (zero, state.gbest_f))
-
-    # ------------------------------------------------------------------- ask / tell
-    def ask_init(self, lower, upper, key, x0=None) -> AskTellState:
-        """Start a run driven from Python (``lower``/``upper``: 1-D arrays)."""
-        lower, upper = jnp.asarray(lower), jnp.asarray(upper)
-        return AskTellState(None, lower, upper, key,
-                            None if x0 is None else jnp.asarray(x0, lower.dtype))
-
-    def _rounds(self, st: AskTellState) -> Rounds:
-        if st.swarm is None:
-            return self.first(st.lower, st.upper, st.key, st.x0)
-        return self._next(st.swarm, st.lower, st.upper)
-
-    def ask(self, st: AskTellState):
-        """``(X, st)``: the candidates (rows) whose fitness :meth:`tell` needs next."""
-        X, _ = _replay_jit(self, st, st.told)
-        return X, st
-
-    def tell(self, st: AskTellState, X, f) -> AskTellState:
-        """Give the fitness ``f`` of the rows ``X`` returned by :meth:`ask` (NaN/inf
-        count as the worst value)."""
-        f = safe_value(jnp.asarray(f, st.lower.dtype))
-        if f.shape != (jnp.shape(X)[0],):
-            raise ValueError(f"tell needs one fitness value per candidate: got shape "
-                             f"{f.shape} for {jnp.shape(X)[0]} candidates")
-        told = st.told + (f,)
-        _, done = _replay_jit(self, st, told)
-        if done is None:
-            return eqx.tree_at(lambda s: s.told, st, told)
-        return AskTellState(done, st.lower, st.upper, st.key, st.x0, ())
-
-    def ask_done(self, st: AskTellState) -> bool:
-        if st.swarm is None:
-            return False
-        return bool(self.terminate(None, st.lower, st.upper, None, st.swarm)[0])
-
-    def ask_result(self, st: AskTellState) -> Solution:
-        """The :class:`Solution` so far (flat ``value``)."""
-        s = st.swarm
-        _, result = self.terminate(None, st.lower, st.upper, None, s)
-        sol = self.postprocess(None, st.lower, st.upper, None, s, result)
-        hist = History.from_arrays(s.num_evals[None], s.gbest_f[None])
-        return eqx.tree_at(lambda t: t.history, sol, hist)
-
-
-@eqx.filter_jit
-def _replay_jit(solver: AbstractSwarm, st: AskTellState, told: tuple):
-    return replay(solver._rounds(st), told)

@@ -1,0 +1,351 @@
+"""Evaluation rounds: one definition of a solver's evaluations serves the compiled run
+and a run driven from Python by ``ask`` / ``tell`` (issue 15 item 1).
+
+A solver writes its start and each of its steps as a Python *generator* ("rounds")
+that yields every batch of points it needs evaluated and receives their values back,
+one NaN-safe value per row (``f = yield X``). A batch may be conditional,
+``f = yield Batch(X, needed)`` with a traced boolean ``needed`` (Nelder–Mead's second
+trial point or shrink, the switch of a two-stage chain): when it is not needed nothing
+is evaluated or counted and the generator receives ``+inf`` values.
+
+* :func:`drive` runs rounds inside the compiled program: each batch is one call of the
+  objective on the whole batch (a conditional one under ``lax.cond``);
+* :meth:`AbstractAskTellSolver.ask` / :meth:`~AbstractAskTellSolver.tell` run the same
+  rounds from Python with values computed anywhere (an external simulator, NumPy), one
+  needed batch per call. The run visits the points :func:`jaxfric.minimise` visits for
+  the same key, with the same evaluation count, and switches stages by the same rule.
+
+Every solver built on :class:`AbstractAskTellSolver` has ``ask``/``tell``: PSO, MAPSO,
+:class:`~jaxfric.optim.Evosax`, Nelder–Mead (``OptxMinimiser(NelderMead())``, the view
+:func:`jaxfric.minimise` runs it through) and the two-stage chains (MAPSO–NMDS, ``chain(PSO(), NelderMead())``, ``cmaes_nm()``). During a
+chain's global stage ``ask`` returns the population (MAPSO: then its self-learning
+batches); during the Nelder–Mead stage the first simplex (``n + 1`` points), then each
+step's trial points: the reflection, then at most one more point or a shrink's ``n``
+points under the sequential rule, or the four trial points at once with
+``NelderMead(batched_trials=True)``. Example, with an objective JAX cannot trace::
+
+    solver = jaxfric.mapso_nmds(num_generations=50)
+    st = solver.ask_init(lower, upper, jax.random.key(0))
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)                        # (k, n) points
+        st = solver.tell(st, X, [simulate(x) for x in np.asarray(X)])
+    solution = solver.ask_result(st)                  # as minimise's, flat value
+
+``tell`` needs one value per row of the batch ``ask`` gave (else ``ValueError``); NaN
+and inf count as the worst value and never become the best.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable, Generator
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ._base import (
+    AbstractIterativeSolver,
+    History,
+    Solution,
+    batch_objective,
+    result_from_f,
+    safe_value,
+)
+
+Rounds = Generator[Any, Any, Any]
+
+
+class Batch(eqx.Module):
+    """Points to evaluate (the rows of ``x``), only where ``needed`` (a boolean scalar;
+    ``True``: always)."""
+
+    x: Array
+    needed: Any = True
+    # a population may be split over the devices (jaxfric.optim.sharding); Nelder–Mead's
+    # few points are evaluated whole, as optimistix's own step evaluates them
+    split: bool = eqx.field(static=True, default=True)
+
+
+def _request(req) -> Batch:
+    return req if isinstance(req, Batch) else Batch(req)
+
+
+def skipped(x):
+    """What a batch that is not needed gives back: ``+inf`` for every row."""
+    return jnp.full((x.shape[0],), jnp.inf, x.dtype)
+
+
+def _run(rounds: Rounds, handle: Callable):
+    """Feed ``rounds`` ``handle(batch)`` for every batch it yields; its result."""
+    out = None
+    while True:
+        try:
+            req = rounds.send(out)
+        except StopIteration as stop:
+            return stop.value
+        out = handle(_request(req))
+
+
+def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped,
+          whole: Callable | None = None):
+    """Run ``rounds`` to the end inside a compiled program, evaluating each batch it
+    yields with ``evaluate`` (``whole`` for a batch that is not to be split over
+    devices; a conditional batch under ``lax.cond``, ``skip`` otherwise); returns the
+    generator's result."""
+    def handle(b):
+        ev = evaluate if b.split or whole is None else whole
+        return ev(b.x) if b.needed is True else jax.lax.cond(b.needed, ev, skip, b.x)
+
+    return _run(rounds, handle)
+
+
+def _objectives(fn, args):
+    """``(evaluate, whole)`` for :func:`drive`: the batched objective, and the same
+    without the driver's device layout."""
+    one = fn if getattr(fn, "layout", None) is None else eqx.tree_at(
+        lambda f: f.layout, fn, None, is_leaf=lambda x: x is None)
+    return batch_objective(fn, args), batch_objective(one, args)
+
+
+class _Pending(Exception):
+    def __init__(self, batch):
+        self.batch = batch
+
+
+def replay(rounds: Rounds, told: tuple, skip: Callable = skipped):
+    """Feed ``rounds`` the values ``told`` (``None``: a batch that was not needed).
+    Returns ``(batch, None)`` for the next :class:`Batch` it asks for, or
+    ``(None, result)`` once it has finished."""
+    values = iter(told)
+
+    def handle(b):
+        f = next(values, _Pending)
+        if f is _Pending:
+            raise _Pending(b)
+        return skip(b.x) if f is None else f
+
+    try:
+        return None, _run(rounds, handle)
+    except _Pending as pending:
+        return pending.batch, None
+
+
+class relay:
+    """``rounds`` seen through ``request`` (applied to each :class:`Batch` it yields) and
+    ``answer`` (applied to each value sent back); use as ``yield from relay(...)``."""
+
+    def __init__(self, rounds: Rounds, request: Callable | None = None,
+                 answer: Callable | None = None):
+        self.rounds, self.request, self.answer, self.started = rounds, request, answer, False
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        return self.send(None)
+
+    def send(self, value):
+        if self.started and self.answer is not None:
+            value = self.answer(value)
+        self.started = True
+        b = _request(self.rounds.send(value))  # its StopIteration carries the result
+        return b if self.request is None else self.request(b)
+
+
+def only_if(need, rounds: Rounds) -> Rounds:
+    """``rounds`` with every batch needed only where ``need`` (its result is then
+    meaningless unless ``need``: the caller selects)."""
+    return relay(rounds, request=lambda b: Batch(b.x, need if b.needed is True
+                                                 else need & b.needed, b.split))
+
+
+class AskTellState(eqx.Module):
+    """A run driven by :meth:`AbstractAskTellSolver.ask` / ``tell``: the solver's state
+    (``None`` until the start has been told), the box, the key, the optional start,
+    the values told so far within the current round, the batch waiting for values
+    (``None`` once the run has finished) and the stage the state is in."""
+
+    state: Any
+    lower: Array
+    upper: Array
+    key: Any
+    x0: Any = None
+    told: tuple = ()
+    pending: Any = None
+    stage: int | None = eqx.field(static=True, default=None)
+
+    @property
+    def swarm(self):
+        """The solver's state (the name of 0.7's swarm-only ask/tell)."""
+        return self.state
+
+
+class AbstractAskTellSolver(AbstractIterativeSolver):
+    """A solver whose evaluations come in rounds (see the module docstring): it gives
+    :meth:`init_rounds` and :meth:`step_rounds`, and gets ``init``/``step`` (compiled,
+    each batch one call of the objective) and ``ask``/``tell`` (from Python) from them.
+
+    ``objective`` is ``(fn, args)`` in a compiled run, ``None`` under ask/tell: with it
+    inner loops may run as ``lax.scan`` (MAPSO's self-learning) and a minimiser that
+    evaluates by itself (an optimistix gradient method) can run at all.
+    """
+
+    @abc.abstractmethod
+    def init_rounds(self, lower, upper, key, x0=None, objective=None) -> Rounds:
+        """Rounds of the start; returns the first state."""
+
+    @abc.abstractmethod
+    def step_rounds(self, lower, upper, state, stage: int = 0, objective=None) -> Rounds:
+        """Rounds of one step of ``stage`` (static), which ``state`` is in; returns the
+        new state."""
+
+    def check_ask_tell(self) -> None:
+        """Raise ``ValueError`` if ``ask``/``tell`` cannot drive this solver."""
+
+    # ------------------------------------------------------------ compiled protocol
+    def init(self, fn, lower, upper, args, key, x0=None):
+        evaluate, whole = _objectives(fn, args)
+        return drive(self.init_rounds(lower, upper, key, x0, (fn, args)), evaluate,
+                     whole=whole)
+
+    def step(self, fn, lower, upper, args, state):
+        return self.step_stage(fn, lower, upper, args, state, 0)
+
+    def step_stage(self, fn, lower, upper, args, state, stage: int):
+        evaluate, whole = _objectives(fn, args)
+        return drive(self.step_rounds(lower, upper, state, stage, (fn, args)), evaluate,
+                     whole=whole)
+
+    # ------------------------------------------------------------------- ask / tell
+    def ask_init(self, lower, upper, key, x0=None) -> AskTellState:
+        """Start a run driven from Python. ``lower``/``upper``: 1-D bounds (their dtype
+        is the search dtype, as in :func:`jaxfric.minimise`); ``key``: a PRNG key or an
+        int seed; ``x0``: an optional start (swarms: or an initial population)."""
+        from .driver import _check_key  # the driver imports the solvers
+
+        self.check()
+        self.check_ask_tell()
+        lower, upper = jnp.asarray(lower), jnp.asarray(upper)
+        if lower.ndim != 1 or lower.shape != upper.shape or lower.shape[0] == 0:
+            raise ValueError(f"ask_init needs 1-D lower and upper bounds of one length, got "
+                             f"shapes {lower.shape} and {upper.shape}")
+        if not bool(jnp.all(lower < upper)):
+            raise ValueError("every lower bound must be < its upper bound")
+        if not jnp.issubdtype(lower.dtype, jnp.floating):
+            lower, upper = lower.astype(float), upper.astype(float)
+        upper = upper.astype(lower.dtype)
+        key = _check_key(key)
+        x0 = None if x0 is None else jnp.asarray(x0, lower.dtype)
+        return self._advance(AskTellState(None, lower, upper, key, x0))
+
+    def ask(self, st: AskTellState):
+        """``(X, st)``: the points (rows) whose values :meth:`tell` needs next."""
+        if st.pending is None:
+            raise ValueError("the run has finished (ask_done is True): read ask_result")
+        return st.pending, st
+
+    def tell(self, st: AskTellState, X, f) -> AskTellState:
+        """Give the values ``f`` of the rows ``X`` returned by :meth:`ask` (NaN and inf
+        count as the worst value); returns the state asking for the next batch."""
+        if st.pending is None:
+            raise ValueError("the run has finished (ask_done is True): nothing to tell")
+        if tuple(jnp.shape(X)) != tuple(st.pending.shape):
+            raise ValueError(f"tell needs the batch ask returned, of shape {st.pending.shape}, "
+                             f"got shape {tuple(jnp.shape(X))}")
+        f = safe_value(jnp.asarray(f, st.lower.dtype))
+        if f.shape != (st.pending.shape[0],):
+            raise ValueError(f"tell needs one fitness value per candidate: got shape "
+                             f"{f.shape} for {st.pending.shape[0]} candidates")
+        return self._advance(_at(st, told=st.told + (f,), pending=None))
+
+    def ask_done(self, st: AskTellState) -> bool:
+        """Whether the run has finished (by the rule the compiled run stops on)."""
+        return st.pending is None
+
+    def ask_result(self, st: AskTellState) -> Solution:
+        """The :class:`Solution` so far (flat ``value``; the history holds its last entry)."""
+        if st.state is None:
+            raise ValueError("no result before the first batch has been told")
+        return _result_jit(self, st.state, st.lower, st.upper)
+
+    def _advance(self, st: AskTellState) -> AskTellState:
+        """Replay the current round with the values told so far up to the next batch
+        that is needed (a batch that is not needed is told ``+inf``, what the compiled
+        run's ``lax.cond`` gives, and passed over), starting the next round whenever one
+        finishes and the run goes on."""
+        while True:
+            batch, state, done, stage = _replay_jit(self, st)
+            if batch is None:
+                st = AskTellState(state, st.lower, st.upper, st.key, st.x0, stage=int(stage))
+                if bool(done):
+                    return st
+            elif bool(batch.needed):
+                return _at(st, pending=batch.x)
+            else:
+                st = _at(st, told=st.told + (skipped(batch.x),))
+
+
+def _at(st: AskTellState, **changes) -> AskTellState:
+    fields = {k: getattr(st, k) for k in ("state", "lower", "upper", "key", "x0", "told",
+                                           "pending", "stage")}
+    return AskTellState(**{**fields, **changes})
+
+
+@eqx.filter_jit
+def _replay_jit(solver: AbstractAskTellSolver, st: AskTellState):
+    if st.state is None:
+        rounds = solver.init_rounds(st.lower, st.upper, st.key, st.x0)
+    else:
+        rounds = solver.step_rounds(st.lower, st.upper, st.state, st.stage)
+    batch, state = replay(rounds, st.told)
+    if state is None:
+        return batch, None, None, None
+    return None, state, solver.terminate(None, st.lower, st.upper, None, state)[0], \
+        solver.stage(state)
+
+
+@eqx.filter_jit
+def _result_jit(solver: AbstractAskTellSolver, state, lower, upper) -> Solution:
+    _, result = solver.terminate(None, lower, upper, None, state)
+    sol = solver.postprocess(None, lower, upper, None, state, result)
+    _, f = solver.best(state)
+    hist = History.from_arrays(jnp.asarray(solver.num_evals(state))[None], f[None])
+    return eqx.tree_at(lambda t: t.history, sol, hist)
+
+
+class AbstractGenerational(AbstractAskTellSolver):
+    """A population solver that runs ``num_generations`` generations (swarms, evosax
+    strategies). Its state has ``generation`` and ``num_evals``; :meth:`best` gives the
+    best point; :meth:`stopped` an optional earlier end."""
+
+    num_generations: eqx.AbstractVar[int]
+
+    def stopped(self, state):
+        """Whether the run ends before ``num_generations`` (default: never)."""
+        return False
+
+    def terminate(self, fn, lower, upper, args, state):
+        done = (state.generation >= self.num_generations) | self.stopped(state)
+        return done, result_from_f(self.best(state)[1])
+
+    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
+        x, f = self.best(state)
+        return Solution(
+            value=x, f=f, result=result,
+            stats={"num_steps": state.generation, "num_evals": state.num_evals},
+            history=History.empty(1, f.dtype), state=state,
+        )
+
+    def num_evals(self, state):
+        return state.num_evals
+
+    def max_steps(self, n: int) -> int:
+        return self.num_generations
+
+    def progress(self, state):
+        return jnp.array(0, jnp.int32), state.generation
+
+    def progress_totals(self):
+        return self.num_generations, None
