@@ -424,6 +424,13 @@ class Fit:
             out["theta_dtype"] = str(self.theta.dtype)
         return out
 
+    def stage_counts(self) -> list[tuple[str, float, int, bool]]:
+        """``(stage, J, count, count_is_evaluations)`` per optimiser stage: the count is the
+        stage's evaluations where it recorded them, else its steps."""
+        return [(st.get("stage", "?"), float(st.get("J", float("nan"))),
+                 st.get("num_evals", st.get("num_steps")), "num_evals" in st)
+                for st in self.stages]
+
     def summary(self) -> str:
         """A short text table: model, metrics per window, stages and timings."""
         lines = [f"{type(self.model).__name__} fit: {self.num_params} parameters, "
@@ -435,11 +442,8 @@ class Fit:
                 lines.append(f"{w:<7}{m['mse_percent']:>10.4f}{m['max_abs']:>11.3g}"
                              f"{m['fit_percent']:>9.2f}{m['r2']:>9.5f}")
         if self.stages:
-            parts = []
-            for s in self.stages:
-                n = s.get("num_evals", s.get("num_steps"))
-                unit = "evals" if "num_evals" in s else "steps"
-                parts.append(f"{s['stage']} J={s['J']:.4g} ({n} {unit})")
+            parts = [f"{name} J={J:.4g} ({n} {'evals' if evals else 'steps'})"
+                     for name, J, n, evals in self.stage_counts()]
             lines.append("stages: " + " -> ".join(parts))
         records = self.metrics.get("records") or []
         if len(records) > 1:

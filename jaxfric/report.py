@@ -447,11 +447,8 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             if band in results["figures"]:
                 L += ["", f"![ensemble band]({band})"]
         if fit.stages:
-            parts = []
-            for st in fit.stages:
-                n = st.get("num_evals", st.get("num_steps"))
-                unit = "evaluations" if "num_evals" in st else "steps"
-                parts.append(f"{st.get('stage', '?')}: J = {float(st.get('J', float('nan'))):.5g} ({n} {unit})")
+            parts = [f"{name}: J = {J:.5g} ({n} {'evaluations' if evals else 'steps'})"
+                     for name, J, n, evals in fit.stage_counts()]
             L += ["", "Optimiser stages: " + " → ".join(parts) + "."]
         if m["file"]:
             L += ["", f"Saved fit: `{m['file']}` (use `jaxfric predict {m['file']} DATA.csv`)."]
