@@ -122,8 +122,11 @@ def test_ensemble_members_equal_single_runs_and_the_band_holds_the_best():
     e = fit.ensemble
     assert len(e["J"]) == 3 and e["best"] == int(np.argmin(e["J"]))
     for i, single in enumerate(singles):
-        np.testing.assert_allclose(e["theta"][i], single.theta, rtol=1e-9, atol=1e-9)
-        assert e["J"][i] == pytest.approx(float(single.metrics["cost"]), rel=1e-9)
+        # float64: a vmapped member rounds its sums in another order than the single run,
+        # and the optimiser's path carries that forward (5e-9 seen since 0.8.0's float64
+        # random numbers; 0.7.0's stream happened to stay under 1e-9)
+        np.testing.assert_allclose(e["theta"][i], single.theta, rtol=1e-8, atol=1e-9)
+        assert e["J"][i] == pytest.approx(float(single.metrics["cost"]), rel=1e-8)
     np.testing.assert_array_equal(fit.theta, e["theta"][e["best"]])
     lo, hi = fit.predict_band(noisy[0])
     best = np.asarray(fit.predict(noisy[0]), np.float64)
