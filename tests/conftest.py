@@ -66,7 +66,7 @@ def run_cache_size():
 
 
 # Tests that take more than ~10 s on an idle 2-core runner (issue 20.14), marked in one place
-# so the quick subset is `python -m pytest -q -m "not slow"`. Measured with
+# so the quick subset is `python -m pytest -q -n 2 -m "not slow"`. Measured with
 # `pytest --durations` (see the house branch's report); node ids without parameters.
 SLOW_TESTS = {
     # share the module's `jaxfric demo --quick` subprocess (about 25 s idle) or run their own
