@@ -33,7 +33,7 @@ def check_models(names, box=None) -> list[str]:
     for name in names:
         if name not in known:
             raise UserError(f"unknown model {name!r}; choose from {', '.join(known)}")
-    used = {k for name in names for k in getattr(models.get(name), "box_keys", ())}
+    used = {k for name in names for k in models.get(name).box_keys}
     for key, _ in box or ():
         if key not in used:
             raise UserError(f"--box {key}: none of the models {', '.join(names)} has this parameter"

@@ -66,7 +66,7 @@ class FitSpec:
                    nm_evals=nm_evals, refine=getattr(args, "refine", "none"),
                    paper=getattr(args, "paper", False), seed=args.seed)
         entries = dict(getattr(args, "box", None) or ())
-        keys = getattr(spec.build_model(), "box_keys", ())  # each model takes the entries it searches
+        keys = spec.build_model().box_keys  # each model takes the entries it searches
         return dataclasses.replace(spec, box=tuple((k, r) for k, r in entries.items() if k in keys))
 
     @property

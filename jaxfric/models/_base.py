@@ -190,7 +190,12 @@ class AbstractFrictionModel(eqx.Module):
         del data
         return ()
 
-    
+    @property
+    def box_keys(self) -> tuple[str, ...]:
+        """The :class:`~jaxfric.models.SearchBox` entries this model searches; ``()`` for
+        the networks, whose box is a model option (docs/algorithms.md §8.5)."""
+        return ()
+
     @property
     @abc.abstractmethod
     def param_names(self) -> tuple[str, ...]:
