@@ -74,3 +74,27 @@ def test_generation_words_are_traceable():
     key = jax.random.key(0)
     f = jax.jit(lambda i: counter_uniform(counter_seed(key, i, 2), (8,), jnp.float32))
     np.testing.assert_array_equal(f(jnp.int32(6)), draw(0, 6, 2, n=8))
+
+
+@pytest.mark.parametrize("shape", [(16, 6), (9, 30), (2, 3, 4), (5,)])
+@pytest.mark.parametrize("x64", [False, True])
+def test_uniform_in_box_draws_what_jax_random_draws_for_the_shape(shape, x64):
+    """The solvers' starting points are drawn flat (XLA compiles a 1-D threefry faster)
+    and are exactly ``jax.random.uniform`` of the shape, scaled to the box, also under
+    jit and vmap over keys."""
+    from jaxfric.optim._base import uniform_in_box
+
+    with jax.enable_x64(x64):
+        dt = jnp.float64 if x64 else jnp.float32
+        lo, hi = jnp.full(shape[-1], -2.0, dt), jnp.full(shape[-1], 3.0, dt)
+        keys = jax.random.split(jax.random.key(7), 3)
+        def plain(k):
+            return lo + jax.random.uniform(k, shape, dt) * (hi - lo)
+
+        # compared program against program (a fused multiply-add rounds the scaling
+        # differently from eager, op-by-op arithmetic)
+        got = jax.jit(jax.vmap(lambda k: uniform_in_box(k, shape, lo, hi)))(keys)
+        assert got.shape == (3,) + shape and got.dtype == dt
+        np.testing.assert_array_equal(got, jax.jit(jax.vmap(plain))(keys))
+        for k in keys:
+            np.testing.assert_array_equal(uniform_in_box(k, shape, lo, hi), plain(k))

