@@ -6,10 +6,10 @@ edit those, then rebuild the committed notebooks without outputs::
 
     jupytext --to ipynb notebooks/0*.py
 
-Kernels get ``JAXFRIC_NOTEBOOK_BUDGET=small`` and share JAX's persistent compilation
-cache with the command-line tests of the same session (an environment variable of the
-kernels; this process's JAX configuration is untouched), so programs the CLI tests
-compiled are not compiled again.
+Kernels get ``JAXFRIC_NOTEBOOK_BUDGET=small``, import jaxfric from this checkout, and
+share the test session's persistent compilation cache (tests/conftest.py sets it as an
+environment variable, which the kernels inherit), so programs other tests compiled are
+not compiled again.
 """
 
 from __future__ import annotations
@@ -49,13 +49,17 @@ def test_notebook_is_built_from_its_percent_source(path):
         f"{path.name} differs from {source.name}: run 'jupytext --to ipynb notebooks/{source.name}'")
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_runs_with_the_small_budget(path, tmp_path_factory, monkeypatch):
-    cache = tmp_path_factory.getbasetemp() / "jax-compilation-cache"
-    cache.mkdir(exist_ok=True)
+@pytest.fixture
+def kernel_env(monkeypatch):
+    """The kernels' environment: the small budget, and this checkout first on the path
+    (whatever an editable install elsewhere points at)."""
     monkeypatch.setenv("JAXFRIC_NOTEBOOK_BUDGET", "small")
-    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(cache))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    return monkeypatch
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_runs_with_the_small_budget(path, kernel_env):
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
                                      resources={"metadata": {"path": str(path.parent)}})
@@ -67,10 +71,9 @@ def test_notebook_runs_with_the_small_budget(path, tmp_path_factory, monkeypatch
         assert images >= 3, f"{path.name} drew {images} figures"
 
 
-def test_real_recordings_notebook_skips_without_data(tmp_path, monkeypatch):
-    monkeypatch.setenv("JAXFRIC_NOTEBOOK_BUDGET", "small")
-    monkeypatch.setenv("JAXFRIC_PNEUMATIC_DATA", str(tmp_path / "absent"))
-    monkeypatch.setenv("JAXFRIC_EMPS", str(tmp_path / "absent" / "DATA_EMPS.mat"))
+def test_real_recordings_notebook_skips_without_data(tmp_path, kernel_env):
+    kernel_env.setenv("JAXFRIC_PNEUMATIC_DATA", str(tmp_path / "absent"))
+    kernel_env.setenv("JAXFRIC_EMPS", str(tmp_path / "absent" / "DATA_EMPS.mat"))
     path = ROOT / "notebooks" / "03_real_recordings.ipynb"
     nb = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
