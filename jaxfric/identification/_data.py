@@ -32,6 +32,7 @@ import numpy as np
 
 from ..records import (DEFAULT_TRAIN_FRACTION, MIN_VALID_SAMPLES, FrictionData, as_channel,
                        check_sample_time, split_count)
+from ..rig.simulator import RigRecord
 
 #: The one record type; identification code calls it a record.
 Record = FrictionData
@@ -58,6 +59,13 @@ def _unpack(data):
             )
         v, f, dt = data
         return v, f, dt, None
+    if isinstance(data, RigRecord):
+        raise ValueError(
+            "data is a RigRecord (the simulator's true states and raw sensor channels), not "
+            "a friction record: identify what the rig measures, "
+            "jaxfric.rig.estimate_friction(record.measurements(), rig.cylinder), or simulate "
+            "and measure in one call with jaxfric.rig.synthetic_friction_data(key)"
+        )
     if not isinstance(data, FrictionData):
         raise ValueError(
             "data must be a FrictionData (not merely a FrictionData-like object: build one with "
