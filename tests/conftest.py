@@ -5,6 +5,8 @@ enough that an ensemble no longer equals its single runs to 1e-9: the tests comp
 users do.)"""
 
 import atexit
+import ctypes
+import ctypes.util
 import gc
 import os
 import shutil
@@ -135,6 +137,19 @@ def _fresh_compilation_caches():
     yield
     jax.clear_caches()
     gc.collect()
+    _return_freed_memory()
+
+
+def _return_freed_memory():
+    """Hand the heap pages freed by the module back to the system (glibc's
+    ``malloc_trim``; elsewhere nothing). Without it a worker's resident memory only grows:
+    four heavy modules run one after another ended at 1.04 GB resident, with it 0.45 GB
+    (peak 1.05 → 0.97 GB)."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
 
 
 @pytest.fixture(scope="session")
