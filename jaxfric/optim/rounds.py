@@ -38,6 +38,7 @@ and inf count as the worst value and never become the best.
 from __future__ import annotations
 
 import abc
+import dataclasses
 from typing import Any, Callable, Generator
 
 import equinox as eqx
@@ -258,7 +259,7 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
         if f.shape != (st.pending.shape[0],):
             raise ValueError(f"tell needs one fitness value per candidate: got shape "
                              f"{f.shape} for {st.pending.shape[0]} candidates")
-        return self._advance(_at(st, told=st.told + (f,), pending=None))
+        return self._advance(dataclasses.replace(st, told=st.told + (f,), pending=None))
 
     def ask_done(self, st: AskTellState) -> bool:
         """Whether the run has finished (by the rule the compiled run stops on)."""
@@ -282,15 +283,9 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
                 if bool(done):
                     return st
             elif bool(batch.needed):
-                return _at(st, pending=batch.x)
+                return dataclasses.replace(st, pending=batch.x)
             else:
-                st = _at(st, told=st.told + (skipped(batch.x),))
-
-
-def _at(st: AskTellState, **changes) -> AskTellState:
-    fields = {k: getattr(st, k) for k in ("state", "lower", "upper", "key", "x0", "told",
-                                           "pending", "stage")}
-    return AskTellState(**{**fields, **changes})
+                st = dataclasses.replace(st, told=st.told + (skipped(batch.x),))
 
 
 @eqx.filter_jit
