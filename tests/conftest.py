@@ -18,13 +18,17 @@ import tempfile
 # It keeps the session's programs out of the user's own cache (the in-process command-line
 # tests switch JAX's cache on, and would otherwise read and write ~/.cache/jaxfric, so a
 # later run reused programs of earlier ones) and shares what repeats across processes
-# (measured: few programs, about 15 s of compilation). A cached program is the executable
-# XLA would build again, so results do not change. A folder the user set
-# (JAX_COMPILATION_CACHE_DIR) is used as it is and kept.
+# (measured: few programs, about 15 s of compilation). Every program is cached, however
+# quick to compile: the many small eager operations (jnp on concrete arrays) are compiled
+# again in every module after `jax.clear_caches()` below, and reading them back is
+# cheaper (measured on six model modules run serially: 5 % less wall time than caching only
+# programs of 0.1 s or more). A cached program is the executable XLA would build again, so
+# results do not change. A folder the user set (JAX_COMPILATION_CACHE_DIR) is used as it
+# is and kept.
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     _cache = tempfile.mkdtemp(prefix="jaxfric-tests-xla-")
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
-    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.1")
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 
 import jax  # noqa: E402
