@@ -31,9 +31,11 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 
-import jax  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+
+# JAX is imported where it is used, not here: xdist's controller process loads this file
+# but runs no test, and importing JAX there cost it 140 MB of the suite's memory.
 
 
 class CallCounter:
@@ -53,6 +55,8 @@ class CallCounter:
         return np.zeros(np.asarray(x).shape[:-1], np.asarray(x).dtype)
 
     def wrap(self, fn):
+        import jax
+
         def counted(y, args):
             zero = jax.pure_callback(
                 self._record,
@@ -139,6 +143,8 @@ def _fresh_compilation_caches():
     peak memory grew with every module to 6.6 GB; the tests of one module still share
     their programs)."""
     yield
+    import jax
+
     jax.clear_caches()
     gc.collect()
     _return_freed_memory()
@@ -159,6 +165,8 @@ def _return_freed_memory():
 @pytest.fixture(scope="session")
 def rig_record():
     """The default rig simulated once with key 0 (2000 samples at 128 Hz, ground truth)."""
+    import jax
+
     from jaxfric import rig
 
     return rig.simulate(rig.Rig(), jax.random.key(0))
