@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import models as _models
+from ._warnings import ExtrapolationWarning, ResamplingWarning
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 
@@ -53,14 +54,6 @@ _WINDOWS = ("train", "valid", "all")
 #: Longest record :meth:`Fit.predict_at` builds on the fit's time grid (a record at
 #: a much coarser sample time than the fit's would otherwise allocate without bound).
 MAX_RESAMPLED_SAMPLES = 50_000_000
-
-
-class ResamplingWarning(UserWarning):
-    """:meth:`Fit.predict` resampled a record whose sample time differs from the fit's."""
-
-
-class ExtrapolationWarning(UserWarning):
-    """The velocity leaves the range the model was trained on."""
 
 
 def _jaxfric_version() -> str:

@@ -16,15 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._warnings import BoundWarning
 from ..models import AbstractFrictionModel, AbstractPhysicalModel
 
 #: A parameter within this fraction of its box width of a bound counts as on it (the
 #: swarms clip to the box, so a stopped parameter sits exactly there).
 BOUND_TOLERANCE = 1e-3
-
-
-class BoundWarning(UserWarning):
-    """A fitted parameter ended on a bound of its search box; widen the range."""
 
 
 def _coordinates(model: AbstractFrictionModel):

@@ -17,16 +17,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .._warnings import IrregularSamplingWarning
 from ..files import column_index, read_rows
 from ._checks import as_channel, check_increasing, check_positive, is_uniform
 from .data import FrictionData, Measurements
 
 RAW_CHANNELS = ("t", "x", "p1", "p2", "load")
 PAIR_CHANNELS = ("t", "velocity", "friction")
-
-
-class IrregularSamplingWarning(UserWarning):
-    """Time stamps were not uniform and the record was resampled."""
 
 
 def resample_uniform(t, *channels, dt: float | None = None):

@@ -1,0 +1,23 @@
+"""jaxfric's warning categories, in a module that imports nothing heavy.
+
+Each is documented, and importable, where it is raised (``jaxfric.fit``,
+``jaxfric.identification``, ``jaxfric.rig``); they live here so that code which only
+needs a category (``warnings.filterwarnings(..., category=...)``, or pytest-xdist
+rebuilding a warning a worker recorded) does not import JAX with it.
+"""
+
+
+class ResamplingWarning(UserWarning):
+    """:meth:`jaxfric.Fit.predict` resampled a record whose sample time differs from the fit's."""
+
+
+class ExtrapolationWarning(UserWarning):
+    """The velocity leaves the range the model was trained on."""
+
+
+class BoundWarning(UserWarning):
+    """A fitted parameter ended on a bound of its search box; widen the range."""
+
+
+class IrregularSamplingWarning(UserWarning):
+    """Time stamps were not uniform and the record was resampled."""
