@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 # JAX is imported where it is used, not here: xdist's controller process loads this file
-# but runs no test, and importing JAX there cost it 140 MB of the suite's memory.
+# but runs no test, and importing JAX there cost it about 120 MB of the suite's memory.
 
 
 class CallCounter:

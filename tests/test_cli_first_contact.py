@@ -29,6 +29,24 @@ def test_help_answers_without_importing_jax(command):
     assert proc.stdout.strip().endswith("NO_JAX"), [m for m in proc.stdout.splitlines()[-1:]]
 
 
+def test_warning_categories_load_without_jax():
+    """pytest-xdist's controller rebuilds every warning a worker records by importing the
+    category's module: jaxfric's must not pull in JAX (issue 20.14: the controller grew to
+    188 MB), and each stays importable where it is documented."""
+    from jaxfric import fit, identification, rig
+
+    categories = [fit.ExtrapolationWarning, fit.ResamplingWarning, identification.BoundWarning,
+                  rig.IrregularSamplingWarning]
+    code = ("import importlib, sys\n"
+            f"for module, name in {[(c.__module__, c.__name__) for c in categories]!r}:\n"
+            "    assert issubclass(getattr(importlib.import_module(module), name), UserWarning)\n"
+            "print('JAX_IMPORTED' if 'jax' in sys.modules else 'NO_JAX')\n")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "NO_JAX"
+
+
 def test_lazy_package_keeps_public_names():
     import jaxfric as jf
 
