@@ -14,6 +14,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _python(code: str) -> subprocess.CompletedProcess:
+    """``code`` run by a fresh interpreter importing this checkout; it must succeed."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
 # ------------------------------------------------------------------ 20.11: --help
 @pytest.mark.parametrize("command", [[], ["demo"], ["identify"], ["predict"], ["bench"]])
 def test_help_answers_without_importing_jax(command):
@@ -22,9 +30,7 @@ def test_help_answers_without_importing_jax(command):
             f"status = main({command!r} + ['--help'])\n"
             "assert status == 0, status\n"
             "print('JAX_IMPORTED' if 'jax' in sys.modules else 'NO_JAX')\n")
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    proc = _python(code)
     assert "usage: jaxfric" in proc.stdout
     assert proc.stdout.strip().endswith("NO_JAX"), [m for m in proc.stdout.splitlines()[-1:]]
 
@@ -41,10 +47,7 @@ def test_warning_categories_load_without_jax():
             f"for module, name in {[(c.__module__, c.__name__) for c in categories]!r}:\n"
             "    assert issubclass(getattr(importlib.import_module(module), name), UserWarning)\n"
             "print('JAX_IMPORTED' if 'jax' in sys.modules else 'NO_JAX')\n")
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == "NO_JAX"
+    assert _python(code).stdout.strip() == "NO_JAX"
 
 
 def test_lazy_package_keeps_public_names():
