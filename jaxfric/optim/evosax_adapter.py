@@ -55,7 +55,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._base import check_positive_int, check_range, count_dtype, uniform_in_box
+from ._base import check_positive_int, check_range, count_dtype, uniform_flat
 from .chained import Chain
 from .nelder_mead import NelderMead
 from .rounds import AbstractGenerational, Rounds
@@ -245,7 +245,7 @@ class Evosax(AbstractGenerational):
             evals = 1
         else:
             P = self.population(n)
-            U = uniform_in_box(k_start, (P, n), jnp.zeros_like(lower), jnp.ones_like(lower))
+            U = uniform_flat(k_start, (P, n), lower.dtype)
             if u0 is not None:
                 U = U.at[: u0.shape[0]].set(u0)
             X = lower + U * width
