@@ -84,6 +84,17 @@ def counter():
 
 
 @pytest.fixture
+def interruptible():
+    """``Popen`` keywords for a subprocess the test interrupts with SIGINT: Ctrl-C's
+    default action is restored in the child. A shell that starts the suite as a
+    background job (``pytest ... &``) ignores SIGINT in it, every child inherits that,
+    and the interrupted run would finish with status 0 instead of 130."""
+    import signal
+
+    return {"preexec_fn": lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)}
+
+
+@pytest.fixture
 def run_cache_size():
     """Number of compilations cached for ``minimise``'s single-run executable (with the
     default ``compiler_options``): a test counts recompilations with it."""

@@ -273,7 +273,7 @@ def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, 
 
 
 # -------------------------------------------------------------------- Ctrl-C
-def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path):
+def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path, interruptible):
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(
         [sys.executable, "-m", "jaxfric", "identify", str(demo[0] / "friction_data.csv"), "--velocity-col",
@@ -282,7 +282,7 @@ def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path):
          # demo's compilation cache) is still compiling or running when Ctrl-C comes, however
          # fast compilation gets.
          "--generations", "3000", "--neurons", "7", "--quiet", "--out", str(out)],
-        env=cli_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        env=cli_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **interruptible)
     deadline = time.monotonic() + 300
     while not (out / "models" / "lugre.npz").exists() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.1)

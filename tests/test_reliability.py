@@ -320,7 +320,7 @@ def test_cli_predict_failing_to_write_keeps_the_old_csv(tmp_path, monkeypatch, c
 
 
 # ------------------------------------------------------------------------ SIGINT
-def test_interrupted_identify_exits_130_and_says_what_was_kept(tmp_path):
+def test_interrupted_identify_exits_130_and_says_what_was_kept(tmp_path, interruptible):
     t = np.arange(200) / 100.0
     v = 0.01 * np.sin(2 * np.pi * 0.5 * t)
     csv = tmp_path / "pairs.csv"
@@ -332,7 +332,7 @@ def test_interrupted_identify_exits_130_and_says_what_was_kept(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "jaxfric", "identify", str(csv), "--velocity-col", "v", "--friction-col", "F",
          "--time-col", "t", "--model", "coulomb", "--generations", "200000", "--no-cache", "--out", str(out)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **interruptible)
     chunks: list[bytes] = []
 
     def read_stderr():
