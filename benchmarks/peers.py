@@ -462,7 +462,8 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
     lo, hi = model.bounds(f1.box)
     pop = (sz.id_solver or paper_solver(model)).mapso.num_agents
     n_global = f1.stages[0]["num_evals"]
-    n_local = sum(st["num_evals"] for st in f1.stages) - n_global
+    # a gradient refinement stage (the default pipeline) counts steps, not evaluations
+    n_local = sum(st.get("num_evals", 0) for st in f1.stages) - n_global
     de_gens = max(1, math.ceil((n_global - pop) / pop))
     f_batch(np.tile((lo + hi) / 2, (2, 1)))
     f_one((lo + hi) / 2)  # compile both before timing
@@ -486,8 +487,8 @@ def section_identify(sz: Sizes, rows: list, quick: bool, log) -> None:
                              first_minus_second_s=sw1.wall_s - sw.wall_s, compile_s=f1.timings["compile_s"],
                              trace_s=sp1.total["trace"], lower_s=sp1.total["lower"], xla_s=sp1.total["xla"],
                              xla_compiles=sp1.count["xla"], recompiles_second=sw.num_compiles,
-                             evals=sum(st["num_evals"] for st in f1.stages)))
-        id_evals = sum(st["num_evals"] for st in fit.stages)
+                             evals=sum(st.get("num_evals", 0) for st in f1.stages)))
+        id_evals = sum(st.get("num_evals", 0) for st in fit.stages)
         rows.append(dict(section="3", case="ENN identification", round=rnd + 1,
                          implementation=f"jaxfric identify (MAPSO-NMDS), key {2 + rnd}",
                          dtype=fit.settings["dtype"], evals=id_evals, evals_global=fit.stages[0]["num_evals"],
