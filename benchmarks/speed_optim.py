@@ -3,9 +3,11 @@
 30-D Rosenbrock (``--function`` picks another test function), 100 agents: jaxfric
 PSO and MAPSO (10×10 lattice) against pyswarms' GlobalBestPSO (numpy, vectorised
 objective); jaxfric Nelder–Mead against ``scipy.optimize.minimize(method="Nelder-Mead")``. Function evaluations per second,
-median over ``--repeats`` timed runs after one warm-up (compile time reported
-apart). Batched rows run ``--seeds`` independent jaxfric runs in one vmapped call
-(:func:`jaxfric.minimise_many`), the way Table 1 uses the library.
+timed in ``--repeats`` rounds after one warm-up (compile time reported apart), every
+implementation once per round, in turn, so that load from other processes hits all alike;
+ratios to the peer are taken round by round and their median reported. Batched rows
+run ``--seeds`` independent jaxfric runs in one vmapped call (:func:`jaxfric.minimise_many`),
+the way Table 1 uses the library.
 
 Writes ``speed_optim.md`` and ``speed_optim.csv`` to ``--out``.
 
@@ -20,25 +22,19 @@ import argparse
 import csv
 import logging
 import platform
+import statistics
 import sys
-import time
 from pathlib import Path
 
 import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import Case, results_dir, run_round_robin  # noqa: E402
 from baselines import NUMPY_BATCH  # noqa: E402
 
-
-def median_time(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+PYSWARMS = "pyswarms GlobalBestPSO (numpy)"
+SCIPY_NM = "scipy Nelder-Mead (adaptive)"
 
 
 def main(argv=None):
@@ -48,14 +44,16 @@ def main(argv=None):
     p.add_argument("--agents", type=int, default=100)
     p.add_argument("--generations", type=int, default=500)
     p.add_argument("--nm-evals", type=int, default=20000)
-    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--repeats", type=int, default=7,
+                   help="timed rounds; each round times every implementation once, in turn")
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32")
     p.add_argument("--out", default=None,
                    help="output folder (default benchmarks/results)")
     p.add_argument("--tag", default="", help="suffix for the output files (e.g. gpu)")
     a = p.parse_args(argv)
-    if a.dtype == "float64":
+    x64 = a.dtype == "float64"
+    if x64:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
     import scipy.optimize
@@ -74,53 +72,38 @@ def main(argv=None):
     with jax.enable_x64(True):  # the NumPy version must be the same function
         ref = np.asarray(jax.vmap(lambda x: obj(x, None))(jnp.asarray(probe, jnp.float64)))
     np.testing.assert_allclose(f_batch(probe), ref, rtol=1e-9, atol=1e-9)
-    rows = []
+    cases: list[Case] = []
 
-    def jax_row(label, solver, batched=False, once=None):
-        keys = jax.random.split(jax.random.key(0), a.seeds)
+    def add(label, once):
+        """``once(r)`` runs round ``r`` (``-1``: the warm-up) and returns
+        ``(evaluations, best f values)``."""
+        cases.append(Case(label, once, x64=x64))
 
-        def default_once(k=[0]):
-            k[0] += 1
+    def jax_once(solver, batched=False, calls=1):
+        def once(r):
+            key = jax.random.key(1000 + r)
             if batched:
-                s = jf.minimise_many(obj, solver, (lo, hi), keys=jax.random.split(jax.random.key(k[0]), a.seeds))
+                s = jf.minimise_many(obj, solver, (lo, hi), keys=jax.random.split(key, a.seeds))
+            elif calls > 1:  # the same runs one call each (minimise_many against minimise)
+                s = [jf.minimise(obj, solver, (lo, hi), key=k) for k in jax.random.split(key, calls)]
+                s = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *s)
             else:
-                s = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(k[0]))
+                s = jf.minimise(obj, solver, (lo, hi), key=key)
             jax.block_until_ready(s)
-            return s
+            return int(np.sum(np.asarray(s.stats["num_evals"]))), np.asarray(s.f)
 
-        once = once or default_once
-        t0 = time.perf_counter()
-        sol = once()
-        first = time.perf_counter() - t0
-        run = median_time(once, a.repeats)
-        evals = int(np.sum(np.asarray(sol.stats["num_evals"])))
-        best = float(np.min(np.asarray(sol.f)))
-        rows.append(dict(implementation=label, evals=evals, seconds=run, evals_per_s=evals / run,
-                         compile_s=max(first - run, 0.0), best_f=best,
-                         median_f=float(np.median(np.asarray(sol.f)))))
-        del keys
+        return once
 
     pso = jf.PSO(num_particles=a.agents, num_generations=a.generations)
     mapso = jf.MAPSO(lattice_size=side, num_generations=a.generations)
     nm = jf.NelderMead(max_evals=a.nm_evals, max_steps=10 * a.nm_evals, atol=0.0, rtol=0.0)
-    jax_row("jaxfric PSO", pso)
-    jax_row("jaxfric MAPSO", mapso)
-    jax_row(f"jaxfric PSO, {a.seeds} seeds vmapped", pso, batched=True)
-    jax_row(f"jaxfric MAPSO, {a.seeds} seeds vmapped", mapso, batched=True)
-
+    add("jaxfric PSO", jax_once(pso))
+    add("jaxfric MAPSO", jax_once(mapso))
+    add(f"jaxfric PSO, {a.seeds} seeds vmapped", jax_once(pso, batched=True))
+    add(f"jaxfric MAPSO, {a.seeds} seeds vmapped", jax_once(mapso, batched=True))
     # minimise_many over the seeds against the same runs one call each (issue 15.5)
-    def one_by_one(solver, label):
-        def once(k=[100]):
-            k[0] += 1
-            sols = [jf.minimise(obj, solver, (lo, hi), key=key)
-                    for key in jax.random.split(jax.random.key(k[0]), a.seeds)]
-            jax.block_until_ready(sols)
-            return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *sols)
-
-        jax_row(label, solver, once=once)
-
-    one_by_one(pso, f"jaxfric PSO, {a.seeds} x minimise")
-    one_by_one(mapso, f"jaxfric MAPSO, {a.seeds} x minimise")
+    add(f"jaxfric PSO, {a.seeds} x minimise", jax_once(pso, calls=a.seeds))
+    add(f"jaxfric MAPSO, {a.seeds} x minimise", jax_once(mapso, calls=a.seeds))
 
     # evosax's PSO (ask/tell in one lax.scan, vmapped over the seeds) at jaxfric PSO's
     # evaluation count: P (G + 1)
@@ -150,72 +133,59 @@ def main(argv=None):
 
             return jax.vmap(run)(jax.random.split(key, a.seeds))
 
-        def evosax_once(k=[200]):
-            k[0] += 1
-            return jax.block_until_ready(evosax_runs(jax.random.key(k[0])))
+        def evosax_once(r):
+            best = np.asarray(jax.block_until_ready(evosax_runs(jax.random.key(2000 + r))))
+            return a.seeds * a.agents * (a.generations + 1), best
 
-        t0 = time.perf_counter()
-        bests = evosax_once()
-        first = time.perf_counter() - t0
-        run = median_time(evosax_once, a.repeats)
-        evals = a.seeds * a.agents * (a.generations + 1)
-        rows.append(dict(implementation=f"evosax PSO, {a.seeds} seeds vmapped", evals=evals, seconds=run,
-                         evals_per_s=evals / run, compile_s=max(first - run, 0.0),
-                         best_f=float(np.min(np.asarray(bests))),
-                         median_f=float(np.median(np.asarray(bests)))))
+        add(f"evosax PSO, {a.seeds} seeds vmapped", evosax_once)
 
     import pyswarms as ps
 
-    logging.disable(logging.CRITICAL)  # pyswarms logs every run
-
-    def pyswarms_once():
+    def pyswarms_once(r):
         opt = ps.single.GlobalBestPSO(
             a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
             bounds=(lo.astype(float), hi.astype(float)), velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]),
         )
-        return opt.optimize(f_batch, a.generations, verbose=False)
+        best = opt.optimize(f_batch, a.generations, verbose=False)[0]
+        return a.agents * (a.generations + 1), np.array([best])
 
-    run = median_time(pyswarms_once, a.repeats)
-    best = pyswarms_once()[0]
-    rows.append(dict(implementation="pyswarms GlobalBestPSO (numpy)", evals=a.agents * (a.generations + 1),
-                     seconds=run, evals_per_s=a.agents * (a.generations + 1) / run, compile_s=0.0, best_f=float(best)))
-    logging.disable(logging.NOTSET)
-
-    jax_row("jaxfric Nelder-Mead", nm)
+    add(PYSWARMS, pyswarms_once)
+    add("jaxfric Nelder-Mead", jax_once(nm))
     x0 = np.random.default_rng(0).uniform(lo, hi)
     opts = dict(maxfev=a.nm_evals, maxiter=10 * a.nm_evals, xatol=0.0, fatol=0.0, adaptive=True)
-
     scalar = scipy.optimize.rosen if a.function == "rosenbrock" else (lambda x: float(f_batch(x[None])[0]))
 
-    def scipy_nm():
-        return scipy.optimize.minimize(scalar, x0, method="Nelder-Mead", options=opts)
+    def scipy_once(r):
+        res = scipy.optimize.minimize(scalar, x0, method="Nelder-Mead", options=opts)
+        return int(res.nfev), np.array([res.fun])
 
-    res = scipy_nm()
-    run = median_time(scipy_nm, max(1, a.repeats // 2))
-    rows.append(dict(implementation="scipy Nelder-Mead (adaptive)", evals=int(res.nfev), seconds=run,
-                     evals_per_s=res.nfev / run, compile_s=0.0, best_f=float(res.fun)))
+    add(SCIPY_NM, scipy_once)
 
-    by = {r["implementation"]: r for r in rows}
-    ref_pso = by["pyswarms GlobalBestPSO (numpy)"]["evals_per_s"]
-    ref_nm = by["scipy Nelder-Mead (adaptive)"]["evals_per_s"]
-    for r in rows:
-        ref = ref_nm if "Nelder" in r["implementation"] else ref_pso
-        r["ratio_vs_peer"] = r["evals_per_s"] / ref
-        r.setdefault("median_f", r["best_f"])
-    # the batched comparisons: vmapped seeds against one call each, and against evosax
+    logging.disable(logging.CRITICAL)  # pyswarms logs every run
+    try:
+        run_round_robin(cases, a.repeats)
+    finally:
+        logging.disable(logging.NOTSET)
+    by = {c.label: c for c in cases}
+    rows = []
+    for c in cases:
+        peer = by[SCIPY_NM if "Nelder" in c.label else PYSWARMS]
+        rows.append(_row(c, peer))
+    # the batched comparisons, round by round: vmapped seeds against one call each, and
+    # against evosax
     ratios = []
     for name in ("PSO", "MAPSO"):
-        many = by.get(f"jaxfric {name}, {a.seeds} seeds vmapped")
-        calls = by.get(f"jaxfric {name}, {a.seeds} x minimise")
-        if many and calls:
-            ratios.append(f"minimise_many / {a.seeds} x minimise, {name} (evals/s): "
-                          f"{many['evals_per_s'] / calls['evals_per_s']:.2f}")
+        many = by[f"jaxfric {name}, {a.seeds} seeds vmapped"]
+        calls = by[f"jaxfric {name}, {a.seeds} x minimise"]
+        ratios.append(f"minimise_many / {a.seeds} x minimise, {name} (evals/s): "
+                      + _spread(_round_ratios(many, calls)))
     evo = by.get(f"evosax PSO, {a.seeds} seeds vmapped")
-    mine = by.get(f"jaxfric PSO, {a.seeds} seeds vmapped")
-    if evo and mine:
+    if evo is not None:
+        mine = by[f"jaxfric PSO, {a.seeds} seeds vmapped"]
+        f_mine, f_evo = (float(np.median(c.results[0][1])) for c in (mine, evo))
         ratios.append(f"jaxfric PSO / evosax PSO, {a.seeds} seeds vmapped (evals/s): "
-                      f"{mine['evals_per_s'] / evo['evals_per_s']:.2f}; median final f "
-                      f"{mine['median_f']:.3g} vs {evo['median_f']:.3g} at equal evaluations")
+                      f"{_spread(_round_ratios(mine, evo))}; median final f {f_mine:.3g} vs "
+                      f"{f_evo:.3g} at equal evaluations")
     out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
@@ -229,9 +199,11 @@ def main(argv=None):
         "# Optimiser throughput against peers",
         "",
         f"{a.dim}-D {a.function}, {a.agents} agents, {a.generations} generations, {a.dtype}; "
-        f"Nelder–Mead budget {a.nm_evals} evaluations. Median of {a.repeats} timed runs after a "
-        "warm-up; every row measured in the same run. Ratio: evaluations per second over the "
-        "peer's (pyswarms for swarms, scipy for Nelder–Mead). Best f is not comparable across "
+        f"Nelder–Mead budget {a.nm_evals} evaluations. {a.repeats} timed rounds after a warm-up; "
+        "each round runs every implementation once, in turn, so load from other processes hits "
+        "all alike. s: the median over rounds. × peer: evaluations per second over the peer's "
+        "(pyswarms for swarms, scipy for Nelder–Mead) in the same round, median over rounds "
+        "(lowest–highest round in brackets). Best f (first timed round) is not comparable across "
         "swarm rows (different coefficients; evosax's PSO is unbounded, with per-particle "
         "coefficients).",
         "",
@@ -245,12 +217,36 @@ def main(argv=None):
     for r in rows:
         lines.append(
             f"| {r['implementation']} | {r['evals']} | {r['seconds']:.3f} | {r['evals_per_s']:.3g} | "
-            f"{r['ratio_vs_peer']:.1f} | {r['compile_s']:.1f} | {r['best_f']:.3g} |"
+            f"{r['ratio_vs_peer']:.1f} ({r['ratio_min']:.1f}–{r['ratio_max']:.1f}) | "
+            f"{r['compile_s']:.1f} | {r['best_f']:.3g} |"
         )
     lines += [""] + [f"- {r}" for r in ratios]
     (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     del jnp
+
+
+def _round_ratios(case: Case, peer: Case) -> list[float]:
+    """Evaluations per second of ``case`` over ``peer``'s, one ratio per timed round."""
+    evals, peer_evals = case.results[0][0], peer.results[0][0]
+    return [(evals / t) / (peer_evals / tp) for t, tp in zip(case.times, peer.times)]
+
+
+def _spread(ratios: list[float]) -> str:
+    return f"{statistics.median(ratios):.2f} (rounds {min(ratios):.2f}–{max(ratios):.2f})"
+
+
+def _row(case: Case, peer: Case) -> dict:
+    """A table row: the warm-up's evaluations and best f, the median round time, and the
+    ratio to ``peer`` round by round."""
+    evals, f = case.results[0]
+    seconds = statistics.median(case.times)
+    ratios = _round_ratios(case, peer)
+    return dict(implementation=case.label, evals=evals, seconds=seconds,
+                evals_per_s=evals / seconds, compile_s=max(case.first - seconds, 0.0),
+                best_f=float(np.min(f)), median_f=float(np.median(f)),
+                ratio_vs_peer=statistics.median(ratios), ratio_min=min(ratios),
+                ratio_max=max(ratios))
 
 
 if __name__ == "__main__":
