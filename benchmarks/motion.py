@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/motion.py [--emps PATH/DATA_EMPS.mat] [--out benchmarks/results]
+    python benchmarks/motion.py [--emps PATH/DATA_EMPS.mat] [--out DIR]
                                 [--parts emps,rig,compensation] [--quick]
 
 * ``emps``: friction identified inside the mechanics of the EMPS axis (input ``gtau*vir``,
@@ -17,7 +17,9 @@ Usage::
 * ``compensation``: the position loop of ``jaxfric.compensation`` on the rig with no,
   static, LuGre, Elman and ideal (true friction) feed-forward.
 
-Writes ``motion.md`` and ``motion_*.png`` into ``--out``. x64 is switched on here
+Writes ``motion.md`` and ``motion_*.png`` into ``--out`` (default ``benchmarks/results``;
+``benchmarks/results/quick`` with ``--quick``, so a smoke run never overwrites the committed
+results). x64 is switched on here
 (benchmarks choose it; the library never does).
 """
 
@@ -35,6 +37,7 @@ jax.config.update("jax_enable_x64", True)
 
 # this checkout's jaxfric, even where another copy is installed
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the harness, also under `jaxfric bench`
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -44,6 +47,8 @@ from jaxfric import models
 from jaxfric.motion import MotionData, MotionFit, identify_motion
 from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
+
+from _harness import add_output_arguments, results_dir  # noqa: E402
 
 EMPS_DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 #: Published IDIM-LS values of SOURCE.md (Janot, Gautier, Brunot 2019).
@@ -244,15 +249,13 @@ def run_compensation(quick, out, key=0):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--emps", default=os.environ.get("JAXFRIC_EMPS", str(EMPS_DEFAULT)))
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     ap.add_argument("--parts", default="emps,rig,compensation")
-    ap.add_argument("--quick", action="store_true")
+    add_output_arguments(ap, "smaller budgets, no Elman row (smoke test)")
     ap.add_argument("--rows", default=None,
                     help="comma-separated substrings: fit only the EMPS rows whose names contain one "
                          "(the result then goes to motion_rows.md, never over motion.md)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(args.out, quick=args.quick)
     parts = set(args.parts.split(","))
     md = ["# Motion identification and friction compensation (benchmarks/motion.py)", "",
           f"Command: `python benchmarks/motion.py --parts {args.parts}{' --quick' if args.quick else ''}`", ""]

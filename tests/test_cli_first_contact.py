@@ -4,6 +4,7 @@ the library's defaults (issue 20.9, 20.11; issue 19.4)."""
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -107,6 +108,33 @@ def test_harness_results_dir_rule(tmp_path):
     assert _harness.RESULTS.name == "results" and _harness.QUICK_RESULTS.name == "quick"
     ignored = (ROOT / ".gitignore").read_text().splitlines()
     assert "/benchmarks/results/quick/" in ignored
+
+
+def _takes_quick(tree) -> bool:
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            name = getattr(node.func, "attr", getattr(node.func, "id", None))
+            if name == "add_output_arguments":
+                return True
+            if name == "add_argument" and any(
+                    isinstance(a, ast.Constant) and a.value == "--quick" for a in node.args):
+                return True
+    return False
+
+
+def _passes_quick_to_results_dir(tree) -> bool:
+    return any(isinstance(node, ast.Call) and getattr(node.func, "id", None) == "results_dir"
+               and any(k.arg == "quick" for k in node.keywords) for node in ast.walk(tree))
+
+
+def test_every_benchmark_with_quick_writes_quick_results_elsewhere():
+    """A script that takes --quick hands it to the harness's output rule (results/quick/);
+    benchmarks/motion.py wrote its smoke run over the committed motion.md and figures."""
+    scripts = sorted(p for p in (ROOT / "benchmarks").glob("*.py") if not p.name.startswith("_"))
+    quick = {p.name: ast.parse(p.read_text()) for p in scripts}
+    quick = {name: tree for name, tree in quick.items() if _takes_quick(tree)}
+    assert {"motion.py", "table1.py", "peers.py"} <= set(quick)
+    assert [name for name, tree in quick.items() if not _passes_quick_to_results_dir(tree)] == []
 
 
 # ------------------------------------------------------ 19.4: one specification object
