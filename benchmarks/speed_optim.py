@@ -237,7 +237,7 @@ def _spread(ratios: list[float]) -> str:
 
 
 def _row(case: Case, peer: Case) -> dict:
-    """A table row: the warm-up's evaluations and best f, the median round time, and the
+    """A table row: the first timed round's evaluations and best f, the median round time, and the
     ratio to ``peer`` round by round."""
     evals, f = case.results[0]
     seconds = statistics.median(case.times)
