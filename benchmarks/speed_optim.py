@@ -237,8 +237,8 @@ def _spread(ratios: list[float]) -> str:
 
 
 def _row(case: Case, peer: Case) -> dict:
-    """A table row: the first timed round's evaluations and best f, the median round time, and the
-    ratio to ``peer`` round by round."""
+    """A table row: the first timed round's evaluations and best f, the median round
+    time, and the ratio to ``peer`` round by round."""
     evals, f = case.results[0]
     seconds = statistics.median(case.times)
     ratios = _round_ratios(case, peer)
