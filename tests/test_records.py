@@ -22,7 +22,8 @@ from jaxfric.identification import BoundWarning, identify
 from jaxfric.identification._pooled import PooledOutputErrorCost, pooled_cost_data
 from jaxfric.identification._data import as_records
 from jaxfric.metrics import friction_metrics
-from jaxfric.models import Coulomb, Elman, LuGre, Scaler
+from jaxfric.plot import predict_on
+from jaxfric.models import Coulomb, Cylinder, Elman, LuGre, Scaler
 
 DT = 0.01
 TINY = jf.mapso_nmds(lattice_size=3, num_generations=8, nm_max_steps=150)
@@ -48,7 +49,67 @@ def lugre_record(phase: float, n: int = 300):
     return v, np.asarray(model.simulate(theta, jnp.asarray(v), DT), np.float64), DT
 
 
+def cylinder_record(phase: float, n: int = 300, name: str = "", truth=None):
+    """Pressure-dependent friction without breakaway, written out in NumPy:
+    F = tanh(v / v_eps)·(F_pr + f_cfr·(p1 + p2)) + sigma2·v (docs/algorithms.md §13.1)."""
+    truth = truth or CYLINDER_TRUTH
+    v = velocity(phase, n)
+    t = np.arange(n) * DT
+    p1 = 3e5 + 1e5 * np.sin(2 * np.pi * 0.3 * t + phase)
+    p2 = 2e5 + 5e4 * np.cos(2 * np.pi * 0.7 * t + 2 * phase)
+    f = (np.tanh(v / Cylinder().v_eps) * (truth["F_pr"] + truth["f_cfr"] * (p1 + p2))
+         + truth["sigma2"] * v)
+    return jf.FrictionData.from_arrays(v, f, DT, p1=p1, p2=p2, name=name)
+
+
+CYLINDER_TRUTH = dict(F_pr=20.0, f_cfr=4e-5, sigma2=800.0)
+
+
 # ------------------------------------------------------------------ several records
+def test_pooled_cost_gives_each_record_its_own_pressures():
+    """Whole records keep their chamber pressures, and the pooled cost rolls each record
+    out with its own (NumPy reference of the module docstring's J)."""
+    recs = [cylinder_record(0.0, 200), cylinder_record(1.0, 300)]
+    model = Cylinder(breakaway=False)
+    guess = dict(F_pr=25.0, f_cfr=3e-5, sigma2=700.0)
+    with jax.enable_x64(True):
+        theta = jnp.asarray(model.from_physical(**guess))
+        got = float(PooledOutputErrorCost(model)(
+            theta, pooled_cost_data(model, as_records(train=recs), (None, None), jnp.float64)))
+    pred = [cylinder_record(0.0, 200, truth=guess), cylinder_record(1.0, 300, truth=guess)]
+    errs = np.concatenate([r.friction - q.friction for r, q in zip(recs, pred)])
+    f_all = np.concatenate([r.friction for r in recs])
+    assert got == pytest.approx(np.sum(errs**2) / f_all.size / np.var(f_all), rel=1e-9)
+
+
+def test_identify_a_pressure_model_on_several_records():
+    """train=[...]/valid=... reach a model with input channels (Cylinder: p1, p2): the
+    parameters come back, and every record is predicted from its own pressures."""
+    train = {"a": cylinder_record(0.0, 300), "b": cylinder_record(1.0, 250)}
+    held_out = cylinder_record(2.0, 200)
+    with jax.enable_x64(True):
+        fit = identify(Cylinder(breakaway=False), train=train, valid={"c": held_out}, key=0,
+                       solver=TINY, dtype=jnp.float64)
+    for name, value in CYLINDER_TRUTH.items():
+        assert float(fit.params[name]) == pytest.approx(value, rel=0.02), name
+    recs = fit.metrics["records"]
+    assert [r["name"] for r in recs] == ["a", "b", "c"]
+    for r, rec in zip(recs, [*train.values(), held_out]):
+        own = fit.predict(rec.velocity, inputs=np.stack([rec.p1, rec.p2]))
+        expect = friction_metrics(rec.friction, np.asarray(own, np.float64))
+        assert r["all"]["mse_percent"] == pytest.approx(expect["mse_percent"], rel=1e-6, abs=1e-9)
+    # figures and reports predict with the record's own pressures too
+    np.testing.assert_allclose(predict_on(fit, held_out),
+                               np.asarray(fit.predict(held_out.velocity,
+                                                      inputs=np.stack([held_out.p1, held_out.p2]))))
+    no_pressure = jf.FrictionData.from_arrays(held_out.velocity, held_out.friction, DT)
+    with pytest.raises(ValueError, match=r"Cylinder needs the measured channel\(s\) p1, p2"):
+        predict_on(fit, no_pressure)
+    with pytest.raises(ValueError, match=r"^c: Cylinder needs the measured channel\(s\) p1, p2"):
+        identify(Cylinder(breakaway=False), train=train, valid={"c": no_pressure}, key=0,
+                 solver=TINY)
+
+
 def test_pooled_cost_rolls_each_record_out_from_its_own_state():
     """J pools squared errors over records, each rolled out alone (no state across)."""
     recs = [lugre_record(0.0, 200), lugre_record(1.0, 300)]

@@ -220,6 +220,28 @@ def _key_record(key):
     return np.asarray(k).ravel().tolist(), None
 
 
+def _record_inputs(model: AbstractFrictionModel, records: RecordSet) -> list:
+    """Each record's ``(C, T)`` measured channels for ``model`` (``None`` per record for a
+    model without ``input_names``); ``ValueError`` naming the record that lacks them."""
+    out = []
+    for r in records.records:
+        try:
+            out.append(model.inputs_from(r, r.n_samples))
+        except ValueError as e:
+            if records.single is not None:
+                raise
+            raise ValueError(f"{r.name}: {e}") from None
+    return out
+
+
+def _train_inputs(records: RecordSet, inputs: list):
+    """The training samples of every training record's channels, side by side (for the
+    search box), or ``None`` for a model without them."""
+    parts = [x[:, : r.n_train] for r, x in zip(records.records, inputs)
+             if x is not None and r.n_train > 0]
+    return np.concatenate(parts, axis=1) if parts else None
+
+
 def _check_theta0(model, theta0, lower, upper):
     if theta0 is None:
         return None
@@ -365,9 +387,9 @@ def identify(
             split into a training and a validation window by ``train``. Leave it out to
             train on whole records (``train=[...]``, ``valid=...``).
             Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that
-            name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`); such a model
-            on data without them raises ``ValueError`` before any optimisation (one
-            record only: pooled records carry no input channels yet).
+            name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`), as do
+            those of each record in ``train=[...]``/``valid=...``; such a model on data
+            without them raises ``ValueError`` before any optimisation, naming the record.
         solver: any jaxfric solver; default :func:`default_solver` for ``method``. ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.
         keys: an ensemble: ``K`` (an int; the members' keys are
@@ -465,15 +487,10 @@ def identify(
     with Stopwatch() as total:
         records = as_records(data, train, valid)
         model = resolve_model(model, {**(model_options or {}), **options})
-        if model.input_names and records.single is None:
-            raise ValueError(
-                f"{type(model).__name__} needs the input channels {list(model.input_names)}; "
-                "identify it on one record (data=...), not on train=[...]/valid=...")
-        inputs = (None if records.single is None
-                  else model.inputs_from(records.single, records.single.n_samples))  # fails early
+        inputs = _record_inputs(model, records)  # fails early, naming the record
         box = model.search_box(box, *(
-            (records.train_velocity, records.train_friction,
-             None if inputs is None else inputs[:, : records.single.n_train]) if data_bounds else ()))
+            (records.train_velocity, records.train_friction, _train_inputs(records, inputs))
+            if data_bounds else ()))
         _check_method(method)
         coarse = solver is None and _fast_pipeline(model, method)
         if solver is None:
@@ -514,7 +531,8 @@ def identify(
                                       (data_j.u[:GLOBAL_STAGE_SAMPLES], data_j.y[:GLOBAL_STAGE_SAMPLES]))
 
         def run_predictions(theta):
-            return [predict(model, theta, scalers, r.velocity, r.dt, inputs) for r in records.records]
+            return [predict(model, theta, scalers, r.velocity, r.dt, x)
+                    for r, x in zip(records.records, inputs)]
 
         with Stopwatch() as sw:
             if member_keys is None:

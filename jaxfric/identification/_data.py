@@ -125,13 +125,18 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
             "velocity is constant over the training window; a friction model cannot be "
             "identified from it"
         )
-    # Checked by the model that uses them (AbstractFrictionModel.inputs_from), so a bad
-    # channel no model needs does not stop the run.
-    given = (data.p1, data.p2) if isinstance(data, FrictionData) else (None, None)
-    pressures = {name: None if p is None else np.asarray(p, dtype=np.float64)
-                 for name, p in zip(("p1", "p2"), given)}
     return FrictionData(t=np.arange(n) * dt, velocity=velocity, friction=friction, acceleration=None,
-                        dt=dt, n_train=n_train, **pressures)
+                        dt=dt, n_train=n_train, **_pressures(data))
+
+
+def _pressures(data) -> dict:
+    """A :class:`FrictionData`'s chamber pressures ``p1``, ``p2`` as float64 arrays (``None``
+    where absent or for ``(v, F, dt)`` tuples). Checked by the model that uses them
+    (:meth:`~jaxfric.models.AbstractFrictionModel.inputs_from`), so a bad channel no model
+    needs does not stop the run."""
+    given = (data.p1, data.p2) if isinstance(data, FrictionData) else (None, None)
+    return {name: None if p is None else np.asarray(p, dtype=np.float64)
+            for name, p in zip(("p1", "p2"), given)}
 
 
 def _checked_whole(data, role: str, name: str) -> Record:
@@ -152,7 +157,7 @@ def _checked_whole(data, role: str, name: str) -> Record:
     if role == "train" and not np.ptp(velocity) > 0.0:
         raise ValueError(f"{name}: velocity is constant; a friction model cannot be identified from it")
     return FrictionData(t=np.arange(n) * dt, velocity=velocity, friction=friction, acceleration=None,
-                        p1=None, p2=None, dt=dt, n_train=n if role == "train" else 0, name=name)
+                        dt=dt, n_train=n if role == "train" else 0, name=name, **_pressures(data))
 
 
 def _record_list(x, what: str) -> list[tuple[str, object]]:

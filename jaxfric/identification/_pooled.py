@@ -27,12 +27,15 @@ from ._data import RecordSet
 
 class PooledCostData(eqx.Module):
     """Per-record model inputs ``u`` and targets ``y`` (tuples of 1-D arrays, scaled
-    or SI), the shared sample time ``dt`` and the constant ``c`` (``inv_norm``)."""
+    or SI), the shared sample time ``dt``, the constant ``c`` (``inv_norm``) and each
+    record's measured channels over its training samples (``inputs``: ``(C, N_r)``
+    arrays for a model with ``input_names``, else ``None`` per record)."""
 
     u: tuple[Array, ...]
     y: tuple[Array, ...]
     dt: Array
     inv_norm: Array
+    inputs: tuple = ()
 
 
 class PooledOutputErrorCost(eqx.Module):
@@ -41,7 +44,9 @@ class PooledOutputErrorCost(eqx.Module):
     model: AbstractFrictionModel = eqx.field(static=True)
 
     def _errors(self, theta, data: PooledCostData) -> list[Array]:
-        return [y - self.model.simulate(theta, u, data.dt) for u, y in zip(data.u, data.y)]
+        inputs = data.inputs or (None,) * len(data.u)
+        return [y - self.model.simulate(theta, u, data.dt, x)
+                for u, y, x in zip(data.u, data.y, inputs)]
 
     def residuals(self, theta, data: PooledCostData) -> Array:
         """Residual vector ``r`` with ``Σ r² = J`` (for least-squares refinement)."""
@@ -57,9 +62,11 @@ class PooledOutputErrorCost(eqx.Module):
 def pooled_cost_data(model: AbstractFrictionModel, records: RecordSet, scalers, dtype) -> PooledCostData:
     """:class:`PooledCostData` for the training windows of ``records`` in ``dtype``."""
     sv, sf = scalers
-    us, ys = [], []
+    us, ys, xs = [], [], []
     for r in records.train_records:
         v, f = r.train_velocity, r.train_friction
+        x = model.inputs_from(r, r.n_samples)
+        xs.append(None if x is None else jnp.asarray(x[:, : r.n_train], dtype))
         if model.needs_scaling:
             # the same jnp path as Fit.predict (see _objective.cost_data)
             us.append(jnp.asarray(sv.scale(jnp.asarray(v, dtype)), dtype))
@@ -69,4 +76,4 @@ def pooled_cost_data(model: AbstractFrictionModel, records: RecordSet, scalers, 
             ys.append(jnp.asarray(f, dtype))
     inv_norm = 1.0 if model.needs_scaling else 1.0 / float(np.var(records.train_friction))
     return PooledCostData(u=tuple(us), y=tuple(ys), dt=jnp.asarray(records.dt, dtype),
-                          inv_norm=jnp.asarray(inv_norm, dtype))
+                          inv_norm=jnp.asarray(inv_norm, dtype), inputs=tuple(xs))
