@@ -110,7 +110,9 @@ def fit_label(fit, default: str = "model") -> str:
 
 
 def predict_on(fit, data) -> np.ndarray:
-    """Friction [N] predicted by ``fit`` on ``data``'s velocity (free run over the record).
+    """Friction [N] predicted by ``fit`` on ``data``'s velocity (free run over the record),
+    with ``data``'s measured channels for a model that needs them (``input_names``, e.g.
+    the chamber pressures of :class:`~jaxfric.models.Cylinder`).
 
     ``fit`` is a :class:`jaxfric.Fit` or an array of predictions already on the data's grid.
     """
@@ -118,10 +120,11 @@ def predict_on(fit, data) -> np.ndarray:
     if isinstance(fit, Fit):
         import warnings
 
+        inputs = fit.model.inputs_from(data, _np(data.velocity).size)
         with warnings.catch_warnings():
             # a figure of the validation data shows the extrapolation; no console line for it
             warnings.simplefilter("ignore", ExtrapolationWarning)
-            y_hat = _np(fit.predict(data.velocity, data.dt))
+            y_hat = _np(fit.predict(data.velocity, data.dt, inputs=inputs))
     elif isinstance(fit, (np.ndarray, jax.Array)):
         y_hat = _np(fit)
     else:
