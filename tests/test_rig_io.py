@@ -132,3 +132,25 @@ def test_csv_round_trip_of_a_simulated_record(tmp_path):
     direct = rig.estimate_friction(meas, rig.Cylinder())
     via_csv = rig.estimate_friction(loaded, rig.Cylinder())
     np.testing.assert_allclose(np.asarray(via_csv.friction), np.asarray(direct.friction), atol=0.05)
+
+
+def test_friction_pairs_carry_chamber_pressures_when_mapped(tmp_path):
+    """p1/p2 columns beside velocity and friction are read, scaled to Pa and resampled with
+    the rest; without them the record has none, and other extra channels are still refused."""
+    t = np.array([0.0, 0.01, 0.02, 0.035, 0.04, 0.05])
+    v = np.linspace(-0.01, 0.01, t.size)
+    f, p1, p2 = 50 * np.tanh(v / 1e-3), np.linspace(2.0, 3.0, t.size), np.linspace(1.0, 1.5, t.size)
+    path = tmp_path / "pairs.csv"
+    _write_csv(path, ["t", "v", "F", "pa", "pb"], np.column_stack([t, v, f, p1, p2]))
+    cols = {"t": "t", "velocity": "v", "friction": "F"}
+    with pytest.warns(rig.IrregularSamplingWarning):
+        d = rig.load_friction_pairs(path, {**cols, "p1": "pa", "p2": "pb"}, scale={"p1": 1e5, "p2": 1e5})
+    grid = np.arange(6) * 0.01
+    np.testing.assert_allclose(d.p1, np.interp(grid, t, p1) * 1e5, rtol=1e-12)
+    np.testing.assert_allclose(d.p2, np.interp(grid, t, p2) * 1e5, rtol=1e-12)
+    np.testing.assert_allclose(d.velocity, np.interp(grid, t, v), rtol=1e-12, atol=1e-15)
+    with pytest.warns(rig.IrregularSamplingWarning):
+        plain = rig.load_friction_pairs(path, cols)
+    assert plain.p1 is None and plain.p2 is None
+    with pytest.raises(ValueError, match=r"unknown channel name\(s\) \['x'\]"):
+        rig.load_friction_pairs(path, {**cols, "x": "pa"})

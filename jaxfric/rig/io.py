@@ -24,6 +24,8 @@ from .data import FrictionData, Measurements
 
 RAW_CHANNELS = ("t", "x", "p1", "p2", "load")
 PAIR_CHANNELS = ("t", "velocity", "friction")
+#: Channels :func:`load_friction_pairs` reads when ``columns`` maps them.
+PAIR_EXTRA_CHANNELS = ("p1", "p2")
 
 
 def resample_uniform(t, *channels, dt: float | None = None):
@@ -120,13 +122,17 @@ def _factor(kind: str, channel: str, value, *, allow_zero: bool) -> float:
     return v
 
 
-def _gather(source, columns, required, scale, fill, delimiter, skip_rows, comments) -> dict:
+def _gather(source, columns, required, scale, fill, delimiter, skip_rows, comments,
+            optional=()) -> dict:
+    """The ``required`` channels (read, or filled with a constant) and those of the
+    ``optional`` channels the source maps, scaled to SI, as float64 arrays of one length."""
     if isinstance(skip_rows, bool) or not isinstance(skip_rows, (int, np.integer)) or skip_rows < 0:
         raise ValueError(f"skip_rows must be a whole number >= 0, got {skip_rows!r}")
     scale = {ch: _factor("scale", ch, v, allow_zero=False) for ch, v in dict(scale or {}).items()}
     fill = {ch: _factor("fill", ch, v, allow_zero=True) for ch, v in dict(fill or {}).items()}
     if isinstance(source, Mapping):
-        columns = dict(columns) if columns is not None else {c: c for c in required if c in source}
+        columns = (dict(columns) if columns is not None
+                   else {c: c for c in (*required, *optional) if c in source})
         missing_keys = [col for col in columns.values() if col not in source]
         if missing_keys:
             raise ValueError(f"missing column(s) {missing_keys}; the arrays given are {sorted(source)}")
@@ -137,9 +143,10 @@ def _gather(source, columns, required, scale, fill, delimiter, skip_rows, commen
         if columns is None:
             raise ValueError("columns= is required for files: map each channel to a column name or index")
         raw = _read_table(os.fspath(source), columns, delimiter, skip_rows, comments)
-    unknown = sorted((set(raw) | set(fill) | set(scale)) - set(required))
+    unknown = sorted((set(raw) | set(fill) | set(scale)) - set(required) - set(optional))
     if unknown:
-        raise ValueError(f"unknown channel name(s) {unknown}; expected some of {list(required)}")
+        raise ValueError(f"unknown channel name(s) {unknown}; expected some of "
+                         f"{list(required) + list(optional)}")
     missing = [ch for ch in required if ch not in raw and ch not in fill]
     if missing:
         raise ValueError(f"missing channel(s) {missing}: map them in columns= or give a constant in fill=")
@@ -147,7 +154,7 @@ def _gather(source, columns, required, scale, fill, delimiter, skip_rows, commen
         raise ValueError("no channel read from the source: columns= maps none of them")
     n = None
     out = {}
-    for ch in required:
+    for ch in (*required, *optional):
         if ch in raw:
             arr = as_channel(ch, raw[ch], n)
             n = arr.shape[0]
@@ -185,9 +192,13 @@ def load_friction_pairs(source, columns: Mapping | None = None, *, scale: Mappin
                         train_fraction: float = 0.8, n_train: int | None = None) -> FrictionData:
     """Ready velocity [m/s] / friction [N] pairs against time [s] as :class:`FrictionData`.
 
-    Same conventions as :func:`load_measurements`, channels ``t, velocity, friction``.
+    Same conventions as :func:`load_measurements`, channels ``t, velocity, friction``,
+    and optionally the chamber pressures ``p1``, ``p2`` [Pa after ``scale``] for a model
+    that takes them (:class:`~jaxfric.models.Cylinder`).
     """
-    sig = _gather(source, columns, PAIR_CHANNELS, scale, None, delimiter, skip_rows, comments)
+    sig = _gather(source, columns, PAIR_CHANNELS, scale, None, delimiter, skip_rows, comments,
+                  optional=PAIR_EXTRA_CHANNELS)
     sig = _uniformise(sig, on_irregular, dt, rtol)
     return FrictionData.from_arrays(sig["velocity"], sig["friction"], sig["t"], train_fraction,
-                                    n_train=n_train, rtol=max(rtol, 1e-6))
+                                    n_train=n_train, rtol=max(rtol, 1e-6),
+                                    p1=sig.get("p1"), p2=sig.get("p2"))
