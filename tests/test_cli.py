@@ -272,6 +272,39 @@ def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, 
     assert "box=(('Fc', (1.0, 50.0)), ('sigma2', (1.0, 1000.0)))" in (out / "report.md").read_text()
 
 
+def test_pairs_with_chamber_pressures_fit_a_pressure_dependent_model(tmp_path, monkeypatch, capsys):
+    """--p1-col/--p2-col beside --velocity-col/--friction-col reach Cylinder (in --pressure-unit);
+    one of them alone is refused, and Cylinder without them names the missing channels."""
+    from jaxfric.cli import main
+    from jaxfric.fit import load_fit
+    from jaxfric.metrics import friction_metrics
+
+    monkeypatch.chdir(tmp_path)
+    t = np.arange(400) / 100.0
+    v = 0.01 * np.sin(2 * np.pi * 0.5 * t) + 0.003 * np.sin(2 * np.pi * 1.3 * t)
+    p1 = 3.0 + np.sin(2 * np.pi * 0.3 * t)  # bar
+    p2 = 2.0 + 0.5 * np.cos(2 * np.pi * 0.7 * t)
+    f = np.tanh(v / 1e-4) * (20.0 + 4e-5 * 1e5 * (p1 + p2)) + 800.0 * v
+    csv = tmp_path / "pressures.csv"
+    csv.write_text("t,v,F,p1,p2\n" + "\n".join(",".join(f"{x:.17g}" for x in row) for row in zip(t, v, f, p1, p2)))
+    base = ["identify", str(csv), "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
+            "--model", "cylinder", "--quick", "--quiet", "--no-cache"]
+    out = tmp_path / "report"
+    assert main([*base, "--p1-col", "p1", "--p2-col", "p2", "--pressure-unit", "bar",
+                 "--out", str(out)]) == 0
+    fit = load_fit(out / "models" / "cylinder.npz")
+    own = fit.predict(v, inputs=np.stack([p1, p2]) * 1e5)  # the fit saw pascals
+    assert fit.metrics["valid"]["mse_percent"] == pytest.approx(
+        friction_metrics(f[320:], np.asarray(own)[320:])["mse_percent"], rel=1e-5, abs=1e-9)
+    assert fit.metrics["valid"]["mse_percent"] < 1.0
+    assert "pressures 'p1' and 'p2'" in (out / "report.md").read_text()
+    capsys.readouterr()
+    assert main([*base, "--p1-col", "p1", "--out", str(tmp_path / "one")]) == 2
+    assert "need both --p1-col and --p2-col" in capsys.readouterr().err
+    assert main([*base, "--out", str(tmp_path / "none")]) == 2
+    assert "Cylinder needs the measured channel(s) p1, p2" in capsys.readouterr().err
+
+
 # -------------------------------------------------------------------- Ctrl-C
 def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path, interruptible):
     out = tmp_path / "interrupted"

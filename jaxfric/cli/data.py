@@ -161,8 +161,9 @@ def identification_data(args):
     pairs = args.velocity_col is not None or args.friction_col is not None
     raw_cols = {"x": args.x_col, "p1": args.p1_col, "p2": args.p2_col, "load": args.load_col}
     raw = any(v is not None for v in raw_cols.values())
-    if pairs and raw:
-        raise UserError("give either --velocity-col/--friction-col (velocity and friction) or "
+    if pairs and (args.x_col is not None or args.load_col is not None):
+        raise UserError("give either --velocity-col/--friction-col (velocity and friction, with "
+                        "--p1-col/--p2-col for a pressure-dependent model) or "
                         "--x-col/--p1-col/--p2-col/--load-col (raw rig channels), not both")
     if not pairs and not raw:
         raise UserError("say which columns to use: --velocity-col and --friction-col, or the raw rig "
@@ -178,10 +179,20 @@ def identification_data(args):
                 "friction": table.column(args.friction_col, "--friction-col")}
         scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit"),
                  "friction": unit_factor("force", args.friction_unit, "--friction-unit")}
+        if args.p1_col is not None or args.p2_col is not None:
+            # chamber pressures beside the pairs, for a model that takes them (Cylinder)
+            if args.p1_col is None or args.p2_col is None:
+                raise UserError("chamber pressures beside velocity and friction need both "
+                                "--p1-col and --p2-col")
+            p_unit = unit_factor("pressure", args.pressure_unit, "--pressure-unit")
+            for ch in ("p1", "p2"):
+                cols[ch] = table.column(raw_cols[ch], f"--{ch}-col")
+                scale[ch] = p_unit
         data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale,
                                     **_given(train_fraction=args.train_fraction))
         desc = (f"velocity/friction pairs from {args.file} (velocity column {args.velocity_col!r}, "
-                f"friction column {args.friction_col!r})")
+                f"friction column {args.friction_col!r}"
+                + (f", pressures {args.p1_col!r} and {args.p2_col!r})" if "p1" in cols else ")"))
         return data, desc, notes
 
     fills = {"p1": args.p1_fill, "p2": args.p2_fill, "load": args.load_fill}

@@ -144,7 +144,8 @@ examples:
 IDENTIFY_EPILOG = """\
 Two kinds of CSV file (header row with column names; columns may also be 0-based indices):
 
-  velocity and friction     --velocity-col, --friction-col and --time-col (or --dt)
+  velocity and friction     --velocity-col, --friction-col and --time-col (or --dt);
+                            add --p1-col and --p2-col (chamber pressures) for --model cylinder
   raw rig channels          --x-col, --p1-col, --p2-col, --load-col, --time-col (or --dt)
                             and the cylinder: --bore, --rod [m], --mass [kg]; the channels
                             are low-pass filtered (--cutoff), x is differentiated and the
