@@ -127,7 +127,7 @@ display(plot.plot_friction_velocity(data))
 # metrics on the training and validation windows (`fit.summary()` prints them).
 
 # %%
-NEURONS = (5, 30) if SMALL else (20, 30, 40)
+NEURONS = (30,) if SMALL else (20, 30, 40)
 study = {}
 for n in NEURONS:
     study[n] = jf.identify("elman", data, solver=solver_for("elman"), key=fit_key, model_options={"neurons": n})
