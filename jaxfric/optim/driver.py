@@ -393,8 +393,11 @@ def minimise(
         check_positive_int("checkpoint_every", checkpoint_every)
     with _progress(progress, proto) as hook:
         if checkpoint is None:
+            # stop_at as an array, as a checkpointed run's chunks pass it: the whole run
+            # and a checkpointed run's first chunk are then one compiled program
             _, sol = _xla.filter_jit(_run, options)(
-                proto, flat, lower, upper, args, key, x0, hook, None, warm)
+                proto, flat, lower, upper, args, key, x0, hook, None, warm,
+                jnp.asarray(NO_STOP, jnp.int32))
         else:
             from .checkpoint import run_checkpointed
 
