@@ -40,6 +40,25 @@ def assert_ok(proc):
     assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
 
 
+@pytest.fixture
+def in_process(capsys):
+    """``jaxfric ARGS`` run in this process through ``main()`` (the code path the command
+    runs; ``--no-cache`` leaves JAX's cache settings to the test session), returned as a
+    finished subprocess would be. In here it reuses the programs this module's Python-API
+    fits compiled, where a subprocess would import JAX and compile them again; the
+    subprocess tests above and below keep what only a real process shows (exit codes
+    through the shell, one-line errors, Ctrl-C)."""
+    from jaxfric.cli import main
+
+    def run(*args):
+        capsys.readouterr()
+        status = main([*map(str, args), "--no-cache"])
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["jaxfric", *map(str, args)], status, out, err)
+
+    return run
+
+
 @pytest.fixture(scope="module")
 def demo(cli_env, tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "report"
@@ -118,10 +137,10 @@ def python_fit(demo):
     return csv, data, fit
 
 
-def test_identify_csv_reproduces_the_python_api(cli_env, python_fit, tmp_path):
+def test_identify_csv_reproduces_the_python_api(in_process, python_fit, tmp_path):
     csv, _, fit = python_fit
     out = tmp_path / "rep"
-    proc = jaxfric(cli_env, "identify", csv, "--velocity-col", "velocity", "--friction-col", "friction",
+    proc = in_process("identify", csv, "--velocity-col", "velocity", "--friction-col", "friction",
                    "--time-col", "t", "--model", "elman", "--neurons", "30", "--quick", "--seed", "5",
                    "--quiet", "--out", out)
     assert_ok(proc)
@@ -132,12 +151,12 @@ def test_identify_csv_reproduces_the_python_api(cli_env, python_fit, tmp_path):
     assert "ENN (30 neurons)" in proc.stdout
 
 
-def test_saved_fit_predicts_the_same_through_the_cli(cli_env, python_fit, tmp_path):
+def test_saved_fit_predicts_the_same_through_the_cli(in_process, python_fit, tmp_path):
     csv, data, fit = python_fit
     model_file = tmp_path / "elman.npz"
     fit.save(model_file)
     pred_csv = tmp_path / "pred.csv"
-    proc = jaxfric(cli_env, "predict", model_file, csv, "--velocity-col", "velocity", "--time-col", "t",
+    proc = in_process("predict", model_file, csv, "--velocity-col", "velocity", "--time-col", "t",
                    "--friction-col", "friction", "--out", pred_csv)
     assert_ok(proc)
     assert "MSE %" in proc.stdout
@@ -148,10 +167,10 @@ def test_saved_fit_predicts_the_same_through_the_cli(cli_env, python_fit, tmp_pa
     np.testing.assert_allclose(table["error"], table["friction_measured"] - table["friction_predicted"])
 
 
-def test_identify_raw_rig_channels_runs_the_pipeline(cli_env, demo, tmp_path):
+def test_identify_raw_rig_channels_runs_the_pipeline(in_process, demo, tmp_path):
     out_demo, _ = demo
     out = tmp_path / "raw"
-    proc = jaxfric(cli_env, "identify", out_demo / "rig_measurements.csv", "--time-col", "t", "--x-col", "x",
+    proc = in_process("identify", out_demo / "rig_measurements.csv", "--time-col", "t", "--x-col", "x",
                    "--p1-col", "p1", "--p2-col", "p2", "--load-col", "load", "--bore", "0.1", "--rod", "0.07",
                    "--mass", "120", "--model", "lugre", "--quick", "--quiet", "--out", out)
     assert_ok(proc)
@@ -409,7 +428,7 @@ def test_predict_keeps_one_row_per_input_row_and_warns_even_when_quiet(cli_env, 
     np.testing.assert_allclose(table["friction_predicted"], expect, rtol=1e-6, atol=1e-6)
 
 
-def test_identify_with_valid_files_trains_on_the_whole_file_and_reports_each_record(cli_env, tmp_path):
+def test_identify_with_valid_files_trains_on_the_whole_file_and_reports_each_record(in_process, tmp_path):
     import jax
 
     import jaxfric as jf
@@ -426,7 +445,7 @@ def test_identify_with_valid_files_trains_on_the_whole_file_and_reports_each_rec
 
     a, b = write("a.csv", 0.0, 300), write("b.csv", 1.0, 200)
     out = tmp_path / "rep"
-    proc = jaxfric(cli_env, "identify", a, "--valid", b, "--velocity-col", "v", "--friction-col", "F",
+    proc = in_process("identify", a, "--valid", b, "--velocity-col", "v", "--friction-col", "F",
                    "--time-col", "t", "--model", "coulomb", "--quick", "--seed", "3", "--quiet", "--out", out)
     assert_ok(proc)
     res = json.loads((out / "results.json").read_text())
