@@ -1,4 +1,6 @@
-"""The ``jaxfric`` command line, run as a user would: ``python -m jaxfric ...`` in a subprocess.
+"""The ``jaxfric`` command line, run as a user would: ``python -m jaxfric ...`` in a subprocess
+where only a real process shows the behaviour (the demo, one-line errors, Ctrl-C), and through
+``main()`` in this process (the ``in_process`` fixture) where it does not.
 
 Compiled programs are shared between the subprocesses and this process through the
 test session's persistent compilation cache (tests/conftest.py sets it as an environment
