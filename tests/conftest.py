@@ -159,8 +159,8 @@ LONGEST_FIRST = [
 
 
 def pytest_configure(config):
-    # xdist would otherwise reorder the files by their number of tests (a file of two
-    # 20-second tests then runs last, while the other worker idles)
+    # xdist would otherwise reorder the files by their number of tests (test_sharding.py,
+    # two tests, one of 36 s, then ran last while the other worker idled)
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
 
