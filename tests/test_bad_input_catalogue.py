@@ -403,7 +403,8 @@ API_CASES = [
     ("identify/data-dict", lambda f: jf.identify("lugre", {"v": V}, key=0), ValueError,
      ["FrictionData-like", "(velocity, friction, dt)"]),
     ("identify/data-rig-record",
-     lambda f: jf.identify("lugre", jf.rig.simulate(jf.rig.Rig(), KEY, n_samples=64), key=0), ValueError,
+     # a record as rig.simulate returns it (built directly: simulating one costs a compilation)
+     lambda f: jf.identify("lugre", jf.rig.RigRecord(*[np.linspace(0.0, 1.0, 64)] * 13), key=0), ValueError,
      ["RigRecord", "jaxfric.rig.estimate_friction(record.measurements(), rig.cylinder)",
       "synthetic_friction_data"]),
     ("identify/data-two-items", lambda f: jf.identify("lugre", (V, F), key=0), ValueError,
