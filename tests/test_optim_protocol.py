@@ -52,6 +52,48 @@ def test_ask_tell_from_python_follows_the_compiled_run(solver):
     np.testing.assert_allclose(sol.f, ref.f, rtol=1e-5, atol=1e-7)
 
 
+def test_ask_tell_compiles_one_program_per_kind_of_round():
+    """A round is one program whatever the number of its batches: MAPSO's step asks for
+    2 + sGen batches, and two runs with sGen = 2 and 5 compile the start and the step
+    once each (0.8.1 compiled one program per batch position: 1 + 4 and 1 + 7)."""
+    from jaxfric.optim import rounds
+
+    added = []
+    for sl_gens in (2, 5):
+        solver = jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=sl_gens)
+        before = rounds._round_jit._cached._cache_size()
+        st, per_step = solver.ask_init(LO, HI, jax.random.key(1)), 0
+        while not solver.ask_done(st):
+            X, st = solver.ask(st)
+            st = solver.tell(st, X, separable_np(X))
+            per_step += 1
+        added.append(rounds._round_jit._cached._cache_size() - before)
+        assert per_step == 1 + 3 * (2 + sl_gens)  # the start, then each generation's batches
+    assert added == [2, 2]
+
+
+def test_ask_tell_looks_again_when_a_round_asks_for_other_batches():
+    """The batches of a kind of round are learnt once and reused; if a round asks for
+    others than those learnt, it is looked at again and the run goes on as minimise's."""
+    import dataclasses
+
+    solver = jf.PSO(num_particles=6, num_generations=5)
+    key = jax.random.key(2)
+    ref = jf.minimise(separable, solver, (LO, HI), args=jnp.asarray(TARGET), key=key)
+    st = solver.ask_init(LO, HI, key)
+    X, st = solver.ask(st)
+    st = solver.tell(st, X, separable_np(X))
+    wrong = ((("step", st.stage), ((4, LO.dtype), (4, LO.dtype))),)
+    st = dataclasses.replace(st, layouts=wrong)
+    while not solver.ask_done(st):
+        X, st = solver.ask(st)
+        assert X.shape == (6, 2)
+        st = solver.tell(st, X, separable_np(X))
+    sol = solver.ask_result(st)
+    assert int(sol.stats["num_evals"]) == int(ref.stats["num_evals"])
+    np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
+
+
 def test_tell_refuses_the_wrong_number_of_values():
     pso = jf.PSO(num_particles=4, num_generations=2)
     st = pso.ask_init(LO, HI, jax.random.key(0))

@@ -44,6 +44,7 @@ from typing import Any, Callable, Generator
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 from ._base import (
@@ -110,6 +111,31 @@ def _objectives(fn, args):
     return batch_objective(fn, args), batch_objective(one, args)
 
 
+def feed(rounds: Rounds, told: tuple):
+    """Run ``rounds`` to the end feeding batch ``k`` the values ``told[k]`` (what a
+    batch that was not needed gets: ``+inf``). Returns the batches it asked for and the
+    generator's result. Batch ``k`` depends only on ``told[:k]``, so the batches up to
+    the first value not yet known are exact whatever stands in for the later ones."""
+    asked = []
+    values = iter(told)
+
+    def handle(b):
+        f = next(values, None)
+        if f is None or f.shape != (b.x.shape[0],):
+            raise _LayoutChanged
+        asked.append(b)
+        return f
+
+    result = _run(rounds, handle)
+    if next(values, None) is not None:
+        raise _LayoutChanged
+    return asked, result
+
+
+class _LayoutChanged(Exception):
+    """The round asked for other batches than the layout it was given."""
+
+
 class _Pending(Exception):
     def __init__(self, batch):
         self.batch = batch
@@ -118,7 +144,8 @@ class _Pending(Exception):
 def replay(rounds: Rounds, told: tuple, skip: Callable = skipped):
     """Feed ``rounds`` the values ``told`` (``None``: a batch that was not needed).
     Returns ``(batch, None)`` for the next :class:`Batch` it asks for, or
-    ``(None, result)`` once it has finished."""
+    ``(None, result)`` once it has finished. (0.7's ask/tell helper, kept for its
+    import path; ask/tell now runs whole rounds with :func:`feed`.)"""
     values = iter(told)
 
     def handle(b):
@@ -166,7 +193,8 @@ class AskTellState(eqx.Module):
     """A run driven by :meth:`AbstractAskTellSolver.ask` / ``tell``: the solver's state
     (``None`` until the start has been told), the box, the key, the optional start,
     the values told so far within the current round, the batch waiting for values
-    (``None`` once the run has finished) and the stage the state is in."""
+    (``None`` once the run has finished), the stage the state is in and the batches of
+    each kind of round met so far."""
 
     state: Any
     lower: Array
@@ -176,6 +204,8 @@ class AskTellState(eqx.Module):
     told: tuple = ()
     pending: Any = None
     stage: int | None = eqx.field(static=True, default=None)
+    # (kind, ((rows, dtype), ...)): the batches of each kind of round met so far
+    layouts: tuple = eqx.field(static=True, default=())
 
     @property
     def swarm(self):
@@ -272,33 +302,77 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
         return _result_jit(self, st.state, st.lower, st.upper)
 
     def _advance(self, st: AskTellState) -> AskTellState:
-        """Replay the current round with the values told so far up to the next batch
-        that is needed (a batch that is not needed is told ``+inf``, what the compiled
-        run's ``lax.cond`` gives, and passed over), starting the next round whenever one
-        finishes and the run goes on."""
+        """Bring the run to the next batch that is needed (a batch that is not needed is
+        told ``+inf``, what the compiled run's ``lax.cond`` gives, and passed over),
+        starting the next round whenever one finishes and the run goes on.
+
+        A round is one compiled program per kind (the start, or a step of a stage): it
+        takes a value for every batch of the round, the ones told so far and ``+inf``
+        for the rest, and gives every batch. Batch ``k`` depends only on the values of
+        the batches before it, so the first batch not yet told is exact, and once every
+        batch is told so is the new state. (Until 0.8.1 each position in a round was its
+        own program replaying the batches before it: a dozen compilations per MAPSO
+        step, each larger than the last.)"""
         while True:
-            batch, state, done, stage = _replay_jit(self, st)
-            if batch is None:
-                st = AskTellState(state, st.lower, st.upper, st.key, st.x0, stage=int(stage))
-                if bool(done):
-                    return st
-            elif bool(batch.needed):
-                return dataclasses.replace(st, pending=batch.x)
-            else:
-                st = dataclasses.replace(st, told=st.told + (skipped(batch.x),))
+            kind = _kind(st)
+            layout = dict(st.layouts).get(kind)
+            if layout is None:
+                layout = _layout(self, st)
+                st = dataclasses.replace(st, layouts=st.layouts + ((kind, layout),))
+            k = k0 = len(st.told)
+            rest = tuple(jnp.full((rows,), jnp.inf, dtype) for rows, dtype in layout[k:])
+            try:
+                xs, needed, state, done, stage = _round_jit(
+                    self, st.state, st.lower, st.upper, st.key, st.x0, st.stage,
+                    st.told + rest)
+            except _LayoutChanged:  # the round's batches differ from last time: look again
+                st = dataclasses.replace(st, layouts=tuple(
+                    (kd, lay) for kd, lay in st.layouts if kd != kind))
+                continue
+            needed = np.asarray(needed)
+            while k < len(layout) and not needed[k]:
+                st = dataclasses.replace(st, told=st.told + (rest[k - k0],))
+                k += 1
+            if k < len(layout):
+                return dataclasses.replace(st, pending=xs[k])
+            st = AskTellState(state, st.lower, st.upper, st.key, st.x0, stage=int(stage),
+                              layouts=st.layouts)
+            if bool(done):
+                return st
+
+
+def _kind(st: AskTellState):
+    return "init" if st.state is None else ("step", st.stage)
+
+
+def _rounds(solver: AbstractAskTellSolver, state, lower, upper, key, x0, stage) -> Rounds:
+    if state is None:
+        return solver.init_rounds(lower, upper, key, x0)
+    return solver.step_rounds(lower, upper, state, stage)
+
+
+def _layout(solver: AbstractAskTellSolver, st: AskTellState) -> tuple:
+    """``(rows, dtype)`` of every batch of the round ``st`` is in (traced, not compiled)."""
+    def batches(state, lower, upper, key, x0):
+        asked = []
+
+        def handle(b):
+            asked.append(b.x)
+            return skipped(b.x)
+
+        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), handle)
+        return asked
+
+    shapes = eqx.filter_eval_shape(batches, st.state, st.lower, st.upper, st.key, st.x0)
+    return tuple((x.shape[0], x.dtype) for x in shapes)
 
 
 @eqx.filter_jit
-def _replay_jit(solver: AbstractAskTellSolver, st: AskTellState):
-    if st.state is None:
-        rounds = solver.init_rounds(st.lower, st.upper, st.key, st.x0)
-    else:
-        rounds = solver.step_rounds(st.lower, st.upper, st.state, st.stage)
-    batch, state = replay(rounds, st.told)
-    if state is None:
-        return batch, None, None, None
-    return None, state, solver.terminate(None, st.lower, st.upper, None, state)[0], \
-        solver.stage(state)
+def _round_jit(solver: AbstractAskTellSolver, state, lower, upper, key, x0, stage, told):
+    asked, new = feed(_rounds(solver, state, lower, upper, key, x0, stage), told)
+    needed = jnp.stack([jnp.asarray(b.needed) for b in asked]) if asked else jnp.zeros(0, bool)
+    done = solver.terminate(None, lower, upper, None, new)[0]
+    return tuple(b.x for b in asked), needed, new, done, solver.stage(new)
 
 
 @eqx.filter_jit
