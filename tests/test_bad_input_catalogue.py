@@ -680,14 +680,13 @@ CLI_CASES = [
 
 
 # Run as real subprocesses (``python -m jaxfric ...``): one of each kind of failure
-# (file, parsing, data, options, model files, names). The rest call ``jaxfric.cli.main``
-# in this process, which is the same code path without paying ~1.5 CPU-seconds of
-# interpreter and JAX start-up per case.
+# (file, parsing, data, options, model files, names) and the exit status of a prediction
+# that would be NaN. The rest call ``jaxfric.cli.main`` in this process, which is the same
+# code path without paying ~1.5 CPU-seconds of interpreter and JAX start-up per case.
 SUBPROCESS = {
-    "cli identify/missing-file", "cli identify/binary-file", "cli identify/text-in-numeric-column",
-    "cli identify/unsorted-time", "cli identify/constant-friction", "cli identify/unknown-model",
-    "cli identify/unknown-solver", "cli identify/zero-generations", "cli predict/truncated-model",
-    "cli predict/model-from-newer-version", "cli demo/unknown-model", "cli predict/nan-scaler-model",
+    "cli identify/missing-file", "cli identify/text-in-numeric-column", "cli identify/unsorted-time",
+    "cli identify/unknown-model", "cli identify/zero-generations", "cli predict/truncated-model",
+    "cli predict/nan-scaler-model",
 }
 
 
