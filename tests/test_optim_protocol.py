@@ -34,7 +34,8 @@ def separable_np(X):
     jf.PSO(num_particles=6, num_generations=8),
     jf.MAPSO(lattice_size=3, num_generations=4, sl_generations=2),
     jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=2, evaluate_replaced=True),
-], ids=["pso", "mapso", "mapso_evaluate_replaced"])
+    jf.MAPSO(lattice_size=3, num_generations=3, sl_generations=0),
+], ids=["pso", "mapso", "mapso_evaluate_replaced", "mapso_no_sl_generations"])
 def test_ask_tell_from_python_follows_the_compiled_run(solver):
     """A simulator outside JAX drives the swarm with ask/tell and visits what minimise
     visits for the same key: the same best point, value and evaluation count."""

@@ -22,7 +22,8 @@ import jax.numpy as jnp
 from ._base import check_positive_int, check_range, count_dtype, linear_inertia
 from .pso import pso_move
 from .rng import counter_seed, counter_uniform
-from .swarm import AbstractSwarm, SwarmState, drive, update_bests
+from .rounds import Scan
+from .swarm import AbstractSwarm, SwarmState, update_bests
 
 
 def lattice_neighbours(values, side: int):
@@ -219,11 +220,10 @@ class MAPSO(AbstractSwarm):
         state = eqx.tree_at(lambda s: (s.v, s.num_evals), state, (v, evals + num))
         return update_bests(state, x, f)
 
-    def _self_learning(self, u0, u_inner, g, g_f, lower, upper, f_batch=None):
+    def _self_learning(self, u0, u_inner, g, g_f, lower, upper):
         """Self-learning around gBest (§3.4), a generator: returns (best position,
-        fitness, evaluations). With a JAX objective (``f_batch``) the ``sGen`` inner
-        generations are one ``lax.scan``; driven by ``ask``/``tell`` they are a
-        Python loop over the same generation."""
+        fitness, evaluations). The ``sGen`` inner generations are one
+        :class:`~jaxfric.optim.rounds.Scan` (a ``lax.scan`` in a compiled run)."""
         side = self.sl_size
         s = side * side
         if self.sl_mode == "multiplicative":
@@ -240,18 +240,13 @@ class MAPSO(AbstractSwarm):
             gbest=cand[i], gbest_f=f[i], num_evals=jnp.array(s - 1, count_dtype()), key=None,
         )
 
-        def generation(st, j, uj):
+        def generation(st, xs):
+            j, uj = xs
             w = linear_inertia(j, self.sl_generations - 1, self.w_max, self.w_min)
             return self._lattice_generation(st, uj, side, lower, upper, w, "gbest")
 
-        if f_batch is not None:
-            def body(st, xs):
-                return drive(generation(st, *xs), f_batch), None
-
-            inner, _ = jax.lax.scan(body, inner, (jnp.arange(self.sl_generations), u_inner))
-        else:
-            for j in range(self.sl_generations):
-                inner = yield from generation(inner, jnp.asarray(j, jnp.int32), u_inner[j])
+        inner = yield Scan(generation, inner, (jnp.arange(self.sl_generations), u_inner),
+                           self.sl_generations)
         return inner.gbest, inner.gbest_f, inner.num_evals
 
     # ------------------------------------------------------------- solver protocol
@@ -269,7 +264,7 @@ class MAPSO(AbstractSwarm):
         inner = counter_uniform(counter_seed(key, i, 2), (self.sl_generations, s, width), dt)
         return main, u0, inner
 
-    def generation(self, state, lower, upper, f_batch=None):
+    def generation(self, state, lower, upper):
         u, u0, u_inner = state.u
         w = linear_inertia(state.generation, self.num_generations - 1, self.w_max, self.w_min)
         state = yield from self._lattice_generation(
@@ -278,7 +273,7 @@ class MAPSO(AbstractSwarm):
         if self.sl_size * self.sl_size <= 1:
             return state
         g, g_f, evals = yield from self._self_learning(
-            u0, u_inner, state.gbest, state.gbest_f, lower, upper, f_batch
+            u0, u_inner, state.gbest, state.gbest_f, lower, upper
         )
         better = g_f < state.gbest_f
         # The agent whose memory is gBest takes the self-learned agent's place.

@@ -72,7 +72,7 @@ class PSO(AbstractSwarm):
         """``r1, r2`` for every particle and dimension, shape ``(2, P, D)``."""
         return counter_uniform(counter_seed(key, i), (2,) + x.shape, x.dtype)
 
-    def generation(self, state, lower, upper, f_batch=None):
+    def generation(self, state, lower, upper):
         w = linear_inertia(state.generation, self.num_generations - 1, self.w_max, self.w_min)
         x, v = pso_move(
             state.u, state.x, state.v, state.pbest, state.gbest[None, :], w,

@@ -6,14 +6,20 @@ that yields every batch of points it needs evaluated and receives their values b
 one NaN-safe value per row (``f = yield X``). A batch may be conditional,
 ``f = yield Batch(X, needed)`` with a traced boolean ``needed`` (Nelder–Mead's second
 trial point or shrink, the switch of a two-stage chain): when it is not needed nothing
-is evaluated or counted and the generator receives ``+inf`` values.
+is evaluated or counted and the generator receives ``+inf`` values. An inner loop is
+``carry = yield Scan(body, carry, xs, length)``, ``body(carry, x)`` being rounds
+(MAPSO's self-learning generations).
 
 * :func:`drive` runs rounds inside the compiled program: each batch is one call of the
-  objective on the whole batch (a conditional one under ``lax.cond``);
+  objective on the whole batch (a conditional one under ``lax.cond``), a :class:`Scan`
+  one ``lax.scan``;
 * :meth:`AbstractAskTellSolver.ask` / :meth:`~AbstractAskTellSolver.tell` run the same
   rounds from Python with values computed anywhere (an external simulator, NumPy), one
   needed batch per call. The run visits the points :func:`jaxfric.minimise` visits for
   the same key, with the same evaluation count, and switches stages by the same rule.
+  Each kind of round (the start, a step of each stage) is one compiled program that
+  takes a value for every batch of the round (:func:`feed`; a :class:`Scan` is a
+  ``lax.scan`` there too), so ask/tell compiles about as much as :func:`jaxfric.minimise`.
 
 Every solver built on :class:`AbstractAskTellSolver` has ``ask``/``tell``: PSO, MAPSO,
 :class:`~jaxfric.optim.Evosax`, Nelder–Mead (``OptxMinimiser(NelderMead())``, the view
@@ -70,8 +76,39 @@ class Batch(eqx.Module):
     split: bool = eqx.field(static=True, default=True)
 
 
-def _request(req) -> Batch:
-    return req if isinstance(req, Batch) else Batch(req)
+@dataclasses.dataclass(frozen=True)
+class Scan:
+    """``length`` repetitions of the rounds ``body(carry, x)`` (which return the next
+    carry) over the leading axis of ``xs``; yielding it gives back the last carry
+    (``carry = yield Scan(...)``). Compiled, it is one ``lax.scan``; driven by
+    ``ask``/``tell``, each repetition's batches are asked one after another (MAPSO's
+    self-learning generations)."""
+
+    body: Callable
+    carry: Any
+    xs: Any
+    length: int
+
+
+def _request(req):
+    return req if isinstance(req, (Batch, Scan)) else Batch(req)
+
+
+def _slice(xs, j):
+    return jax.tree_util.tree_map(lambda a: a[j], xs)
+
+
+def unrolled(handle: Callable) -> Callable:
+    """``handle`` for batches, with every :class:`Scan` run as a Python loop."""
+    def h(req):
+        if not isinstance(req, Scan):
+            return handle(req)
+        carry = req.carry
+        for j in range(req.length):
+            carry = _run(req.body(carry, _slice(req.xs, j)), h)
+        return carry
+
+    return h
 
 
 def skipped(x):
@@ -97,6 +134,11 @@ def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped,
     devices; a conditional batch under ``lax.cond``, ``skip`` otherwise); returns the
     generator's result."""
     def handle(b):
+        if isinstance(b, Scan):
+            def body(carry, x):
+                return drive(b.body(carry, x), evaluate, skip, whole), None
+
+            return jax.lax.scan(body, b.carry, b.xs, length=b.length)[0]
         ev = evaluate if b.split or whole is None else whole
         return ev(b.x) if b.needed is True else jax.lax.cond(b.needed, ev, skip, b.x)
 
@@ -113,23 +155,83 @@ def _objectives(fn, args):
 
 def feed(rounds: Rounds, told: tuple):
     """Run ``rounds`` to the end feeding batch ``k`` the values ``told[k]`` (what a
-    batch that was not needed gets: ``+inf``). Returns the batches it asked for and the
+    batch that was not needed gets: ``+inf``), a :class:`Scan`'s batches as one
+    ``lax.scan`` over their values. Returns every batch it asked for, in order, and the
     generator's result. Batch ``k`` depends only on ``told[:k]``, so the batches up to
     the first value not yet known are exact whatever stands in for the later ones."""
-    asked = []
-    values = iter(told)
+    take = _taker(told)
+    asked: list = []
+    result = _feed(rounds, take, asked)
+    if take.left():
+        raise _LayoutChanged
+    return asked, result
 
+
+def _taker(values):
+    """The values one by one (``_LayoutChanged`` past the end); at the end, ``.left()``
+    tells whether any were not taken."""
+    it = iter(values)
+
+    def take():
+        f = next(it, None)
+        if f is None:
+            raise _LayoutChanged
+        return f
+
+    take.left = lambda: next(it, None) is not None
+    return take
+
+
+def _feed(rounds: Rounds, take: Callable, asked: list):
     def handle(b):
-        f = next(values, None)
-        if f is None or f.shape != (b.x.shape[0],):
+        if isinstance(b, Scan):
+            return _feed_scan(b, take, asked)
+        f = take()
+        if f.shape != (b.x.shape[0],):
             raise _LayoutChanged
         asked.append(b)
         return f
 
-    result = _run(rounds, handle)
-    if next(values, None) is not None:
+    return _run(rounds, handle)
+
+
+def _feed_scan(scan: Scan, take: Callable, asked: list):
+    """A :class:`Scan` fed its values: ``m`` batches a repetition, the ``j``-th value of
+    every repetition stacked into one array the scan runs over."""
+    if scan.length == 0:
+        return scan.carry  # what lax.scan gives
+    m = _batches_per_repetition(scan)
+    columns = list(zip(*[[take() for _ in range(m)] for _ in range(scan.length)])) if m else []
+    if any(len({f.shape for f in col}) != 1 for col in columns):
         raise _LayoutChanged
-    return asked, result
+    stacked = tuple(jnp.stack(col) for col in columns)
+
+    def body(carry, xf):
+        x, fs = xf
+        inner: list = []
+        take_rep = _taker(fs)
+        carry = _feed(scan.body(carry, x), take_rep, inner)
+        if len(inner) != m or take_rep.left():
+            raise _LayoutChanged
+        return carry, (tuple(b.x for b in inner), tuple(jnp.asarray(b.needed) for b in inner))
+
+    carry, (xs, needed) = jax.lax.scan(body, scan.carry, (scan.xs, stacked), length=scan.length)
+    for j in range(scan.length):
+        asked.extend(Batch(x[j], n[j]) for x, n in zip(xs, needed))
+    return carry
+
+
+def _batches_per_repetition(scan: Scan) -> int:
+    """How many batches one repetition of ``scan`` asks for (traced, not compiled)."""
+    count = [0]
+
+    def handle(b):
+        count[0] += 1
+        return skipped(b.x)
+
+    x = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), scan.xs)
+    jax.eval_shape(lambda c, x: _run(scan.body(c, x), unrolled(handle)), scan.carry, x)
+    return count[0]
 
 
 class _LayoutChanged(Exception):
@@ -155,7 +257,7 @@ def replay(rounds: Rounds, told: tuple, skip: Callable = skipped):
         return skip(b.x) if f is None else f
 
     try:
-        return None, _run(rounds, handle)
+        return None, _run(rounds, unrolled(handle))
     except _Pending as pending:
         return pending.batch, None
 
@@ -167,6 +269,7 @@ class relay:
     def __init__(self, rounds: Rounds, request: Callable | None = None,
                  answer: Callable | None = None):
         self.rounds, self.request, self.answer, self.started = rounds, request, answer, False
+        self.scanned = False
 
     def __iter__(self):
         return self
@@ -175,10 +278,14 @@ class relay:
         return self.send(None)
 
     def send(self, value):
-        if self.started and self.answer is not None:
-            value = self.answer(value)
+        if self.started and self.answer is not None and not self.scanned:
+            value = self.answer(value)  # a Scan gives back its carry, not values
         self.started = True
         b = _request(self.rounds.send(value))  # its StopIteration carries the result
+        self.scanned = isinstance(b, Scan)
+        if self.scanned:
+            body, request, answer = b.body, self.request, self.answer
+            return dataclasses.replace(b, body=lambda c, x: relay(body(c, x), request, answer))
         return b if self.request is None else self.request(b)
 
 
@@ -316,7 +423,8 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
         while True:
             kind = _kind(st)
             layout = dict(st.layouts).get(kind)
-            if layout is None:
+            fresh = layout is None
+            if fresh:
                 layout = _layout(self, st)
                 st = dataclasses.replace(st, layouts=st.layouts + ((kind, layout),))
             k = k0 = len(st.told)
@@ -326,6 +434,9 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
                     self, st.state, st.lower, st.upper, st.key, st.x0, st.stage,
                     st.told + rest)
             except _LayoutChanged:  # the round's batches differ from last time: look again
+                if fresh:
+                    raise RuntimeError(f"ask/tell: the batches of {type(self).__name__}'s "
+                                       f"round {kind!r} change as it runs") from None
                 st = dataclasses.replace(st, layouts=tuple(
                     (kd, lay) for kd, lay in st.layouts if kd != kind))
                 continue
@@ -360,7 +471,7 @@ def _layout(solver: AbstractAskTellSolver, st: AskTellState) -> tuple:
             asked.append(b.x)
             return skipped(b.x)
 
-        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), handle)
+        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), unrolled(handle))
         return asked
 
     shapes = eqx.filter_eval_shape(batches, st.state, st.lower, st.upper, st.key, st.x0)

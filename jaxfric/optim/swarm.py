@@ -21,7 +21,6 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from ._base import (
-    batch_objective,
     check_positive_int,
     check_range,
     count_dtype,
@@ -141,9 +140,9 @@ class AbstractSwarm(AbstractGenerational):
     def draw(self, key, i, x):
         raise NotImplementedError
 
-    def generation(self, state: SwarmState, lower, upper, f_batch=None) -> Rounds:
-        """Generation ``state.generation`` with its numbers ``state.u``. ``f_batch``
-        (when the objective is JAX) lets inner loops run as ``lax.scan``."""
+    def generation(self, state: SwarmState, lower, upper) -> Rounds:
+        """Generation ``state.generation`` with its numbers ``state.u`` (inner loops
+        yield a :class:`~jaxfric.optim.rounds.Scan`)."""
         raise NotImplementedError
 
     def evaluations(self) -> int:
@@ -186,8 +185,8 @@ class AbstractSwarm(AbstractGenerational):
              jnp.where(improved, s.gbest_f, s.stall_f)),
         )
 
-    def _next(self, state: SwarmState, lower, upper, f_batch=None) -> Rounds:
-        s = yield from self.generation(state, lower, upper, f_batch)
+    def _next(self, state: SwarmState, lower, upper) -> Rounds:
+        s = yield from self.generation(state, lower, upper)
         return self._advanced(s)
 
     # ------------------------------------------------------------ rounds protocol
@@ -195,8 +194,7 @@ class AbstractSwarm(AbstractGenerational):
         return self.first(lower, upper, key, x0)
 
     def step_rounds(self, lower, upper, state, stage=0, objective=None) -> Rounds:
-        f_batch = None if objective is None else batch_objective(*objective)
-        return self._next(state, lower, upper, f_batch)
+        return self._next(state, lower, upper)
 
     def stopped(self, state):
         if self.stall_generations is None:
