@@ -11,7 +11,7 @@ from .nelder_mead import NelderMead, NelderMeadState
 from .optx_adapter import OptxMinimiser, OptxState
 from .progress import ProgressHook, RecordingProgress, TqdmProgress
 from .pso import PSO
-from .rounds import AbstractAskTellSolver, AbstractGenerational, Batch
+from .rounds import AbstractAskTellSolver, AbstractGenerational, Batch, Scan
 from .swarm import AbstractSwarm, AskTellState, SwarmState
 
 __all__ = [
@@ -38,6 +38,7 @@ __all__ = [
     "OptxMinimiser",
     "OptxState",
     "PSO",
+    "Scan",
     "ProgressHook",
     "RecordingProgress",
     "TqdmProgress",

@@ -98,7 +98,7 @@ def _slice(xs, j):
     return jax.tree_util.tree_map(lambda a: a[j], xs)
 
 
-def unrolled(handle: Callable) -> Callable:
+def _unrolled(handle: Callable) -> Callable:
     """``handle`` for batches, with every :class:`Scan` run as a Python loop."""
     def h(req):
         if not isinstance(req, Scan):
@@ -230,7 +230,7 @@ def _batches_per_repetition(scan: Scan) -> int:
         return skipped(b.x)
 
     x = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), scan.xs)
-    jax.eval_shape(lambda c, x: _run(scan.body(c, x), unrolled(handle)), scan.carry, x)
+    jax.eval_shape(lambda c, x: _run(scan.body(c, x), _unrolled(handle)), scan.carry, x)
     return count[0]
 
 
@@ -257,7 +257,7 @@ def replay(rounds: Rounds, told: tuple, skip: Callable = skipped):
         return skip(b.x) if f is None else f
 
     try:
-        return None, _run(rounds, unrolled(handle))
+        return None, _run(rounds, _unrolled(handle))
     except _Pending as pending:
         return pending.batch, None
 
@@ -471,7 +471,7 @@ def _layout(solver: AbstractAskTellSolver, st: AskTellState) -> tuple:
             asked.append(b.x)
             return skipped(b.x)
 
-        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), unrolled(handle))
+        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), _unrolled(handle))
         return asked
 
     shapes = eqx.filter_eval_shape(batches, st.state, st.lower, st.upper, st.key, st.x0)
