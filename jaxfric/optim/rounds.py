@@ -428,7 +428,7 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
                 layout = _layout(self, st)
                 st = dataclasses.replace(st, layouts=st.layouts + ((kind, layout),))
             k = k0 = len(st.told)
-            rest = tuple(jnp.full((rows,), jnp.inf, dtype) for rows, dtype in layout[k:])
+            rest = tuple(jnp.asarray(np.full((rows,), np.inf, dtype)) for rows, dtype in layout[k:])
             try:
                 xs, needed, state, done, stage = _round_jit(
                     self, st.state, st.lower, st.upper, st.key, st.x0, st.stage,
