@@ -223,15 +223,25 @@ def _feed_scan(scan: Scan, take: Callable, asked: list):
 
 def _batches_per_repetition(scan: Scan) -> int:
     """How many batches one repetition of ``scan`` asks for (traced, not compiled)."""
-    count = [0]
-
-    def handle(b):
-        count[0] += 1
-        return skipped(b.x)
-
     x = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), scan.xs)
-    jax.eval_shape(lambda c, x: _run(scan.body(c, x), _unrolled(handle)), scan.carry, x)
-    return count[0]
+    return len(jax.eval_shape(_asked(scan.body), scan.carry, x))
+
+
+def _asked(make_rounds: Callable) -> Callable:
+    """A function of ``make_rounds``' arguments that gives the points of every batch its
+    rounds ask for (each told ``+inf``, a :class:`Scan` unrolled): trace it with
+    ``eval_shape`` to learn a round's batches without compiling it."""
+    def batches(*args):
+        asked = []
+
+        def handle(b):
+            asked.append(b.x)
+            return skipped(b.x)
+
+        _run(make_rounds(*args), _unrolled(handle))
+        return asked
+
+    return batches
 
 
 class _LayoutChanged(Exception):
@@ -464,17 +474,8 @@ def _rounds(solver: AbstractAskTellSolver, state, lower, upper, key, x0, stage) 
 
 def _layout(solver: AbstractAskTellSolver, st: AskTellState) -> tuple:
     """``(rows, dtype)`` of every batch of the round ``st`` is in (traced, not compiled)."""
-    def batches(state, lower, upper, key, x0):
-        asked = []
-
-        def handle(b):
-            asked.append(b.x)
-            return skipped(b.x)
-
-        _run(_rounds(solver, state, lower, upper, key, x0, st.stage), _unrolled(handle))
-        return asked
-
-    shapes = eqx.filter_eval_shape(batches, st.state, st.lower, st.upper, st.key, st.x0)
+    rounds = _asked(lambda *args: _rounds(solver, *args, st.stage))
+    shapes = eqx.filter_eval_shape(rounds, st.state, st.lower, st.upper, st.key, st.x0)
     return tuple((x.shape[0], x.dtype) for x in shapes)
 
 
