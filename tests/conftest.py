@@ -33,6 +33,14 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 
+# One lock file per test session for tests/processes.py (the workers inherit its name).
+from processes import LOCK_ENV, jax_subprocess  # noqa: E402
+
+if LOCK_ENV not in os.environ:
+    _locks = tempfile.mkdtemp(prefix="jaxfric-tests-lock-")
+    os.environ[LOCK_ENV] = os.path.join(_locks, "subprocess.lock")
+    atexit.register(shutil.rmtree, _locks, ignore_errors=True)
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -92,6 +100,14 @@ def interruptible():
     import signal
 
     return {"preexec_fn": lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)}
+
+
+@pytest.fixture
+def subprocess_slot():
+    """Held for the whole test, which starts a subprocess importing JAX: it waits while a
+    notebook kernel runs (tests/processes.py, issue 20.14)."""
+    with jax_subprocess():
+        yield
 
 
 @pytest.fixture

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from processes import jax_subprocess
 
 import jaxfric as jf
 from jaxfric import models, rig
@@ -714,7 +715,7 @@ def cli_runs(files, tmp_path_factory):
                               capture_output=True, text=True, timeout=300)
         return case[0], (proc.returncode, proc.stdout, proc.stderr, cwd)
 
-    with concurrent.futures.ThreadPoolExecutor(max_workers=4) as pool:
+    with jax_subprocess(), concurrent.futures.ThreadPoolExecutor(max_workers=4) as pool:
         return dict(pool.map(run, [c for c in CLI_CASES if c[0] in SUBPROCESS]))
 
 

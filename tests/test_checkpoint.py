@@ -56,7 +56,7 @@ KILLED = textwrap.dedent(
 )
 
 
-def test_killed_and_resumed_run_equals_uninterrupted(tmp_path):
+def test_killed_and_resumed_run_equals_uninterrupted(tmp_path, subprocess_slot):
     path = tmp_path / "killed.npz"
     proc = subprocess.run([sys.executable, "-c", KILLED, str(path)], capture_output=True, text=True,
                           timeout=600, env=dict(os.environ, JAX_PLATFORMS="cpu"))

@@ -21,6 +21,7 @@ from pathlib import Path
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
+from processes import jax_subprocess
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,8 +35,9 @@ def cli_env():
 
 
 def jaxfric(env, *args, cwd=None, timeout=600):
-    return subprocess.run([sys.executable, "-m", "jaxfric", *map(str, args)], env=env, cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+    with jax_subprocess():
+        return subprocess.run([sys.executable, "-m", "jaxfric", *map(str, args)], env=env, cwd=cwd,
+                              capture_output=True, text=True, timeout=timeout)
 
 
 def assert_ok(proc):
@@ -326,7 +328,7 @@ def test_pairs_with_chamber_pressures_fit_a_pressure_dependent_model(tmp_path, m
 
 
 # -------------------------------------------------------------------- Ctrl-C
-def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path, interruptible):
+def test_ctrl_c_exits_130_and_says_what_was_kept(cli_env, demo, tmp_path, interruptible, subprocess_slot):
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(
         [sys.executable, "-m", "jaxfric", "identify", str(demo[0] / "friction_data.csv"), "--velocity-col",

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from processes import jax_subprocess
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,7 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def _python(code: str) -> subprocess.CompletedProcess:
     """``code`` run by a fresh interpreter importing this checkout; it must succeed."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    with jax_subprocess():
+        proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     return proc
 

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from processes import jax_subprocess
 
 import jaxfric as jf
 from jaxfric import _xla
@@ -167,8 +168,9 @@ def test_rollout_under_transformations():
 def _run_script(script):
     """Run ``script`` in a fresh CPU-only Python process (an XLA abort or log line stays
     there); fail with its stderr unless it exits cleanly."""
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    with jax_subprocess():
+        proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              timeout=300, env=dict(os.environ, JAX_PLATFORMS="cpu"))
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc
 

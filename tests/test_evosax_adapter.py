@@ -160,7 +160,7 @@ NO_EVOSAX = textwrap.dedent(
 )
 
 
-def test_missing_evosax_names_the_extra():
+def test_missing_evosax_names_the_extra(subprocess_slot):
     out = subprocess.run([sys.executable, "-c", NO_EVOSAX], capture_output=True, text=True,
                          timeout=300, env={**__import__("os").environ, "JAX_PLATFORMS": "cpu"})
     assert out.returncode == 0, out.stderr[-2000:]

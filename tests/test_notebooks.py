@@ -18,6 +18,7 @@ import os
 from pathlib import Path
 
 import pytest
+from processes import jax_subprocess
 
 nbformat = pytest.importorskip("nbformat", reason="needs nbformat (pip install jaxfric[test])")
 nbclient = pytest.importorskip("nbclient", reason="needs nbclient (pip install jaxfric[test])")
@@ -68,7 +69,8 @@ def test_notebook_runs_with_the_small_budget(path, kernel_env):
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
                                      resources={"metadata": {"path": str(path.parent)}})
-    client.execute()  # raises CellExecutionError with the failing cell's traceback
+    with jax_subprocess(notebook=True):  # the largest subprocess runs alone
+        client.execute()  # raises CellExecutionError with the failing cell's traceback
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "budget: small" in text
     images = sum("image/png" in o.get("data", {}) for c in nb.cells if c.cell_type == "code" for o in c.outputs)
@@ -81,8 +83,9 @@ def test_real_recordings_notebook_skips_without_data(tmp_path, kernel_env):
     kernel_env.setenv("JAXFRIC_EMPS", str(tmp_path / "absent" / "DATA_EMPS.mat"))
     path = ROOT / "notebooks" / "03_real_recordings.ipynb"
     nb = nbformat.read(path, as_version=4)
-    nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
-                            resources={"metadata": {"path": str(path.parent)}}).execute()
+    with jax_subprocess(notebook=True):
+        nbclient.NotebookClient(nb, kernel_name="python3", timeout=600,
+                                resources={"metadata": {"path": str(path.parent)}}).execute()
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
     assert "SKIPPED: no pneumatic_seal_friction data" in text
     assert "SKIPPED: no EMPS file" in text

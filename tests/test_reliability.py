@@ -320,7 +320,7 @@ def test_cli_predict_failing_to_write_keeps_the_old_csv(tmp_path, monkeypatch, c
 
 
 # ------------------------------------------------------------------------ SIGINT
-def test_interrupted_identify_exits_130_and_says_what_was_kept(tmp_path, interruptible):
+def test_interrupted_identify_exits_130_and_says_what_was_kept(tmp_path, interruptible, subprocess_slot):
     t = np.arange(200) / 100.0
     v = 0.01 * np.sin(2 * np.pi * 0.5 * t)
     csv = tmp_path / "pairs.csv"

@@ -155,7 +155,7 @@ def _results(out: Path) -> dict:
     return r
 
 
-def test_cli_identify_twice_with_the_same_seed_is_bit_identical(tmp_path):
+def test_cli_identify_twice_with_the_same_seed_is_bit_identical(tmp_path, subprocess_slot):
     t, v, f = _record()
     csv = tmp_path / "pairs.csv"
     csv.write_text("t,v,F\n" + "\n".join(f"{float(a)!r},{float(b)!r},{float(c)!r}" for a, b, c in zip(t, v, f))

@@ -67,7 +67,7 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def test_sharded_equals_unsharded_on_four_host_devices():
+def test_sharded_equals_unsharded_on_four_host_devices(subprocess_slot):
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     proc = subprocess.run(
         [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600
