@@ -16,7 +16,9 @@ class ExtrapolationWarning(UserWarning):
 
 
 class BoundWarning(UserWarning):
-    """A fitted parameter ended on a bound of its search box; widen the range."""
+    """A fitted parameter ended on a bound of its search box: widen the range the message
+    names, or, where the range already starts at the least value the model allows (Fs/Fc
+    at 1), the data ask for less than the model can express."""
 
 
 class IrregularSamplingWarning(UserWarning):

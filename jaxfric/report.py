@@ -228,12 +228,15 @@ def _environment() -> dict:
             "float64": bool(jax.config.jax_enable_x64)}
 
 
-def _fmt_params(d: Mapping, on_bound=frozenset(), unidentifiable=frozenset()) -> list[str]:
+def _fmt_params(d: Mapping, on_bound=(), unidentifiable=frozenset()) -> list[str]:
+    """Table rows of the parameters; ``on_bound``: the fit's ``diagnostics["on_bound"]``."""
+    at_limit = {b["name"]: b.get("at_limit", False) for b in on_bound}
     lines = []
     for k, v in d.items():
         arr = np.asarray(v)
         if arr.ndim == 0 and arr.dtype.kind in "fi":
-            mark = " **(on a bound: widen its range)**" if k in on_bound else ""
+            mark = ("" if k not in at_limit else " **(at the least value the model allows)**"
+                    if at_limit[k] else " **(on a bound: widen its range)**")
             mark += " **(not identifiable from these data)**" if k in unidentifiable else ""
             lines.append(f"| {k} | {float(arr):.6g}{mark} |")
     return lines
@@ -424,7 +427,7 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             for rec_name, fig in m["record_figures"].items():
                 L += ["", f"![{r['label']} on {rec_name}]({fig})"]
         if not fit.model.needs_scaling:
-            pl = _fmt_params(fit.params, {d["name"] for d in m["on_bound"]}, unidentifiable_names(m["unidentifiable"]))
+            pl = _fmt_params(fit.params, m["on_bound"], unidentifiable_names(m["unidentifiable"]))
             if pl:
                 L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
             if fit.box is not None:

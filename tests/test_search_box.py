@@ -109,3 +109,63 @@ def test_identify_motion_takes_the_box():
     assert fit.box == Coulomb().search_box(box)
     with pytest.raises(ValueError, match="Coulomb has no parameter 'vs'"):
         identify_motion("coulomb", data, key=0, mass=1.0, box={"vs": (1e-3, 1e-2)})
+
+
+#: every physical model's search coordinates, directional and offset forms included
+PHYSICAL = [Coulomb(asymmetric=True, offset=True), jf.models.Stribeck(asymmetric=True, offset=True),
+            LuGre(asymmetric=True, offset=True), jf.models.Dahl(), GMS(num_elements=2), Cylinder()]
+
+
+@pytest.mark.parametrize("model", PHYSICAL, ids=lambda m: type(m).__name__)
+@pytest.mark.parametrize("ranges", ["defaults", "near the floors"])
+def test_bound_advice_is_a_box_the_model_accepts(model, ranges):
+    """A parameter on either bound of its range gets advice the box then accepts: a
+    strictly wider range (one width more, ten times for a log10 entry, never below what
+    the entry allows: Fc (1, 20) -> (0.1, 20), not (-18, 20)), or, where the range starts
+    at the least value the model allows (Fs/Fc at 1), no range to pass at all.
+    (0.8.1 told a LuGre fit on EMPS to pass box={'Fs_ratio': (-1, 3)}, which identify
+    then refused.)"""
+    import ast
+    import re
+
+    from jaxfric.identification import on_bound
+
+    box = model.search_box()
+    if ranges == "near the floors":  # ranges starting just above, or at, each entry's least value
+        near = {"Fc": (1.0, 20.0), "Fs_ratio": (1.2, 3.0), "K_brk": (1.0, 2.0), "F_pr": (5.0, 100.0),
+                "f_cfr": (0.0, 1e-5), "delta": (0.6, 3.0), "F_off": (-1.0, 1.0)}
+        box = model.search_box({k: r for k, r in near.items() if k in model.box_keys})
+    lower, upper = model.bounds(box)
+    for i, search in enumerate(model.param_names):
+        for side, edge in (("lower", lower), ("upper", upper)):
+            theta = np.where(np.arange(lower.size) == i, edge, (lower + upper) / 2)
+            flags = on_bound(model, theta, box)
+            if search.startswith("split"):  # GMS's element splits: a range the model fixes
+                assert flags == []
+                continue
+            assert [f["search_name"] for f in flags] == [search], (search, side, flags)
+            (flag,) = flags
+            key, (lo, hi) = flag["box_key"], flag["range"]
+            passed = re.search(r"pass box=(\{.*?\})", flag["message"])
+            assert flag["at_limit"] == (passed is None), flag["message"]
+            if passed is None:
+                assert side == "lower" and key in ("Fs_ratio", "K_brk", "F_pr", "f_cfr"), flag["message"]
+                assert "the least the model allows" in flag["message"]
+                continue
+            wider = ast.literal_eval(passed.group(1))
+            assert list(wider) == [key]
+            model.search_box(wider)  # accepted: raises ValueError otherwise
+            new_lo, new_hi = wider[key]
+            if side == "lower":
+                assert new_lo < lo * (1 - 1e-9) - 1e-300 and new_hi == pytest.approx(hi, rel=1e-3)
+            else:
+                assert new_hi > hi * (1 + 1e-9) and new_lo == pytest.approx(lo, rel=1e-3)
+
+
+def test_report_marks_a_parameter_at_the_models_limit_apart_from_one_to_widen():
+    from jaxfric.report import _fmt_params
+
+    rows = _fmt_params({"Fs": 16.8, "Fc": 20.0, "vs": 1e-3},
+                       [{"name": "Fs", "at_limit": True}, {"name": "Fc", "at_limit": False}])
+    assert rows == ["| Fs | 16.8 **(at the least value the model allows)** |",
+                    "| Fc | 20 **(on a bound: widen its range)** |", "| vs | 0.001 |"]

@@ -18,6 +18,7 @@ import numpy as np
 
 from .._warnings import BoundWarning
 from ..models import AbstractFrictionModel, AbstractPhysicalModel
+from ..models._box import RANGE_FLOORS, widened
 
 #: A parameter within this fraction of its box width of a bound counts as on it (the
 #: swarms clip to the box, so a stopped parameter sits exactly there).
@@ -44,7 +45,11 @@ def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_T
     ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units
     (for LuGre's ``Fs`` the ratio Fs/Fc, whose box entry is ``Fs_ratio``),
     ``box_key`` (the box entry that sets the range, e.g. ``"vs"``), ``option`` (what
-    to pass, e.g. ``"box['vs']"``) and a one-line ``message`` naming all of it. Empty
+    to pass, e.g. ``"box['vs']"``), ``at_limit`` (the range already starts at the least
+    value the model allows, e.g. Fs/Fc at 1: there is nothing to widen) and a one-line
+    ``message`` naming all of it, with a widened range the box accepts
+    (:func:`jaxfric.models._box.widened`). A coordinate whose range the model fixes
+    (GMS's element splits, in [0, 1]) has no box entry to widen and is left out. Empty
     for models fitted on scaled data.
     """
     if model.needs_scaling:
@@ -53,26 +58,26 @@ def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_T
     lower, upper = model.bounds(box)
     out = []
     for i, (search, name, kind, key) in enumerate(_coordinates(model)):
-        option = None if key is None else f"box[{key!r}]"
         width = upper[i] - lower[i]
         side = ("lower" if theta[i] <= lower[i] + tol * width
                 else "upper" if theta[i] >= upper[i] - tol * width else None)
-        if side is None:
+        if side is None or key is None:  # key None: a range the model fixes (GMS's splits)
             continue
         phys = (lambda x: 10.0 ** x) if kind == "log10" else (lambda x: x)
         value, lo, hi = float(phys(theta[i])), float(phys(lower[i])), float(phys(upper[i]))
-        widen = (f"pass box={{{key!r}: ({lo / 10 if kind == 'log10' else lo - width:.4g}, {hi:.4g})}}"
-                 if side == "lower"
-                 else f"pass box={{{key!r}: ({lo:.4g}, {hi * 10 if kind == 'log10' else hi + width:.4g})}}")
-        if key is None:
-            widen = "widen the search box"
         shown = f"{name}/Fc" if kind == "ratio" else name
+        wider = widened(key, lo, hi, side)
+        if wider is None:  # the range already starts where the model's rule allows
+            advice = (f"the least the model allows ({key} range {RANGE_FLOORS[key][2]}): the data "
+                      f"ask for less than the model can express")
+        else:
+            advice = (f"the box, not the data, fixed it; widen the range (pass box={{{key!r}: "
+                      f"({wider[0]:.4g}, {wider[1]:.4g})}}) and fit again")
         out.append({
             "name": name, "search_name": search, "side": side, "value": value, "range": [lo, hi],
-            "box_key": key, "option": option,
+            "box_key": key, "option": f"box[{key!r}]", "at_limit": wider is None,
             "message": (f"{shown} = {value:.4g} ended on the {side} bound of its search range "
-                        f"[{lo:.4g}, {hi:.4g}]: the box, not the data, fixed it; widen the range "
-                        f"({widen}) and fit again"),
+                        f"[{lo:.4g}, {hi:.4g}]: {advice}"),
         })
     return out
 

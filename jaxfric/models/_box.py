@@ -20,7 +20,7 @@ from jaxtyping import ArrayLike
 
 from ._base import friction_scales
 
-__all__ = ["DEFAULT_RANGES", "SearchBox", "as_range", "data_ranges"]
+__all__ = ["DEFAULT_RANGES", "RANGE_FLOORS", "SearchBox", "as_range", "data_ranges", "widened"]
 
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     # docs/algorithms.md §8.5 [D]: order-of-magnitude ranges for hydraulic cylinders.
@@ -56,19 +56,47 @@ def as_range(value, key: str = "a search range") -> tuple[float, float]:
     return (lo, hi)
 
 
+#: The least start of each entry's range (docs/algorithms.md §8.5): ``(least value,
+#: whether a range may start exactly there, the rule)``. Entries not listed (``F_off``)
+#: may start anywhere.
+RANGE_FLOORS: dict[str, tuple[float, bool, str]] = {
+    **{key: (0.0, False, "must be positive") for key in LOG_RANGED + ("Fc", "delta")},
+    "Fs_ratio": (1.0, True, "must start at >= 1 so that Fs >= Fc"),
+    "K_brk": (1.0, True, "must start at >= 1 (break-away >= Coulomb)"),
+    "F_pr": (0.0, True, "must be non-negative"),
+    "f_cfr": (0.0, True, "must be non-negative"),
+}
+
+
 def _check_entry(key: str, lo: float, hi: float) -> None:
     """The rules a range must keep for the search coordinates of §8.5 to exist."""
     got = f"got {(lo, hi)}"
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
         raise ValueError(f"search box: {key} range must satisfy low < high (finite), {got}")
-    if (key in LOG_RANGED or key in ("Fc", "delta")) and lo <= 0.0:
-        raise ValueError(f"search box: {key} range must be positive, {got}")
-    if key == "Fs_ratio" and lo < 1.0:
-        raise ValueError(f"search box: Fs_ratio range must start at >= 1 so that Fs >= Fc, {got}")
-    if key == "K_brk" and lo < 1.0:
-        raise ValueError(f"search box: K_brk range must start at >= 1 (break-away >= Coulomb), {got}")
-    if key in ("F_pr", "f_cfr") and lo < 0.0:
-        raise ValueError(f"search box: {key} range must be non-negative, {got}")
+    if key in RANGE_FLOORS:
+        least, inclusive, rule = RANGE_FLOORS[key]
+        if lo < least or (lo == least and not inclusive):
+            raise ValueError(f"search box: {key} range {rule}, {got}")
+
+
+def widened(key: str, lo: float, hi: float, side: str) -> tuple[float, float] | None:
+    """``key``'s range ``(lo, hi)`` widened on ``side`` (``"lower"``/``"upper"``) to a
+    range :class:`SearchBox` accepts: ten times wider for a log10 entry, one width more
+    otherwise, a start never below the entry's least (:data:`RANGE_FLOORS`). ``None``
+    when ``lo`` already is that least value (Fs/Fc at 1: the model allows no lower)."""
+    log = key in LOG_RANGED
+    if side == "upper":
+        return (lo, hi * 10.0 if log else hi + (hi - lo))
+    start = lo / 10.0 if log else lo - (hi - lo)
+    if key in RANGE_FLOORS:
+        least, inclusive, _ = RANGE_FLOORS[key]
+        if inclusive:
+            if lo <= least:
+                return None
+            start = max(start, least)
+        elif start <= least:
+            start = lo / 10.0  # positive, and below lo
+    return (start, hi)
 
 
 class SearchBox(Mapping):
