@@ -278,9 +278,11 @@ def test_bad_data_fail_before_any_stage_message_or_bar(tmp_path, monkeypatch, ca
     assert sorted(x.name for x in tmp_path.iterdir()) == ["constant.csv"]
 
 
-def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, monkeypatch):
+def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, monkeypatch, capsys):
     """``--box NAME=LO,HI`` goes into the FitSpec (its repr is the report's Reproduce line)
-    and from there to identify(box=...): the saved fit searched that box."""
+    and from there to identify(box=...): the saved fit searched that box. Fc (truth 100 N)
+    then ends on the upper end of (1, 50), and the warning gives the wider range as this
+    command takes it."""
     from jaxfric.cli import main
     from jaxfric.fit import load_fit
 
@@ -292,6 +294,9 @@ def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, 
     fit = load_fit(out / "models" / "coulomb.npz")
     assert fit.box["Fc"] == (1.0, 50.0) and fit.box["sigma2"] == (1.0, 1000.0)
     assert "box=(('Fc', (1.0, 50.0)), ('sigma2', (1.0, 1000.0)))" in (out / "report.md").read_text()
+    err = capsys.readouterr().err
+    assert "jaxfric: warning: Coulomb: Fc = 50 ended on the upper bound" in err
+    assert "(pass --box Fc=1,99) and fit again" in err and "box={" not in err
 
 
 def test_pairs_with_chamber_pressures_fit_a_pressure_dependent_model(tmp_path, monkeypatch, capsys):

@@ -151,14 +151,20 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own
-        for w in caught:
-            if issubclass(w.category, (RuntimeWarning, UserWarning)):
-                text = " ".join(str(w.message).split())
-                own = f"{type(model).__name__}: "
-                text = text[len(own):] if text.startswith(own) else text  # the label says it
-                print(f"jaxfric: warning: {label(name, model)}: {text}", file=sys.stderr, flush=True)
-                if notes is not None:
-                    notes.append(f"{label(name, model)}: {text}")
+        from jaxfric.identification import BoundWarning
+        from jaxfric.identification._diagnostics import bound_message
+
+        texts = [" ".join(str(w.message).split()) for w in caught
+                 if issubclass(w.category, (RuntimeWarning, UserWarning))
+                 and not issubclass(w.category, BoundWarning)]
+        # a parameter on a bound: the wider range as this command takes it (--box NAME=LO,HI)
+        texts += [bound_message(d, "cli") for d in fit.diagnostics.get("on_bound", [])]
+        for text in texts:
+            own = f"{type(model).__name__}: "
+            text = text[len(own):] if text.startswith(own) else text  # the label says it
+            print(f"jaxfric: warning: {label(name, model)}: {text}", file=sys.stderr, flush=True)
+            if notes is not None:
+                notes.append(f"{label(name, model)}: {text}")
         m = (fit.metrics.get("valid") or fit.metrics.get("all") or {})
         say(f"  done in {time.perf_counter() - t0:.1f} s (validation MSE {m.get('mse_percent', float('nan')):.4g} %)")
         fits[name] = fit

@@ -45,10 +45,11 @@ def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_T
     ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units
     (for LuGre's ``Fs`` the ratio Fs/Fc, whose box entry is ``Fs_ratio``),
     ``box_key`` (the box entry that sets the range, e.g. ``"vs"``), ``option`` (what
-    to pass, e.g. ``"box['vs']"``), ``at_limit`` (the range already starts at the least
-    value the model allows, e.g. Fs/Fc at 1: there is nothing to widen) and a one-line
-    ``message`` naming all of it, with a widened range the box accepts
-    (:func:`jaxfric.models._box.widened`). A coordinate whose range the model fixes
+    to pass, e.g. ``"box['vs']"``), ``shown`` (the name the message uses: ``Fs/Fc``),
+    ``widen_to`` (a wider range the box accepts, :func:`jaxfric.models._box.widened`)
+    or, where the range already starts at the least value the model allows (Fs/Fc at
+    1), ``None`` with ``at_limit`` true, and a one-line ``message`` naming all of it
+    (:func:`bound_message`). A coordinate whose range the model fixes
     (GMS's element splits, in [0, 1]) has no box entry to widen and is left out. Empty
     for models fitted on scaled data.
     """
@@ -65,21 +66,30 @@ def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_T
             continue
         phys = (lambda x: 10.0 ** x) if kind == "log10" else (lambda x: x)
         value, lo, hi = float(phys(theta[i])), float(phys(lower[i])), float(phys(upper[i]))
-        shown = f"{name}/Fc" if kind == "ratio" else name
+        flag = {"name": name, "search_name": search, "side": side, "value": value, "range": [lo, hi],
+                "box_key": key, "option": f"box[{key!r}]", "shown": f"{name}/Fc" if kind == "ratio" else name}
         wider = widened(key, lo, hi, side)
-        if wider is None:  # the range already starts where the model's rule allows
-            advice = (f"the least the model allows ({key} range {RANGE_FLOORS[key][2]}): the data "
-                      f"ask for less than the model can express")
-        else:
-            advice = (f"the box, not the data, fixed it; widen the range (pass box={{{key!r}: "
-                      f"({wider[0]:.4g}, {wider[1]:.4g})}}) and fit again")
-        out.append({
-            "name": name, "search_name": search, "side": side, "value": value, "range": [lo, hi],
-            "box_key": key, "option": f"box[{key!r}]", "at_limit": wider is None,
-            "message": (f"{shown} = {value:.4g} ended on the {side} bound of its search range "
-                        f"[{lo:.4g}, {hi:.4g}]: {advice}"),
-        })
+        flag.update(at_limit=wider is None, widen_to=None if wider is None else list(wider))
+        flag["message"] = bound_message(flag)
+        out.append(flag)
     return out
+
+
+def bound_message(flag: dict, style: str = "python") -> str:
+    """The one-line message of an :func:`on_bound` flag; ``style="cli"`` gives the wider
+    range as the command line takes it (``--box vs=1e-05,0.01``), ``"python"`` as
+    :func:`jaxfric.identify` does (``box={'vs': (1e-05, 0.01)}``)."""
+    key, (lo, hi) = flag["box_key"], flag["range"]
+    if flag.get("widen_to") is None:  # the range already starts where the model's rule allows
+        advice = (f"the least the model allows ({key} range {RANGE_FLOORS[key][2]}): the data "
+                  f"ask for less than the model can express")
+    else:
+        a, b = flag["widen_to"]
+        option = f"--box {key}={a:.4g},{b:.4g}" if style == "cli" else f"box={{{key!r}: ({a:.4g}, {b:.4g})}}"
+        advice = f"the box, not the data, fixed it; widen the range (pass {option}) and fit again"
+    shown = flag.get("shown", flag["name"])
+    return (f"{shown} = {flag['value']:.4g} ended on the {flag['side']} bound of its search range "
+            f"[{lo:.4g}, {hi:.4g}]: {advice}")
 
 
 def unidentifiable(model: AbstractFrictionModel, velocity) -> tuple[str, ...]:
