@@ -21,5 +21,10 @@ class BoundWarning(UserWarning):
     at 1), the data ask for less than the model can express."""
 
 
+class FrictionSignWarning(UserWarning):
+    """The friction given to :func:`jaxfric.identify` mostly pushes along the motion instead
+    of against it: most likely a sign convention was crossed (friction > 0 while x increases)."""
+
+
 class IrregularSamplingWarning(UserWarning):
     """Time stamps were not uniform and the record was resampled."""

@@ -198,6 +198,27 @@ def test_ensemble_members_equal_single_runs_and_the_band_holds_the_best():
     assert "ensemble: 3 members" in fit.summary()
 
 
+def test_friction_with_a_crossed_sign_convention_is_named_before_the_fit():
+    """Friction that mostly pushes along the motion (here: the Coulomb record negated, as a
+    force balance with the load cell's sign crossed gives) is named in a
+    FrictionSignWarning before the search; a correct record, also one whose offset exceeds
+    its Coulomb level, is not."""
+    from jaxfric.identification import FrictionSignWarning, friction_sign
+
+    v, f, dt = coulomb_record(0.0)
+    vt, ft = v[:240], f[:240]  # the training part, the leading 80 %
+    moving = np.abs(vt) > 0.1 * np.max(np.abs(vt))
+    level = -np.mean(np.abs(ft[moving]))  # f = Fc sign(v) + sigma2 v, negated
+    with pytest.warns(FrictionSignWarning, match=rf"mostly pushes along the motion .*: {level:.4g}\).*negate"):
+        identify("coulomb", (v, -f, dt), key=0, solver=TINY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FrictionSignWarning)
+        identify("coulomb", (v, f, dt), key=0, solver=TINY)
+    assert friction_sign(v, f + 1.5 * np.max(np.abs(f))) is None  # an offset, both directions
+    assert friction_sign(np.zeros(5), np.ones(5)) is None  # no motion: nothing to say
+    assert "mostly pushes along" in friction_sign(v, -f)
+
+
 def test_ensemble_survives_save_and_load(tmp_path):
     fit = identify("coulomb", coulomb_record(0.0), keys=2, key=1, solver=TINY)
     fit.save(tmp_path / "f.npz")

@@ -15,7 +15,7 @@ from ._api import (
     paper_solver,
 )
 from ._data import MIN_VALID_SAMPLES, Record, RecordSet, as_record, as_records
-from ._diagnostics import BoundWarning, on_bound, unidentifiable
+from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
 from ._objective import CostData, OutputErrorCost
 from ._refine import GradientRefinement
 
@@ -25,6 +25,8 @@ __all__ = [
     "MIN_VALID_SAMPLES",
     "NAMED_MODEL_DEFAULTS",
     "BoundWarning",
+    "FrictionSignWarning",
+    "friction_sign",
     "RecordSet",
     "as_records",
     "on_bound",

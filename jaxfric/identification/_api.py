@@ -44,7 +44,7 @@ from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
 from ._data import Record, RecordSet, as_record, as_records
-from ._diagnostics import BoundWarning, on_bound, unidentifiable
+from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
 from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, as_refinement, refine_impl, result_name
@@ -486,6 +486,9 @@ def identify(
         )
     with Stopwatch() as total:
         records = as_records(data, train, valid)
+        crossed = friction_sign(records.train_velocity, records.train_friction)
+        if crossed is not None:
+            warnings.warn(crossed, FrictionSignWarning, stacklevel=2)
         model = resolve_model(model, {**(model_options or {}), **options})
         inputs = _record_inputs(model, records)  # fails early, naming the record
         box = model.search_box(box, *(

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._warnings import BoundWarning
+from .._warnings import BoundWarning, FrictionSignWarning  # noqa: F401 (re-exported)
 from ..models import AbstractFrictionModel, AbstractPhysicalModel
 from ..models._box import RANGE_FLOORS, widened
 
@@ -90,6 +90,36 @@ def bound_message(flag: dict, style: str = "python") -> str:
     shown = flag.get("shown", flag["name"])
     return (f"{shown} = {flag['value']:.4g} ended on the {flag['side']} bound of its search range "
             f"[{lo:.4g}, {hi:.4g}]: {advice}")
+
+
+#: Samples faster than this fraction of the largest speed count as moving for
+#: :func:`friction_sign`.
+MOVING_FRACTION = 0.1
+
+
+def friction_sign(velocity, friction) -> str | None:
+    """A one-line warning when ``friction`` mostly pushes along ``velocity``, else ``None``.
+
+    Friction dissipates: with jaxfric's convention (friction > 0 while x increases) the
+    mean of ``F·sign(v)`` over the moving samples (``|v|`` above :data:`MOVING_FRACTION`
+    of its largest value) is the mean friction level, positive even with an offset when
+    the record moves both ways. A negative mean means a crossed sign convention, which no
+    friction model can fit (a Coulomb level then ends on the lower bound of its box).
+    """
+    v, f = np.asarray(velocity, np.float64).ravel(), np.asarray(friction, np.float64).ravel()
+    speed = np.abs(v)
+    top = float(np.max(speed)) if speed.size else 0.0
+    moving = speed > MOVING_FRACTION * top
+    if top <= 0.0 or not moving.any():
+        return None
+    level = float(np.mean(f[moving] * np.sign(v[moving])))
+    if level >= 0.0:
+        return None
+    return (f"the friction mostly pushes along the motion (mean of F·sign(v) over the moving samples: "
+            f"{level:.4g}); jaxfric's convention is friction > 0 while the velocity is positive. "
+            f"Check the signs: negate the friction, or, from raw cylinder channels, the load (it "
+            f"opposes +x; a scale or unit factor of -1 flips it) and which chamber is p1 (the one "
+            f"pushing towards +x)")
 
 
 def unidentifiable(model: AbstractFrictionModel, velocity) -> tuple[str, ...]:
