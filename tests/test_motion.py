@@ -273,3 +273,31 @@ def test_cli_identify_motion(tmp_path):
     assert "valid RMSE [mm]" in (tmp_path / "r" / "motion.md").read_text()
     assert main(["identify-motion", str(path), "--force-col", "volt", "--x-col", "x", "--time-col", "t",
                  "--quiet", "--no-cache", "--out", str(tmp_path / "r2")]) != 0  # no mass given
+
+
+
+def test_cli_identify_motion_resamples_irregular_stamps_and_takes_a_position_unit(tmp_path, capsys):
+    """Irregular time stamps (rows missing) are resampled onto a uniform grid and said even
+    under --quiet (until 0.8.1 the median step was taken as if the stamps were uniform);
+    --x-unit mm scales the position column (0.8.1 had no such option)."""
+    from jaxfric.cli import main
+    from jaxfric.motion import load_motion_fit
+
+    model = models.Coulomb(v_eps=1e-3)
+    with jax.enable_x64(True):
+        u, x, _ = _recording(model, model.from_physical(Fc=12.0, sigma2=60.0), 2.5, n=600)
+    keep = np.ones(600, bool)
+    keep[[100, 101, 102, 350, 351]] = False  # gaps of 4 and 3 ms in a 1 ms record
+    path = tmp_path / "m.csv"
+    np.savetxt(path, np.c_[np.arange(600)[keep] * 1e-3, u[keep], 1e3 * x[keep]], delimiter=",",
+               header="t,F,x_mm", comments="")
+    capsys.readouterr()
+    rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x_mm", "--x-unit", "mm",
+               "--time-col", "t", "--mass", "2.5", "--model", "coulomb", "--quick", "--quiet",
+               "--no-cache", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert "jaxfric: warning: time stamps are irregular" in err and "resampled linearly onto a uniform grid" in err
+    fit = load_motion_fit(tmp_path / "r" / "models" / "coulomb.npz")
+    assert fit.dt == pytest.approx(1e-3)
+    assert fit.n_samples == 600  # 0 .. 599 ms on the 1 ms grid, the dropped rows interpolated

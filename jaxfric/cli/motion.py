@@ -10,6 +10,7 @@ RMSE [mm] and FIT %, free run and k-step, per model), ``models/<model>.npz`` (lo
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -43,11 +44,12 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     g = p.add_argument_group("columns (header name or 0-based index)")
     g.add_argument("--force-col", required=True, metavar="COL", help="actuator force [N] (or voltage, see --force-gain)")
     g.add_argument("--force-gain", type=float, default=1.0, metavar="N/UNIT", help="force = gain * column")
-    g.add_argument("--x-col", required=True, metavar="COL", help="position [m]")
+    g.add_argument("--x-col", required=True, metavar="COL", help="position (in --x-unit)")
     g.add_argument("--load-col", metavar="COL", help="external load opposing +x [N]")
     g.add_argument("--time-col", metavar="COL", help="time stamps [s] (or give --dt)")
     g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s]")
     g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
+    g.add_argument("--x-unit", default="m", metavar="UNIT", help="of the position column (e.g. mm)")
     g.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
     m = p.add_argument_group("mechanics")
     m.add_argument("--mass", type=positive_float, metavar="KG", help="known moving mass [kg]")
@@ -60,28 +62,39 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--model", "--models", dest="models", type=model_list, default="coulomb,lugre",
                    metavar="NAMES", help="comma-separated friction models")
     f.add_argument("--neurons", type=positive_int, default=10, help="hidden neurons of an Elman network")
-    f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F")
-    f.add_argument("--seed", type=seed, default=0)
+    f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
+                   help="leading fraction of the record used for estimation; the rest validates")
+    f.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
     f.add_argument("--quick", action="store_true", help="tiny budget: a smoke test, not a real fit")
     f.add_argument("--out", default="jaxfric-motion", metavar="DIR", help="report folder")
     common(p)
 
 
 def _data(args):
+    """:class:`jaxfric.motion.MotionData` from the file and options; irregular time stamps
+    are resampled onto a uniform grid and said on stderr (also under ``--quiet``)."""
     from jaxfric.motion import MotionData
+    from jaxfric.rig.io import _uniformise
 
-    from .data import _time_column, read_table
+    from .data import _load_quietly, _time_column, read_table
+    from .units import unit_factor
 
     table = read_table(args.file, delimiter=args.delimiter)
-    force = table.column(args.force_col, "--force-col") * args.force_gain
-    x = table.column(args.x_col, "--x-col")
-    load = table.column(args.load_col, "--load-col") if args.load_col is not None else None
-    t = _time_column(table, args)
-    dt = float(np.median(np.diff(t)))
+    signals = {"t": _time_column(table, args),
+               "force": table.column(args.force_col, "--force-col") * args.force_gain,
+               "x": table.column(args.x_col, "--x-col") * unit_factor("length", args.x_unit, "--x-unit")}
+    if args.load_col is not None:
+        signals["load"] = table.column(args.load_col, "--load-col")
     try:
-        return MotionData.from_arrays(force, x, dt, load=load, cutoff=args.cutoff)
+        signals, notes = _load_quietly(_uniformise, signals, "resample", None, 1e-3)
+        dt = float(np.median(np.diff(signals["t"])))
+        data = MotionData.from_arrays(signals["force"], signals["x"], dt, load=signals.get("load"),
+                                      cutoff=args.cutoff)
     except ValueError as e:
         raise UserError(f"{args.file}: {e}") from None
+    for note in notes:
+        print(f"jaxfric: warning: {note}", file=sys.stderr, flush=True)
+    return data
 
 
 def cmd_identify_motion(args, argv) -> int:
