@@ -705,7 +705,8 @@ def _argv(case, files):
 
 @pytest.fixture(scope="module")
 def cli_runs(files, tmp_path_factory):
-    """The :data:`SUBPROCESS` cases, each run once as ``python -m jaxfric`` (four at a time)."""
+    """The :data:`SUBPROCESS` cases, each run once as ``python -m jaxfric``, two at a time
+    (four at a time, 4 x 180 MB beside both workers, made the suite's memory peak)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="",
                JAX_COMPILATION_CACHE_DIR=str(tmp_path_factory.mktemp("cache")))
 
@@ -715,7 +716,7 @@ def cli_runs(files, tmp_path_factory):
                               capture_output=True, text=True, timeout=300)
         return case[0], (proc.returncode, proc.stdout, proc.stderr, cwd)
 
-    with jax_subprocess(), concurrent.futures.ThreadPoolExecutor(max_workers=4) as pool:
+    with jax_subprocess(), concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
         return dict(pool.map(run, [c for c in CLI_CASES if c[0] in SUBPROCESS]))
 
 
