@@ -131,6 +131,9 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
     (e.g. a free run that diverges on validation) become one ``jaxfric: warning:`` line each,
     shown even with ``--quiet``, and are appended to ``notes`` for the report.
     """
+    from jaxfric.identification import BoundWarning
+    from jaxfric.identification._diagnostics import bound_message
+
     fits = {}
     for name in check_models(args.models, getattr(args, "box", None)):
         spec = FitSpec.from_args(name, args)
@@ -151,9 +154,6 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         finally:
             if bar is not None:
                 bar.close()  # also when identify raises: the error line must start a line of its own
-        from jaxfric.identification import BoundWarning
-        from jaxfric.identification._diagnostics import bound_message
-
         texts = [" ".join(str(w.message).split()) for w in caught
                  if issubclass(w.category, (RuntimeWarning, UserWarning))
                  and not issubclass(w.category, BoundWarning)]
