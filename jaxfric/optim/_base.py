@@ -209,6 +209,19 @@ def scalar_objective(fn: Callable, args) -> Callable:
     return f_one
 
 
+def clip(x, lower, upper):
+    """``jnp.clip(x, lower, upper)`` as two selects: ``lower`` where ``x < lower``,
+    ``upper`` where ``x > upper``, else ``x`` (a NaN stays NaN, as with ``jnp.clip``).
+
+    The swarms clip every coordinate two or three times a generation (§3.2, §3.3).
+    ``jnp.clip`` is ``min(max(x, lower), upper)``, and XLA:CPU writes each NaN-propagating
+    ``max``/``min`` as a compare-and-select chain that stays scalar inside the swarm's
+    fused loops; two plain selects vectorise. Same value for every input but a signed
+    zero on a bound of zero.
+    """
+    return jnp.where(x < lower, lower, jnp.where(x > upper, upper, x))
+
+
 def linear_inertia(i, num, w_max, w_min):
     """Inertia weight falling linearly from ``w_max`` to ``w_min`` (docs/algorithms.md §3.3, §10):
     ``w(i) = w_max - (w_max - w_min) * i / G``."""

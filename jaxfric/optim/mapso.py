@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._base import check_positive_int, check_range, count_dtype, linear_inertia
+from ._base import check_positive_int, check_range, clip, count_dtype, linear_inertia
 from .pso import pso_move
 from .rng import counter_seed, counter_uniform
 from .rounds import Scan
@@ -92,7 +92,7 @@ def competition(u, x, f, side, lower, upper, po, strict_segment=False):
     m, fm = best_neighbour(x, f, side)
     lose = ~(f < fm)
     use_first = u[:, 0] < po
-    e1 = jnp.clip(m + (2.0 * u[:, 3:] - 1.0) * (m - x), lower, upper)
+    e1 = clip(m + (2.0 * u[:, 3:] - 1.0) * (m - x), lower, upper)
     width = upper - lower
     unit = (m - lower) / width
     idx = reverse_segment_index(u[:, 1], u[:, 2], dim, strict_segment)
@@ -214,7 +214,7 @@ class MAPSO(AbstractSwarm):
             social = state.gbest[None, :]
         x, v = pso_move(
             r, x, state.v, state.pbest, social, w, self.c1, self.c2, vmax,
-            lower, upper, self.zero_velocity_at_bounds,
+            lower, upper, self.zero_velocity_at_bounds, clip=clip,
         )
         f = yield x
         state = eqx.tree_at(lambda s: (s.v, s.num_evals), state, (v, evals + num))
@@ -231,7 +231,7 @@ class MAPSO(AbstractSwarm):
         else:
             cand = g + (2.0 * u0 - 1.0) * self.sl_radius * (upper - lower)
         # sL_11 = g; the others perturbed and clipped
-        cand = jnp.concatenate([g[None], jnp.clip(cand[1:], lower, upper)])
+        cand = jnp.concatenate([g[None], clip(cand[1:], lower, upper)])
         f_rest = yield cand[1:]
         f = jnp.concatenate([g_f[None], f_rest])
         i = jnp.argmin(f)
