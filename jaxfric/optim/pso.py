@@ -33,8 +33,8 @@ def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_boun
 
     ``clip(x, lo, hi)`` bounds both; it gives the same numbers either way. :class:`PSO`
     keeps ``jnp.clip``; :class:`~jaxfric.optim.MAPSO` passes the select form
-    (:func:`jaxfric.optim._base.clip`), with which its generation runs 1.4-2.3x faster
-    while the select form made PSO's vmapped Ackley runs 1.7x slower
+    (:func:`jaxfric.optim._base.clip`), with which its generation runs 1.2-2.2x faster,
+    while the select form made PSO's vmapped Ackley runs 1.5x slower
     (``benchmarks/clip_forms.py``).
     """
     v = w * v + c1 * r[0] * (pbest - x) + c2 * r[1] * (social - x)
