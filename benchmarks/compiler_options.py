@@ -13,6 +13,8 @@ Writes ``compiler_options.md``, ``.csv`` and ``.png`` to ``--out``.
 
     python benchmarks/compiler_options.py            # about 2 minutes
     python benchmarks/compiler_options.py --identify # adds a default ENN identify (slow)
+    python benchmarks/compiler_options.py --emps ../shared/data/emps/DATA_EMPS.mat
+                                                     # adds LuGre and ENN identified on EMPS
 """
 
 from __future__ import annotations
@@ -36,12 +38,19 @@ from jaxfric import functions as F
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
 from _harness import results_dir  # noqa: E402
 
-NO_SINGLE = "auto without single-kernel loops"  # 0.6.0's variant; the loops are gone (0.7.0)
+PREVIOUS = "0.8's solver options"
+#: What "auto" passed for optimiser runs until session 17 (the older fusion emitters);
+#: timed beside the current choice so the change stays measured.
+PREVIOUS_SOLVER = {"xla_cpu_prefer_vector_width": 512, "xla_cpu_use_fusion_emitters": False}
 
 
 def _variants(kind):
     """(label, compiler_options) pairs timed for a workload of ``kind``."""
-    return [("auto", "auto"), ("XLA defaults", None)]
+    variants = [("auto", "auto"), ("XLA defaults", None)]
+    previous = dict(_xla.supported(tuple(sorted(PREVIOUS_SOLVER.items())), "cpu"))
+    if kind == "solver" and previous != _xla.compiler_options("solver", "cpu"):
+        variants.insert(1, (PREVIOUS, previous))
+    return variants
 
 
 def _swarm_cases(dim, agents, generations, seeds):
@@ -111,18 +120,37 @@ def _rollout_cases(candidates, samples, neurons):
     return cases
 
 
-def _identify_case():
-    data = jf.rig.synthetic_friction_data(jax.random.key(0))
+def _identify(model, data, key, options):
+    """``jf.identify`` with ``options``; 0.8's solver options (a dict equal to
+    :data:`PREVIOUS_SOLVER`) replace only what "auto" passes to the optimiser run, so the
+    gradient stage keeps its own options as in a user's call."""
+    if options is not None and options != "auto":
+        saved = _xla.CPU_OPTIONS["solver"]
+        _xla.CPU_OPTIONS["solver"] = dict(options)
+        try:
+            return jf.identify(model, data, key=key)
+        finally:
+            _xla.CPU_OPTIONS["solver"] = saved
+    return jf.identify(model, data, key=key, compiler_options=options)
+
+
+def _identify_case(model="elman", data=None, label="simulated rig", fixed_key=False):
+    """``identify(model)`` with its default pipeline. With ``fixed_key`` every call uses
+    key 1, so the variants must agree to the bit (parameters compared)."""
+    data = jf.rig.synthetic_friction_data(jax.random.key(0)) if data is None else data
 
     def make(options):
         counter = [0]
 
         def call():
             counter[0] += 1
-            return jf.identify("elman", data, key=counter[0], compiler_options=options)
+            return _identify(model, data, 1 if fixed_key else counter[0], options)
+        if fixed_key:
+            return call, lambda fit: np.concatenate(
+                [np.ravel(np.asarray(x, np.float64)) for x in jax.tree_util.tree_leaves(fit.params)])
         return call, lambda fit: (float(fit.stages[-1]["J"]), fit.stages[-1]["mse_percent_valid"])
-    return dict(workload="identify('elman'), default MAPSO-NMDS", kind="solver", make=make,
-                compare=False)
+    return dict(workload=f"identify('{model}') on {label}, default pipeline", kind="solver",
+                make=make, compare=fixed_key, bitwise=fixed_key)
 
 
 def _agree(case, a, b):
@@ -154,22 +182,23 @@ def measure(cases, rounds):
                     v["times"].append(time.perf_counter() - t0)
         by = {v["label"]: v for v in timed}
         a, d = by["auto"], by["XLA defaults"]
-        agree = [_agree(case, a, v) for v in timed[1:]]
-        same = None if None in agree else all(agree)
+        # one word per variant against auto, in the table's order (0.8's options, defaults)
+        same = " / ".join({True: "yes", False: "NO", None: "n/a"}[_agree(case, a, v)]
+                          for v in timed[1:])
         med = {v["label"]: statistics.median(v["times"]) for v in timed}
-        single = med[NO_SINGLE] / med["auto"] if NO_SINGLE in med else None
+        prev = med[PREVIOUS] / med["auto"] if PREVIOUS in med else None
         rows.append(dict(
             workload=case["workload"],
             options=str(_xla.compiler_options(case["kind"])),
             auto_ms=1e3 * med["auto"],
-            no_single_ms=1e3 * med[NO_SINGLE] if single else None,
+            previous_ms=1e3 * med[PREVIOUS] if prev else None,
             default_ms=1e3 * med["XLA defaults"],
             speedup=med["XLA defaults"] / med["auto"],
-            single_kernel_speedup=single,
+            speedup_vs_previous=prev,
             auto_first_s=a["first"], default_first_s=d["first"],
-            same_result={True: "yes", False: "NO", None: "n/a"}[same], rounds=rounds,
+            same_result=same, rounds=rounds,
         ))
-        extra = f"  single-kernel x{single:.2f}" if single else ""
+        extra = f"  vs 0.8 x{prev:.2f}" if prev else ""
         print(f"{case['workload']:50s} auto {rows[-1]['auto_ms']:9.2f} ms  "
               f"default {rows[-1]['default_ms']:9.2f} ms  x{rows[-1]['speedup']:.2f}{extra}  "
               f"same: {rows[-1]['same_result']}", flush=True)
@@ -205,6 +234,8 @@ def main(argv=None):
     p.add_argument("--rounds", type=int, default=15)
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--identify", action="store_true", help="also time a default ENN identify")
+    p.add_argument("--emps", default=None, metavar="DATA_EMPS.mat",
+                   help="also time identify('lugre') and identify('elman') on the EMPS record")
     p.add_argument("--out", default=None)
     p.add_argument("--tag", default="", help="suffix for the output files")
     a = p.parse_args(argv)
@@ -216,6 +247,10 @@ def main(argv=None):
     rows = measure(cases, a.rounds)
     if a.identify:
         rows += measure([_identify_case()], max(2, a.rounds // 5))
+    if a.emps:
+        record = jf.rig.emps_friction_data(jf.rig.load_emps(Path(a.emps)))
+        rows += measure([_identify_case(m, record, "EMPS", fixed_key=True) for m in ("lugre", "elman")],
+                        max(2, a.rounds // 5))
     out = results_dir(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = "compiler_options" + (f"_{a.tag}" if a.tag else "")
@@ -229,30 +264,26 @@ def main(argv=None):
         "# jaxfric's XLA CPU options against XLA's defaults",
         "",
         "Generated by `benchmarks/compiler_options.py`. Each workload compiled with "
-        "`compiler_options=\"auto\"` (jaxfric's default), for optimiser runs also with "
-        "the XLA options of \"auto\" but without jaxfric's single-kernel loops "
-        "(`jaxfric/_xla.py`), and with `compiler_options=None` (XLA's defaults); timed "
-        "round-robin in the same process; medians over "
-        f"{a.rounds} rounds (identify: fewer), first call (compile + run) apart. "
-        "Swarms: 100 agents, PSO 500 generations, MAPSO the same evaluation budget. "
-        "'Same result': best value within 1e-4 and equal evaluation count (swarms), "
-        "bit-identical outputs (rollouts). 'Single-kernel': time without the "
-        "single-kernel loops over time with them: single PSO and MAPSO runs of this "
-        "size are one kernel each, MAPSO's self-learning loop is one where the whole "
-        "run is not (the vmapped row has none; there and on Nelder-Mead it measures "
-        "noise).",
+        "`compiler_options=\"auto\"` (jaxfric's default), for optimiser runs also with 0.8's "
+        f"solver options (`{PREVIOUS_SOLVER}`, the older fusion emitters), and with "
+        "`compiler_options=None` (XLA's defaults); timed round-robin in the same process; "
+        f"medians over {a.rounds} rounds (identify: fewer), first call (compile + run) apart. "
+        "Swarms: float32, 100 agents, PSO 500 generations, MAPSO the same evaluation budget. "
+        "'Same result' against auto, for 0.8's options / XLA's defaults (one word where only "
+        "the defaults run): best value within 1e-4 and equal evaluation count (swarms), "
+        "bit-identical outputs (rollouts) or parameters (identify on EMPS, one key).",
         "",
         f"Machine: {platform.machine()}, {len(jax.devices())} device(s), "
         f"AVX-512: {'yes' if 'avx512f' in flags else 'no'}; jax {jax.__version__}. "
         f"Wall time {time.perf_counter() - t_start:.0f} s.",
         "",
-        "| workload | XLA options (auto) | auto ms | no single-kernel ms | XLA defaults ms | "
-        "speed-up vs defaults | single-kernel | first call s (auto / defaults) | same result |",
+        "| workload | XLA options (auto) | auto ms | 0.8's options ms | XLA defaults ms | "
+        "speed-up vs defaults | speed-up vs 0.8 | first call s (auto / defaults) | same result |",
         "|---|---|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
-        ns = f"{r['no_single_ms']:.2f}" if r["no_single_ms"] else "-"
-        sk = f"{r['single_kernel_speedup']:.2f}x" if r["single_kernel_speedup"] else "-"
+        ns = f"{r['previous_ms']:.2f}" if r["previous_ms"] else "-"
+        sk = f"{r['speedup_vs_previous']:.2f}x" if r["speedup_vs_previous"] else "-"
         lines.append(f"| {r['workload']} | `{r['options']}` | {r['auto_ms']:.2f} | {ns} | "
                      f"{r['default_ms']:.2f} | {r['speedup']:.2f}x | {sk} | "
                      f"{r['auto_first_s']:.2f} / {r['default_first_s']:.2f} | {r['same_result']} |")
