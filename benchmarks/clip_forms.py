@@ -3,7 +3,8 @@
 ``jnp.clip(x, lo, hi)`` (``min(max(x, lo), hi)``, each NaN-propagating) and
 ``jaxfric.optim._base.clip`` (two selects) give the same numbers. XLA:CPU compiles
 them differently inside a swarm's fused generation, and the faster one differs by
-solver: MAPSO bounds with selects, PSO with ``jnp.clip`` (docs/algorithms.md §3.3).
+solver: MAPSO bounds with selects, PSO with ``jnp.clip`` (``pso_move`` in
+jaxfric/optim/pso.py).
 This script keeps that choice honest: float64, 30-D Rosenbrock and Ackley, 100 agents,
 500 generations, one run and 8 seeds vmapped, each solver with each form.
 
