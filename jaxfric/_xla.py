@@ -13,21 +13,13 @@ measurement on the development machine (2-core AMD EPYC with AVX-512;
     rollout (64 candidates × 30 neurons × 1600 samples) ran 1.2–1.5× faster in
     float32 and float64 with outputs bit-identical; where the CPU has no 512-bit
     registers LLVM uses the widest it has, so the option is harmless there.
-``xla_cpu_copy_insertion_use_region_analysis = True``  (optimiser runs only)
-    A swarm carries its state (positions, velocities, personal bests, the next
-    generation's random numbers) through a ``while`` loop, and XLA's default copy
-    insertion copies much of it every generation. Region analysis proves more of those
-    copies unneeded: in 8 vmapped PSO runs it leaves 66 of 91 copies, among them no
-    longer the two of the random numbers (8 × 2 × 100 × 30 each). Measured side by side (``benchmarks/compiler_options.py`` and the
-    identification A/B in the CHANGELOG, session 17), against the previous choice
-    ``xla_cpu_use_fusion_emitters = False``: on EMPS (float32) LuGre identifies 1.4-1.5x
-    faster, the paper's MAPSO–NMDS on the Elman network 1.10x, the default Elman pipeline
-    in the same time, with the same parameters. On the float64 test functions one PSO run
-    is 1.2x faster, Nelder–Mead 1.07–1.09x, one MAPSO run 1.04–1.13x and 8 vmapped MAPSO
-    runs 0.91–0.97x, results bit-identical; in float32 PSO gains 1.1–1.3x while MAPSO on
-    the cheap test functions loses (0.75–0.95x), and XLA's float32 cosine differs in the
-    last bit between the two code generators. XLA's newer fusion emitters, which the
-    previous choice turned off, are on again (jax 0.11's XLA no longer has the switch).
+``xla_cpu_use_fusion_emitters = False``  (optimiser runs only)
+    XLA's newer fusion code generator emits slower code for the many tiny
+    fusions of MAPSO's 3×3 self-learning loop: MAPSO on 30-D Rosenbrock and
+    Ackley ran 1.4–1.8× faster with the older one and compiled faster; PSO and
+    Nelder–Mead were unchanged, and Table 1's 450 runs gave identical values. It
+    made the rollout alone 20–30 % slower, so the models' eager rollouts keep the
+    default.
 
 On other platforms (GPU, TPU) nothing is passed. Every entry point takes
 ``compiler_options=``: ``"auto"`` (the default, the above), ``None`` (XLA's own
@@ -49,7 +41,7 @@ AUTO = "auto"
 
 #: Options for the CPU backend, per kind of computation (see the module docstring).
 CPU_OPTIONS: dict[str, dict[str, Any]] = {
-    "solver": {"xla_cpu_prefer_vector_width": 512, "xla_cpu_copy_insertion_use_region_analysis": True},
+    "solver": {"xla_cpu_prefer_vector_width": 512, "xla_cpu_use_fusion_emitters": False},
     "rollout": {"xla_cpu_prefer_vector_width": 512},
 }
 

@@ -24,15 +24,9 @@ SCRIPT = textwrap.dedent(
     # nm_adaptive=False: Nelder-Mead's standard coefficients. Gao-Han's (the default from
     # n = 2 since 0.7.0) give float32 arithmetic that XLA compiles with different rounding
     # for one and four devices (same f, points 1e-7 apart); checked separately below.
-    # Rastrigin's float32 cosine: XLA's fusion code generator (on since session 17's
-    # solver options, and the only one from jax 0.11) may round it differently in the
-    # per-device and the whole-batch program, so runs laid out over devices visit the same
-    # points but their best values may differ in the last bits (amplified by Rastrigin's
-    # 10·D − 10·Σcos cancellation); a polynomial objective must agree to the bit.
-    hybrid = jf.mapso_nmds(lattice_size=3, num_generations=10, nm_max_steps=50, nm_adaptive=False)
-    for name, fname, solver in [("hybrid", "rastrigin", hybrid), ("hybrid_rosenbrock", "rosenbrock", hybrid)]:
-        lo, hi = F.get(fname).bounds(6, np.float32)
-        obj = F.objective(fname)
+    for name, solver in [
+        ("hybrid", jf.mapso_nmds(lattice_size=3, num_generations=10, nm_max_steps=50, nm_adaptive=False)),
+    ]:
         a = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(0))
         b = jf.minimise(obj, solver, (lo, hi), key=jax.random.key(0), devices=False)
         keys = jax.random.split(jax.random.key(1), 7)  # not a multiple of 4: padded
@@ -40,15 +34,11 @@ SCRIPT = textwrap.dedent(
         u = jf.minimise_many(obj, solver, (lo, hi), keys=keys, devices=False)
         out[name] = dict(
             population=bool(jnp.array_equal(a.value, b.value)) and float(a.f) == float(b.f),
-            runs=bool(jnp.array_equal(m.value, u.value)),
-            runs_f_equal=bool(jnp.array_equal(m.f, u.f)),
-            runs_f_max_abs=float(jnp.max(jnp.abs(m.f - u.f))),
+            runs=bool(jnp.array_equal(m.value, u.value)) and bool(jnp.array_equal(m.f, u.f)),
             runs_shape=list(m.f.shape),
             expected_shape=[7],
             evals_equal=bool(jnp.array_equal(m.stats["num_evals"], u.stats["num_evals"])),
         )
-    lo, hi = F.get("rastrigin").bounds(6, np.float32)
-    obj = F.objective("rastrigin")
     g = jf.mapso_nmds(lattice_size=3, num_generations=10, nm_max_steps=50)
     a = jf.minimise(obj, g, (lo, hi), key=jax.random.key(0))
     b = jf.minimise(obj, g, (lo, hi), key=jax.random.key(0), devices=False)
@@ -91,9 +81,5 @@ def test_sharded_equals_unsharded_on_four_host_devices(subprocess_slot):
         if "population" in r:  # Nelder-Mead has no population to split
             assert r["population"], f"{name}: population-sharded run differs"
         assert r["runs"], f"{name}: runs sharded over devices differ"
-        if name == "hybrid":  # float32 cosines (see SCRIPT): a few ulps of 10·D = 60
-            assert r["runs_f_max_abs"] <= 2e-5, (name, r)
-        elif "runs_f_equal" in r:
-            assert r["runs_f_equal"], (name, r)
         assert r["runs_shape"] == r["expected_shape"] and r["evals_equal"], (name, r)
     assert "one device" in out["nelder_mead"]["map_error"], out["nelder_mead"]
