@@ -18,35 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import KEPT, UserError
+from .errors import KEPT, UserError, _prepare_out, _say
 from .fitting import check_models, fit_all
 from .spec import FitSpec
 
 
-def _say(args):
-    def say(msg: str) -> None:
-        if not args.quiet:
-            print(f"jaxfric: {msg}", file=sys.stderr, flush=True)
-
-    return say
-
-
 def _command_line(argv) -> str:
     return "jaxfric " + " ".join(shlex.quote(a) for a in argv)
-
-
-def _prepare_out(path: str) -> Path:
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out {path} exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise UserError(f"cannot create the report folder {path}: {e.strerror}") from None
-    if not os.access(out, os.W_OK):
-        raise UserError(f"the report folder {path} is not writable")
-    KEPT.watch(out)
-    return out
 
 
 def _write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:

@@ -146,3 +146,26 @@ def interrupted() -> None:
     print(f"\njaxfric: interrupted; {KEPT.describe()}", file=sys.stderr, flush=True)
     sys.stdout.flush()
     os._exit(EXIT_INTERRUPTED)
+
+
+# ------------------------------------------------- helpers of every command
+def _say(args):
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(f"jaxfric: {msg}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def _prepare_out(path: str) -> Path:
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {path} exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"cannot create the report folder {path}: {e.strerror}") from None
+    if not os.access(out, os.W_OK):
+        raise UserError(f"the report folder {path} is not writable")
+    KEPT.watch(out)
+    return out

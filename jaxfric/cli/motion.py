@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from .errors import KEPT, UserError
+from .errors import KEPT, UserError, _prepare_out, _say
 
 EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
@@ -106,8 +106,6 @@ def cmd_identify_motion(args, argv) -> int:
     from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
     from jaxfric.files import atomic_write_text
     from jaxfric.report import save_figure
-
-    from .commands import _prepare_out, _say
 
     if (args.mass is None) == (args.mass_range is None):
         raise UserError("give exactly one of --mass (known) and --mass-range LO,HI (identified)")
