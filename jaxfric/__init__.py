@@ -20,7 +20,7 @@ import importlib as _importlib
 # name -> module that defines it ("" = the name is a submodule of its own)
 _LAZY = {
     "functions": "", "metrics": "", "models": "", "rig": "", "files": "",
-    "compensation": "", "export": "", "motion": "",
+    "compensation": "", "export": "", "motion": "", "datasets": "",
     "MotionData": ".motion", "MotionFit": ".motion", "identify_motion": ".motion",
     "load_motion_fit": ".motion",
     "compiler_options": "._xla",
@@ -78,6 +78,7 @@ __all__ = [
     "compensation",
     "cmaes_nm",
     "compiler_options",
+    "datasets",
     "export",
     "friction_metrics",
     "files",

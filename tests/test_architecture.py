@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[1] / "jaxfric"
 #: export → optim, models, rig, metrics, functions → records, files → compiler helpers and
 #: the warning categories.
 LAYER = {"cli": 8, "report": 7, "plot": 7, "identification": 6, "motion": 6, "compensation": 6,
-         "fit": 5, "export": 4, "optim": 3, "models": 3, "rig": 3, "metrics": 3, "functions": 3,
+         "fit": 5, "export": 4, "datasets": 4, "optim": 3, "models": 3, "rig": 3, "metrics": 3, "functions": 3,
          "records": 2, "files": 2, "_xla": 1, "_timing": 1, "_warnings": 1}
 
 
