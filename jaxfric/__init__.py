@@ -24,6 +24,7 @@ _LAZY = {
     "MotionData": ".motion", "MotionFit": ".motion", "identify_motion": ".motion",
     "load_motion_fit": ".motion",
     "compiler_options": "._xla",
+    "sweep": ".sweeps", "sweeps": "",
     "Fit": ".fit", "load_fit": ".fit",
     "GradientRefinement": ".identification", "identify": ".identification",
     "friction_metrics": ".metrics",
@@ -94,4 +95,6 @@ __all__ = [
     "models",
     "motion",
     "rig",
+    "sweep",
+    "sweeps",
 ]

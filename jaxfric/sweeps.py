@@ -1,0 +1,499 @@
+"""Sweeps: every (model, record, key) identification as one resumable call.
+
+``jaxfric.sweep(models, records, keys, out_dir)`` runs :func:`jaxfric.identify` (or
+:func:`jaxfric.identify_motion` for :class:`jaxfric.MotionData` records) once per
+combination and writes, under ``out_dir``:
+
+* ``fits/<model>/<record>/seed<k>.npz`` -- one :meth:`jaxfric.Fit.save` file per run;
+* ``results.csv`` -- one row per finished run (model, record, seed, cost, the metrics of
+  every window, the run's wall time and its fit file), in the sweep's order;
+* ``sweep.json`` -- what each model and record label stands for (the model
+  configuration with the identify options, a SHA-256 of each record's arrays).
+
+Resuming: a run whose fit file exists is not recomputed; its row is read back from the
+file. Every file is written atomically (:func:`jaxfric.files.atomic_write`), so an
+interrupted sweep (Ctrl-C, a killed job, an exception) leaves only whole files, and
+calling the same sweep again finishes the rest. A label that already stands for other
+settings or other data in ``out_dir`` is refused before any run.
+
+Where the runs go: run ``i`` of the sweep's order belongs to process
+``i % process_count`` (``process_index``, ``process_count``: JAX's
+``jax.process_index()`` / ``jax.process_count()`` after ``jax.distributed.initialize``,
+or given, for a job array without JAX's runtime). Within a process the runs go one
+after another, and each one spreads its population over that process's devices as
+:func:`jaxfric.identify` does. Runs of one (model, record) pair share one compiled
+program (the key is data), so only the first run of a pair compiles. Under JAX's
+distributed runtime the processes meet at a barrier at the end and process 0 writes
+the table of every run; the fit files must then lie on a file system all processes
+share (docs/scale.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import numbers
+import re
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .files import atomic_write_text, write_json
+
+__all__ = ["Run", "SweepResult", "TABLE_COLUMNS", "read_table", "sweep"]
+
+#: The table's leading columns; the metric columns follow (``<window>_<metric>``).
+TABLE_COLUMNS = ("model", "record", "seed", "cost", "num_params", "run_s", "fit_file")
+_LABEL = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+=-]*$")
+_WINDOWS = ("train", "valid", "all", "train_kstep", "valid_kstep")
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """One (model, record, seed) combination; ``index`` is its place in the sweep."""
+
+    model: str
+    record: str
+    seed: int
+    index: int
+
+    @property
+    def fit_file(self) -> str:
+        """The fit's path relative to the sweep folder."""
+        return f"fits/{self.model}/{self.record}/seed{self.seed}.npz"
+
+
+@dataclasses.dataclass
+class SweepResult:
+    """What :func:`sweep` did: ``rows`` (one dict per finished run, the table's rows in
+    the sweep's order), the runs this call ``computed`` and those it found ``done``
+    already, and the ``out_dir``. :meth:`fit` loads one run's fit."""
+
+    out_dir: Path
+    runs: list[Run]
+    rows: list[dict]
+    computed: list[Run]
+    done: list[Run]
+    motion: bool = False
+
+    @property
+    def table(self) -> Path:
+        return self.out_dir / "results.csv"
+
+    def fit(self, model: str, record: str, seed: int):
+        """The saved fit of run ``(model, record, seed)``."""
+        for run in self.runs:
+            if (run.model, run.record, run.seed) == (model, record, int(seed)):
+                return _load(self.out_dir / run.fit_file, self.motion)
+        raise KeyError(f"no run ({model!r}, {record!r}, {seed!r}) in this sweep")
+
+
+# ----------------------------------------------------------------- arguments
+def _check_label(label, what: str) -> str:
+    if not isinstance(label, str) or not _LABEL.match(label):
+        raise ValueError(f"{what} label {label!r} must be a non-empty name of letters, digits and "
+                         "'_.+=-' (it names folders under out_dir)")
+    return label
+
+
+def _models(models) -> dict[str, tuple[Any, dict]]:
+    """Label -> (model, its own identify options); a model is a name or an instance."""
+    from .fit import model_name
+    from .models import AbstractFrictionModel
+
+    def entry(label, m):
+        if isinstance(m, tuple) and len(m) == 2 and isinstance(m[1], Mapping):
+            return m[0], dict(m[1])
+        return m, {}
+
+    if isinstance(models, Mapping):
+        items = [(label, *entry(label, m)) for label, m in models.items()]
+    else:
+        if isinstance(models, (str, AbstractFrictionModel)):
+            models = [models]
+        items = []
+        for m in models:
+            if isinstance(m, str):
+                label = m.strip().lower().replace("-", "_")
+            elif isinstance(m, AbstractFrictionModel):
+                label = model_name(m) or type(m).__name__.lower()
+            else:
+                raise ValueError(f"models must be names, model instances or a mapping label -> model "
+                                 f"(or -> (model, options)), got {type(m).__name__}")
+            items.append((label, m, {}))
+    if not items:
+        raise ValueError("models is empty: give at least one model")
+    labels = [label for label, _, _ in items]
+    twice = sorted({x for x in labels if labels.count(x) > 1})
+    if twice:
+        raise ValueError(f"model label(s) {twice} appear twice; give a mapping label -> model "
+                         "(e.g. {'elman10': Elman(neurons=10), 'elman30': Elman()})")
+    for label, m, _ in items:
+        if not isinstance(m, (str, AbstractFrictionModel)):
+            raise ValueError(f"model {label!r} must be a name or a model instance, got {type(m).__name__}")
+    return {_check_label(label, "model"): (m, opts) for label, m, opts in items}
+
+
+def _records(records) -> dict[str, Any]:
+    if isinstance(records, Mapping):
+        items = list(records.items())
+    elif isinstance(records, (list, tuple)) and records and not isinstance(records[0], numbers.Number):
+        items = [(f"record{i}", r) for i, r in enumerate(records)]
+    else:
+        raise ValueError("records must be a mapping label -> record or a list of records "
+                         "(FrictionData, MotionData or (velocity, friction, dt) tuples)")
+    if not items:
+        raise ValueError("records is empty: give at least one record")
+    return {_check_label(label, "record"): r for label, r in items}
+
+
+def _seeds(keys) -> list[int]:
+    if isinstance(keys, numbers.Integral) and not isinstance(keys, bool):
+        if keys < 1:
+            raise ValueError(f"keys must be a number of seeds >= 1 or a list of seeds, got {keys}")
+        return list(range(int(keys)))
+    try:
+        seeds = list(keys)
+    except TypeError:
+        raise ValueError(f"keys must be a number of seeds or a list of int seeds, got {keys!r}") from None
+    bad = [s for s in seeds if not isinstance(s, numbers.Integral) or isinstance(s, bool) or s < 0]
+    if bad or not seeds:
+        raise ValueError("keys must be a number of seeds or a non-empty list of int seeds >= 0 "
+                         f"(each run's key is jax.random.key(seed)), got {keys!r}")
+    seeds = [int(s) for s in seeds]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"keys holds a seed twice: {seeds}")
+    return seeds
+
+
+def _processes(process_index, process_count) -> tuple[int, int, bool]:
+    """``(index, count, distributed)``: given, or JAX's (then ``distributed`` is whether
+    JAX's runtime joins several processes)."""
+    if (process_index is None) != (process_count is None):
+        raise ValueError("give both process_index and process_count, or neither")
+    if process_index is None:
+        import jax
+
+        count = jax.process_count()
+        return jax.process_index(), count, count > 1
+    for name, v in (("process_index", process_index), ("process_count", process_count)):
+        if not isinstance(v, numbers.Integral) or isinstance(v, bool):
+            raise ValueError(f"{name} must be an int, got {v!r}")
+    if not (process_count >= 1 and 0 <= process_index < process_count):
+        raise ValueError(f"need 0 <= process_index < process_count, got {process_index} and {process_count}")
+    return int(process_index), int(process_count), False
+
+
+def _record_digest(record) -> str:
+    """SHA-256 of a record's arrays and sample time (what the fit depends on)."""
+    h = hashlib.sha256()
+    if isinstance(record, tuple):
+        parts = list(record)
+    else:
+        parts = [getattr(record, f.name) for f in dataclasses.fields(record)
+                 if f.name not in ("name",)] if dataclasses.is_dataclass(record) else [
+            getattr(record, k, None) for k in ("velocity", "friction", "force", "position", "load",
+                                               "p1", "p2", "dt", "n_train")]
+    for p in parts:
+        a = np.asarray(p) if p is not None else np.zeros(0)
+        h.update(str(a.dtype).encode() + str(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def _model_entry(model, options: dict) -> dict:
+    from .fit import model_config
+
+    described = ({"name": model} if isinstance(model, str)
+                 else {"class": type(model).__name__, "config": model_config(model)})
+    return {**described, "options": {k: repr(v) for k, v in sorted(options.items())}}
+
+
+def _check_manifest(out: Path, manifest: dict) -> None:
+    """Refuse labels that ``out`` already holds for other settings or data."""
+    path = out / "sweep.json"
+    if not path.exists():
+        return
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"{path} is not readable ({err}); remove it or choose another out_dir") from None
+    for part, what in (("models", "model"), ("records", "record")):
+        for label, entry in manifest[part].items():
+            before = (old.get(part) or {}).get(label)
+            if before is not None and before != entry:
+                raise ValueError(
+                    f"{out} holds a sweep in which {what} {label!r} stood for other "
+                    f"{'settings' if what == 'model' else 'data'} ({before} now {entry}); its finished runs "
+                    "would be mixed with new ones: choose another out_dir or another label")
+
+
+def _merged_manifest(out: Path, manifest: dict) -> dict:
+    path = out / "sweep.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    return {part: {**(old.get(part) or {}), **manifest[part]} for part in ("models", "records")}
+
+
+# ---------------------------------------------------------------------- rows
+def _load(path: Path, motion: bool):
+    if motion:
+        from .motion import load_motion_fit
+
+        return load_motion_fit(path)
+    from .fit import load_fit
+
+    return load_fit(path)
+
+
+def _number(x):
+    if isinstance(x, bool) or x is None:
+        return None
+    if isinstance(x, numbers.Real):
+        return float(x)
+    return None
+
+
+def _row(run: Run, fit) -> dict:
+    metrics = fit.metrics or {}
+    row = {"model": run.model, "record": run.record, "seed": run.seed,
+           "cost": _number(metrics.get("cost")), "num_params": fit.num_params,
+           "run_s": _number((fit.timings or {}).get("total_s")), "fit_file": run.fit_file}
+    for window in _WINDOWS:
+        values = metrics.get(window)
+        if isinstance(values, Mapping):
+            for name, v in values.items():
+                if _number(v) is not None:
+                    row[f"{window}_{name}"] = _number(v)
+    return row
+
+
+def _table_text(rows: list[dict]) -> str:
+    import csv
+    import io
+
+    extra = sorted({k for r in rows for k in r} - set(TABLE_COLUMNS))
+    columns = list(TABLE_COLUMNS) + extra
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else repr(r[k]) if isinstance(r[k], float) else r[k])
+                    for k in columns})
+    return buf.getvalue()
+
+
+def _barrier(name: str) -> None:
+    from jax.experimental import multihost_utils
+
+    multihost_utils.sync_global_devices(name)
+
+
+def _check_local_layout() -> None:
+    """Refuse to run under JAX's distributed runtime when the optimiser would lay one
+    process's run over other processes' devices: their different keys would mix."""
+    import jax
+
+    from .optim.sharding import resolve_devices
+
+    layout = resolve_devices(None)
+    if layout is None:
+        return
+    foreign = [d for d in layout.devices if d.process_index != jax.process_index()]
+    if foreign:
+        raise RuntimeError(
+            "jaxfric.optim lays a run's population over every process's devices "
+            f"({len(layout.devices)} devices, {len(foreign)} of other processes), so the "
+            "independent runs of a multi-process sweep would be computed as one program and mix; "
+            "the optimiser's default layout must use this process's devices (jax.local_devices())")
+
+
+# --------------------------------------------------------------------- sweep
+def sweep(
+    models,
+    records,
+    keys,
+    out_dir,
+    *,
+    progress: bool = True,
+    on_run: Callable | None = None,
+    process_index: int | None = None,
+    process_count: int | None = None,
+    **options,
+) -> SweepResult:
+    """Run every (model, record, key) identification, resumably (module docstring).
+
+    Args:
+        models: a model name or instance, a list of them (labelled by their
+            :func:`jaxfric.models.get` name) or a mapping label -> model, or label ->
+            ``(model, options)`` for identify options of that model alone (they win over
+            ``**options``; e.g. a solver sized for the model).
+        records: a mapping label -> record or a list of records (labelled ``record0``,
+            ``record1``, ...): :class:`jaxfric.FrictionData` or ``(velocity, friction,
+            dt)`` for :func:`jaxfric.identify`; :class:`jaxfric.MotionData` (all of them)
+            for :func:`jaxfric.identify_motion`.
+        keys: a number of seeds ``K`` (seeds ``0 .. K-1``) or a list of int seeds; each
+            run's key is ``jax.random.key(seed)``, so run ``(m, r, k)`` equals
+            ``identify(m, records[r], key=k, **options)``.
+        out_dir: the sweep folder (created if needed; reused to resume).
+        progress: one progress bar over the whole sweep (tqdm, on stderr).
+        on_run: called as ``on_run(run, fit)`` after each run's files are written.
+        process_index, process_count: this process's share of the runs; default JAX's
+            (one process, unless ``jax.distributed.initialize`` joined several).
+        **options: passed to every ``identify`` / ``identify_motion`` call (``solver=``,
+            ``method=``, ``refine=``, ``dtype=``, ``box=``, ``mass=``, model options...).
+
+    Returns:
+        a :class:`SweepResult`; ``out_dir/results.csv`` holds its rows.
+
+    Raises:
+        ValueError: before any run, for empty or badly labelled models or records,
+            bad seeds, a model name that does not exist, a record identify would
+            refuse, or labels that ``out_dir`` holds for other settings or data.
+    """
+    from tqdm.auto import tqdm
+
+    from .identification import as_record, identify
+    from .identification._api import resolve_model
+    from .motion import MotionData, identify_motion
+
+    for forbidden in ("key", "keys", "progress"):
+        if forbidden in options:
+            raise ValueError(f"{forbidden}= is the sweep's own: give the seeds as keys=, not as an "
+                             "identify option")
+    model_map = _models(models)
+    record_map = _records(records)
+    seeds = _seeds(keys)
+    index, count, distributed = _processes(process_index, process_count)
+    kinds = {isinstance(r, MotionData) for r in record_map.values()}
+    if len(kinds) > 1:
+        raise ValueError("records mix MotionData (identify_motion) with friction records (identify); "
+                         "sweep them separately")
+    motion = kinds == {True}
+    # Every check identify would make on models and records, before the first run.
+    fit_fn = identify_motion if motion else identify
+    keywords = _identify_keywords(fit_fn)
+    run_options = {}
+    for label, (m, own) in model_map.items():
+        for forbidden in ("key", "keys", "progress"):
+            if forbidden in own:
+                raise ValueError(f"model {label!r}: {forbidden}= is the sweep's own")
+        run_options[label] = {**options, **own}
+        model_options = {k: v for k, v in run_options[label].items() if k not in keywords}
+        model_options.update(run_options[label].get("model_options") or {})
+        try:
+            resolve_model(m, model_options if isinstance(m, str) else None)
+        except ValueError as err:
+            raise ValueError(f"model {label!r}: {err}") from None
+    if not motion:
+        for label, r in record_map.items():
+            try:
+                as_record(r)
+            except ValueError as err:
+                raise ValueError(f"record {label!r}: {err}") from None
+    if distributed:
+        _check_local_layout()
+
+    out = Path(out_dir)
+    manifest = {"models": {label: _model_entry(m, run_options[label]) for label, (m, _) in model_map.items()},
+                "records": {label: _record_digest(r) for label, r in record_map.items()}}
+    _check_manifest(out, manifest)
+    out.mkdir(parents=True, exist_ok=True)
+    if index == 0:
+        write_json(out / "sweep.json", _merged_manifest(out, manifest))
+
+    runs = [Run(m, r, s, i) for i, (m, r, s) in enumerate(
+        (m, r, s) for m in model_map for r in record_map for s in seeds)]
+    mine = [run for run in runs if run.index % count == index]
+    rows: dict[int, dict] = {}
+    done, todo = [], []
+    for run in mine:
+        path = out / run.fit_file
+        if path.exists():
+            try:
+                rows[run.index] = _row(run, _load(path, motion))
+                done.append(run)
+                continue
+            except ValueError:
+                pass  # unreadable (e.g. written by hand): compute it again, atomically
+        todo.append(run)
+
+    def write_table(known: dict[int, dict]) -> None:
+        atomic_write_text(out / "results.csv", _table_text([known[i] for i in sorted(known)]))
+
+    computed = []
+    bar = tqdm(total=len(mine), initial=len(done), desc=f"sweep {out.name}", unit="run",
+               disable=not progress, dynamic_ncols=True)
+    try:
+        if count == 1 and done and not todo:
+            write_table(rows)
+        for run in todo:
+            bar.set_postfix_str(f"{run.model} {run.record} seed {run.seed}")
+            start = time.perf_counter()
+            fit = fit_fn(model_map[run.model][0], record_map[run.record], key=run.seed,
+                         **run_options[run.model])
+            fit.timings = {**(fit.timings or {}), "total_s": time.perf_counter() - start}
+            fit.save(out / run.fit_file)
+            rows[run.index] = _row(run, fit)
+            computed.append(run)
+            if not distributed:
+                # one process: the table is whole after every run; several: process 0
+                # writes it after the barrier below, from every process's files
+                write_table(rows if count == 1 else {**_rows_on_disk(out, runs, motion), **rows})
+            bar.update(1)
+            if on_run is not None:
+                on_run(run, fit)
+    finally:
+        bar.close()
+    if distributed:
+        _barrier(f"jaxfric.sweep:{out.resolve()}")
+        rows = _rows_on_disk(out, runs, motion)
+        if index == 0:
+            write_table(rows)
+        _barrier(f"jaxfric.sweep.table:{out.resolve()}")
+    elif count > 1:
+        rows = _rows_on_disk(out, runs, motion)
+    ordered = [rows[i] for i in sorted(rows)]
+    return SweepResult(out_dir=out, runs=runs, rows=ordered, computed=computed, done=done, motion=motion)
+
+
+def _rows_on_disk(out: Path, runs: list[Run], motion: bool) -> dict[int, dict]:
+    rows = {}
+    for run in runs:
+        path = out / run.fit_file
+        if path.exists():
+            rows[run.index] = _row(run, _load(path, motion))
+    return rows
+
+
+def _identify_keywords(fn) -> set[str]:
+    import inspect
+
+    return {name for name, p in inspect.signature(fn).parameters.items()
+            if p.kind is not inspect.Parameter.VAR_KEYWORD}
+
+
+def read_table(path) -> list[dict]:
+    """The rows of a sweep's ``results.csv`` (numbers as float, ``seed`` as int)."""
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    out = []
+    for r in rows:
+        row = {}
+        for k, v in r.items():
+            if v == "":
+                row[k] = None
+            elif k == "seed" or k == "num_params":
+                row[k] = int(v)
+            elif k in ("model", "record", "fit_file"):
+                row[k] = v
+            else:
+                row[k] = float(v)
+        out.append(row)
+    return out
+
