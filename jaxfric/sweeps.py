@@ -50,6 +50,9 @@ __all__ = ["Run", "SweepResult", "TABLE_COLUMNS", "read_table", "sweep"]
 TABLE_COLUMNS = ("model", "record", "seed", "cost", "num_params", "run_s", "fit_file")
 _LABEL = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+=-]*$")
 _WINDOWS = ("train", "valid", "all", "train_kstep", "valid_kstep")
+#: The metrics of each window the table keeps (friction fits: MSE %, FIT %, MAX [N],
+#: R²; motion fits: position RMSE and MAX in mm, FIT %); the fit files hold them all.
+_METRICS = ("mse_percent", "fit_percent", "max_abs", "r2", "rmse_mm", "max_abs_mm")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -266,7 +269,7 @@ def _row(run: Run, fit) -> dict:
         values = metrics.get(window)
         if isinstance(values, Mapping):
             for name, v in values.items():
-                if _number(v) is not None:
+                if name in _METRICS and _number(v) is not None:
                     row[f"{window}_{name}"] = _number(v)
     return row
 

@@ -315,3 +315,12 @@ def _identify_motion(args, argv) -> int:
 
 
 COMMANDS["identify-motion"] = _identify_motion
+
+
+def _sweep(args, argv) -> int:
+    from .sweep import cmd_sweep
+
+    return cmd_sweep(args, argv)
+
+
+COMMANDS["sweep"] = _sweep

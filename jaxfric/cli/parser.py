@@ -319,6 +319,11 @@ def build_parser() -> Parser:
     _add_motion(sub, common=_common, formatter=_Formatter, positive_float=positive_float,
                 positive_int=positive_int, fraction=fraction, seed=seed, model_list=model_list)
 
+    from .sweep import add_parser as _add_sweep
+
+    _add_sweep(sub, common=_common, columns=_columns, formatter=_Formatter, positive_int=positive_int,
+               fraction=fraction, box_entry=box_entry, model_list=model_list, solvers=SOLVERS)
+
     b = sub.add_parser("bench", help="run a benchmark script (table1, friction)",
                        description="Run one of the benchmark scripts of benchmarks/.",
                        epilog=BENCH_EPILOG, formatter_class=_Formatter)
