@@ -677,6 +677,31 @@ CLI_CASES = [
     ("cli identify/validation-window-too-short", ["identify", "{good}", *PAIRS, "--train-fraction", "0.97", *QUIET],
      ["the validation window has 2 sample(s)"]),
     ("cli demo/negative-seed", ["demo", "--seed", "-1", *QUIET], ["argument --seed: must be >= 0"]),
+    # ------------------------------------------- refused before JAX, or before any stage
+    ("cli identify/reversed-box", ["identify", "{good}", *PAIRS, "--box", "Fc=10,1", *QUIET],
+     ["argument --box: Fc range must satisfy low < high, got 10,1"]),
+    ("cli identify/box-breaks-its-rule", ["identify", "{good}", *PAIRS, "--box", "Fc=-1,5", *QUIET],
+     ["--box Fc=-1,5", "Fc range must be positive"]),
+    ("cli identify/box-of-no-model", ["identify", "{good}", *PAIRS, "--box", "sigma0=1,5", *QUIET],
+     ["--box sigma0: none of the models coulomb has this parameter"]),
+    ("cli demo/model-too-large-for-memory", ["demo", "--model", "elman", "--neurons", "100000", *QUIET],
+     ["ENN (100000 neurons) has 600 000 parameters", "BFGS's dense Hessian (600 000 x 600 000 x 4 bytes)",
+      "needs 1.44 TB, more than the", "of memory available; use fewer neurons"]),
+    ("cli demo/out-is-a-file", ["demo", "--out", "{good}", *QUIET], ["--out", "exists and is not a folder"]),
+    ("cli predict/filter-without-a-saved-filter", ["predict", "{fit}", "{good}", "--velocity-col", "v",
+                                                   "--time-col", "t", "--filter-velocity", *QUIET],
+     ["--filter-velocity: the fit records no velocity filter", "--cutoff HZ"]),
+]
+
+#: Cases refused before JAX is imported (checked in one subprocess by
+#: test_command_line_refuses_before_importing_jax).
+BEFORE_JAX = [
+    "cli identify/missing-file", "cli identify/folder", "cli identify/binary-file", "cli identify/empty-file",
+    "cli identify/text-in-numeric-column", "cli identify/empty-cell", "cli identify/unknown-column",
+    "cli identify/unknown-model", "cli identify/unknown-solver", "cli identify/zero-generations",
+    "cli identify/dt-zero", "cli identify/duplicate-header", "cli identify/reversed-box",
+    "cli predict/missing-data", "cli predict/out-is-a-folder", "cli demo/unknown-model",
+    "cli demo/negative-seed", "cli demo/out-is-a-file",
 ]
 
 
@@ -746,6 +771,59 @@ def test_command_line_rejects_bad_input_in_one_line(cli_runs, files, tmp_path, m
     written = [p for p in Path(cwd).rglob("*") if p.is_file()]
     assert not written, f"files written before the error: {written}"
     assert stdout == ""
+
+
+_BEFORE_JAX_SCRIPT = """
+import json, sys
+from jaxfric.cli import main
+out = []
+for argv in json.loads(sys.argv[1]):
+    out.append([main(argv), "jax" in sys.modules])
+print(json.dumps(out))
+"""
+
+
+def test_command_line_refuses_before_importing_jax(files, tmp_path):
+    """Files, columns, NaN cells, model and solver names, box order and the report folder
+    are refused before JAX is imported: every case of :data:`BEFORE_JAX`, run in turn in
+    one fresh interpreter, exits 2 with ``jax`` still absent from ``sys.modules``."""
+    cases = [c for c in CLI_CASES if c[0] in BEFORE_JAX]
+    assert len(cases) == len(BEFORE_JAX)
+    env = dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="")
+    proc = subprocess.run([sys.executable, "-c", _BEFORE_JAX_SCRIPT, json.dumps([_argv(c, files) for c in cases])],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads(proc.stdout.strip().splitlines()[-1])
+    for case, (status, jax_loaded) in zip(cases, results):
+        assert status == 2, case[0]
+        assert not jax_loaded, f"{case[0]}: JAX was imported before the refusal"
+    assert len(proc.stderr.strip().splitlines()) == len(cases), proc.stderr
+    assert not list(tmp_path.iterdir())
+
+
+def test_interrupted_first_stage_leaves_no_folder(files, tmp_path, interruptible, subprocess_slot):
+    """Ctrl-C during the first model's search: exit 130, "nothing was written", and no
+    report folder (it is made once the first fit is done)."""
+    import signal
+    import time
+
+    out = tmp_path / "report"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxfric", "identify", str(files["good"]), *PAIRS[:6], "--model", "elman",
+         "--neurons", "3", "--generations", "100000", "--no-cache", "--out", str(out)],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **interruptible)
+    seen = ""
+    deadline = time.monotonic() + 300
+    while "identifying ENN" not in seen and proc.poll() is None and time.monotonic() < deadline:
+        seen += proc.stderr.readline()
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130, seen + rest
+    assert "jaxfric: interrupted; nothing was written" in rest
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
 # ------------------------------------------------ issue 20: behaviour that must be right

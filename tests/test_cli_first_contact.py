@@ -213,3 +213,75 @@ def test_slow_tests_are_marked_and_exist():
         names = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
         assert name in names, nodeid
     assert "slow:" in (ROOT / "pyproject.toml").read_text()
+
+
+# ------------------------------------------------------- checks before JAX, memory, predict
+def test_command_line_model_names_are_the_librarys():
+    """The names refused before JAX is imported are exactly jaxfric.models.available()."""
+    from jaxfric import models
+    from jaxfric.cli.checks import MODEL_NAMES
+
+    assert tuple(MODEL_NAMES) == tuple(models.available())
+
+
+def test_memory_figure_is_the_dense_matrix_of_the_stage_that_runs():
+    """BFGS (the networks' default gradient stage) holds an n x n matrix, Nelder-Mead an
+    (n+1) x n simplex; a swarm alone holds neither. The refusal names the figures."""
+    import argparse
+
+    from jaxfric.cli.errors import UserError
+    from jaxfric.cli.fitting import check_memory, memory_need
+    from jaxfric.cli.spec import FitSpec
+
+    def spec(name, **kw):
+        args = argparse.Namespace(generations=None, nm_evals=None, quick=False, neurons=kw.pop("neurons", None),
+                                  solver=kw.pop("solver", "mapso-nmds"), refine=kw.pop("refine", "none"),
+                                  paper=kw.pop("paper", False), seed=0, box=None)
+        s = FitSpec.from_args(name, args)
+        return s, s.build_model()
+
+    s, m = spec("elman", neurons=30)  # 180 parameters, MAPSO then BFGS
+    assert memory_need(s, m, x64=False)[0] == 180 * 180 * 4
+    assert memory_need(s, m, x64=True)[0] == 180 * 180 * 8
+    s, m = spec("elman", neurons=30, paper=True)  # MAPSO-NMDS
+    assert memory_need(s, m, x64=False)[0] == 181 * 180 * 4
+    s, m = spec("elman", neurons=30, solver="mapso")  # a swarm alone (with identify's BFGS)
+    assert memory_need(s, m, x64=False)[0] == 180 * 180 * 4
+    s, m = spec("lugre", solver="pso")
+    assert memory_need(s, m, x64=False) == (0, "")
+    s, m = spec("elman", neurons=1000)
+    with pytest.raises(UserError, match=r"6 000 parameters: BFGS's dense Hessian \(6 000 x 6 000 x 4 bytes\) "
+                       r"needs 144 MB, more than the 100 MB of memory available; use fewer neurons"):
+        check_memory(s, m, x64=False, available=100_000_000)
+    check_memory(s, m, x64=False, available=10**12)  # fits: nothing said
+
+
+def test_predict_says_and_applies_the_fits_velocity_filter(tmp_path, capsys):
+    """A fit saved with the pipeline's velocity filter: predict says so, and with
+    --filter-velocity its output is the fit's prediction of the low-passed velocity."""
+    import numpy as np
+
+    import jaxfric as jf
+    from jaxfric.cli import main
+    from jaxfric.rig.pipeline import lowpass
+
+    t = np.arange(400) / 100.0
+    rng = np.random.default_rng(0)
+    v = 0.02 * np.sin(2 * np.pi * 0.5 * t) + 0.004 * rng.standard_normal(t.size)
+    (tmp_path / "v.csv").write_text("t,v\n" + "\n".join(f"{float(a)!r},{float(b)!r}" for a, b in zip(t, v)) + "\n")
+    fit = jf.Fit(model=jf.Coulomb(), theta=np.array([40.0, 3.0]), velocity_scaler=None, friction_scaler=None,
+                 dt=0.01, n_train=300, n_samples=400, metrics={"train": None, "valid": None, "all": None},
+                 settings={"velocity_filter": {"kind": "butterworth zero-phase", "order": 4, "cutoff_hz": 5.0}})
+    fit.save(tmp_path / "fit.npz")
+    base = ["predict", str(tmp_path / "fit.npz"), str(tmp_path / "v.csv"), "--velocity-col", "v", "--time-col", "t"]
+    assert main([*base, "--out", str(tmp_path / "raw.csv"), "--no-cache"]) == 0
+    err = capsys.readouterr().err
+    assert "trained on velocity filtered by a zero-phase Butterworth low-pass (order 4, 5 Hz)" in err
+    assert "--filter-velocity" in err
+    assert main([*base, "--out", str(tmp_path / "filtered.csv"), "--filter-velocity", "--no-cache"]) == 0
+    got = np.genfromtxt(tmp_path / "filtered.csv", delimiter=",", names=True)
+    expected = np.asarray(fit.predict(lowpass(v, 100.0, 5.0, 4)))
+    assert np.allclose(got["velocity"], lowpass(v, 100.0, 5.0, 4), rtol=0, atol=1e-12)
+    assert np.allclose(got["friction_predicted"], expected, rtol=1e-5, atol=1e-4)
+    raw = np.genfromtxt(tmp_path / "raw.csv", delimiter=",", names=True)
+    assert np.allclose(raw["velocity"], v, rtol=0, atol=1e-12)

@@ -61,6 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     from .commands import COMMANDS
 
     def work() -> int:
+        from .checks import precheck
+
+        precheck(args)  # files, columns, names: one line, before JAX is imported
         _configure(args)
         return COMMANDS[args.command](args, argv)
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import KEPT, UserError, _prepare_out, _say
-from .fitting import check_models, fit_all
+from .fitting import check_fits, fit_all
 from .spec import FitSpec
 
 
@@ -35,11 +35,19 @@ def _write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
     return p
 
 
-def _save_fit_now(out: Path):
-    """Save each fit as soon as it exists, so an interrupted run keeps the finished models."""
+def _save_fit_now(out: Path, velocity_filter=None):
+    """Save each fit as soon as it exists, so an interrupted run keeps the finished models.
+
+    The report folder is made here, when the first fit is done: a run refused or
+    interrupted before that leaves no folder behind. ``velocity_filter`` (the low-pass
+    the identification's velocity went through, or ``None``) is saved with each fit for
+    ``jaxfric predict``."""
     from jaxfric.report import save_fit, slug
 
     def keep(name, fit):
+        _prepare_out(str(out))
+        if velocity_filter is not None:
+            fit.settings["velocity_filter"] = dict(velocity_filter)
         if hasattr(fit, "save"):
             KEPT.add(save_fit(fit, out / "models" / f"{slug(name)}.npz"))
 
@@ -92,21 +100,21 @@ def cmd_demo(args, argv) -> int:
     """Simulate the rig, compute friction, fit the models, write the report."""
     import jax
 
-    from .data import simulated_rig
+    from .data import simulated_rig, velocity_filter
 
-    check_models(args.models, args.box)
-    out = _prepare_out(args.out)
     say = _say(args)
+    check_fits(args, say)
+    out = Path(args.out)  # made when the first fit is done (_save_fit_now)
     data_key, fit_key = jax.random.split(jax.random.key(args.seed))
     t0 = time.perf_counter()
     say(f"simulating the test rig (2000 samples at 128 Hz, seed {args.seed}) and computing the friction")
     r, record, data = simulated_rig(data_key)
     say(f"  done in {time.perf_counter() - t0:.1f} s")
+    notes = ["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else []
+    fits = fit_all(data, args, fit_key, say=say, kept_fit=_save_fit_now(out, velocity_filter(args)), notes=notes)
     _write_csv(out / "rig_measurements.csv", {
         "t": record.t, "x": record.x, "p1": record.p1, "p2": record.p2, "load": record.load})
     _write_csv(out / "friction_data.csv", {"t": data.t, "velocity": data.velocity, "friction": data.friction})
-    notes = ["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else []
-    fits = fit_all(data, args, fit_key, say=say, kept_fit=_save_fit_now(out), notes=notes)
     cyl = r.cylinder
     source = (f"Simulated low-speed press rig (jaxfric.rig.Rig(), seed {args.seed}): bore {cyl.bore:g} m, rod "
               f"{cyl.rod:g} m, moving mass {cyl.mass:g} kg; measured position, chamber pressures and load "
@@ -165,19 +173,17 @@ def cmd_identify(args, argv) -> int:
     """Fit friction models to a user's CSV file and write the report."""
     import jax
 
-    from .data import identification_data
-
-    import argparse
+    from .data import identification_data, velocity_filter
 
     from jaxfric.identification import as_records
 
-    check_models(args.models, args.box)
     say = _say(args)
+    check_fits(args, say)
     data, desc, notes = identification_data(args)
     valid = {}
     for path in getattr(args, "valid", None) or []:
         # the same columns, units and pipeline as FILE
-        v_data, _, v_notes = identification_data(argparse.Namespace(**{**vars(args), "file": path}))
+        v_data, _, v_notes = identification_data(args, path)
         valid[path] = v_data
         notes = list(notes) + [f"{path}: {n}" for n in v_notes]
     if valid:
@@ -196,10 +202,11 @@ def cmd_identify(args, argv) -> int:
     else:
         say(f"{data.n_samples} samples at {1.0 / float(data.dt):.4g} Hz: {data.n_train} for estimation, "
             f"{data.n_valid} for validation")
-    out = _prepare_out(args.out)
+    out = Path(args.out)  # made when the first fit is done (_save_fit_now)
     key = jax.random.key(args.seed)
     notes = list(notes) + (["Budget reduced with --quick: a smoke test, not a fit."] if args.quick else [])
-    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out), notes=notes, valid=valid or None)
+    fits = fit_all(data, args, key, say=say, kept_fit=_save_fit_now(out, velocity_filter(args)), notes=notes,
+                   valid=valid or None)
     split = (f"used whole; validation records {list(valid)} loaded the same way, and each fit is "
              "identify(name, train={FILE: data}, valid={...}, ...)" if valid
              else f"train_fraction={args.train_fraction}")
@@ -233,6 +240,7 @@ def cmd_predict(args, argv) -> int:
     except (ValueError, KeyError, TypeError, OSError) as e:
         raise UserError(f"cannot load the fit {args.model_file}: {e}") from None
     t, v, dt, measured, notes = prediction_input(args)
+    v = _velocity_as_trained(args, fit, v, dt)
     # Resampling and extrapolation change what the numbers mean: said even with --quiet.
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -257,6 +265,33 @@ def cmd_predict(args, argv) -> int:
         print(f"MSE % {m['mse_percent']:.4g}, MAX {m['max_abs']:.4g} N, FIT % {m['fit_percent']:.2f}",
               file=sys.stderr if args.out == "-" else sys.stdout)
     return 0
+
+
+def _velocity_as_trained(args, fit, v, dt):
+    """Say which velocity the fit was trained on; with ``--filter-velocity`` low-pass ``v``
+    the same way (the zero-phase Butterworth of docs/algorithms.md §7)."""
+    saved = fit.settings.get("velocity_filter")
+    if saved:
+        what = f"a zero-phase Butterworth low-pass (order {saved['order']}, {saved['cutoff_hz']:g} Hz)"
+    if not args.filter_velocity:
+        if not args.quiet:
+            text = (f"this fit was trained on velocity filtered by {what}; pass --filter-velocity to filter this "
+                    "record the same way, unless it is filtered already" if saved else
+                    "this fit was trained on the velocity as its file gave it; give this record's velocity "
+                    "processed the same way")
+            print(f"jaxfric: note: {text}", file=sys.stderr, flush=True)
+        return v
+    if args.cutoff is None and not saved:
+        raise UserError("--filter-velocity: the fit records no velocity filter (it was trained on the velocity "
+                        "as given); give the cutoff with --cutoff HZ")
+    from jaxfric.rig.pipeline import lowpass
+
+    cutoff = args.cutoff if args.cutoff is not None else float(saved["cutoff_hz"])
+    order = {"order": int(saved["order"])} if saved else {}  # else lowpass's own
+    if not args.quiet:
+        print(f"jaxfric: note: velocity low-passed (zero-phase Butterworth, {cutoff:g} Hz) as the fit's "
+              "training velocity was", file=sys.stderr, flush=True)
+    return lowpass(v, 1.0 / dt, cutoff, **order)
 
 
 # --------------------------------------------------------------------- bench

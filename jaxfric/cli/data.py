@@ -149,15 +149,23 @@ def _load_quietly(fn, *a, **kw):
     return out, notes
 
 
-def identification_data(args):
-    """:class:`jaxfric.rig.FrictionData` from ``jaxfric identify``'s file and options.
+@dataclass
+class Columns:
+    """The columns of one input file a command uses, read and checked (no JAX): ``mode``
+    (``"pairs"``, ``"raw"`` or ``"predict"``), NumPy ``cols`` in the file's units, their
+    ``scale`` factors to SI and the constant ``fill`` channels."""
 
-    Returns ``(data, description, notes)``: the description says which mode and columns were
-    used (for the report), the notes carry the loaders' warnings (e.g. resampled time stamps). Velocity/friction columns select the pairs mode; position and
-    pressure/load columns the raw-channel mode through the §7 pipeline.
-    """
-    from jaxfric import rig
+    path: str
+    mode: str
+    cols: dict
+    scale: dict
+    fill: dict
 
+
+def identification_columns(args, path: str) -> Columns:
+    """Read ``jaxfric identify``'s columns of ``path`` (FILE or a ``--valid`` file) and
+    check the options that choose them; one-line :class:`UserError` otherwise. NumPy only:
+    this runs before JAX is imported (:mod:`jaxfric.cli.checks`)."""
     pairs = args.velocity_col is not None or args.friction_col is not None
     raw_cols = {"x": args.x_col, "p1": args.p1_col, "p2": args.p2_col, "load": args.load_col}
     raw = any(v is not None for v in raw_cols.values())
@@ -168,12 +176,26 @@ def identification_data(args):
     if not pairs and not raw:
         raise UserError("say which columns to use: --velocity-col and --friction-col, or the raw rig "
                         "channels --x-col --p1-col --p2-col --load-col (see 'jaxfric identify --help')")
-    table = read_table(args.file, delimiter=args.delimiter, skip_rows=args.skip_rows)
+    if pairs and (args.velocity_col is None or args.friction_col is None):
+        raise UserError("the velocity/friction mode needs both --velocity-col and --friction-col")
+    fills = {"p1": args.p1_fill, "p2": args.p2_fill, "load": args.load_fill}
+    if not pairs:
+        if args.x_col is None:
+            raise UserError("the raw-channel mode needs --x-col (piston position)")
+        for ch in ("p1", "p2", "load"):
+            if raw_cols[ch] is None and fills[ch] is None:
+                raise UserError(f"--{ch}-col is missing (or give a constant with --{ch}-fill)")
+            if raw_cols[ch] is not None and fills[ch] is not None:
+                raise UserError(f"give either --{ch}-col or --{ch}-fill, not both")
+        missing = [f"--{k}" for k in ("bore", "rod", "mass") if getattr(args, k) is None]
+        if missing:
+            raise UserError(f"the raw-channel mode needs the cylinder geometry: {' '.join(missing)} "
+                            "(bore and rod diameters in m, moving mass in kg)")
+        if args.rod >= args.bore:
+            raise UserError(f"--rod ({args.rod} m) must be smaller than --bore ({args.bore} m)")
+    table = read_table(path, delimiter=args.delimiter, skip_rows=args.skip_rows)
     t = _time_column(table, args)
-    notes: list[str] = []
     if pairs:
-        if args.velocity_col is None or args.friction_col is None:
-            raise UserError("the velocity/friction mode needs both --velocity-col and --friction-col")
         cols = {"t": t,
                 "velocity": table.column(args.velocity_col, "--velocity-col"),
                 "friction": table.column(args.friction_col, "--friction-col")}
@@ -188,27 +210,7 @@ def identification_data(args):
             for ch in ("p1", "p2"):
                 cols[ch] = table.column(raw_cols[ch], f"--{ch}-col")
                 scale[ch] = p_unit
-        data, notes = _load_quietly(rig.load_friction_pairs, cols, scale=scale,
-                                    **_given(train_fraction=args.train_fraction))
-        desc = (f"velocity/friction pairs from {args.file} (velocity column {args.velocity_col!r}, "
-                f"friction column {args.friction_col!r}"
-                + (f", pressures {args.p1_col!r} and {args.p2_col!r})" if "p1" in cols else ")"))
-        return data, desc, notes
-
-    fills = {"p1": args.p1_fill, "p2": args.p2_fill, "load": args.load_fill}
-    if args.x_col is None:
-        raise UserError("the raw-channel mode needs --x-col (piston position)")
-    for ch in ("p1", "p2", "load"):
-        if raw_cols[ch] is None and fills[ch] is None:
-            raise UserError(f"--{ch}-col is missing (or give a constant with --{ch}-fill)")
-        if raw_cols[ch] is not None and fills[ch] is not None:
-            raise UserError(f"give either --{ch}-col or --{ch}-fill, not both")
-    missing = [f"--{k}" for k in ("bore", "rod", "mass") if getattr(args, k) is None]
-    if missing:
-        raise UserError(f"the raw-channel mode needs the cylinder geometry: {' '.join(missing)} "
-                        "(bore and rod diameters in m, moving mass in kg)")
-    if args.rod >= args.bore:
-        raise UserError(f"--rod ({args.rod} m) must be smaller than --bore ({args.bore} m)")
+        return Columns(path, "pairs", cols, scale, {})
     cols = {"t": t, "x": table.column(args.x_col, "--x-col")}
     fill = {}
     for ch in ("p1", "p2", "load"):
@@ -219,14 +221,60 @@ def identification_data(args):
     p_unit = unit_factor("pressure", args.pressure_unit, "--pressure-unit")
     scale = {"x": unit_factor("length", args.x_unit, "--x-unit"), "p1": p_unit, "p2": p_unit,
              "load": unit_factor("force", args.load_unit, "--load-unit")}
-    meas, notes = _load_quietly(rig.load_measurements, cols, scale=scale, fill=fill)
+    return Columns(path, "raw", cols, scale, fill)
+
+
+def identification_data(args, path: str | None = None):
+    """:class:`jaxfric.rig.FrictionData` from ``jaxfric identify``'s file and options.
+
+    Returns ``(data, description, notes)``: the description says which mode and columns were
+    used (for the report), the notes carry the loaders' warnings (e.g. resampled time stamps). Velocity/friction columns select the pairs mode; position and
+    pressure/load columns the raw-channel mode through the §7 pipeline. The columns come
+    from :func:`identification_columns` (read before JAX was imported, kept in ``args.columns``).
+    """
+    from jaxfric import rig
+
+    path = args.file if path is None else path
+    c = (getattr(args, "columns", None) or {}).get(path) or identification_columns(args, path)
+    if c.mode == "pairs":
+        data, notes = _load_quietly(rig.load_friction_pairs, c.cols, scale=c.scale,
+                                    **_given(train_fraction=args.train_fraction))
+        desc = (f"velocity/friction pairs from {path} (velocity column {args.velocity_col!r}, "
+                f"friction column {args.friction_col!r}"
+                + (f", pressures {args.p1_col!r} and {args.p2_col!r})" if "p1" in c.cols else ")"))
+        return data, desc, notes
+    meas, notes = _load_quietly(rig.load_measurements, c.cols, scale=c.scale, fill=c.fill)
     options = _given(gravity=args.gravity, cutoff=args.cutoff, train_fraction=args.train_fraction)
     data = rig.estimate_friction(meas, bore=args.bore, rod=args.rod, mass=args.mass, **options)
     used = _with_defaults(rig.estimate_friction, options)
-    desc = (f"raw rig channels from {args.file} through the pipeline (Butterworth {used['cutoff']:g} Hz, "
+    desc = (f"raw rig channels from {path} through the pipeline (Butterworth {used['cutoff']:g} Hz, "
             f"bore {args.bore:g} m, rod {args.rod:g} m, mass {args.mass:g} kg, "
             + (f"gravity {used['gravity']:g} m/s^2)" if used["gravity"] is not None else "no gravity term)"))
     return data, desc, notes
+
+
+def velocity_filter(args) -> dict | None:
+    """The low-pass the identification applied to the velocity, as saved with each fit
+    (``fit.settings["velocity_filter"]``) so that ``jaxfric predict`` can say it and
+    apply it: ``None`` when the file gave the velocity itself."""
+    if getattr(args, "velocity_col", None) is not None:
+        return None
+    from jaxfric import rig
+
+    used = _with_defaults(rig.estimate_friction, _given(cutoff=getattr(args, "cutoff", None)))
+    return {"kind": "butterworth zero-phase", "order": int(used["order"]), "cutoff_hz": float(used["cutoff"])}
+
+
+def prediction_columns(args) -> Columns:
+    """``jaxfric predict``'s columns (no JAX; see :func:`identification_columns`)."""
+    table = read_table(args.data, delimiter=args.delimiter, skip_rows=args.skip_rows)
+    t = _time_column(table, args)
+    cols = {"t": t, "velocity": table.column(args.velocity_col, "--velocity-col")}
+    scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit")}
+    if args.friction_col is not None:
+        cols["friction"] = table.column(args.friction_col, "--friction-col")
+        scale["friction"] = unit_factor("force", args.friction_unit, "--friction-unit")
+    return Columns(args.data, "predict", cols, scale, {})
 
 
 def prediction_input(args):
@@ -235,18 +283,15 @@ def prediction_input(args):
     resampled here (``Fit.predict_at`` resamples onto the fit's grid and back)."""
     from jaxfric import rig
 
-    table = read_table(args.data, delimiter=args.delimiter, skip_rows=args.skip_rows)
-    t = _time_column(table, args)
-    cols = {"t": t, "velocity": table.column(args.velocity_col, "--velocity-col")}
-    scale = {"velocity": unit_factor("velocity", args.velocity_unit, "--velocity-unit")}
-    if args.friction_col is not None:
-        cols["friction"] = table.column(args.friction_col, "--friction-col")
-        scale["friction"] = unit_factor("force", args.friction_unit, "--friction-unit")
-    else:
-        cols["friction"] = np.zeros_like(t)  # placeholder: the loader wants the channel
+    c = (getattr(args, "columns", None) or {}).get(args.data) or prediction_columns(args)
+    cols, scale = dict(c.cols), dict(c.scale)
+    measured = "friction" in cols
+    if not measured:
+        cols["friction"] = np.zeros_like(cols["t"])  # placeholder: the loader wants the channel
+        scale["friction"] = 1.0
     data, _ = _load_quietly(rig.load_friction_pairs, cols, scale=scale, train_fraction=1.0)
-    friction = cols["friction"] * scale["friction"] if args.friction_col is not None else None
-    return t, cols["velocity"] * scale["velocity"], float(data.dt), friction, []
+    friction = cols["friction"] * scale["friction"] if measured else None
+    return cols["t"], cols["velocity"] * scale["velocity"], float(data.dt), friction, []
 
 
 def simulated_rig(key):

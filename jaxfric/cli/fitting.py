@@ -25,20 +25,94 @@ LABELS = {"elman": "ENN", "elman_full": "ENN (full context)", "lugre": "LuGre", 
 
 
 def check_models(names, box=None) -> list[str]:
-    """Validate model names against :func:`jaxfric.models.available`, and that every
-    ``--box`` entry is searched by one of them (one-line errors)."""
+    """Validate model names, and that every ``--box`` entry is searched by one of them
+    and is a range :class:`jaxfric.models.SearchBox` accepts (one-line errors). The names
+    were checked before JAX was imported (:func:`jaxfric.cli.checks.check_model_names`);
+    the box needs the models."""
     from jaxfric import models
 
-    known = models.available()
-    for name in names:
-        if name not in known:
-            raise UserError(f"unknown model {name!r}; choose from {', '.join(known)}")
+    from .checks import check_model_names
+
+    check_model_names(names)
     used = {k for name in names for k in models.get(name).box_keys}
-    for key, _ in box or ():
+    for key, rng in box or ():
         if key not in used:
             raise UserError(f"--box {key}: none of the models {', '.join(names)} has this parameter"
                             + (f" (theirs: {', '.join(sorted(used))})" if used else ""))
+        try:
+            models.SearchBox({key: rng})
+        except ValueError as err:
+            raise UserError(f"--box {key}={rng[0]:g},{rng[1]:g}: {err}") from None
     return list(names)
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to this process (Linux's MemAvailable, else the
+    physical memory), ``None`` when unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _bytes(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
+        if n < 1000 or unit == "PB":
+            return f"{n:.3g} {unit}"
+        n /= 1000.0
+    return f"{n:.3g} PB"  # pragma: no cover
+
+
+def _n(n: int) -> str:
+    return f"{n:,}".replace(",", " ")
+
+
+def memory_need(spec, model, *, x64: bool) -> tuple[int, str]:
+    """The largest matrix a fit of ``model`` as ``spec`` says holds, in bytes, and what
+    it is: BFGS's dense ``n x n`` inverse Hessian (the networks' default gradient stage,
+    ``--refine bfgs``/``lm``/``gauss_newton``/``auto``) or Nelder-Mead's ``(n+1) x n``
+    simplex; 0 when neither runs (a swarm alone, L-BFGS)."""
+    from jaxfric.identification import _api
+
+    n = int(model.num_params)
+    item = 8 if x64 else 4
+    dense = spec.refine in ("bfgs", "lm", "gauss_newton", "auto") or (
+        spec.refine == "none" and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
+    if dense:
+        what = "BFGS's dense Hessian" if spec.refine in ("none", "bfgs", "auto") else "the Gauss-Newton matrix"
+        return n * n * item, f"{what} ({_n(n)} x {_n(n)} x {item} bytes)"
+    solver = spec.build_solver(model)
+    uses_nm = spec.solver in ("mapso-nmds", "nelder-mead") and not (
+        solver is None and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
+    if uses_nm:
+        return (n + 1) * n * item, f"Nelder-Mead's simplex ({_n(n + 1)} x {_n(n)} x {item} bytes)"
+    return 0, ""
+
+
+def check_memory(spec, model, *, x64: bool, available: int | None = None, say=None) -> None:
+    """Refuse a fit whose largest matrix (:func:`memory_need`) exceeds the memory
+    available, and warn (through ``say``) past a quarter of it, with the figures."""
+    need, what = memory_need(spec, model, x64=x64)
+    available = available_memory() if available is None else available
+    if not need or available is None:
+        return
+    name = label(spec.model, model)
+    if need > available:
+        fewer = "; use fewer neurons" if getattr(model, "neurons", None) is not None else ""
+        raise UserError(f"{name} has {_n(model.num_params)} parameters: {what} needs {_bytes(need)}, more than "
+                        f"the {_bytes(available)} of memory available{fewer}")
+    if need > available / 4 and say is not None:
+        print(f"jaxfric: warning: {name}: {what} needs {_bytes(need)} of the {_bytes(available)} of memory "
+              "available", file=sys.stderr, flush=True)
 
 
 def label(name: str, model) -> str:
@@ -121,6 +195,16 @@ def progress_bar(solver, model, desc: str, paper: bool = False, refine=None):
     return LazyBar(total, local_total, desc, gradient_total)
 
 
+def check_fits(args, say=None) -> list[str]:
+    """Every check of the requested fits that needs the models, before any data are made
+    or any stage starts: names, ``--box`` entries and each model's memory."""
+    names = check_models(args.models, getattr(args, "box", None))
+    for name in names:
+        spec = FitSpec.from_args(name, args)
+        check_memory(spec, spec.build_model(), x64=bool(getattr(args, "x64", False)), say=say)
+    return names
+
+
 def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> dict:
     """Identify every model of ``args.models`` on ``data`` with ``key``; ``name -> Fit``.
 
@@ -134,8 +218,9 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
     from jaxfric.identification import BoundWarning
     from jaxfric.identification._diagnostics import bound_message
 
+    names = check_models(args.models, getattr(args, "box", None))
     fits = {}
-    for name in check_models(args.models, getattr(args, "box", None)):
+    for name in names:
         spec = FitSpec.from_args(name, args)
         model = spec.build_model()
         solver = spec.build_solver(model)

@@ -86,18 +86,17 @@ def positive_int(text: str) -> int:
 
 
 def box_entry(text: str) -> tuple[str, tuple[float, float]]:
-    """``NAME=LO,HI`` -> ``(NAME, (LO, HI))``, checked by :class:`jaxfric.models.SearchBox`."""
-    from jaxfric.models import SearchBox
-
+    """``NAME=LO,HI`` -> ``(NAME, (LO, HI))``: two finite numbers, low < high (no JAX here;
+    the parameter's name and the range rules of :class:`jaxfric.models.SearchBox` are
+    checked once the models are imported, before any stage)."""
     name, sep, pair = text.partition("=")
     parts = pair.split(",")
-    if not sep or len(parts) != 2:
+    if not sep or not name.strip() or len(parts) != 2:
         raise argparse.ArgumentTypeError(f"give NAME=LO,HI (e.g. Fc=1,100), got {text!r}")
-    try:
-        box = SearchBox({name.strip(): (_number(parts[0]), _number(parts[1]))})
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-    return next(iter(box.items()))
+    lo, hi = _number(parts[0]), _number(parts[1])
+    if not lo < hi:
+        raise argparse.ArgumentTypeError(f"{name.strip()} range must satisfy low < high, got {lo:g},{hi:g}")
+    return name.strip(), (lo, hi)
 
 
 def seed(text: str) -> int:
@@ -172,9 +171,14 @@ folder, or Fit.save in Python) and writes its free-run friction prediction for t
 velocity record of DATA_CSV: columns t [s], velocity [m/s], friction_predicted [N]
 (plus friction_measured and error when --friction-col is given).
 
+A fit learns from the velocity it was given. Fits made from raw rig channels (and the
+demo's) saw a low-pass filtered velocity (zero-phase Butterworth, 5 Hz by default): the
+command says so, and --filter-velocity applies the same filter to an unfiltered record.
+
 examples:
   jaxfric predict jaxfric-report/models/elman.npz new.csv --velocity-col v --time-col t
   jaxfric predict fit.npz new.csv --velocity-col 0 --dt 0.0078125 --out pred.csv
+  jaxfric predict jaxfric-report/models/elman.npz raw.csv --velocity-col v --time-col t --filter-velocity
 """
 
 BENCH_EPILOG = """\
@@ -310,6 +314,12 @@ def build_parser() -> Parser:
     g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
     g.add_argument("--velocity-unit", default="m/s", metavar="UNIT", help="of the velocity column")
     g.add_argument("--friction-unit", default="N", metavar="UNIT", help="of the friction column")
+    f = r.add_argument_group("preprocessing")
+    f.add_argument("--filter-velocity", action="store_true",
+                   help="low-pass the velocity as the fit's training velocity was (zero-phase Butterworth; the "
+                   "cutoff and order saved with the fit, or --cutoff)")
+    f.add_argument("--cutoff", type=positive_float, default=None, metavar="HZ",
+                   help="cutoff [Hz] for --filter-velocity (default: the fit's)")
     r.add_argument("--out", "-o", default="predictions.csv", metavar="FILE",
                    help="output CSV ('-' for standard output)")
     _common(r)
