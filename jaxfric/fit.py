@@ -139,6 +139,16 @@ def unidentifiable_names(texts) -> set[str]:
     return {str(t).split(": ", 1)[0] for t in texts}
 
 
+def uncertainty_lines(fit) -> list[str]:
+    """The summary lines of a fit's parameter uncertainty and plausibility warnings."""
+    lines = []
+    if not fit.model.needs_scaling and fit.uncertainty is not None:
+        lines += fit.uncertainty.format()
+    for d in fit.diagnostics.get("implausible", []):
+        lines.append(f"! implausible {d['name']}: {d['message']}")
+    return lines
+
+
 def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
     """Free-run friction [N] of ``model`` at ``theta`` for ``velocity`` [m/s] (§2.4):
     scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
@@ -196,7 +206,7 @@ class Fit:
     def __init__(self, *, model, theta, velocity_scaler, friction_scaler, dt, n_train,
                  n_samples, metrics, stages=(), history=None, solution=None, timings=None,
                  key_data=None, key_impl=None, seed=None, settings=None, version=None,
-                 velocity_range=None, diagnostics=None, ensemble=None, box=None):
+                 velocity_range=None, diagnostics=None, ensemble=None, box=None, uncertainty=None):
         self.model = model
         self.box = model.search_box(box)
         self.theta = model.check_theta(np.asarray(theta))
@@ -223,6 +233,62 @@ class Fit:
                                else (float(velocity_range[0]), float(velocity_range[1])))
         self.diagnostics = {"on_bound": [], "unidentifiable": [], **dict(diagnostics or {})}
         self.ensemble = None if ensemble is None else dict(ensemble)
+        # parameter uncertainty (jaxfric.uncertainty): given, or computed on first use
+        # from the training data identify attaches (never saved: only the result is)
+        self._uncertainty = uncertainty
+        self._training_data = None
+
+    # ---------------------------------------------------------- uncertainty
+    @property
+    def uncertainty(self):
+        """The :class:`jaxfric.uncertainty.ParameterUncertainty` of a physical model's
+        parameters (Newey–West and Jacobian covariances, docs/uncertainty.md), or
+        ``None`` (a network; a fit loaded from a file without it). Computed on first
+        use from the training data :func:`jaxfric.identify` attached."""
+        if self._uncertainty is None and self._training_data is not None:
+            from .uncertainty import parameter_uncertainty
+
+            data, self._training_data = self._training_data, None
+            try:
+                self._uncertainty = parameter_uncertainty(self, data, method=("hac", "jacobian"))
+            except ValueError as err:
+                self.diagnostics["uncertainty_error"] = str(err)
+        return self._uncertainty
+
+    def _need_uncertainty(self):
+        u = self.uncertainty
+        if u is None:
+            why = self.diagnostics.get("uncertainty_error") or (
+                "a network has no physical parameters" if self.model.needs_scaling
+                else "none was computed: jaxfric.uncertainty.parameter_uncertainty(fit, data)")
+            raise ValueError(f"this fit has no parameter uncertainty: {why}")
+        return u
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        """``{name: standard error}`` of the physical parameters (SI units; the fit's
+        default, Newey–West covariance). ``ValueError`` when the fit has none."""
+        return self._need_uncertainty().stderr()
+
+    def intervals(self, level: float = 0.95, method: str | None = None) -> dict[str, tuple[float, float]]:
+        """``{name: (low, high)}`` confidence intervals at ``level`` (SI units);
+        ``method`` ``"hac"`` (default), ``"jacobian"`` (independent residuals) or
+        another the fit holds. See docs/uncertainty.md for how to read them."""
+        return self._need_uncertainty().intervals(level, method)
+
+    @property
+    def correlation(self) -> np.ndarray:
+        """Correlation matrix of the parameters, in the order of ``fit.uncertainty.names``;
+        entries near ±1 mark combinations the data fix while the parts stay free."""
+        return self._need_uncertainty().correlation()
+
+    def prediction_interval(self, velocity, level: float = 0.95, dt=None, inputs=None, method=None):
+        """``(prediction, low, high)`` [N]: the band a new measurement falls in with
+        probability ``level`` (:func:`jaxfric.uncertainty.prediction_interval`)."""
+        from .uncertainty import prediction_interval
+
+        self._need_uncertainty()
+        return prediction_interval(self, velocity, level, dt=dt, inputs=inputs, method=method)
 
     # ------------------------------------------------------------------ use
     @property
@@ -407,6 +473,8 @@ class Fit:
             "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
             "diagnostics": jsonable(self.diagnostics),
         }
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty.to_json()
         if self.ensemble:
             out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items()
                                          if include_theta or k != "theta"})
@@ -459,6 +527,7 @@ class Fit:
             lines.append(f"! {d['message']}")
         for text in self.diagnostics.get("unidentifiable", []):
             lines.append(f"! {text} (not identifiable from these data: the value is physically meaningless)")
+        lines += uncertainty_lines(self)
         if self.ensemble:
             e = self.ensemble
             vm = [x for x in e.get("valid_mse_percent", []) if x is not None]
@@ -585,6 +654,11 @@ def load_fit(path) -> Fit:
         dt = header["dt"]
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise ValueError(f"{path}: the fit's sample time dt = {dt!r} is not a positive number")
+        uncertainty = header.get("uncertainty")
+        if uncertainty is not None:
+            from .uncertainty import ParameterUncertainty
+
+            uncertainty = ParameterUncertainty.from_json(uncertainty)
         ensemble = header.get("ensemble")
         if ensemble is not None and "ensemble_theta" in arrays:
             ensemble = {**ensemble, "theta": _finite_array(path, "ensemble weights", arrays["ensemble_theta"])}
@@ -614,6 +688,7 @@ def load_fit(path) -> Fit:
             diagnostics=header.get("diagnostics"),
             ensemble=ensemble,
             box=box,
+            uncertainty=uncertainty,
         )
     except (KeyError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None

@@ -43,6 +43,7 @@ from ..fit import Fit, model_config, model_name, predict
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
 from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
+from ..uncertainty import assess_fit
 from ._data import Record, RecordSet, as_record, as_records
 from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
 from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
@@ -641,6 +642,7 @@ def identify(
                     "ensemble_root_seed": seed} if member_keys is not None else {}),
             },
         )
+    assess_fit(fit, records)  # plausibility now, parameter uncertainty on first use
     fit.timings = {**timings, "total_s": total.wall_s}
     return fit
 

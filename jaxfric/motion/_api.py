@@ -32,6 +32,7 @@ from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
 from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
+from ..uncertainty import assess_fit
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._step import friction_step
 
@@ -461,5 +462,6 @@ def identify_motion(
         )
         metrics = fit.evaluate(data, n_train, int(metric_horizon))
         fit.metrics = {**metrics, "num_params": int(y.size), "cost": float(sol.f)}
+    assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     fit.timings["total_s"] = total.wall_s
     return fit
