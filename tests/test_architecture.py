@@ -54,3 +54,83 @@ def test_imports_go_down():
             elif LAYER.get(target, 0) > LAYER[me]:
                 upward.append(f"{path.relative_to(ROOT)}:{line} ({me}) imports {target}")
     assert not upward, upward
+
+
+#: Inside ``jaxfric.optim`` a module imports only modules listed before it (module-level
+#: and function-level imports alike), so the package has no import circle: the pieces
+#: every solver shares, the checks of a problem, the evaluation rounds, the solvers, the
+#: chains, then the one driver that runs them all.
+OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "rounds",
+               "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "chained", "hybrid",
+               "evosax_adapter", "driver", "__init__"]
+
+
+def _imported_modules(path: Path, package: str):
+    """``(line, module)`` of every import of a sibling module of ``path`` inside
+    ``jaxfric.<package>``, at module level or inside a function."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            if node.module:
+                yield node.lineno, node.module.split(".")[0]
+            else:
+                for a in node.names:
+                    yield node.lineno, a.name
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith(
+                f"jaxfric.{package}."):
+            yield node.lineno, node.module.split(".")[2]
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith(f"jaxfric.{package}."):
+                    yield node.lineno, a.name.split(".")[2]
+
+
+def test_optim_modules_import_only_earlier_ones():
+    folder = ROOT / "optim"
+    modules = {p.stem for p in folder.glob("*.py")}
+    assert modules == set(OPTIM_ORDER), ("place every optim module in OPTIM_ORDER",
+                                         sorted(modules ^ set(OPTIM_ORDER)))
+    later = []
+    for path in folder.glob("*.py"):
+        rank = OPTIM_ORDER.index(path.stem)
+        for line, target in _imported_modules(path, "optim"):
+            if target in modules and OPTIM_ORDER.index(target) >= rank:
+                later.append(f"optim/{path.name}:{line} imports {target}")
+    assert not later, later
+
+
+def _cycle(graph: dict) -> list | None:
+    """A cycle of ``graph`` (module -> imported modules), or ``None``."""
+    state: dict = {}
+
+    def visit(node, trail):
+        state[node] = "open"
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == "open":
+                return trail[trail.index(nxt):] + [nxt] if nxt in trail else [node, nxt]
+            if nxt not in state:
+                found = visit(nxt, trail + [nxt])
+                if found:
+                    return found
+        state[node] = "done"
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node, [node])
+            if found:
+                return found
+    return None
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set(), "c": {"a"}}) is None
+
+
+def test_no_import_circle_inside_the_optimisers_or_the_command_line():
+    for package in ("optim", "cli"):
+        folder = ROOT / package
+        modules = {p.stem for p in folder.glob("*.py")} - {"__init__"}
+        graph = {p.stem: {t for _, t in _imported_modules(p, package) if t in modules}
+                 for p in folder.glob("*.py") if p.stem in modules}
+        assert _cycle(graph) is None, (package, _cycle(graph))

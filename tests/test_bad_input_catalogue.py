@@ -856,12 +856,12 @@ def test_large_budgets_count_in_int64_under_x64():
     """Issue 20.3: under 64-bit mode the counters are int64, so budgets of 2**31 and
     more are accepted (checked on the counter, not by running them)."""
     from jaxfric.optim._base import count_dtype
-    from jaxfric.optim.driver import _check_budget
+    from jaxfric.optim.problem import check_budget
 
     big = jf.PSO(num_particles=100_000, num_generations=30_000)
     with jax.enable_x64(True):
         assert count_dtype() == jnp.int64
-        _check_budget(big, 3)  # no error
+        check_budget(big, 3)  # no error
         sol = jf.minimise(counted, jf.PSO(num_particles=4, num_generations=2), (LO, HI), key=KEY,
                           dtype=np.float32)
         assert sol.stats["num_evals"].dtype == jnp.int64 and sol.value.dtype == jnp.float32

@@ -228,9 +228,6 @@ def linear_inertia(i, num, w_max, w_min):
     return w_max - (w_max - w_min) * i / jnp.maximum(num, 1)
 
 
-from .rng import counter_seed, counter_uniform  # noqa: E402,F401  (moved; old import path)
-
-
 def uniform_flat(key, shape, dtype):
     """``jax.random.uniform(key, shape, dtype)``, drawn flat and reshaped: the same
     numbers (threefry's counter is the element's flat index; tests/test_rng.py checks),
@@ -283,6 +280,11 @@ class AbstractSolver(eqx.Module):
     def check(self) -> None:
         """Raise ``ValueError`` on invalid hyperparameters. Run on construction
         (``__check_init__``) and again by :func:`jaxfric.minimise` before any tracing."""
+
+    def population_size(self) -> int | None:
+        """Agents of a population solver (a start ``y0`` may then be an initial
+        population of up to this many rows); ``None``: the solver takes one start."""
+        return None
 
     def steps_for(self, n: int) -> int | None:
         """Most steps of a run on ``n`` parameters (``None``: not known)."""

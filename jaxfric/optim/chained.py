@@ -111,6 +111,9 @@ class AbstractChain(AbstractAskTellSolver):
         self._global.check_ask_tell()
         self._local.check_ask_tell()
 
+    def population_size(self):
+        return self._global.population_size()
+
     # ------------------------------------------------------------------ stages
     def num_stages(self) -> int:
         return 2

@@ -1,19 +1,16 @@
-"""Checkpoint and resume for any solver, owned by the driver.
+"""Checkpoint files: a pytree (the driver's loop carry) written after a JSON header.
 
-The run advances in chunks of ``every`` steps, each chunk one call of the driver's
-compiled ``_run``; after each chunk the loop's carry (solver state, history, steps) is
-written with equinox's serialisation (``eqx.tree_serialise_leaves``) after a one-line
-JSON header, through :func:`jaxfric.files.atomic_write` (a temporary file that then
-replaces the checkpoint with ``os.replace``), so an interrupt never leaves a half-written
-file. Files get the user's usual permissions (``0o666 & ~umask``). Calling :func:`jaxfric.minimise` again with the same path resumes
-from the last completed chunk and returns exactly what the uninterrupted run returns:
-a chunked run performs the same steps, in the same order, with the same compiled loop.
+The pytree is written with equinox's serialisation (``eqx.tree_serialise_leaves``)
+after a one-line JSON header, through :func:`jaxfric.files.atomic_write` (a temporary
+file that then replaces the checkpoint with ``os.replace``), so an interrupt never
+leaves a half-written file. Files get the user's usual permissions (``0o666 & ~umask``).
+The driver (:mod:`jaxfric.optim.driver`) runs in chunks and calls :func:`save` after
+each; this module knows nothing of solvers or runs.
 
 The header records a fingerprint of the problem, checked on resume, each part with its
-own message (issue 15 item 2, issue 20 item 1): the objective (qualified name and a
-hash of its code, constants and closure values), the bounds, the ``args`` (tree
-structure and a hash of every value), the solver (its repr: every hyperparameter), the
-key and the search dtype.
+own message: the objective (qualified name and a hash of its code, constants and
+closure values), the bounds, the ``args`` (tree structure and a hash of every value),
+the solver (its repr: every hyperparameter), the key and the search dtype.
 """
 
 from __future__ import annotations
@@ -97,14 +94,15 @@ def _digest(x) -> str:
     return h.hexdigest()
 
 
-def fingerprint(flat, solver, lower, upper, args, key) -> dict:
-    """What a checkpoint belongs to, part by part (hex digests and readable names)."""
-    fn = flat.fn
+def fingerprint(fn, structure, solver, lower, upper, args, key) -> dict:
+    """What a checkpoint belongs to, part by part (hex digests and readable names):
+    the objective ``fn``, the parameters' ``structure`` (any hashable description),
+    the ``solver``, the box, ``args`` and the ``key``."""
     name = getattr(fn, "__qualname__", type(fn).__qualname__)
     return {
         "objective": _digest(fn),
         "objective_name": f"{getattr(fn, '__module__', '?')}.{name}",
-        "parameter structure": _digest((str(flat.treedef), flat.shapes)),
+        "parameter structure": _digest(structure),
         "bounds": _digest((np.asarray(lower), np.asarray(upper))),
         "args": _digest((str(jtu.tree_structure(args)), jtu.tree_leaves(args))),
         "solver": _digest(repr(solver)),
@@ -151,6 +149,13 @@ def _raw_like(tree):
 def _typed(raw, like, impl):
     return jtu.tree_map(
         lambda r, x: jax.random.wrap_key_data(r, impl=impl) if _is_key(x) else r, raw, like)
+
+
+def header(fp: dict, key) -> dict:
+    """The header of a checkpoint of the run with fingerprint ``fp`` and ``key`` (its
+    ``"steps_done"`` is added by the writer)."""
+    impl = str(jax.random.key_impl(key)) if _is_key(jnp.asarray(key)) else "threefry2x32"
+    return dict(format=FORMAT, version=VERSION, fingerprint=fp, key_impl=impl)
 
 
 def save(path: Path, meta: dict, carry) -> None:
@@ -201,30 +206,3 @@ def load(path: Path, fp: dict, like):
     except Exception as e:
         raise ValueError(f"checkpoint {path} is unreadable or corrupted: {e}") from None
     return meta, _typed(raw, like, meta["key_impl"])
-
-
-def run_checkpointed(run, proto, flat, lower, upper, args, key, x0, hook, warm,
-                     path: Path, every: int):
-    """Drive ``run`` (the driver's compiled ``_run``) in chunks of ``every`` steps,
-    checkpointing the carry to ``path`` after each."""
-    fp = fingerprint(flat, proto, lower, upper, args, key)
-    meta = dict(format=FORMAT, version=VERSION, fingerprint=fp,
-                key_impl=str(jax.random.key_impl(key)) if _is_key(jnp.asarray(key)) else "threefry2x32")
-    carry, done = None, 0
-    if path.exists():
-        from .driver import _begin
-
-        like = eqx.filter_eval_shape(_begin, proto, flat, lower, upper, args, key, x0, warm)
-        stored, carry = load(path, fp, like)
-        done = int(stored["steps_done"])
-        carry = eqx.tree_at(lambda c: c.steps, carry, jnp.asarray(done, jnp.int32))
-    while True:
-        carry, sol = run(proto, flat, lower, upper, args, key, x0, hook, carry, warm,
-                         jnp.asarray(done + every, jnp.int32))
-        new_done = int(carry.steps)
-        finished = new_done < done + every
-        if new_done != done or not path.exists():
-            save(path, {**meta, "steps_done": new_done}, carry)
-        if finished:
-            return sol
-        done = new_done

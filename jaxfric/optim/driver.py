@@ -20,7 +20,6 @@ in ``args`` (never closures), so new data of the same shapes do not recompile.
 from __future__ import annotations
 
 import contextlib
-import numbers
 from pathlib import Path
 from typing import Any, Callable
 
@@ -31,13 +30,12 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .. import _xla
-from ._base import AbstractIterativeSolver, History, Solution, check_positive_int, count_dtype
-from .chained import AbstractChain
+from . import checkpoint as ckpt
+from ._base import History, Solution, check_positive_int
 from .optx_adapter import OptxMinimiser, as_protocol
-from .problem import _as_float_leaves, _check_output, _Flat, prepare_bounds
+from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
 from .progress import ProgressHook, TqdmProgress, register
 from .sharding import Layout, resolve_devices, shard_keys
-from .swarm import AbstractSwarm
 
 #: Most history entries kept (a longer run keeps every 2nd, 4th, ... step).
 HISTORY_SIZE = 4096
@@ -66,108 +64,10 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
     lower, upper, treedef, shapes = prepare_bounds(bounds, dtype)
     flat = _Flat(fn, treedef, shapes)
     _check_output(flat, lower, args)
-    _check_budget(proto, lower.shape[0])
-    x0 = None if y0 is None else _start(y0, treedef, shapes, lower, upper, proto)
+    check_budget(proto, lower.shape[0])
+    x0 = None if y0 is None else check_start(y0, treedef, shapes, lower, upper,
+                                             proto.population_size())
     return proto, flat, lower, upper, x0
-
-
-def _check_budget(proto: AbstractIterativeSolver, n: int):
-    """The evaluation counter must hold the run's budget (issue 20.3)."""
-    top = int(jnp.iinfo(count_dtype()).max)
-    most = proto.max_evaluations(n)
-    if most is not None and most > top:
-        raise ValueError(
-            f"this run may take {most:,} objective evaluations, more than the {count_dtype()} "
-            f"evaluation counter holds ({top:,}); enable 64-bit counters with "
-            "`with jax.enable_x64(True):` (a float32 search stays float32 with dtype=) "
-            "or lower the budget"
-        )
-
-
-def _start(y0, treedef, shapes, lower, upper, proto):
-    """``y0`` as a flat start ``(D,)``, or for swarms an initial population ``(k, D)``
-    (every leaf with one more leading axis of the same length ``k``)."""
-    y_leaves, y_def = _as_float_leaves(y0, "y0")
-    if y_def != treedef:
-        raise ValueError("y0 must have the same structure and shapes as the bounds")
-    if [a.shape for a in y_leaves] == list(shapes):
-        x0 = np.concatenate([a.ravel() for a in y_leaves])[None]
-    elif all(a.ndim == len(s) + 1 and a.shape[1:] == s for a, s in zip(y_leaves, shapes)) and len(
-        {a.shape[0] for a in y_leaves}
-    ) == 1:
-        k = y_leaves[0].shape[0]
-        x0 = np.concatenate([a.reshape(k, -1) for a in y_leaves], axis=1)
-        agents = _population_size(proto)
-        if agents is None:
-            raise ValueError(
-                "y0 with a leading population axis needs a swarm (PSO, MAPSO, or a chain "
-                "starting with one); this solver takes one start"
-            )
-        if k > agents:
-            raise ValueError(f"y0 holds {k} starts but the swarm has {agents} agents")
-    else:
-        raise ValueError("y0 must have the same structure and shapes as the bounds "
-                         "(or, for swarms, one more leading axis: an initial population)")
-    x0 = jnp.asarray(x0, lower.dtype)
-    if not bool(jnp.all(jnp.isfinite(x0))):
-        raise ValueError("y0 must be finite (found NaN or inf)")
-    outside = np.nonzero(np.asarray(jnp.any((x0 < lower) | (x0 > upper), axis=0)))[0]
-    if outside.size:
-        i = int(outside[0])
-        bad = np.asarray(x0[:, i])
-        v = bad[(bad < float(lower[i])) | (bad > float(upper[i]))][0]
-        raise ValueError(
-            f"y0 lies outside the bounds at {outside.size} parameter(s), first at flat "
-            f"index {i}: {float(v)!r} not in [{float(lower[i])!r}, {float(upper[i])!r}]; "
-            "a start is used as given, never clipped"
-        )
-    return x0[0] if x0.shape[0] == 1 and not _population_size(proto) else x0
-
-
-def _population_size(proto) -> int | None:
-    if isinstance(proto, AbstractSwarm):
-        return proto.num_agents
-    if isinstance(proto, AbstractChain) and isinstance(proto.global_solver, AbstractSwarm):
-        return proto.global_solver.num_agents
-    return None
-
-
-def _check_key(key, name="key", batch=False):
-    """One key (an int seed is accepted, as :func:`jaxfric.identify` does) or, with
-    ``batch``, a non-empty batch of keys; else ``ValueError`` naming the problem."""
-    if key is None:
-        raise ValueError(f"{name} is required: pass jax.random.key(seed) (or an int seed)")
-    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
-        if batch:
-            raise ValueError(f"{name} must be a batch of keys, e.g. "
-                             f"jax.random.split(jax.random.key({int(key)}), 8), not an int")
-        return jax.random.key(int(key))
-    try:
-        k = jnp.asarray(key)
-    except TypeError:
-        raise ValueError(f"{name} must be a JAX PRNG key or an int seed, got "
-                         f"{type(key).__name__}") from None
-    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
-    if not (typed or k.dtype == jnp.uint32):
-        raise ValueError(f"{name} must be a JAX PRNG key (or an int seed), got dtype {k.dtype}")
-    if not typed:
-        if k.ndim == 0 or k.shape[-1] != 2:
-            raise ValueError(
-                f"{name} is a raw uint32 array of shape {k.shape}, but a raw key has 2 words "
-                f"(shape (2,), or (n, 2) for a batch); pass jax.random.key(seed) or an int seed"
-            )
-    key_ndim = k.ndim if typed else k.ndim - 1  # raw uint32 keys carry a trailing axis
-    if not batch and key_ndim != 0:
-        raise ValueError(
-            f"{name} must be one key, got a batch of shape {k.shape}; "
-            "for several runs use minimise_many"
-        )
-    if batch:
-        if key_ndim != 1:
-            raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
-        if k.shape[0] == 0:
-            raise ValueError("keys is empty: pass at least one key")
-    return key
 
 
 # ---------------------------------------------------------------------- progress
@@ -313,6 +213,33 @@ def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
     return proto.continued(state)
 
 
+def _run_checkpointed(run, proto, flat, lower, upper, args, key, x0, hook, warm,
+                      path: Path, every: int):
+    """Drive ``run`` (the compiled :func:`_run`) in chunks of ``every`` steps, saving the
+    carry to ``path`` after each; resume from ``path`` when it exists. A chunked run
+    takes the same steps, in the same order, with the same compiled loop, so it returns
+    exactly what the uninterrupted run returns."""
+    fp = ckpt.fingerprint(flat.fn, (str(flat.treedef), flat.shapes), proto, lower,
+                                upper, args, key)
+    meta = ckpt.header(fp, key)
+    carry, done = None, 0
+    if path.exists():
+        like = eqx.filter_eval_shape(_begin, proto, flat, lower, upper, args, key, x0, warm)
+        stored, carry = ckpt.load(path, fp, like)
+        done = int(stored["steps_done"])
+        carry = eqx.tree_at(lambda c: c.steps, carry, jnp.asarray(done, jnp.int32))
+    while True:
+        carry, sol = run(proto, flat, lower, upper, args, key, x0, hook, carry, warm,
+                         jnp.asarray(done + every, jnp.int32))
+        new_done = int(carry.steps)
+        finished = new_done < done + every
+        if new_done != done or not path.exists():
+            ckpt.save(path, {**meta, "steps_done": new_done}, carry)
+        if finished:
+            return sol
+        done = new_done
+
+
 # ----------------------------------------------------------------------- entries
 def minimise(
     fn: Callable,
@@ -381,7 +308,7 @@ def minimise(
     proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     if warm_start is not None and key is None:
         key = 0  # unused: the warm state carries its own
-    key = _check_key(key)
+    key = check_key(key)
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
     if layout is not None:
@@ -399,9 +326,7 @@ def minimise(
                 proto, flat, lower, upper, args, key, x0, hook, None, warm,
                 jnp.asarray(NO_STOP, jnp.int32))
         else:
-            from .checkpoint import run_checkpointed
-
-            sol = run_checkpointed(
+            sol = _run_checkpointed(
                 _xla.filter_jit(_run, options), proto, flat, lower, upper, args, key, x0,
                 hook, warm, Path(checkpoint), checkpoint_every,
             )
@@ -447,7 +372,7 @@ def minimise_many(
     mapped (benchmarks/results/peers.md §1).
     """
     proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
-    keys = _check_key(keys, "keys", batch=True)
+    keys = check_key(keys, "keys", batch=True)
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
     mode = _batching(batching, proto, layout)

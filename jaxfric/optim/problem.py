@@ -1,6 +1,7 @@
 """What a problem is made of, checked before anything is traced: bounds (pytrees, or
 scipy's sequence of ``(lo, hi)`` pairs / ``scipy.optimize.Bounds``), the objective's
-output, starts and keys. Used by the driver (:mod:`jaxfric.optim.driver`)."""
+output, starts, keys and the evaluation budget. The one home of these checks: the
+driver (:mod:`jaxfric.optim.driver`) and ask/tell call them."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ._base import count_dtype
 from .sharding import Layout
 
 
@@ -226,3 +228,92 @@ def _check_output(flat, lower, args):
         _CHECKED[key] = True
 
 
+def check_budget(solver, n: int):
+    """The evaluation counter must hold the budget of ``solver``'s run on ``n`` parameters."""
+    top = int(jnp.iinfo(count_dtype()).max)
+    most = solver.max_evaluations(n)
+    if most is not None and most > top:
+        raise ValueError(
+            f"this run may take {most:,} objective evaluations, more than the {count_dtype()} "
+            f"evaluation counter holds ({top:,}); enable 64-bit counters with "
+            "`with jax.enable_x64(True):` (a float32 search stays float32 with dtype=) "
+            "or lower the budget"
+        )
+
+
+def check_start(y0, treedef, shapes, lower, upper, agents: int | None):
+    """``y0`` as a flat start ``(D,)``, or for a population solver of ``agents`` agents
+    an initial population ``(k, D)`` (every leaf with one more leading axis of the same
+    length ``k <= agents``)."""
+    y_leaves, y_def = _as_float_leaves(y0, "y0")
+    if y_def != treedef:
+        raise ValueError("y0 must have the same structure and shapes as the bounds")
+    if [a.shape for a in y_leaves] == list(shapes):
+        x0 = np.concatenate([a.ravel() for a in y_leaves])[None]
+    elif all(a.ndim == len(s) + 1 and a.shape[1:] == s for a, s in zip(y_leaves, shapes)) and len(
+        {a.shape[0] for a in y_leaves}
+    ) == 1:
+        k = y_leaves[0].shape[0]
+        x0 = np.concatenate([a.reshape(k, -1) for a in y_leaves], axis=1)
+        if agents is None:
+            raise ValueError(
+                "y0 with a leading population axis needs a swarm (PSO, MAPSO, or a chain "
+                "starting with one); this solver takes one start"
+            )
+        if k > agents:
+            raise ValueError(f"y0 holds {k} starts but the swarm has {agents} agents")
+    else:
+        raise ValueError("y0 must have the same structure and shapes as the bounds "
+                         "(or, for swarms, one more leading axis: an initial population)")
+    x0 = jnp.asarray(x0, lower.dtype)
+    if not bool(jnp.all(jnp.isfinite(x0))):
+        raise ValueError("y0 must be finite (found NaN or inf)")
+    outside = np.nonzero(np.asarray(jnp.any((x0 < lower) | (x0 > upper), axis=0)))[0]
+    if outside.size:
+        i = int(outside[0])
+        bad = np.asarray(x0[:, i])
+        v = bad[(bad < float(lower[i])) | (bad > float(upper[i]))][0]
+        raise ValueError(
+            f"y0 lies outside the bounds at {outside.size} parameter(s), first at flat "
+            f"index {i}: {float(v)!r} not in [{float(lower[i])!r}, {float(upper[i])!r}]; "
+            "a start is used as given, never clipped"
+        )
+    return x0[0] if x0.shape[0] == 1 and not agents else x0
+
+
+def check_key(key, name="key", batch=False):
+    """One key (an int seed is accepted, as :func:`jaxfric.identify` does) or, with
+    ``batch``, a non-empty batch of keys; else ``ValueError`` naming the problem."""
+    if key is None:
+        raise ValueError(f"{name} is required: pass jax.random.key(seed) (or an int seed)")
+    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
+        if batch:
+            raise ValueError(f"{name} must be a batch of keys, e.g. "
+                             f"jax.random.split(jax.random.key({int(key)}), 8), not an int")
+        return jax.random.key(int(key))
+    try:
+        k = jnp.asarray(key)
+    except TypeError:
+        raise ValueError(f"{name} must be a JAX PRNG key or an int seed, got "
+                         f"{type(key).__name__}") from None
+    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
+    if not (typed or k.dtype == jnp.uint32):
+        raise ValueError(f"{name} must be a JAX PRNG key (or an int seed), got dtype {k.dtype}")
+    if not typed:
+        if k.ndim == 0 or k.shape[-1] != 2:
+            raise ValueError(
+                f"{name} is a raw uint32 array of shape {k.shape}, but a raw key has 2 words "
+                f"(shape (2,), or (n, 2) for a batch); pass jax.random.key(seed) or an int seed"
+            )
+    key_ndim = k.ndim if typed else k.ndim - 1  # raw uint32 keys carry a trailing axis
+    if not batch and key_ndim != 0:
+        raise ValueError(
+            f"{name} must be one key, got a batch of shape {k.shape}; "
+            "for several runs use minimise_many"
+        )
+    if batch:
+        if key_ndim != 1:
+            raise ValueError("keys must be a batch of keys, e.g. jax.random.split(key, 30)")
+        if k.shape[0] == 0:
+            raise ValueError("keys is empty: pass at least one key")
+    return key

@@ -61,6 +61,7 @@ from ._base import (
     result_from_f,
     safe_value,
 )
+from .problem import check_key
 
 Rounds = Generator[Any, Any, Any]
 
@@ -371,8 +372,6 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
         """Start a run driven from Python. ``lower``/``upper``: 1-D bounds (their dtype
         is the search dtype, as in :func:`jaxfric.minimise`); ``key``: a PRNG key or an
         int seed; ``x0``: an optional start (swarms: or an initial population)."""
-        from .driver import _check_key  # the driver imports the solvers
-
         self.check()
         self.check_ask_tell()
         lower, upper = jnp.asarray(lower), jnp.asarray(upper)
@@ -384,7 +383,7 @@ class AbstractAskTellSolver(AbstractIterativeSolver):
         if not jnp.issubdtype(lower.dtype, jnp.floating):
             lower, upper = lower.astype(float), upper.astype(float)
         upper = upper.astype(lower.dtype)
-        key = _check_key(key)
+        key = check_key(key)
         x0 = None if x0 is None else jnp.asarray(x0, lower.dtype)
         return self._advance(AskTellState(None, lower, upper, key, x0))
 

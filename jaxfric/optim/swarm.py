@@ -134,6 +134,9 @@ class AbstractSwarm(AbstractGenerational):
     def num_agents(self) -> int:
         raise NotImplementedError
 
+    def population_size(self) -> int:
+        return self.num_agents
+
     def vmax(self, lower, upper):
         return self.vmax_fraction * (upper - lower)
 
