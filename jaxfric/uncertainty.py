@@ -356,7 +356,7 @@ def _coords(model):
 def _friction_residuals(fit, data):
     """``(r(θ) -> (n,), segments)`` over the training samples the fit was made on."""
     from .fit import predict
-    from .identification._data import RecordSet, as_record, as_records
+    from .identification._data import RecordSet, as_records
 
     model = fit.model
     if isinstance(data, RecordSet):
@@ -364,10 +364,10 @@ def _friction_residuals(fit, data):
     elif isinstance(data, (list, tuple)) and data and not _is_triplet(data):
         recs = list(as_records(None, list(data), None).train_records)
     else:
-        recs = [as_record(data, train=fit.n_train)]
+        recs = [_one_record(data, fit.n_train)]
     parts = []
     for r in recs:
-        x = model.inputs_from(r, r.n_samples)
+        x = model.inputs_from(r, r.velocity.shape[0])
         parts.append((np.asarray(r.velocity), np.asarray(r.friction)[: r.n_train], r.n_train,
                       None if x is None else np.asarray(x)))
     scalers = (fit.velocity_scaler, fit.friction_scaler)
@@ -378,6 +378,33 @@ def _friction_residuals(fit, data):
         return jnp.concatenate(out)
 
     return resid, tuple(p[2] for p in parts), "friction [N]"
+
+
+def _one_record(data, n_train: int):
+    """The record a single-record fit was trained on, with its first ``n_train`` samples
+    as the training window (a ``(velocity, friction, dt)`` tuple or a FrictionData)."""
+    from .records import FrictionData, as_channel
+
+    if _is_triplet(data):
+        v, f, _ = data
+        rec = None
+    elif isinstance(data, FrictionData):
+        v, f, rec = data.velocity, data.friction, data
+    else:
+        raise ValueError("data must be the fit's training record (FrictionData or (velocity, friction, dt)), "
+                         f"a list of training records, or a RecordSet; got {type(data).__name__}")
+    v, f = as_channel("velocity", v), as_channel("friction", f)
+    if v.shape != f.shape or v.shape[0] < n_train:
+        raise ValueError(f"the record ({v.shape[0]} velocity, {f.shape[0]} friction samples) does not hold "
+                         f"the fit's {n_train} training samples")
+
+    class _Rec:  # the few fields the residuals read; channels (p1, p2) from the record
+        def __getattr__(self, name):
+            return getattr(rec, name)
+
+    out = _Rec() if rec is not None else type("_Rec", (), {})()
+    out.velocity, out.friction, out.n_train = v, f, int(n_train)
+    return out
 
 
 def _is_triplet(data) -> bool:

@@ -1,0 +1,262 @@
+"""Parameter uncertainty (jaxfric.uncertainty): estimators against independent
+references, calibration over noisy replicates on the rig simulator's velocity, an
+unidentifiable parameter that must not look confident, and the Fit API / file round trip."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from jaxfric import Fit, load_fit, models
+from jaxfric.uncertainty import (ParameterUncertainty, andrews_bandwidth, block_bootstrap_covariance,
+                                 hac_covariance, jacobian_covariance, parameter_uncertainty,
+                                 prediction_interval)
+
+FC, SIGMA2 = 300.0, 1.5e4          # true Coulomb level [N] and viscous coefficient [N s/m]
+NOISE = 20.0                       # measurement noise [N]
+REPLICATES = 400
+
+
+@pytest.fixture(scope="module")
+def rig_velocity(rig_record):
+    return np.asarray(rig_record.velocity, np.float64)
+
+
+def _fit(model, theta, v, dt, n_train=None, **kw):
+    n = v.size
+    return Fit(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None, friction_scaler=None,
+               dt=dt, n_train=n if n_train is None else n_train, n_samples=n, metrics={}, **kw)
+
+
+def _ar1(key, shape, rho, sd):
+    """AR(1) noise of marginal standard deviation ``sd`` along the last axis."""
+    e = jax.random.normal(key, shape) * sd * np.sqrt(1 - rho**2)
+
+    def step(prev, x):
+        cur = rho * prev + x
+        return cur, cur
+
+    first = jax.random.normal(jax.random.fold_in(key, 1), shape[:-1]) * sd
+    _, out = jax.lax.scan(step, first, jnp.moveaxis(e, -1, 0))
+    return jnp.moveaxis(out, 0, -1)
+
+
+# ------------------------------------------------------------------- references
+def test_jacobian_covariance_is_ols_covariance_for_a_linear_model(rig_velocity):
+    """Coulomb+viscous is linear in (Fc, sigma2): the physical covariance must equal the
+    textbook OLS s²(XᵀX)⁻¹, whatever the log10 search coordinate in between."""
+    with jax.enable_x64(True):
+        model = models.Coulomb()
+        v = rig_velocity
+        rng = np.random.default_rng(0)
+        f = FC * np.tanh(v / model.v_eps) + SIGMA2 * v + NOISE * rng.standard_normal(v.size)
+        ls = model.fit_least_squares(v, f)
+        theta = model.from_physical(**ls)
+        fit = _fit(model, theta, v, 1 / 128)
+        u = parameter_uncertainty(fit, (v, f, 1 / 128), method="jacobian")
+    x = np.stack([np.tanh(v / model.v_eps), v], axis=1)
+    beta = np.linalg.lstsq(x, f, rcond=None)[0]
+    r = f - x @ beta
+    ref = r @ r / (v.size - 2) * np.linalg.inv(x.T @ x)
+    np.testing.assert_allclose(u.estimate, beta, rtol=1e-10)
+    np.testing.assert_allclose(u.cov["jacobian"], ref, rtol=1e-6)
+    lo, hi = u.intervals(0.95, "jacobian")["Fc"]
+    t = stats.t.ppf(0.975, v.size - 2)
+    np.testing.assert_allclose([lo, hi], beta[0] + np.array([-1, 1]) * t * np.sqrt(ref[0, 0]), rtol=1e-8)
+
+
+def test_hac_matches_the_newey_west_definition():
+    """FFT lag sums against the definition written out as a loop over lags."""
+    rng = np.random.default_rng(1)
+    n, p, L = 300, 3, 7.0
+    jac = rng.standard_normal((n, p))
+    r = np.convolve(rng.standard_normal(n + 10), np.ones(5) / 5, "same")[:n]
+    def long_run(g):
+        omega = g.T @ g
+        for lag in range(1, int(L) + 1):
+            gam = g[lag:].T @ g[:-lag]
+            omega += (1 - lag / (L + 1)) * (gam + gam.T)
+        return omega
+
+    g = jac * r[:, None]
+    a = np.linalg.inv(jac.T @ jac)
+    ref = a @ long_run(g) @ a * n / (n - p)
+    np.testing.assert_allclose(hac_covariance(jac, r, L), ref, rtol=1e-9)
+    # two independent records: no lag crosses the boundary
+    ref2 = a @ (long_run(g[:100]) + long_run(g[100:])) @ a * n / (n - p)
+    np.testing.assert_allclose(hac_covariance(jac, r, L, segments=(100, 200)), ref2, rtol=1e-9)
+
+
+def test_bandwidth_grows_with_correlation_and_bootstrap_is_keyed():
+    rng = np.random.default_rng(2)
+    n = 2000
+    jac = np.ones((n, 1))
+    white = rng.standard_normal(n)
+    ar = np.asarray(_ar1(jax.random.key(0), (n,), 0.9, 1.0))
+    assert andrews_bandwidth(jac, white) < 3 < 10 < andrews_bandwidth(jac, ar)
+    c1 = block_bootstrap_covariance(jac, ar, 0, 20, replicates=200)
+    c2 = block_bootstrap_covariance(jac, ar, 0, 20, replicates=200)
+    np.testing.assert_array_equal(c1, c2)
+    # the block bootstrap of a mean of AR(1) noise: variance ≈ (1+ρ)/(1-ρ) σ²/n (long-run)
+    assert 0.5 < c1[0, 0] / (19.0 / n) < 1.6
+
+
+# ------------------------------------------------------------------- calibration
+def _coulomb_replicates(v, noise):
+    """Least-squares fits of Coulomb+viscous on ``REPLICATES`` noisy records (vmapped),
+    returning (theta (R, 2), residuals (R, n), Jacobians (R, n, 2))."""
+    model = models.Coulomb()
+    f_true = FC * np.tanh(v / model.v_eps) + SIGMA2 * v
+    x = jnp.stack([jnp.tanh(v / model.v_eps), v], axis=1)
+    beta = jnp.linalg.lstsq(x, (f_true[None, :] + noise).T)[0].T          # (R, 2) physical
+    theta = jax.vmap(lambda b: model.from_physical(Fc=b[0], sigma2=b[1]))(beta)
+
+    def resid(th, y):
+        return model.simulate(th, v) - y
+
+    y = f_true[None, :] + noise
+    r = jax.vmap(resid)(theta, y)
+    jac = jax.vmap(jax.jacfwd(resid))(theta, y)
+    return model, np.asarray(theta), np.asarray(r), np.asarray(jac)
+
+
+def _coverage(model, theta, r, jac, method, truth):
+    """Fraction of replicates whose 95 % interval holds the truth, per search coordinate."""
+    n, p = jac.shape[1:]
+    t = stats.t.ppf(0.975, n - p)
+    hits = np.zeros(p)
+    for th, ri, ji in zip(theta, r, jac):
+        if method == "jacobian":
+            cov = jacobian_covariance(ji, ri)[0]
+        else:
+            cov = hac_covariance(ji, ri, andrews_bandwidth(ji, ri))
+        se = np.sqrt(np.diag(cov))
+        hits += np.abs(th - truth) <= t * se
+    return hits / len(theta)
+
+
+def test_intervals_cover_the_truth_with_white_noise(rig_velocity):
+    with jax.enable_x64(True):
+        v = jnp.asarray(rig_velocity)
+        noise = NOISE * jax.random.normal(jax.random.key(3), (REPLICATES, v.size))
+        model, theta, r, jac = _coulomb_replicates(v, noise)
+        truth = np.asarray(model.from_physical(Fc=FC, sigma2=SIGMA2))
+    for method in ("jacobian", "hac"):
+        cov = _coverage(model, theta, r, jac, method, truth)
+        assert np.all((0.85 <= cov) & (cov <= 0.99)), (method, cov)
+
+
+def test_correlated_noise_needs_the_newey_west_intervals(rig_velocity):
+    """AR(1) noise (ρ = 0.9): the independent-residual intervals are far too narrow,
+    Newey–West's hold 85–99 % of the truths."""
+    with jax.enable_x64(True):
+        v = jnp.asarray(rig_velocity)
+        noise = _ar1(jax.random.key(4), (REPLICATES, v.size), 0.9, NOISE)
+        model, theta, r, jac = _coulomb_replicates(v, noise)
+        truth = np.asarray(model.from_physical(Fc=FC, sigma2=SIGMA2))
+    naive = _coverage(model, theta, r, jac, "jacobian", truth)
+    hac = _coverage(model, theta, r, jac, "hac", truth)
+    assert np.all(naive < 0.75), naive
+    assert np.all((0.85 <= hac) & (hac <= 0.99)), hac
+
+
+def test_the_public_path_gives_the_replicate_intervals(rig_velocity):
+    """parameter_uncertainty(fit, data) on one replicate equals the estimators above."""
+    with jax.enable_x64(True):
+        v = jnp.asarray(rig_velocity)
+        noise = _ar1(jax.random.key(5), (1, v.size), 0.9, NOISE)
+        model, theta, r, jac = _coulomb_replicates(v, noise)
+        f = np.asarray(model.simulate(jnp.asarray(theta[0]), v)) - r[0]   # r = prediction - data
+        fit = _fit(model, theta[0], rig_velocity, 1 / 128)
+        u = parameter_uncertainty(fit, (rig_velocity, f, 1 / 128), method=("hac", "jacobian"))
+    bw = andrews_bandwidth(jac[0], r[0])
+    np.testing.assert_allclose(u.cov_theta["hac"], hac_covariance(jac[0], r[0], bw), rtol=1e-8)
+    np.testing.assert_allclose(u.bandwidth, bw, rtol=1e-12)
+    assert u.default == "hac" and u.lag1 > 0.8
+
+
+# ------------------------------------------------------------------- not identifiable
+def test_stiffness_without_presliding_is_not_a_confident_number():
+    """LuGre on a record that never slows down (|v| >= 5 mm/s except at sharp reversals):
+    σ0 is not determined; its interval must cover the box (or be strongly correlated)."""
+    with jax.enable_x64(True):
+        dt = 1e-3
+        t = np.arange(4000) * dt
+        v = 0.05 * np.sign(np.sin(2 * np.pi * 1.0 * t)) * (1 + 0.5 * np.abs(np.sin(2 * np.pi * 0.3 * t)))
+        model = models.LuGre()
+        box = model.search_box(None, v, 50 * np.sign(v) + 300 * v)
+        theta = model.from_physical(sigma0=1e7, sigma1=300.0, sigma2=300.0, Fc=50.0, Fs=60.0, vs=0.01)
+        f = np.asarray(model.simulate(theta, v, dt)) + np.random.default_rng(0).standard_normal(v.size)
+        fit = _fit(model, theta, v, dt, box=box)
+        u = parameter_uncertainty(fit, (v, f, dt), method=("hac", "jacobian"))
+    i = u.names.index("sigma0")
+    loose = set(u.covers_box()) | {a for a, b, _ in u.strongly_correlated(0.95)} \
+        | {b for a, b, _ in u.strongly_correlated(0.95)}
+    assert "sigma0" in loose, "\n".join(u.format())
+    # and the well-excited sliding parameters are confident
+    se = u.stderr()
+    assert se["Fc"] < 0.05 * 50.0 and se["sigma2"] < 0.1 * 300.0, se
+    assert u.estimate[i] == pytest.approx(1e7)
+
+
+def test_singular_direction_is_regularised_not_dropped():
+    """Two identical columns: a pseudo-inverse would give them a finite, confident
+    variance; the regularised inverse gives a huge one and correlation −1."""
+    rng = np.random.default_rng(6)
+    a = rng.standard_normal(500)
+    jac = np.stack([a, a, rng.standard_normal(500)], axis=1)
+    cov, s2, rank = jacobian_covariance(jac, rng.standard_normal(500))
+    assert rank == 2
+    assert cov[0, 0] > 1e6 * cov[2, 2]
+    assert cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1]) < -0.999
+
+
+# ------------------------------------------------------------------- API and files
+def test_fit_api_summary_and_round_trip(tmp_path, rig_velocity):
+    with jax.enable_x64(True):
+        model = models.Coulomb()
+        v = rig_velocity
+        f = FC * np.tanh(v / model.v_eps) + SIGMA2 * v + NOISE * np.random.default_rng(7).standard_normal(v.size)
+        fit = _fit(model, model.from_physical(**model.fit_least_squares(v, f)), v, 1 / 128, n_train=1600)
+        fit._uncertainty = parameter_uncertainty(fit, (v, f, 1 / 128), method=("hac", "jacobian",
+                                                                                   "block_bootstrap"), key=0)
+        assert set(fit.stderr) == {"Fc", "sigma2"}
+        iv = fit.intervals(0.95)
+        assert iv["Fc"][0] < FC < iv["Fc"][1]
+        assert fit.intervals(0.99)["Fc"][0] < iv["Fc"][0]
+        assert fit.correlation.shape == (2, 2) and fit.correlation[0, 0] == pytest.approx(1.0)
+        text = fit.summary()
+        assert "uncertainty (hac" in text and "se jacobian" in text
+        fit.save(tmp_path / "f.npz")
+        back = load_fit(tmp_path / "f.npz")
+        assert isinstance(back.uncertainty, ParameterUncertainty)
+        assert back.intervals(0.9) == pytest.approx(fit.intervals(0.9))
+        np.testing.assert_allclose(back.uncertainty.cov["block_bootstrap"],
+                                   fit.uncertainty.cov["block_bootstrap"])
+        assert back.summary() == text
+        # prediction band on held-out samples (noise + parameter part)
+        y, lo, hi = prediction_interval(fit, v[1600:], 0.95)
+        inside = np.mean((f[1600:] >= lo) & (f[1600:] <= hi))
+        assert 0.9 < inside <= 1.0
+        with pytest.raises(ValueError, match="level"):
+            fit.intervals(95)
+        with pytest.raises(ValueError, match="no 'nope' covariance"):
+            fit.intervals(0.95, "nope")
+
+
+def test_bad_requests_fail_clearly(rig_velocity):
+    model = models.Coulomb()
+    fit = _fit(model, [100.0, 3.0], rig_velocity, 1 / 128)
+    data = (rig_velocity, np.ones_like(rig_velocity), 1 / 128)
+    with pytest.raises(ValueError, match="method must be"):
+        parameter_uncertainty(fit, data, method="bayes")
+    with pytest.raises(ValueError, match="needs key"):
+        parameter_uncertainty(fit, data, method="block_bootstrap")
+    with pytest.raises(ValueError, match="no parameter uncertainty"):
+        fit.stderr
+    elman = Fit(model=models.Elman(neurons=2), theta=np.zeros(models.Elman(neurons=2).num_params),
+                velocity_scaler=models.Scaler(lo=-1.0, hi=1.0), friction_scaler=models.Scaler(lo=-1.0, hi=1.0),
+                dt=0.01, n_train=10, n_samples=20, metrics={})
+    with pytest.raises(ValueError, match="black-box"):
+        parameter_uncertainty(elman, data)
