@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ..fit import Fit, load_fit, model_config, model_name
+from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
 from ..identification._api import _as_key, _history, _key_record, _stages, default_solver, resolve_model
 from ..identification._objective import search_dtype
 from ..identification._timing import Stopwatch
@@ -291,6 +291,7 @@ class MotionFit(Fit):
                 lines.append(f"{w:<13}{m['rmse_mm']:>11.4g}{m['fit_percent']:>9.2f}{m['max_abs_mm']:>10.4g}")
         if not self.model.needs_scaling:
             lines.append("params: " + ", ".join(f"{k}={float(v):.4g}" for k, v in self.params.items()))
+        lines += uncertainty_lines(self)
         return "\n".join(lines)
 
     def __repr__(self) -> str:
