@@ -411,6 +411,10 @@ def _is_triplet(data) -> bool:
     return isinstance(data, tuple) and len(data) == 3 and np.ndim(data[2]) == 0
 
 
+#: A motion fit's mechanics coordinates: search name -> (physical name, kind).
+_MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v0": ("v0", "linear")}
+
+
 def _motion_residuals(fit, data):
     """Simulation residuals of an :func:`jaxfric.identify_motion` fit over its training
     window (free-run position and/or velocity, each divided by its standard deviation
@@ -425,6 +429,10 @@ def _motion_residuals(fit, data):
     n = fit.n_train
     names = list(mech.get("search_names") or [])
     extra = names[fit.model.num_params:]
+    unknown = [e for e in extra if e not in _MECHANICS]
+    if unknown or "y" not in mech or len(mech["y"]) != len(names):
+        raise ValueError(f"motion fit with search coordinates {names} not understood by the "
+                         f"uncertainty code (mechanics it knows: {sorted(_MECHANICS)})")
     force = np.asarray(data.net_force[:n])
     x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
     error, horizon = mech.get("error", "position"), mech.get("horizon")
@@ -467,10 +475,8 @@ def _motion_residuals(fit, data):
         unit = f"{int(horizon)}-step position [m]"
     segs = (n,) if error != "both" or horizon is not None else (n, n)
     y0 = np.asarray(mech["y"], np.float64)
-    kinds = tuple(c[2] for c in _coords(fit.model)) + tuple(
-        {"log10_mass": "log10", "offset": "linear", "v0": "linear"}[e] for e in extra)
-    phys = tuple(c[1] for c in _coords(fit.model)) + tuple(
-        {"log10_mass": "mass", "offset": "offset", "v0": "v0"}[e] for e in extra)
+    kinds = tuple(c[2] for c in _coords(fit.model)) + tuple(_MECHANICS[e][1] for e in extra)
+    phys = tuple(c[1] for c in _coords(fit.model)) + tuple(_MECHANICS[e][0] for e in extra)
     lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
     if extra:
         sb = mech.get("search_bounds")

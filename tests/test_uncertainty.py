@@ -260,3 +260,24 @@ def test_bad_requests_fail_clearly(rig_velocity):
                 dt=0.01, n_train=10, n_samples=20, metrics={})
     with pytest.raises(ValueError, match="black-box"):
         parameter_uncertainty(elman, data)
+
+
+def test_identify_attaches_uncertainty_and_plausibility(rig_velocity, tmp_path):
+    """The hook: a physical identify returns a fit with intervals (computed on first
+    use), the plausibility diagnostics, and both in the saved file."""
+    from jaxfric import identify
+    from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
+
+    with jax.enable_x64(True):
+        model = models.Coulomb()
+        v = rig_velocity
+        f = FC * np.tanh(v / model.v_eps) + SIGMA2 * v + NOISE * np.random.default_rng(8).standard_normal(v.size)
+        solver = MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=5),
+                           nelder_mead=NelderMead(max_steps=200, max_evals=200))
+        fit = identify(model, (v, f, 1 / 128), key=0, solver=solver)
+        assert fit.diagnostics["implausible"] == []
+        assert fit._uncertainty is None          # not computed until asked
+        iv = fit.intervals()
+        assert iv["Fc"][0] < FC < iv["Fc"][1]
+        fit.save(tmp_path / "f.npz")
+        assert load_fit(tmp_path / "f.npz").intervals() == pytest.approx(iv)
