@@ -39,6 +39,7 @@ from .fit import Fit, unidentifiable_names
 from .files import TEMP_SUFFIX, atomic_write, atomic_write_bytes, atomic_write_text, jsonable, write_json
 from .metrics import METRIC_FORMULAS, friction_metrics
 from .records import FrictionData
+from .uncertainty import report_markdown, report_summary
 
 __all__ = [
     "FIGURES",
@@ -351,6 +352,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
                                "on_bound": _on_bound(fits[r["name"]]),
                                "unidentifiable": list(fits[r["name"]].diagnostics.get("unidentifiable", [])),
                                "ensemble": _ensemble(fits[r["name"]]),
+                               "uncertainty": jsonable(report_summary(fits[r["name"]], data), finite=True),
                                "record_figures": record_figs.get(r["name"], {}),
                                "fit": fit_dict(fits[r["name"]])} for r in rows},
         "figures": figs,
@@ -436,6 +438,7 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
             L += ["", f"**On a bound:** {d['message']}."]
         for text in m["unidentifiable"]:
             L += ["", f"**Not identifiable from these data (its value is physically meaningless):** {text}"]
+        L += report_markdown(m.get("uncertainty"))
         e = m["ensemble"]
         if e:
             vm = [x for x in e.get("valid_mse_percent", []) if x is not None]

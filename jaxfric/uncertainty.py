@@ -629,3 +629,74 @@ def assess_fit(fit, data) -> None:
     fit.diagnostics["implausible"] = [f.to_json() for f in found]
     warn_implausible(fit.model, found, stacklevel=4)
     fit._training_data = data
+
+
+# ----------------------------------------------------------------------- report
+def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
+    """What report.md and results.json show of a fit's uncertainty: the parameter table,
+    strongly correlated pairs, the plausibility warnings and, for a force-balance fit on
+    one split record ``data``, the prediction band's measured coverage on the training
+    and validation windows. ``None`` for a fit without uncertainty or warnings."""
+    u = None if fit.model.needs_scaling else fit.uncertainty
+    implausible = list(fit.diagnostics.get("implausible", []))
+    if u is None and not implausible:
+        return None
+    out: dict[str, Any] = {"level": level, "implausible": implausible}
+    if u is not None:
+        out.update(method=u.default, residual=u.residual, n=u.n, lag1=u.lag1, bandwidth=u.bandwidth,
+                   rank=u.rank, table=u.table(level), correlated=[list(x) for x in u.strongly_correlated()],
+                   error=fit.diagnostics.get("uncertainty_error"))
+        if "motion" not in fit.settings and getattr(data, "velocity", None) is not None \
+                and len(data.velocity) == fit.n_samples:
+            try:
+                inputs = fit.model.inputs_from(data, len(data.velocity))
+                y, lo, hi = prediction_interval(fit, data.velocity, level, inputs=inputs)
+            except ValueError:
+                y = None
+            if y is not None:
+                f, n = np.asarray(data.friction), fit.n_train
+                out["band"] = {"train": coverage(f[:n], lo[:n], hi[:n]),
+                               "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None,
+                               "mean_half_width_N": float(np.mean(hi - lo) / 2)}
+    return out
+
+
+def _g(x, fmt: str = ".3g") -> str:
+    """A number of a JSON summary (``"inf"`` text for non-finite ones, ``None``: ``-``)."""
+    if x is None:
+        return "-"
+    try:
+        return format(float(x), fmt)
+    except (TypeError, ValueError):
+        return str(x)
+
+
+def report_markdown(summary: dict | None) -> list[str]:
+    """Markdown lines of :func:`report_summary` for a model's section of report.md."""
+    if not summary:
+        return []
+    L: list[str] = []
+    if summary.get("table"):
+        lvl = f"{summary['level']:.0%}"
+        L += ["", f"Parameter uncertainty ({lvl} intervals, Newey–West covariance of the {summary['n']} "
+              f"training residuals in {summary['residual']}, lag-1 autocorrelation {summary['lag1']:.2f}; "
+              "see docs/uncertainty.md):", "",
+              f"| parameter | estimate | se (Newey–West) | se (independent residuals) | {lvl} interval | |",
+              "|---|---|---|---|---|---|"]
+        for row in summary["table"]:
+            L.append(f"| {row['name']} | {_g(row['estimate'], '.5g')} | {_g(row.get('se_hac'))} | "
+                     f"{_g(row.get('se_jacobian'))} | [{_g(row['low'], '.4g')}, {_g(row['high'], '.4g')}] | "
+                     + ("covers the search box: **not determined by the data**" if row["covers_box"] else "")
+                     + " |")
+        for a, b, r in summary.get("correlated", []):
+            L += ["", f"corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each."]
+        band = summary.get("band")
+        if band:
+            cov = [f"{band['train']:.1%} of the training samples"]
+            if band.get("valid") is not None:
+                cov.append(f"{band['valid']:.1%} of the validation samples")
+            L += ["", f"{lvl} prediction band (parameter covariance plus the training residual variance, "
+                  f"mean half-width {band['mean_half_width_N']:.3g} N) holds " + " and ".join(cov) + "."]
+    for d in summary.get("implausible", []):
+        L += ["", f"**Physically implausible ({d['rule']}):** {d['message']}."]
+    return L

@@ -1,0 +1,41 @@
+"""report.md / results.json show each physical fit's intervals, correlations, the
+prediction band with its measured coverage, and the plausibility warnings."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from jaxfric import Fit, FrictionData, models, report
+from jaxfric.plausibility import PlausibilityWarning
+from jaxfric.uncertainty import assess_fit
+
+
+def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
+    with jax.enable_x64(True):
+        dt, n = 1e-3, 3000
+        t = np.arange(n) * dt
+        v = 0.2 * np.clip(4 * np.sin(2 * np.pi * 0.5 * t), -1, 1)
+        rng = np.random.default_rng(0)
+        coul = models.Coulomb()
+        f = 20 * np.tanh(v / coul.v_eps) + 200 * v + rng.standard_normal(n)
+        data = FrictionData.from_arrays(v, f, dt, 0.8)
+        good = Fit(model=coul, theta=np.asarray(coul.from_physical(**coul.fit_least_squares(v[:2400], f[:2400]))),
+                   velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400, n_samples=n, metrics={})
+        strib = models.Stribeck()
+        bad = Fit(model=strib, theta=np.asarray(strib.from_physical(Fc=20.0, Fs=80.0, vs=1e-4, sigma2=200.0)),
+                  velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400, n_samples=n, metrics={})
+        assess_fit(good, data)
+        with pytest.warns(PlausibilityWarning, match="Stribeck peak"):
+            assess_fit(bad, data)
+        report.write_report(tmp_path, data, {"coulomb": good, "stribeck": bad}, title="t", save_models=False)
+    md = (tmp_path / "report.md").read_text()
+    res = json.loads((tmp_path / "results.json").read_text())["models"]
+    assert "Parameter uncertainty (95% intervals" in md and "se (Newey–West)" in md
+    band = res["coulomb"]["uncertainty"]["band"]
+    assert 0.85 < band["valid"] <= 1.0 and 0.85 < band["train"] <= 1.0
+    assert f"holds {band['train']:.1%} of the training samples" in md
+    assert "**Physically implausible (stribeck_spike):**" in md
+    assert res["stribeck"]["uncertainty"]["implausible"][0]["name"] == "Fs"
+    assert res["coulomb"]["fit"]["uncertainty"]["names"] == ["Fc", "sigma2"]
