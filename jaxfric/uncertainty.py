@@ -700,3 +700,17 @@ def report_markdown(summary: dict | None) -> list[str]:
     for d in summary.get("implausible", []):
         L += ["", f"**Physically implausible ({d['rule']}):** {d['message']}."]
     return L
+
+
+def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
+    """The command line's short account of a physical fit: one line of intervals, and a
+    line per strongly correlated pair (nothing for a network or a fit without them)."""
+    u = None if fit.model.needs_scaling else fit.uncertainty
+    if u is None:
+        return []
+    loose = set(u.covers_box(level))
+    parts = [f"{k} {float(u.estimate[i]):.4g} [{lo:.3g}, {hi:.3g}]" + (" (not determined)" if k in loose else "")
+             for i, (k, (lo, hi)) in enumerate(u.intervals(level).items())]
+    lines = [f"  {level:.0%} intervals ({u.default}): " + ", ".join(parts)]
+    lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
+    return lines

@@ -39,3 +39,20 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
     assert "**Physically implausible (stribeck_spike):**" in md
     assert res["stribeck"]["uncertainty"]["implausible"][0]["name"] == "Fs"
     assert res["coulomb"]["fit"]["uncertainty"]["names"] == ["Fc", "sigma2"]
+
+
+def test_cli_prints_the_intervals(tmp_path, monkeypatch, capsys):
+    from jaxfric.cli import main
+
+    p = tmp_path / "pairs.csv"
+    t = np.arange(300) / 100.0
+    v = 0.01 * np.sin(2 * np.pi * 0.5 * t)
+    f = 30 * np.tanh(v / 1e-4) + 500 * v + np.random.default_rng(1).standard_normal(t.size)
+    p.write_text("t,v,F\n" + "\n".join(f"{a},{b},{c}" for a, b, c in zip(t, v, f)))
+    monkeypatch.chdir(tmp_path)
+    assert main(["identify", str(p), "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
+                 "--model", "coulomb", "--quick", "--no-cache", "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr()
+    line = next(s for s in (out.out + out.err).splitlines() if "95% intervals (hac)" in s)
+    assert "Fc " in line and "sigma2 " in line
+    assert "Parameter uncertainty" in (tmp_path / "r" / "report.md").read_text()

@@ -217,6 +217,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
     """
     from jaxfric.identification import BoundWarning
     from jaxfric.identification._diagnostics import bound_message
+    from jaxfric.uncertainty import cli_lines
 
     names = check_models(args.models, getattr(args, "box", None))
     fits = {}
@@ -252,6 +253,8 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
                 notes.append(f"{label(name, model)}: {text}")
         m = (fit.metrics.get("valid") or fit.metrics.get("all") or {})
         say(f"  done in {time.perf_counter() - t0:.1f} s (validation MSE {m.get('mse_percent', float('nan')):.4g} %)")
+        for line in cli_lines(fit):
+            say(line)
         fits[name] = fit
         if kept_fit is not None:
             kept_fit(name, fit)
