@@ -225,7 +225,7 @@ IN_PROCESS_ERRORS = [
     (["predict", "{csv}", "{csv}", "--velocity-col", "v", "--time-col", "t", "--out", "."],
      "--out . is a folder; give a file name"),
     (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc=10,1"],
-     "argument --box: search box: Fc range must satisfy low < high"),
+     "argument --box: Fc range must satisfy low < high"),
     (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--box", "Fc"],
      "argument --box: give NAME=LO,HI"),
     (["identify", "{csv}", "--velocity-col", "v", "--friction-col", "F", "--dt", "0.01", "--model", "coulomb",

@@ -262,7 +262,7 @@ class ElmanFull(AbstractFrictionModel):
         y(k)   = v . h(k) + b_o
         c(k+1) = h(k),          c(1) = c0 (learned) or 0
 
-    Parameter count N + N^2 + N + N [+ N for c0] [+ 1 for b_o]: 1021 for N = 30
+    Parameter count N + N^2 + N + N (+ N for c0) (+ 1 for b_o): 1021 for N = 30
     with the defaults. Offered for comparison with the 6N-parameter Option A.
 
     Hyperparameters (static): ``neurons``; ``output_bias`` (default ``True``,
