@@ -3,8 +3,10 @@
 Reads a CSV with a force column (or a drive voltage and ``--force-gain``) and a position
 column, identifies each ``--model`` inside the mechanics with
 :func:`jaxfric.identify_motion`, and writes a report folder: ``motion.md`` (position
-RMSE [mm] and FIT %, free run and k-step, per model), ``models/<model>.npz`` (load with
-:func:`jaxfric.motion.load_motion_fit`) and ``motion_free_run.png``.
+RMSE [mm] and FIT %, free run and k-step, per model, ranked by the held-back block's
+free-run RMSE, :func:`jaxfric.motion.compare_motion`'s rule), ``models/<model>.npz`` (load
+with :func:`jaxfric.motion.load_motion_fit`) and ``motion_free_run.png``. Progress bars
+are shown unless ``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from .errors import KEPT, UserError, _prepare_out, _say
 
 EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
-      --mass-range 50,200 --offset --model coulomb,lugre
+      --mass-range 50,200 --offset --model coulomb,stribeck,lugre,gms
   jaxfric identify-motion rig.csv --force-col force --x-col x --time-col t --mass 120 --quick
 """
 
@@ -65,6 +67,10 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
                    help="leading fraction of the record used for estimation; the rest validates")
     f.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
+    f.add_argument("--max-time", type=positive_float, default=None, metavar="S",
+                   help="budget per model: wall seconds; the search then stops with the best so far")
+    f.add_argument("--max-evals", type=positive_int, default=None, metavar="N",
+                   help="budget per model: cost evaluations (a Jacobian counts 1 + parameters)")
     f.add_argument("--quick", action="store_true", help="tiny budget: a smoke test, not a real fit")
     f.add_argument("--out", default="jaxfric-motion", metavar="DIR", help="report folder")
     common(p)
@@ -101,10 +107,11 @@ def cmd_identify_motion(args, argv) -> int:
     """Identify each model inside the mechanics and write the report folder."""
     import jax.numpy as jnp
 
-    from jaxfric.identification import default_solver
-    from jaxfric.motion import identify_motion
-    from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
+    import warnings
+
     from jaxfric.files import atomic_write_text
+    from jaxfric.motion import MotionSearch, OverfitWarning, identify_motion
+    from jaxfric.motion._compare import rank_fits
     from jaxfric.report import save_figure
 
     if (args.mass is None) == (args.mass_range is None):
@@ -120,30 +127,43 @@ def cmd_identify_motion(args, argv) -> int:
 
         opts = {"neurons": args.neurons} if name.startswith("elman") else {}
         model = _models.get(name, **opts)
-        solver = (MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=5),
-                            nelder_mead=NelderMead(max_steps=50, max_evals=50))
-                  if args.quick else default_solver(model))
+        search = (MotionSearch(particles=4, generations=2, shooting_steps=2, free_run_steps=2)
+                  if args.quick else MotionSearch())
         say(f"identifying {name} inside the mechanics ({data.n_samples} samples)")
         try:
             fit = identify_motion(model, data, key=args.seed, mass=mass, train=args.train_fraction,
-                                  solver=solver, horizon=args.horizon, fit_offset=args.offset,
-                                  dtype=jnp.float64 if args.x64 else None)
+                                  search=search, horizon=args.horizon, fit_offset=args.offset,
+                                  dtype=jnp.float64 if args.x64 else None, max_time=args.max_time,
+                                  max_evals=args.max_evals, progress=not args.quiet)
         except ValueError as e:
             raise UserError(str(e)) from None
         fits[name] = fit
         path = out / "models" / f"{name}.npz"
         fit.save(path)
         KEPT.add(path)
-        m = fit.metrics
-        lines.append(f"| {name} | {fit.mass:.4g} | {fit.offset:.4g} | {m['valid']['rmse_mm']:.4g} | "
-                     f"{m['valid']['fit_percent']:.2f} | {m['valid_kstep']['rmse_mm']:.4g} |")
+        if fit.settings["motion"].get("stopped"):
+            say(f"{name}: the search stopped at its budget ({fit.settings['motion']['stopped']})")
         print(fit.summary())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OverfitWarning)
+        ranked = rank_fits(fits)
+    for w in caught:  # said even under --quiet: it changes which model to use
+        print(f"jaxfric: warning: {w.message}", file=sys.stderr, flush=True)
+    for i, name in enumerate(ranked.ranking, 1):
+        fit, m = fits[name], fits[name].metrics
+        flag = " (worse than a simpler model)" if any(r == name for r, _ in ranked.overfit) else ""
+        lines.append(f"| {i} | {name}{flag} | {m['num_params']} | {fit.mass:.4g} | {fit.offset:.4g} | "
+                     f"{m['train']['rmse_mm']:.4g} | {m['valid']['rmse_mm']:.4g} | "
+                     f"{m['valid']['fit_percent']:.2f} | {m['valid_kstep']['rmse_mm']:.4g} | "
+                     f"{fit.timings['total_s']:.1f} |")
     k = next(iter(fits.values())).metrics["horizon"]
     md = ["# jaxfric identify-motion", "", f"Command: `jaxfric {' '.join(argv)}`", "",
+          "Ranked by the held-back block's free-run RMSE (the training fit does not decide). "
           "Validation: free run from the state estimated at the start of the held-back part; "
           f"{k}-step-ahead from every measured state.", "",
-          f"| model | mass [kg] | offset [N] | valid RMSE [mm] | valid FIT % | valid {k}-step RMSE [mm] |",
-          "|---|---|---|---|---|---|", *lines, "", "![free run](motion_free_run.png)", ""]
+          f"| rank | model | parameters | mass [kg] | offset [N] | train RMSE [mm] | valid RMSE [mm] | "
+          f"valid FIT % | valid {k}-step RMSE [mm] | time [s] |",
+          "|---|---|---|---|---|---|---|---|---|---|", *lines, "", "![free run](motion_free_run.png)", ""]
     KEPT.add(atomic_write_text(out / "motion.md", "\n".join(md)))
     import matplotlib.pyplot as plt
 

@@ -3,16 +3,29 @@
 * :func:`friction_step` — any jaxfric friction model one sample at a time;
 * :func:`simulate_motion` — ``m dv/dt = F_act - F_f - F_load``, ``dx/dt = v`` in one ``lax.scan``;
 * :func:`k_step_positions`, :func:`track_states` — k-step-ahead prediction from measured states;
-* :func:`identify_motion` → :class:`MotionFit` (``simulate``, metrics in mm and FIT %, save /
-  :func:`load_motion_fit`), from :class:`MotionData` (force and position, no friction signal).
+* :func:`identify_motion` → :class:`MotionFit` (``simulate``, ``simulate(record, init_window=N)``,
+  metrics in mm and FIT %, save / :func:`load_motion_fit`), from :class:`MotionData` (force and
+  position, no friction signal), one record split or several (``train=[...]``, ``valid=[...]``);
+  the default search (:class:`MotionSearch`) with a budget (``max_evals``, ``max_time``);
+* :func:`compare_motion` → :class:`MotionComparison`: several models ranked by validation error,
+  with an :class:`OverfitWarning` when a richer model validates worse than a simpler one.
 """
 
-from ._api import MotionData, MotionFit, identify_motion, load_motion_fit, motion_metrics
+from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,
+                   motion_metrics)
+from ._compare import MotionComparison, OverfitWarning, compare_motion
+from ._pipeline import MotionBudget, MotionSearch
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
                     friction_step)
 
 __all__ = [
+    "DEFAULT_INIT_WINDOW",
+    "MotionBudget",
+    "MotionComparison",
+    "MotionSearch",
+    "OverfitWarning",
+    "compare_motion",
     "BristleStep",
     "ElmanFullStep",
     "ElmanStep",

@@ -25,7 +25,7 @@ import numpy as np
 from jaxtyping import Array
 
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
-from ..identification._api import _as_key, _history, _key_record, _stages, default_solver, resolve_model
+from ..identification._api import _as_key, _history, _key_record, _stages, resolve_model
 from ..identification._objective import search_dtype
 from ..identification._timing import Stopwatch
 from ..metrics import friction_metrics
@@ -34,12 +34,19 @@ from ..optim import AbstractSolver, minimise
 from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
 from ..uncertainty import assess_fit
 from ._forward import k_step_positions, simulate_motion, track_states
+from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, run_search
+from ._shooting import schedule, shoot
 from ._step import friction_step
 
 __all__ = ["MotionData", "MotionFit", "identify_motion", "load_motion_fit", "motion_metrics"]
 
 #: k of the k-step-ahead metrics when none is asked for: 10 samples.
 DEFAULT_METRIC_HORIZON = 10
+#: Leading samples of a validation record that set its initial state (the EMPS
+#: benchmark's ``state_initialization_window_length``); they are not scored.
+DEFAULT_INIT_WINDOW = 20
+#: Degree of the polynomial the initial-state rule fits to the window's positions.
+INIT_DEGREE = 2
 ERRORS = ("position", "velocity", "both")
 
 
@@ -103,9 +110,22 @@ class MotionData:
     def net_force(self) -> np.ndarray:
         return self.force - self.load
 
+    def window(self, start: int, stop: int | None = None) -> "MotionData":
+        """Samples ``[start, stop)`` as a record of their own (the velocity stays the one
+        filtered over the whole record)."""
+        sl = slice(start, stop)
+        return dataclasses.replace(self, force=self.force[sl], position=self.position[sl],
+                                   load=self.load[sl], velocity=self.velocity[sl])
+
     @property
     def n_samples(self) -> int:
         return int(self.force.size)
+
+
+def _init_window(n) -> int:
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 2:
+        raise ValueError(f"init_window must be an integer >= 2 (samples), got {n!r}")
+    return int(n)
 
 
 def _as_motion_data(data) -> MotionData:
@@ -121,7 +141,8 @@ def _split(n: int, train) -> int:
     two samples on each side of it to start a free run from."""
     count = split_count(n, DEFAULT_TRAIN_FRACTION if train is None else train, whole=False)
     if not 2 <= count <= n - 2:
-        raise ValueError(f"train must be a fraction or a sample count in [2, {n - 2}], got {train!r}")
+        raise ValueError(f"train must be a fraction, a sample count in [2, {n - 2}] (two samples held "
+                         f"back at least) or {n} / 1.0 (the whole record), got {train!r}")
     return count
 
 
@@ -174,6 +195,16 @@ class MotionCost(eqx.Module):
                                  self.horizon)
         return x_hat, None, args["x"][self.horizon:], None
 
+    def residuals(self, y, args):
+        """The terms of J as a vector (``J = sum(residuals**2)``), for Levenberg–Marquardt."""
+        x_hat, v_hat, x, v = self.simulate(y, args)
+        out = []
+        if self.error in ("position", "both"):
+            out.append((x_hat - x) * jnp.sqrt(args["inv_var_x"] / x.shape[0]))
+        if self.error in ("velocity", "both") and v_hat is not None:
+            out.append((v_hat - v) * jnp.sqrt(args["inv_var_v"] / v.shape[0]))
+        return jnp.concatenate(out)
+
     def __call__(self, y, args):
         x_hat, v_hat, x, v = self.simulate(y, args)
         j = 0.0
@@ -182,6 +213,34 @@ class MotionCost(eqx.Module):
         if self.error in ("velocity", "both") and v_hat is not None:
             j = j + jnp.mean((v_hat - v) ** 2) * args["inv_var_v"]
         return j
+
+
+class ShootingResiduals(eqx.Module):
+    """Weighted position errors of :func:`jaxfric.motion._shooting.shoot` over the
+    concatenated training records: ``r_k = sqrt(w_k) (x̂_k - x̃_k)``. With the
+    per-record weights ``1 / (var(x_r) N)`` (``N`` all training samples) the sum of
+    squares is the pooled ``1 - R^2`` of :class:`MotionCost`."""
+
+    model: object = eqx.field(static=True)
+    layout: Layout
+
+    def __call__(self, y, args):
+        theta, mass, offset, dv0 = self.layout.unpack(y, args)
+        step = friction_step(self.model, args["scalers"])
+        plan = args["plan"]
+        v = args["v"] + dv0 * plan.reset
+        x_hat = shoot(step, theta, mass, args["force"] - offset, args["dt"], args["x"], v, plan)
+        return jnp.sqrt(plan.weight) * (x_hat - args["x"])
+
+
+class SumOfSquares(eqx.Module):
+    """``J = sum(residuals(y, args)**2)``: the scalar cost of a residual function."""
+
+    residuals: eqx.Module
+
+    def __call__(self, y, args):
+        r = self.residuals(y, args)
+        return jnp.sum(r * r)
 
 
 def motion_metrics(x, x_hat) -> dict:
@@ -227,10 +286,33 @@ class MotionFit(Fit):
         """The per-sample :class:`jaxfric.motion.FrictionStep` of this fit's model."""
         return friction_step(self.model, (self.velocity_scaler, self.friction_scaler))
 
-    def simulate(self, force, x0, v0, dt=None, *, load=None, state0=None) -> dict:
-        """Free-run ``{"x", "v", "friction"}`` for actuator force [N] (``load`` opposing
-        +x subtracted) from position ``x0`` [m] and velocity ``v0`` [m/s]; ``friction``
-        includes the fitted offset. Float64 NumPy."""
+    def simulate(self, force, x0=None, v0=None, dt=None, *, load=None, state0=None,
+                 init_window: int | None = None) -> dict:
+        """Free-run ``{"x", "v", "friction"}`` (float64 NumPy; ``friction`` includes the
+        fitted offset).
+
+        Two forms:
+
+        * ``simulate(force, x0, v0)``: actuator force [N] (``load`` opposing +x
+          subtracted) from position ``x0`` [m], velocity ``v0`` [m/s] and friction state
+          ``state0`` (default ``step.init(v0)``);
+        * ``simulate(record, init_window=N)``: a :class:`MotionData` record whose initial
+          state is estimated from its first ``N`` samples only, by the rule of
+          :meth:`initial_state`; the outputs cover the whole record (samples before
+          ``N - 1`` are the rule's smoothed estimates, the free run starts at ``N - 1``).
+          The record's positions after sample ``N - 1`` and its filtered ``velocity``
+          are never read; its force is (it is the input).
+        """
+        if isinstance(force, MotionData):
+            if init_window is None:
+                raise ValueError("simulate(record) needs init_window=N: the number of leading "
+                                 "samples the initial state is estimated from")
+            return self._simulate_record(force, init_window)
+        if x0 is None or v0 is None:
+            raise ValueError("simulate(force, x0, v0): give the initial position and velocity, or pass "
+                             "a MotionData record with init_window=N")
+        if init_window is not None:
+            raise ValueError("init_window applies to simulate(record, init_window=N), not to a force array")
         f = _series("force", force)
         if load is not None:
             f = f - _series("load", load)
@@ -242,9 +324,61 @@ class MotionFit(Fit):
         res["friction"] = res["friction"] + self.offset
         return res
 
+    def initial_state(self, position, init_window: int, dt: float | None = None) -> dict:
+        """The initial-state rule (docs/motion.md): from ``position[:N]`` only.
+
+        A polynomial of degree ``min(2, N - 1)`` is fitted by least squares to the first
+        ``N`` positions; its value and slope at sample ``N - 1`` are ``x0`` and ``v0``,
+        and the friction state is tracked along its slope over samples ``0 .. N - 1``
+        (:func:`jaxfric.motion.track_states`), giving ``state0`` at sample ``N - 1``.
+        Returns ``{"x0", "v0", "state0", "x_window", "v_window"}`` (the polynomial's
+        values and slopes on the window). Reads nothing past ``position[N - 1]``.
+        """
+        n = _init_window(init_window)
+        x = np.asarray(position, np.float64)
+        if x.ndim != 1 or x.size < n:
+            raise ValueError(f"init_window={n} needs at least {n} position samples, got {x.size}")
+        x = x[:n]
+        if not np.all(np.isfinite(x)):
+            raise ValueError("the initial-state window holds NaN or inf positions")
+        dt = self.dt if dt is None else float(dt)
+        tau = (np.arange(n) - (n - 1)) * dt
+        coef = np.polyfit(tau, x, min(INIT_DEGREE, n - 1))
+        x_win = np.polyval(coef, tau)
+        v_win = np.polyval(np.polyder(coef), tau)
+        theta = jnp.asarray(self.theta)
+        states = _track_jit(self.friction_step(), theta, jnp.asarray(v_win, theta.dtype), dt)
+        s0 = jax.tree_util.tree_map(lambda a: a[n - 1], states)
+        return {"x0": float(x_win[-1]), "v0": float(v_win[-1]), "state0": s0, "x_window": x_win,
+                "v_window": v_win}
+
+    def _simulate_record(self, data, init_window) -> dict:
+        data = _as_motion_data(data)
+        if abs(data.dt - self.dt) > 1e-9 * self.dt:
+            raise ValueError(f"the record's sample time {data.dt} s differs from the fit's {self.dt} s")
+        n = _init_window(init_window)
+        if data.n_samples <= n:
+            raise ValueError(f"init_window={n} leaves nothing to simulate in a record of {data.n_samples} samples")
+        st = self.initial_state(data.position[:n], n)
+        out = self.simulate(data.net_force[n - 1:], st["x0"], st["v0"], state0=st["state0"])
+        head = n - 1
+        fr = self.predict(st["v_window"][:head]) if head else np.zeros(0)
+        return {"x": np.concatenate([st["x_window"][:head], out["x"]]),
+                "v": np.concatenate([st["v_window"][:head], out["v"]]),
+                "friction": np.concatenate([np.asarray(fr, np.float64), out["friction"]])}
+
     def simulate_from(self, data: MotionData, start: int = 0, stop: int | None = None) -> dict:
-        """Free run over ``data[start:stop]`` from the state estimated at ``start``
-        (measured position, filtered velocity, friction state tracked along it)."""
+        """Free run over ``data[start:stop]`` from the state estimated at ``start``.
+
+        Reads: the position ``data.position[start]``; the velocity
+        ``data.velocity[start]`` (plus the fitted ``v0`` correction when ``start == 0``),
+        which comes from a *zero-phase* low-pass of the whole record's position, so it
+        depends on positions after ``start`` too; the friction state tracked along
+        ``data.velocity[:start + 1]``; and the net force ``data[start:stop]``. This is
+        the rule of the training cost and of the held-back block of a single-record
+        fit. To start from a window of leading samples only (a benchmark's protocol),
+        use ``simulate(record, init_window=N)``.
+        """
         data = _as_motion_data(data)
         stop = data.n_samples if stop is None else stop
         step = self.friction_step()
@@ -255,6 +389,14 @@ class MotionFit(Fit):
             s0 = jax.tree_util.tree_map(lambda a: a[start], states)
         v0 = data.velocity[start] + self.mechanics.get("v0", 0.0) * (start == 0)
         return self.simulate(data.net_force[start:stop], data.position[start], v0, state0=s0)
+
+    def score(self, data: MotionData, init_window: int = 20) -> dict:
+        """:func:`motion_metrics` of ``simulate(data, init_window=N)`` on samples ``N`` onward
+        (a benchmark's protocol: the first ``N`` samples only set the initial state)."""
+        data = _as_motion_data(data)
+        n = _init_window(init_window)
+        x_hat = self.simulate(data, init_window=n)["x"]
+        return motion_metrics(data.position[n:], x_hat[n:])
 
     def k_step(self, data: MotionData, horizon: int = DEFAULT_METRIC_HORIZON) -> np.ndarray:
         """k-step-ahead positions x̂[j + k] for j = 0..T-k-1 (MATLAB ``compare(..., k)``)."""
@@ -279,6 +421,28 @@ class MotionFit(Fit):
         cut = n_train - horizon
         out["train_kstep"] = motion_metrics(target[:cut], ks[:cut])
         out["valid_kstep"] = motion_metrics(target[cut:], ks[cut:])
+        return out
+
+    def evaluate_records(self, train_records, valid_records=(), init_window: int = DEFAULT_INIT_WINDOW) -> dict:
+        """Free-run metrics per record: each training record from its first sample
+        (:meth:`simulate_from`, as the training cost), each validation record from its
+        first ``init_window`` samples (:meth:`simulate` with ``init_window``), scored on
+        the rest. ``"train"``/``"valid"`` pool the errors of all records of a kind;
+        ``"records"`` lists each record's metrics."""
+        out = {"records": {"train": [], "valid": []}, "init_window": int(init_window)}
+        for kind, recs in (("train", train_records), ("valid", valid_records)):
+            xs, hats = [], []
+            for r in recs:
+                r = _as_motion_data(r)
+                if kind == "train":
+                    x, x_hat = r.position, self.simulate_from(r)["x"]
+                else:
+                    x, x_hat = r.position[init_window:], self.simulate(r, init_window=init_window)["x"][init_window:]
+                out["records"][kind].append(motion_metrics(x, x_hat))
+                xs.append(x)
+                hats.append(x_hat)
+            if recs:
+                out[kind] = motion_metrics(np.concatenate(xs), np.concatenate(hats))
         return out
 
     def summary(self) -> str:
@@ -335,14 +499,84 @@ def _mass_setting(mass):
     return float(np.sqrt(lo * hi)), (lo, hi)
 
 
+def _as_record_list(name, value) -> list:
+    items = list(value.values()) if isinstance(value, dict) else (
+        list(value) if isinstance(value, list) else [value])
+    if not items:
+        raise ValueError(f"{name} must hold at least one record")
+    out = []
+    for i, item in enumerate(items):
+        try:
+            out.append(_as_motion_data(item))
+        except ValueError as e:
+            raise ValueError(f"{name}[{i}]: {e}") from None
+    return out
+
+
+def _records(data, train, valid):
+    """``(train_records, valid_records, data, n_train)``: the records form (``data`` None,
+    ``n_train`` None) or one record split by ``train`` (``valid`` must then be None)."""
+    if data is not None:
+        if valid is not None:
+            raise ValueError("valid= goes with train=[records...]; with data, train is the split "
+                             "(a fraction or a sample count)")
+        if isinstance(train, (list, dict, MotionData)):
+            raise ValueError("give either data (split by train=fraction) or train=[records...], not both")
+        data = _as_motion_data(data)
+        if not isinstance(train, bool) and isinstance(train, numbers.Real) and (
+                train == 1.0 if isinstance(train, float) else train == data.n_samples):
+            return [data], [], None, None  # the whole record trains; nothing is held back
+        n_train = _split(data.n_samples, train)
+        return [data.window(0, n_train)], [], data, n_train
+    if train is None or isinstance(train, numbers.Real):
+        raise ValueError("no data: pass a record (data, split by train=fraction) or train=[records...]")
+    tr = _as_record_list("train", train)
+    va = [] if valid is None else _as_record_list("valid", valid)
+    dts = {r.dt for r in tr + va}
+    if max(dts) - min(dts) > 1e-9 * max(dts):
+        raise ValueError(f"every record must have the same sample time, got {sorted(dts)}")
+    return tr, va, None, None
+
+
+def _pooled(records, dtype, scalers, mass0, *, segment=None, lead=0, windows=None):
+    """The shooting cost's data for ``records`` concatenated (see :class:`ShootingResiduals`).
+    ``windows=(length, total)``: short windows spread over the records instead (global stage)."""
+    total = sum(r.n_samples for r in records)
+    parts, starts, weights, at = [], [], [], 0
+    for r in records:
+        w = 1.0 / (max(float(np.var(r.position)), 1e-300) * total)
+        if windows is None:
+            parts.append((r.net_force, r.position, r.velocity))
+            starts.append(at)
+            weights.append(w)
+            at += r.n_samples
+            continue
+        length, budget = windows
+        count = max(1, int(budget * r.n_samples / total) // length)
+        first = np.linspace(0, max(r.n_samples - length, 0), count).astype(int)
+        for a in first:
+            sl = slice(a, a + length)
+            parts.append((r.net_force[sl], r.position[sl], r.velocity[sl]))
+            starts.append(at)
+            weights.append(w * total / (count * len(records) * min(length, r.n_samples)))
+            at += min(length, r.n_samples - a)
+    u, x, v = (np.concatenate([p[j] for p in parts]) for j in range(3))
+    return {"force": jnp.asarray(u, dtype), "x": jnp.asarray(x, dtype), "v": jnp.asarray(v, dtype),
+            "dt": jnp.asarray(records[0].dt, dtype), "mass": jnp.asarray(mass0, dtype),
+            "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
+            "plan": schedule(starts, at, segment=segment, lead=lead, weights=weights, dtype=dtype)}
+
+
 def identify_motion(
     model,
-    data,
+    data=None,
     *,
     key,
     mass,
     train=0.8,
+    valid=None,
     solver: AbstractSolver | None = None,
+    search: MotionSearch | None = None,
     error: str = "position",
     horizon: int | None = None,
     fit_offset: bool = False,
@@ -353,66 +587,108 @@ def identify_motion(
     dtype=None,
     model_options: dict | None = None,
     metric_horizon: int = DEFAULT_METRIC_HORIZON,
+    init_window: int = DEFAULT_INIT_WINDOW,
+    max_evals: int | None = None,
+    max_time: float | None = None,
     progress=None,
 ) -> MotionFit:
     """Identify friction inside ``m dv/dt = F_act - F_f - F_load`` from force and position (§13.2).
 
     Args:
         model: a jaxfric friction model or its name (as :func:`jaxfric.identify`).
-        data: :class:`MotionData` or ``(force [N], position [m], dt [s])``.
+        data: one record, :class:`MotionData` or ``(force [N], position [m], dt [s])``,
+            split by ``train`` into a training and a held-back block. Leave it out to
+            train on whole records (``train=[...]``).
         key: PRNG key or int seed. Same key, same fit.
         mass: known moving mass [kg], or a ``(low, high)`` range to identify it (log search).
-        train: training fraction or sample count (default 0.8); the rest is validation.
-        solver: default :func:`jaxfric.identification.default_solver` (MAPSO-NMDS).
+        train: with ``data``: the training fraction or sample count (default 0.8). Without:
+            a record, a list or a mapping name -> record, each used whole for training
+            (the cost pools them, each simulated from its own first sample).
+        valid: with ``train=[...]``: a record or a list of records, each used whole for
+            validation; its state is estimated from its first ``init_window`` samples
+            (:meth:`MotionFit.initial_state`) and the rest is scored.
+        search: the default pipeline's settings (:class:`MotionSearch`: a short PSO on
+            windows, Levenberg–Marquardt on shooting segments, then on the free run;
+            docs/motion.md). Ignored when ``solver`` is given.
+        solver: a jaxfric solver to run instead, on the final cost (the pre-0.9 behaviour
+            with :func:`jaxfric.identification.default_solver`; slow on long records).
         error: ``"position"`` (default), ``"velocity"`` (against the filtered velocity)
             or ``"both"``; each term is a mean squared error / variance (1 - R^2).
-        horizon: ``None`` = free-run simulation error over the training window (default);
-            an int k = k-step-ahead position error from every measured state.
+            Velocity errors and ``horizon`` take one record (``data``).
+        horizon: ``None`` = free-run simulation error (default); an int k = k-step-ahead
+            position error from every measured state.
         fit_offset: add a constant force offset [N] to the friction (e.g. the EMPS
             reference model's offset); range ``offset_range`` (default +-0.25 of the
             95th percentile of |force|).
-        fit_v0: identify a correction of the initial velocity (range +-0.05 max|v|).
+        fit_v0: identify a correction of each record's initial velocity (range +-0.05 max|v|).
         box: the friction model's search box, a partial mapping physical name ->
             (low, high) (a :class:`jaxfric.models.SearchBox`, as in :func:`jaxfric.identify`).
-        data_bounds: centre the box entries left out on the record, using the
+        data_bounds: centre the box entries left out on the training data, using the
             filtered velocity and the net force as the friction scale.
-        metric_horizon: k of the k-step metrics reported beside the free run.
+        metric_horizon: k of the k-step metrics reported beside the free run (``data`` form).
+        init_window: leading samples of each validation record that set its state.
+        max_evals, max_time: a budget (cost evaluations, wall seconds) checked between
+            stages and after every gradient step; the run then ends with the best point
+            so far and ``fit.settings["motion"]["stopped"]`` says why (:class:`MotionBudget`).
+        progress: ``True`` for progress bars (the global stage's, then one per
+            Levenberg–Marquardt stage), or a callable sink (as :func:`jaxfric.minimise`).
+
+    Metrics (:func:`motion_metrics`, position in mm and FIT %): ``data`` form:
+    ``"train"``, ``"valid"`` (free run of the held-back block from the state at its
+    start, :meth:`MotionFit.simulate_from`), ``"train_kstep"``, ``"valid_kstep"``;
+    records form: ``"train"`` and ``"valid"`` pooled over the records and
+    ``metrics["records"]`` per record.
 
     Elman networks work on scaled data (§2.4): the velocity scaler is fitted on the
-    training window's filtered velocity; with no friction signal the friction scaler
+    training records' filtered velocity; with no friction signal the friction scaler
     maps +-(95th percentile of |net force|) to +-1.
 
     Raises ``ValueError`` before any optimisation for bad data, split, mass, options.
     """
     with Stopwatch() as total:
-        data = _as_motion_data(data)
-        n = data.n_samples
-        n_train = _split(n, train)
+        tr_records, va_records, data, n_train = _records(data, train, valid)
         if error not in ERRORS:
             raise ValueError(f"error must be one of {ERRORS}, got {error!r}")
+        legacy_cost = horizon is not None or error != "position"
+        if legacy_cost and data is None:
+            raise ValueError("k-step (horizon) and velocity costs take one record with a held-back block: "
+                             "pass data and a train fraction below 1")
+        n = data.n_samples if data is not None else None
         if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, numbers.Integral)
                                     or not 1 <= horizon < n_train):
             raise ValueError(f"horizon must be None (free run) or an int in [1, {n_train - 1}], got {horizon!r}")
         if horizon is not None and error != "position":
             raise ValueError("k-step costs use the position error only: pass error='position'")
-        if not 1 <= int(metric_horizon) < n - n_train:
-            raise ValueError(f"metric_horizon must lie in [1, {n - n_train - 1}], got {metric_horizon!r}")
+        if isinstance(metric_horizon, bool) or not isinstance(metric_horizon, numbers.Integral) \
+                or metric_horizon < 1:
+            raise ValueError(f"metric_horizon must be a positive integer, got {metric_horizon!r}")
+        if data is not None:  # a short held-back block gets a shorter k
+            metric_horizon = min(int(metric_horizon), n - n_train - 1)
+        init_window = _init_window(init_window)
+        for i, r in enumerate(va_records):
+            if r.n_samples <= init_window:
+                raise ValueError(f"valid[{i}] has {r.n_samples} samples, not more than init_window={init_window}")
+        budget = MotionBudget(max_evals, max_time)
+        budget.check()
+        search = MotionSearch() if search is None else search
+        if not isinstance(search, MotionSearch):
+            raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
+        search.check()
         mass0, mass_range = _mass_setting(mass)
         model = resolve_model(model, model_options)
-        u = data.net_force
-        vt, ut = data.velocity[:n_train], u[:n_train]
+        vt = np.concatenate([r.velocity for r in tr_records])
+        ut = np.concatenate([r.net_force for r in tr_records])
         f_level = float(np.percentile(np.abs(ut), 95.0))
-        if f_level <= 0 or np.ptp(data.position[:n_train]) <= 0:
-            raise ValueError("the training window has no force or no motion: nothing to identify")
+        if f_level <= 0 or max(np.ptp(r.position) for r in tr_records) <= 0:
+            raise ValueError("the training data have no force or no motion: nothing to identify")
         box = model.search_box(box, *((vt, ut) if data_bounds else ()))
         scalers = (None, None)
         if model.needs_scaling:
             scalers = (Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
-        if solver is None:
-            solver = default_solver(model)
-        if not isinstance(solver, AbstractSolver):
-            raise ValueError(f"solver must be a jaxfric solver, got {type(solver).__name__}")
-        solver.check()
+        if solver is not None:
+            if not isinstance(solver, AbstractSolver):
+                raise ValueError(f"solver must be a jaxfric solver, got {type(solver).__name__}")
+            solver.check()
         key, seed = _as_key(key)
         dtype = search_dtype(dtype)
 
@@ -431,38 +707,79 @@ def identify_motion(
             upper.append(vmax)
         lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
 
-        x_tr = data.position[:n_train]
-        args = {
-            "force": jnp.asarray(ut, dtype), "x": jnp.asarray(x_tr, dtype),
-            "v": jnp.asarray(vt, dtype), "dt": jnp.asarray(data.dt, dtype),
-            "mass": jnp.asarray(mass0, dtype),
-            "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
-            "inv_var_v": jnp.asarray(1.0 / max(np.var(vt), 1e-300), dtype),
-            "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
-        }
-        cost = MotionCost(model, layout, error, None if horizon is None else int(horizon))
+        if legacy_cost:
+            x_tr, v_tr = tr_records[0].position, tr_records[0].velocity
+            free = {
+                "force": jnp.asarray(ut, dtype), "x": jnp.asarray(x_tr, dtype),
+                "v": jnp.asarray(v_tr, dtype), "dt": jnp.asarray(data.dt, dtype),
+                "mass": jnp.asarray(mass0, dtype),
+                "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
+                "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
+                "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
+            }
+            residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
+            cost, glob, shooting = residuals, free, None
+        else:
+            residuals = ShootingResiduals(model, layout)
+            cost = SumOfSquares(residuals)
+            free = _pooled(tr_records, dtype, scalers, mass0)
+            glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
+                           windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
+            shooting = None if search.segment is None else _pooled(
+                tr_records, dtype, scalers, mass0, segment=search.segment, lead=search.lead)
+        sol, stopped = None, None
         with Stopwatch() as sw:
-            sol = jax.block_until_ready(minimise(cost, solver, (lower, upper), args=args, key=key,
-                                                 dtype=dtype, progress=progress))
-        y = np.asarray(sol.value)
-        theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y), args))
+            if solver is not None:
+                sol = jax.block_until_ready(minimise(cost, solver, (lower, upper), args=free, key=key,
+                                                     dtype=dtype, progress=progress))
+                y = np.asarray(sol.value)
+                stages = _stages(sol, solver)
+            else:
+                y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
+                                                global_data=glob, shooting_data=shooting, free_data=free,
+                                                key=key, dtype=dtype, progress=progress)
+        y = np.asarray(y, np.float64)
+        j_final = float(eqx.filter_jit(cost)(jnp.asarray(y, dtype), free))
+        theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
         key_data, key_impl = _key_record(key)
+        n_tr_total = sum(r.n_samples for r in tr_records)
+        n_all = n if data is not None else n_tr_total + sum(r.n_samples for r in va_records)
         fit = MotionFit(
             model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
-            dt=data.dt, n_train=n_train, n_samples=n, metrics={}, stages=_stages(sol, solver),
-            history=_history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
+            dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
+            history=_history(sol) if sol is not None else {"evals": np.zeros(0), "f": np.zeros(0)},
+            solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
             timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
             settings={
                 "model_name": model_name(model), "model_config": model_config(model),
-                "solver": repr(solver), "dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
+                "solver": repr(solver) if solver is not None else repr(search),
+                "dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
                 "motion": {"mass": float(m_hat), "mass_range": mass_range, "offset": float(off),
                            "v0": float(dv0), "error": error, "horizon": horizon,
-                           "cutoff": data.cutoff, "search_names": list(model.param_names) + list(layout.names()),
-                           "y": [float(a) for a in y]},
+                           "cutoff": tr_records[0].cutoff,
+                           "search_names": list(model.param_names) + list(layout.names()),
+                           "search_bounds": [lower.tolist(), upper.tolist()],
+                           "y": [float(a) for a in y], "stopped": stopped,
+                           "records": None if data is not None else
+                           {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in va_records]},
+                           "init_window": init_window},
             },
         )
-        metrics = fit.evaluate(data, n_train, int(metric_horizon))
-        fit.metrics = {**metrics, "num_params": int(y.size), "cost": float(sol.f)}
+        if data is not None:
+            metrics = fit.evaluate(data, n_train, int(metric_horizon))
+        else:
+            metrics = fit.evaluate_records(tr_records, va_records, init_window)
+        fit.metrics = {**metrics, "num_params": int(y.size), "cost": j_final}
+        data = data if data is not None else _concatenated(tr_records)
     assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     fit.timings["total_s"] = total.wall_s
     return fit
+
+
+def _concatenated(records) -> MotionData:
+    """The training records end to end (for the plausibility check, which reads velocities)."""
+    first = records[0]
+    return dataclasses.replace(first, force=np.concatenate([r.force for r in records]),
+                               position=np.concatenate([r.position for r in records]),
+                               load=np.concatenate([r.load for r in records]),
+                               velocity=np.concatenate([r.velocity for r in records]))

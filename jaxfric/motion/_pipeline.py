@@ -1,0 +1,199 @@
+"""The default search of :func:`jaxfric.identify_motion`: global, then shooting, then free run (§13.2).
+
+A free-run position error over a long closed-loop record is a hard cost to search: the
+plant integrates twice, so a small force error early moves every later sample, and
+the cost is flat in some directions and steep and many-valleyed in others. The
+default pipeline therefore grows the simulation horizon:
+
+1. **global** — a small :class:`jaxfric.optim.PSO` swarm on short windows spread over
+   the training records (:data:`GLOBAL_SAMPLES` samples in all, windows of
+   ``lead + global_window`` samples, each started from the measurement and with its
+   friction state carried along the measured velocity over the ``lead`` samples,
+   :mod:`._shooting`). It only has to find the basin;
+2. **shooting** — Levenberg–Marquardt (:mod:`._lm`) on the whole training data cut
+   into segments of ``segment`` samples, each started from the measurement
+   (multiple shooting): the errors no longer accumulate over the record, so the
+   problem is close to a least-squares fit of the force balance;
+3. **free run** — Levenberg–Marquardt on the cost the fit is judged by, each training
+   record simulated whole from its first sample.
+
+Measured on the EMPS estimation file (benchmarks/motion.py): the earlier default
+(MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of the
+free run) took 87–136 s per physical model on a quiet machine; this pipeline takes a
+few seconds per model after compilation and reaches a lower held-back error.
+
+The budget (:class:`MotionBudget`) is checked between the stages and after every
+Levenberg–Marquardt step, so a run stops with the best point so far.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..identification._refine import GRADIENT_PHASE
+from ..optim import PSO, minimise
+from ._lm import levenberg_marquardt
+
+__all__ = ["MotionBudget", "MotionSearch"]
+
+#: Samples the global stage simulates per candidate (short windows spread over the data).
+GLOBAL_SAMPLES = 4000
+
+
+class MotionSearch(eqx.Module):
+    """Settings of :func:`jaxfric.identify_motion`'s default search (module docstring).
+
+    Args:
+        particles, generations: the global PSO stage (``particles·(generations + 1)``
+            evaluations of the window cost).
+        global_window: samples simulated per window in the global stage.
+        lead: forced samples before every window or segment start (the friction state is
+            carried along the measured velocity over them; they carry no error).
+        segment: multiple-shooting segment length of the second stage (``None`` skips it).
+        shooting_steps, free_run_steps: Levenberg–Marquardt step caps of stages 2 and 3.
+        rtol: a stage ends when ``3`` accepted steps in a row lower its cost by less than
+            ``rtol`` relative.
+    """
+
+    particles: int = eqx.field(default=25, static=True)
+    generations: int = eqx.field(default=20, static=True)
+    global_window: int = eqx.field(default=200, static=True)
+    lead: int = eqx.field(default=20, static=True)
+    segment: int | None = eqx.field(default=1000, static=True)
+    shooting_steps: int = eqx.field(default=15, static=True)
+    free_run_steps: int = eqx.field(default=40, static=True)
+    rtol: float = eqx.field(default=1e-4, static=True)
+
+    def check(self) -> None:
+        for name in ("particles", "generations", "global_window", "shooting_steps", "free_run_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < (2 if name == "particles" else 0):
+                raise ValueError(f"MotionSearch.{name} must be a non-negative integer"
+                                 f"{' >= 2' if name == 'particles' else ''}, got {value!r}")
+        if isinstance(self.lead, bool) or not isinstance(self.lead, int) or self.lead < 0:
+            raise ValueError(f"MotionSearch.lead must be a non-negative integer, got {self.lead!r}")
+        if self.segment is not None and (isinstance(self.segment, bool) or not isinstance(self.segment, int)
+                                         or self.segment < 2):
+            raise ValueError(f"MotionSearch.segment must be None or an integer >= 2, got {self.segment!r}")
+        if not (isinstance(self.rtol, (int, float)) and self.rtol >= 0):
+            raise ValueError(f"MotionSearch.rtol must be >= 0, got {self.rtol!r}")
+
+
+@dataclasses.dataclass
+class MotionBudget:
+    """``max_evals``: most cost evaluations in all (a PSO candidate or a residual pass
+    counts 1, a Jacobian ``1 + n``); ``max_time``: most wall seconds from the start of the
+    search. ``None`` = no limit. The global stage is one compiled call: its generations
+    are cut to fit ``max_evals``, and ``max_time`` is checked before and after it."""
+
+    max_evals: int | None = None
+    max_time: float | None = None
+
+    def check(self) -> None:
+        if self.max_evals is not None and (isinstance(self.max_evals, bool) or not isinstance(self.max_evals, int)
+                                           or self.max_evals < 1):
+            raise ValueError(f"max_evals must be None or a positive integer, got {self.max_evals!r}")
+        if self.max_time is not None and not (isinstance(self.max_time, (int, float))
+                                              and not isinstance(self.max_time, bool)
+                                              and math.isfinite(self.max_time) and self.max_time > 0):
+            raise ValueError(f"max_time must be None or a positive number of seconds, got {self.max_time!r}")
+
+
+def _lm_progress(progress, desc, total):
+    """``(on_step, close)`` for one Levenberg–Marquardt stage."""
+    if progress is None or progress is False:
+        return None, lambda: None
+    if progress is True:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc=desc, unit="step", leave=True)
+
+        def on_step(step, f):
+            bar.update(step - bar.n)
+            bar.set_postfix(J=f"{f:.4g}", refresh=False)
+
+        return on_step, bar.close
+    return (lambda step, f: progress(GRADIENT_PHASE, step, step, f)), (lambda: None)
+
+
+class _Clock:
+    def __init__(self, budget: MotionBudget):
+        self.t0 = time.perf_counter()
+        self.budget = budget
+        self.evals = 0
+        self.stopped = None
+
+    @property
+    def deadline(self):
+        return None if self.budget.max_time is None else self.t0 + float(self.budget.max_time)
+
+    def left(self):
+        return None if self.budget.max_evals is None else self.budget.max_evals - self.evals
+
+    def out_of_time(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
+
+
+def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost, lower, upper, *,
+               global_data, shooting_data, free_data, key, dtype, progress=None, y0=None):
+    """Run the stages; returns ``(y, stages, stopped)``: the best search vector, one dict per
+    stage (``stage``, ``J``, ``num_evals``, ``num_steps``, ``seconds``, ``reason``) and why the
+    budget ended the run (``None`` when it did not)."""
+    clock = _Clock(budget)
+    stages = []
+    lower = np.asarray(lower, np.float64)
+    upper = np.asarray(upper, np.float64)
+    y = None if y0 is None else np.asarray(y0, np.float64)
+    gens = search.generations
+    left = clock.left()
+    if left is not None:
+        gens = min(gens, left // search.particles - 1)
+    if y is None and gens < 0:
+        raise ValueError(f"max_evals={budget.max_evals} leaves no room for the global stage's first "
+                         f"population ({search.particles} evaluations)")
+    if y is None:
+        t = time.perf_counter()
+        sol = minimise(total_cost, PSO(num_particles=search.particles, num_generations=max(gens, 0)),
+                       (lower, upper), args=global_data, key=key, dtype=dtype, progress=progress)
+        y = np.asarray(jax.block_until_ready(sol.value), np.float64)
+        n_ev = int(sol.stats["num_evals"])
+        clock.evals += n_ev
+        stages.append({"stage": "pso", "J": float(sol.f), "num_evals": n_ev, "num_steps": max(gens, 0),
+                       "seconds": time.perf_counter() - t, "reason": "done"})
+    plan = []
+    if search.segment is not None and shooting_data is not None and search.shooting_steps > 0:
+        plan.append(("shooting", shooting_data, search.shooting_steps))
+    if search.free_run_steps > 0:
+        plan.append(("free_run", free_data, search.free_run_steps))
+    for name, data, steps in plan:
+        if clock.out_of_time():
+            clock.stopped = "max_time"
+            break
+        left = clock.left()
+        if left is not None and left < 2 + y.size:
+            clock.stopped = "max_evals"
+            break
+        on_step, close = _lm_progress(progress, f"{name} (Levenberg-Marquardt)", steps)
+        t = time.perf_counter()
+        try:
+            out = levenberg_marquardt(residuals, jnp.asarray(y, dtype), jnp.asarray(lower, dtype),
+                                      jnp.asarray(upper, dtype), data, max_steps=steps, rtol=search.rtol,
+                                      deadline=clock.deadline, max_evals=left, on_step=on_step)
+        finally:
+            close()
+        clock.evals += out.evals
+        if np.isfinite(out.f):
+            y = out.theta
+        stages.append({"stage": name, "J": out.f, "num_evals": out.evals, "num_steps": out.steps,
+                       "seconds": time.perf_counter() - t, "reason": out.reason})
+        if out.reason in ("max_time", "max_evals"):
+            clock.stopped = out.reason
+            break
+    return y, stages, clock.stopped

@@ -1,0 +1,255 @@
+"""identify_motion's default search, records, budget, initial-state rule and model choice
+(docs/motion.md, docs/algorithms.md §13.2)."""
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from jaxfric import models
+from jaxfric.motion import (MotionData, MotionFit, MotionSearch, OverfitWarning, compare_motion,
+                            friction_step, identify_motion, simulate_motion)
+from jaxfric.motion._compare import rank_fits
+from jaxfric.motion._lm import levenberg_marquardt
+from jaxfric.motion._shooting import schedule, shoot
+
+TRUTH = dict(Fc=12.0, sigma2=60.0)
+MASS, OFFSET = 2.5, 3.0
+#: A small search for the unit tests (the defaults are sized for long records).
+SMALL = MotionSearch(particles=10, generations=8, global_window=150, segment=300,
+                     shooting_steps=15, free_run_steps=25)
+
+
+def _record(n=1500, dt=1e-3, phase=0.0, seed=0, model=None, theta=None, velocity=False):
+    """Noise-free motion of a Coulomb+viscous axis (mass 2.5 kg, offset 3 N) under a
+    two-tone force (and the true velocity with ``velocity=True``)."""
+    model = models.Coulomb(v_eps=1e-3) if model is None else model
+    theta = model.from_physical(**TRUTH) if theta is None else theta
+    t = np.arange(n) * dt
+    u = 30 * np.sin(2 * np.pi * 1.3 * t + phase) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0 + seed)
+    with jax.enable_x64(True):
+        out = simulate_motion(friction_step(model), jnp.asarray(theta, jnp.float64), MASS, u - OFFSET,
+                              dt, 0.0, 0.0)
+        x = np.asarray(out["x"])
+    rec = MotionData.from_arrays(u, x, dt)
+    return (rec, np.asarray(out["v"])) if velocity else rec
+
+
+def _fit(**kw):
+    kw.setdefault("search", SMALL)
+    with jax.enable_x64(True):
+        return identify_motion(models.Coulomb(v_eps=1e-3), key=0, mass=(0.5, 10.0), fit_offset=True,
+                               box={"Fc": (2.0, 40.0), "sigma2": (5.0, 500.0)}, data_bounds=False,
+                               dtype=jnp.float64, **kw)
+
+
+# ----------------------------------------------------------------- building blocks
+def _rosenbrock(theta, data):
+    return jnp.stack([10.0 * (theta[1] - theta[0] ** 2), 1.0 - theta[0]])
+
+
+def test_levenberg_marquardt_finds_scipys_optimum_inside_the_box():
+    """Rosenbrock residuals from (-1.2, 1): scipy's least_squares and ours reach (1, 1)."""
+    with jax.enable_x64(True):
+        lo, hi = jnp.asarray([-2.0, -2.0]), jnp.asarray([2.0, 3.0])
+        out = levenberg_marquardt(_rosenbrock, jnp.asarray([-1.2, 1.0]), lo, hi, None, max_steps=200,
+                                  rtol=1e-14)
+    ref = least_squares(lambda p: np.asarray(_rosenbrock(p, None)), [-1.2, 1.0], bounds=([-2, -2], [2, 3]))
+    np.testing.assert_allclose(out.theta, ref.x, atol=1e-6)
+    assert out.f < 1e-12
+    assert out.evals >= out.steps
+
+
+def test_levenberg_marquardt_stops_at_its_budget():
+    with jax.enable_x64(True):
+        lo, hi = jnp.asarray([-2.0, -2.0]), jnp.asarray([2.0, 3.0])
+        out = levenberg_marquardt(_rosenbrock, jnp.asarray([-1.2, 1.0]), lo, hi, None, max_steps=200,
+                                  max_evals=10)
+    assert out.reason == "max_evals" and out.evals <= 10
+
+
+def test_free_run_schedule_is_simulate_motion_and_segments_restart_from_the_measurement():
+    model = models.LuGre()
+    theta = model.from_physical(sigma0=1e5, sigma1=50.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=5e-3)
+    rec = _record(n=600, model=model, theta=theta)
+    with jax.enable_x64(True):
+        step = friction_step(model)
+        th = jnp.asarray(theta, jnp.float64)
+        u = rec.net_force - OFFSET
+        ref = simulate_motion(step, th, MASS, u, rec.dt, rec.position[0], rec.velocity[0])["x"]
+        free = shoot(step, th, MASS, u, rec.dt, rec.position, rec.velocity, schedule([0], 600))
+        np.testing.assert_allclose(np.asarray(free), np.asarray(ref), rtol=0, atol=1e-15)
+        plan = schedule([0], 600, segment=100, lead=5)
+        seg = np.asarray(shoot(step, th, MASS, u, rec.dt, rec.position, rec.velocity, plan))
+    forced = np.asarray(plan.forced)
+    assert forced[[0, 1, 5, 100, 105, 200, 205]].all() and not forced[[6, 99, 106, 300 - 6]].any()
+    np.testing.assert_array_equal(seg[forced], rec.position[forced])
+    assert np.all(np.asarray(plan.weight)[forced] == 0.0)
+
+
+# ----------------------------------------------------------------- default search, records
+def test_default_search_recovers_mass_offset_and_friction():
+    """Noise-free data: the default pipeline (PSO, shooting, free run) recovers Fc, Fv,
+    mass and offset within 1 %."""
+    fit = _fit(data=_record(), train=0.8)
+    got = fit.params
+    for k, val in TRUTH.items():
+        assert abs(float(got[k]) - val) <= 0.01 * val, (k, got[k])
+    assert abs(fit.mass - MASS) <= 0.01 * MASS
+    assert abs(fit.offset - OFFSET) <= 0.01 * OFFSET
+    assert [s["stage"] for s in fit.stages] == ["pso", "shooting", "free_run"]
+    assert fit.metrics["valid"]["fit_percent"] > 99.0
+    assert fit.settings["motion"]["stopped"] is None
+
+
+def test_records_are_used_whole_with_metrics_per_record():
+    a, b, c = _record(1200, phase=0.0), _record(1000, phase=1.0, seed=2), _record(900, phase=2.0, seed=4)
+    fit = _fit(train=[a, b], valid=c)
+    recs = fit.metrics["records"]
+    assert len(recs["train"]) == 2 and len(recs["valid"]) == 1
+    assert fit.n_train == 2200 and fit.n_samples == 3100
+    # the validation record is scored after its 20-sample initial-state window
+    with jax.enable_x64(True):
+        x_hat = fit.simulate(c, init_window=20)["x"]
+    rmse = 1e3 * np.sqrt(np.mean((x_hat[20:] - c.position[20:]) ** 2))
+    assert recs["valid"][0]["rmse_mm"] == pytest.approx(rmse, rel=1e-12)
+    assert abs(fit.mass - MASS) <= 0.02 * MASS
+    assert recs["valid"][0]["fit_percent"] > 98.0
+
+
+def test_whole_record_trains_with_train_one():
+    rec = _record(1000)
+    fit = _fit(data=rec, train=1.0)
+    assert fit.n_train == 1000 and "valid" not in fit.metrics
+    assert fit.metrics["train"]["fit_percent"] > 99.0
+
+
+def test_records_form_refuses_mixed_and_missing_input():
+    rec = _record(300)
+    with pytest.raises(ValueError, match="valid= goes with train"):
+        identify_motion("coulomb", rec, key=0, mass=1.0, valid=rec)
+    with pytest.raises(ValueError, match="no data"):
+        identify_motion("coulomb", key=0, mass=1.0, train=0.8)
+    with pytest.raises(ValueError, match="init_window"):
+        identify_motion("coulomb", key=0, mass=1.0, train=[rec], valid=rec.window(0, 15))
+    with pytest.raises(ValueError, match="max_time"):
+        identify_motion("coulomb", rec, key=0, mass=1.0, max_time=-1.0)
+    with pytest.raises(ValueError, match="one record"):
+        identify_motion("coulomb", key=0, mass=1.0, train=[rec], horizon=5)
+
+
+def test_budget_stops_the_run_with_the_best_so_far():
+    rec = _record(1200)
+    fit = _fit(data=rec, max_evals=150)
+    assert fit.settings["motion"]["stopped"] == "max_evals"
+    assert sum(s["num_evals"] for s in fit.stages) <= 150
+    assert np.isfinite(fit.metrics["cost"])
+    # the stages never make it worse: the final J is at most the global stage's on the same cost
+    timed = _fit(data=rec, max_time=1e-6)
+    assert timed.settings["motion"]["stopped"] == "max_time"
+    assert [s["stage"] for s in timed.stages] == ["pso"]
+    assert np.isfinite(timed.metrics["valid"]["rmse_mm"])
+    with pytest.raises(ValueError, match="no room"):
+        _fit(data=rec, max_evals=5)
+
+
+def test_same_key_same_fit():
+    rec = _record(800)
+    a, b = _fit(data=rec), _fit(data=rec)
+    np.testing.assert_array_equal(a.theta, b.theta)
+    assert a.mass == b.mass
+
+
+# ----------------------------------------------------------------- initial-state rule
+def _reference_fit(rec):
+    model = models.Coulomb(v_eps=1e-3)
+    return MotionFit(model=model, theta=np.asarray(model.from_physical(**TRUTH), np.float64),
+                     velocity_scaler=None, friction_scaler=None, dt=rec.dt, n_train=rec.n_samples,
+                     n_samples=rec.n_samples, metrics={},
+                     settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 0.0}})
+
+
+def test_initial_state_reads_only_its_window():
+    """Positions after the window never matter; the force drives the free run after it."""
+    rec = _record(700)
+    fit = _reference_fit(rec)
+    n = 20
+    with jax.enable_x64(True):
+        base = fit.simulate(rec, init_window=n)["x"]
+        x2 = rec.position.copy()
+        x2[n:] += np.random.default_rng(0).normal(0, 1e-2, x2.size - n)  # the whole tail replaced
+        other = MotionData.from_arrays(rec.force, x2, rec.dt)
+        assert not np.allclose(other.velocity[:n], rec.velocity[:n])  # the filter would read past
+        np.testing.assert_array_equal(fit.simulate(other, init_window=n)["x"], base)
+        f2 = rec.force.copy()
+        f2[n + 5:] += 50.0
+        changed = fit.simulate(MotionData.from_arrays(f2, rec.position, rec.dt), init_window=n)["x"]
+    np.testing.assert_array_equal(changed[: n + 6], base[: n + 6])
+    assert not np.allclose(changed[n + 7:], base[n + 7:])
+
+
+def test_initial_state_rule_is_a_quadratic_fit_over_the_window():
+    """On a quadratic position the rule's x0 and v0 are exact; on the simulated record they
+    match the true state within the polynomial's error."""
+    rec, v = _record(800, velocity=True)
+    fit = _reference_fit(rec)
+    dt = rec.dt
+    t = np.arange(20) * dt
+    with jax.enable_x64(True):
+        st = fit.initial_state(0.1 + 0.02 * t + 0.5 * 3.0 * t ** 2, 20)
+        assert st["x0"] == pytest.approx(0.1 + 0.02 * t[-1] + 1.5 * t[-1] ** 2, abs=1e-14)
+        assert st["v0"] == pytest.approx(0.02 + 3.0 * t[-1], abs=1e-10)
+        st = fit.initial_state(rec.position[500:], 20)
+        with pytest.raises(ValueError, match="init_window"):
+            fit.initial_state(rec.position, 1)
+        with pytest.raises(ValueError, match="init_window"):
+            fit.simulate(rec)
+    assert st["v0"] == pytest.approx(v[519], rel=1e-2)
+    assert st["x0"] == pytest.approx(rec.position[519], abs=1e-3 * np.ptp(rec.position))
+
+
+# ----------------------------------------------------------------- model choice
+def test_overfit_warning_fires_when_a_richer_model_validates_worse():
+    """Data from Coulomb+viscous friction; a 'richer' Stribeck fit with a wrong breakaway
+    peak validates worse than the true simpler model: the warning names both. With the
+    peak right (the richer model containing the truth) it stays silent."""
+    rec = _record(1500)
+    train, valid = rec.window(0, 1000), rec.window(1000)
+    coul = _reference_fit(rec)
+    strib_model = models.Stribeck(v_eps=1e-3)
+
+    def strib(fs):
+        return MotionFit(model=strib_model, theta=np.asarray(
+            strib_model.from_physical(Fc=12.0, Fs=fs, vs=2e-3, sigma2=60.0), np.float64),
+            velocity_scaler=None, friction_scaler=None, dt=rec.dt, n_train=1000, n_samples=1500,
+            metrics={}, settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 0.0}})
+
+    fits = {"coulomb": coul, "stribeck": strib(30.0)}
+    with jax.enable_x64(True):
+        for f in fits.values():
+            f.metrics = {**f.evaluate_records([train], [valid]), "num_params": f.model.num_params + 2}
+        with pytest.warns(OverfitWarning, match="stribeck .* worse than coulomb"):
+            out = rank_fits(fits)
+        assert out.ranking == ["coulomb", "stribeck"] and out.overfit == [("stribeck", "coulomb")]
+        assert "worse than a simpler model" in out.table()
+        good = strib(12.0)  # Fs = Fc: the Coulomb model itself
+        good.metrics = {**good.evaluate_records([train], [valid]), "num_params": 6}
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", OverfitWarning)
+            rank_fits({"coulomb": coul, "stribeck": good})
+
+
+def test_compare_motion_ranks_and_needs_validation():
+    rec = _record(1200)
+    with pytest.raises(ValueError, match="validation"):
+        compare_motion(["coulomb"], rec, key=0, mass=2.5, train=1.0)
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = compare_motion({"coulomb": models.Coulomb(v_eps=1e-3), "stribeck": models.Stribeck(v_eps=1e-3)},
+                             rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=SMALL, dtype=jnp.float64)
+    scores = [out.fits[k].metrics["valid"]["rmse_mm"] for k in out.ranking]
+    assert scores == sorted(scores)
+    assert out.best is out.fits[out.ranking[0]]
