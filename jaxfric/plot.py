@@ -91,6 +91,13 @@ def _mark_split(ax, data) -> None:
         ax.axvline(split, color="tab:orange", ls="--", lw=1.0)
 
 
+def _legend_outside(ax, **kwargs):
+    """The axes' legend beside it, to the right, never over the data (the figures use
+    constrained layout, which makes room for it)."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                     **{"fontsize": 8, **kwargs})
+
+
 def _split_legend_note(data) -> str:
     n = _n_train(data)
     t = _time(data)
@@ -106,7 +113,11 @@ def fit_label(fit, default: str = "model") -> str:
     if not isinstance(fit, Fit):
         return default
     name = type(fit.model).__name__
-    return f"ENN ({fit.model.neurons} neurons)" if name == "Elman" else name
+    if name == "Elman":
+        return f"ENN ({fit.model.neurons} neurons)"
+    form = [w for w, on in (("asymmetric", getattr(fit.model, "asymmetric", False)),
+                            ("offset", getattr(fit.model, "offset", False))) if on]
+    return f"{name} ({' + '.join(form)})" if form else name
 
 
 def predict_on(fit, data) -> np.ndarray:
@@ -182,7 +193,7 @@ def plot_data(data, *, title: str | None = None) -> Figure:
         _mark_split(ax, data)
         ax.grid(alpha=0.3)
     ax_f.plot([], [], color="tab:orange", ls="--", label="train | validation split")
-    ax_f.legend(loc="best", fontsize=8)
+    _legend_outside(ax_f)
     fig.suptitle(title or f"Identification data: {_split_legend_note(data)}")
     return fig
 
@@ -252,7 +263,7 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
     ax.set_ylabel("friction force [N]")
     ax.set_title(title or "Friction against velocity")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, markerscale=4)
+    _legend_outside(ax, markerscale=4)
     return fig
 
 
@@ -282,14 +293,14 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     ax_t.set_ylabel("friction force [N]")
     ax_t.set_title("MSE (normalised): " + ", ".join(parts))
     ax_t.grid(alpha=0.3)
-    ax_t.legend(loc="upper right", fontsize=8)
+    _legend_outside(ax_t)
     ax_v.plot(v * scale, y, ".", ms=1.5, color="0.35", label="measured")
     ax_v.plot(v * scale, y_hat, "-", lw=0.8, color="tab:red", label="estimated")
     ax_v.set_xlabel(f"piston velocity [{unit}]")
     ax_v.set_ylabel("friction force [N]")
     ax_v.set_title("against velocity")
     ax_v.grid(alpha=0.3)
-    ax_v.legend(fontsize=8, markerscale=4)
+    _legend_outside(ax_v, markerscale=4)
     fig.suptitle(title or f"Measured and estimated friction: {label}")
     return fig
 
@@ -329,7 +340,7 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     ax.set_ylabel("error  F - F_hat [N]")
     ax.set_title(title or "Friction estimation error")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    _legend_outside(ax)
     return fig
 
 
@@ -356,7 +367,7 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
     ax.set_ylabel("friction force [N]")
     ax.set_title(title or f"Ensemble prediction band: {label}")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    _legend_outside(ax)
     return fig
 
 
@@ -383,17 +394,39 @@ def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
                     f"pair) holding an optimiser history, got {type(item).__name__}")
 
 
+#: How a stage of ``Fit.stages`` is named in figures.
+STAGE_NAMES = {"mapso": "MAPSO", "pso": "PSO", "nelder_mead": "Nelder-Mead", "bfgs": "BFGS",
+               "lbfgs": "L-BFGS", "lm": "Levenberg-Marquardt", "gauss_newton": "Gauss-Newton"}
+
+
+def _stage_name(stage: Mapping) -> str:
+    name = str(stage.get("stage", "?"))
+    return STAGE_NAMES.get(name, name)
+
+
 def _global_phase_evals(item):
-    """Evaluations spent by the global phase of a hybrid run, if recorded."""
+    """``(evaluations, "first -> second")`` where a hybrid run's second derivative-free
+    stage took over from its global stage, if recorded; else ``None``."""
     solution = item.solution if isinstance(item, Fit) else item
+    stages = item.stages if isinstance(item, Fit) else []
+    searched = [s for s in stages if "num_evals" in s]  # the stages the history covers
     if isinstance(solution, Solution) and "num_evals_global" in solution.stats:
         g = np.asarray(solution.stats["num_evals_global"])
-        return float(np.median(g)) if g.ndim else float(g)
-    if isinstance(item, Fit):  # a Fit loaded from disk keeps its stages only
-        stages = item.stages
-        if len(stages) > 1 and stages[0].get("stage") == "mapso" and "num_evals" in stages[0]:
-            return float(stages[0]["num_evals"])
+        names = (" -> ".join(_stage_name(s) for s in searched[:2]) if len(searched) > 1
+                 else "MAPSO -> Nelder-Mead")
+        return (float(np.median(g)) if g.ndim else float(g)), names
+    if len(searched) > 1:  # a Fit loaded from disk keeps its stages only
+        return float(searched[0]["num_evals"]), f"{_stage_name(searched[0])} -> {_stage_name(searched[1])}"
     return None
+
+
+def _gradient_stages(item) -> list[Mapping]:
+    """The stages of a fit after its derivative-free search (the gradient stage, e.g.
+    the networks' BFGS): each has a final cost ``J`` and a number of steps, and is not
+    part of the search history."""
+    if not isinstance(item, Fit):
+        return []
+    return [s for s in item.stages if "num_evals" not in s and "J" in s]
 
 
 def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None, *,
@@ -403,7 +436,10 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
     Items may be :class:`jaxfric.Solution`, :class:`jaxfric.History`, fits holding
     a solution, or ``(evals, f)`` pairs; a mapping label -> item works too. For a
     batch of runs (``minimise_many``) the median is drawn with the min-max band.
-    A dotted line marks where Nelder-Mead took over from MAPSO, when known.
+    Every stage of a fit is drawn and named in the legend per model: a dotted line
+    where its second derivative-free stage took over (e.g. MAPSO -> Nelder-Mead), and
+    its gradient stage (e.g. the networks' BFGS), whose steps are counted on the
+    evaluation axis, as a dashed segment to the cost it ended at.
     """
     if isinstance(solutions_or_histories, Mapping):
         labels = list(solutions_or_histories) if labels is None else labels
@@ -422,17 +458,23 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
         raise ValueError(f"{len(labels)} labels for {len(items)} histories")
 
     curves = [_history_arrays(it) for it in items]
-    finite = np.concatenate([f[np.isfinite(f)].ravel() for _, f in curves] or [np.zeros(0)])
+    ends = [float(s["J"]) for it in items for s in _gradient_stages(it)]
+    finite = np.concatenate([f[np.isfinite(f)].ravel() for _, f in curves] + [np.asarray(ends, float)]
+                            or [np.zeros(0)])
+    finite = finite[np.isfinite(finite)]
     positive = finite[finite > 0]
     log = finite.size > 0 and np.all(finite >= 0)
     # Exact zeros (a test function solved) cannot sit on a log axis: draw them at a floor
     # a decade below the smallest positive value, and say so in the title.
     floor = positive.min() / 10.0 if positive.size else 1e-300
-    fig = Figure(figsize=(7.5, 4.6), layout="constrained")
+    fig = Figure(figsize=(8.5, 4.6), layout="constrained")
     ax = fig.subplots()
     clipped = False
+    gradient_steps = False
     for i, ((evals, f), label) in enumerate(zip(curves, labels)):
         color = f"C{i}"
+        searched = [s for s in getattr(items[i], "stages", []) if "num_evals" in s]
+        first = _stage_name(searched[0]) if searched else None
         if evals.ndim == 2:  # a batch of runs: median and band on a common grid
             grid = np.linspace(0.0, float(np.max(evals)), 200)
             rows = np.stack([np.interp(grid, e, np.where(np.isfinite(v), v, np.nan)) for e, v in zip(evals, f)])
@@ -442,24 +484,37 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
                 mid, lo, hi = (np.maximum(a, floor) for a in (mid, lo, hi))
             ax.plot(grid, mid, color=color, lw=1.4, label=f"{label} (median of {evals.shape[0]})")
             ax.fill_between(grid, lo, hi, color=color, alpha=0.15, lw=0)
-        else:
-            y = np.where(np.isfinite(f), f, np.nan)
-            if log:
-                clipped |= bool(np.any(y <= 0))
-                y = np.maximum(y, floor)
-            ax.step(evals, y, where="post", color=color, lw=1.4, label=label)
+            continue
+        y = np.where(np.isfinite(f), f, np.nan)
+        if log:
+            clipped |= bool(np.any(y <= 0))
+            y = np.maximum(y, floor)
+        stage_text = " -> ".join(_stage_name(s) for s in searched) if searched else ""
+        ax.step(evals, y, where="post", color=color, lw=1.4,
+                label=f"{label}: {stage_text}" if stage_text else label)
         switch = _global_phase_evals(items[i])
         if switch is not None:
-            ax.axvline(switch, color=color, ls=":", lw=1.0)
-    if any(_global_phase_evals(it) is not None for it in items):
-        ax.plot([], [], color="0.3", ls=":", label="MAPSO -> Nelder-Mead")
+            ax.axvline(switch[0], color=color, ls=":", lw=1.0, label=f"{label}: {switch[1]} switch")
+        # the gradient stage(s): from the search's end to the cost each one ended at
+        x0 = float(evals[-1]) if evals.size else 0.0
+        y0 = float(y[-1]) if y.size else np.nan
+        for stage in _gradient_stages(items[i]):
+            steps = int(stage.get("num_steps", 0) or 0)
+            j = float(stage["J"])
+            j = max(j, floor) if log else j
+            x1 = x0 + max(steps, 1)
+            ax.plot([x0, x1], [y0, j], color=color, ls="--", lw=1.4, marker="o", markevery=[1],
+                    label=f"{label}: {_stage_name(stage)}" + (f", {steps} steps" if steps else "")
+                    + (f" (after {first})" if first else ""))
+            x0, y0 = x1, j
+            gradient_steps = True
     if log:
         ax.set_yscale("log")
-    ax.set_xlabel("function evaluations")
+    ax.set_xlabel("function evaluations" + (" (a gradient step counted as one)" if gradient_steps else ""))
     ax.set_ylabel(ylabel + (" (log scale)" if log else ""))
     ax.set_title((title or "Optimiser convergence") + (" (zeros drawn at the floor)" if clipped else ""))
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    _legend_outside(ax)
     return fig
 
 
@@ -503,5 +558,5 @@ def plot_table1(rows: Sequence[Mapping], *, title: str | None = None) -> Figure:
     ax.set_ylabel("final best f: mean (bars), best-worst (whiskers)")
     ax.set_title(title or "Table 1: final objective value per test function")
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    _legend_outside(ax)
     return fig

@@ -235,7 +235,7 @@ def test_memory_figure_is_the_dense_matrix_of_the_stage_that_runs():
 
     def spec(name, **kw):
         args = argparse.Namespace(generations=None, nm_evals=None, quick=False, neurons=kw.pop("neurons", None),
-                                  solver=kw.pop("solver", "mapso-nmds"), refine=kw.pop("refine", "none"),
+                                  solver=kw.pop("solver", "mapso-nmds"), refine=kw.pop("refine", "default"),
                                   paper=kw.pop("paper", False), seed=0, box=None)
         s = FitSpec.from_args(name, args)
         return s, s.build_model()
@@ -285,3 +285,37 @@ def test_predict_says_and_applies_the_fits_velocity_filter(tmp_path, capsys):
     assert np.allclose(got["friction_predicted"], expected, rtol=1e-5, atol=1e-4)
     raw = np.genfromtxt(tmp_path / "raw.csv", delimiter=",", names=True)
     assert np.allclose(raw["velocity"], v, rtol=0, atol=1e-12)
+
+
+def test_demo_help_describes_the_pipelines_the_demo_runs():
+    """--help, the stage lines and the report's settings share one description of each
+    demo model's pipeline (describe_solver of the library's defaults), so they cannot drift."""
+    import argparse
+
+    from jaxfric.cli.fitting import describe_solver
+    from jaxfric.cli.parser import DEMO_EPILOG
+    from jaxfric.cli.spec import FitSpec
+
+    args = argparse.Namespace(generations=None, nm_evals=None, quick=False, neurons=None, solver="mapso-nmds",
+                              refine="default", paper=False, seed=0, box=None, asymmetric=True)
+    for name in ("elman", "lugre"):
+        spec = FitSpec.from_args(name, args)
+        model = spec.build_model()
+        text = describe_solver(spec.build_solver(model), model, spec.paper, spec.refine)
+        assert text in DEMO_EPILOG, (name, text)
+        assert f"{model.num_params} parameters" in DEMO_EPILOG
+    assert FitSpec.from_args("elman", args).asymmetric is False  # the networks have no such form
+
+
+def test_asymmetric_models_are_those_with_the_form():
+    from jaxfric import models
+    from jaxfric.cli.spec import ASYMMETRIC_MODELS
+    from jaxfric.identification._api import resolve_model
+
+    for name in models.available():
+        try:
+            model = resolve_model(name, {"asymmetric": True, "offset": True})
+        except ValueError:
+            assert name not in ASYMMETRIC_MODELS, name
+        else:
+            assert name in ASYMMETRIC_MODELS and model.asymmetric and model.offset, name

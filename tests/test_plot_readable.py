@@ -67,3 +67,58 @@ def test_error_figure_without_validation_skips_the_transient():
     pred[:20] -= 50.0
     text = plot.plot_error({"m": pred}, d).axes[0].get_legend().get_texts()[0].get_text()
     assert "after the first 50 samples = 1 N" in text, text
+
+
+def _overlaps_axes(fig) -> list[str]:
+    """Axes whose legend overlaps the axes' own drawing area."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    bad = []
+    for ax in fig.axes:
+        legend = ax.get_legend()
+        if legend is None:
+            continue
+        box, area = legend.get_window_extent(), ax.get_window_extent()
+        if box.overlaps(area):
+            bad.append(ax.get_title() or "axes")
+    return bad
+
+
+def test_legends_sit_beside_the_data_never_on_it(noisy, make_fit):
+    """Every figure of a report keeps its legends outside the plotting area."""
+    import jaxfric as jf
+
+    fit = make_fit(jf.Coulomb(), [40.0, 3.0], dt=1e-3, n_train=16_000, n_samples=20_000)
+    figures = {
+        "data": plot.plot_data(noisy),
+        "friction_velocity": plot.plot_friction_velocity(noisy, {"model": np.asarray(noisy.friction)}),
+        "fit": plot.plot_fit(fit, noisy),
+        "error": plot.plot_error({"model": np.asarray(noisy.friction) - 1.0}, noisy),
+        "convergence": plot.plot_convergence({"Coulomb": fit}),
+    }
+    for name, fig in figures.items():
+        assert not _overlaps_axes(fig), name
+
+
+def test_convergence_names_every_stage_per_model(make_fit):
+    """A network's gradient stage is drawn (to the cost it ended at) and named, and the
+    switch between derivative-free stages is named by the fit's own stages."""
+    import jaxfric as jf
+
+    enn = make_fit(jf.Elman(neurons=2), np.zeros(jf.Elman(neurons=2).num_params),
+                   stages=[{"stage": "mapso", "J": 0.1, "num_evals": 200},
+                           {"stage": "bfgs", "J": 1e-4, "num_steps": 50}],
+                   history={"evals": np.arange(1, 21) * 10, "f": np.geomspace(1.0, 0.1, 20)})
+    lugre = make_fit(jf.Coulomb(), [40.0, 3.0])  # mapso then nelder_mead (make_fit's stages)
+    fig = plot.plot_convergence({"ENN (2 neurons)": enn, "Coulomb": lugre})
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "ENN (2 neurons): MAPSO" in labels
+    assert "ENN (2 neurons): BFGS, 50 steps (after MAPSO)" in labels
+    assert "Coulomb: MAPSO -> Nelder-Mead switch" in labels
+    assert not any("ENN (2 neurons): MAPSO -> Nelder-Mead" in t for t in labels)
+    bfgs = next(line for line in ax.get_lines() if line.get_label().startswith("ENN (2 neurons): BFGS"))
+    assert list(bfgs.get_xdata()) == [200.0, 250.0]
+    assert bfgs.get_ydata()[-1] == pytest.approx(1e-4)
+    assert "gradient step counted as one" in ax.get_xlabel()

@@ -86,9 +86,9 @@ def memory_need(spec, model, *, x64: bool) -> tuple[int, str]:
     n = int(model.num_params)
     item = 8 if x64 else 4
     dense = spec.refine in ("bfgs", "lm", "gauss_newton", "auto") or (
-        spec.refine == "none" and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
+        spec.refine == "default" and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
     if dense:
-        what = "BFGS's dense Hessian" if spec.refine in ("none", "bfgs", "auto") else "the Gauss-Newton matrix"
+        what = "BFGS's dense Hessian" if spec.refine in ("default", "bfgs", "auto") else "the Gauss-Newton matrix"
         return n * n * item, f"{what} ({_n(n)} x {_n(n)} x {item} bytes)"
     solver = spec.build_solver(model)
     uses_nm = spec.solver in ("mapso-nmds", "nelder-mead") and not (
@@ -118,21 +118,49 @@ def check_memory(spec, model, *, x64: bool, available: int | None = None, say=No
 def label(name: str, model) -> str:
     base = LABELS.get(name, name)
     n = getattr(model, "neurons", None)
-    return f"{base} ({n} neurons)" if n is not None else base
+    if n is not None:
+        return f"{base} ({n} neurons)"
+    return f"{base} (asymmetric + offset)" if getattr(model, "asymmetric", False) else base
 
 
-def describe_solver(solver, model, paper: bool = False) -> str:
-    """One phrase for stage messages and reports (``solver=None``: ``identify``'s default
-    for the method, the paper's with ``paper=True``)."""
+def describe_solver(solver, model, paper: bool = False, refine: str = "default") -> str:
+    """One phrase for the stage lines, the report's settings and ``--help`` (``solver=None``:
+    ``identify``'s default for the method, the paper's with ``paper=True``), with the
+    gradient stage ``refine`` adds (``"default"``: the method's own, BFGS for the networks
+    under jaxfric's pipeline; ``"none"``: none)."""
     from jaxfric.identification import _api
 
     method = "paper" if paper else "jaxfric"
     s = _api.default_solver(model, method) if solver is None else solver
     text = _describe(s, model)
-    if _api._fast_pipeline(model, method):  # identify adds the gradient stage
+    if refine == "default" and _api._fast_pipeline(model, method):  # identify adds the gradient stage
         where = f" on the first {_api.GLOBAL_STAGE_SAMPLES} samples" if solver is None else ""
         text += f"{where} -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)"
+    elif refine not in ("default", "none"):
+        text += f" -> gradient stage {refine!r}"
     return text
+
+
+def physical_form(data, *, threshold: float = 0.05) -> tuple[bool, str]:
+    """Whether the physical models need direction-dependent levels and an offset, and why:
+    the direction-wise mean friction while sliding (``|v|`` above a tenth of its maximum;
+    :func:`jaxfric.rig.coulomb_levels`) differs between the directions by more than
+    ``threshold`` of its half-range. Returns ``(asymmetric, sentence for the report)``."""
+    import numpy as np
+
+    from jaxfric import rig
+
+    v = np.asarray(data.velocity[: data.n_train], dtype=np.float64)
+    f = np.asarray(data.friction[: data.n_train], dtype=np.float64)
+    lev = rig.coulomb_levels(v, f, 0.1 * float(np.max(np.abs(v))))
+    ratio = abs(lev.offset) / abs(lev.halfrange) if lev.halfrange else 0.0
+    levels = (f"the training data's sliding friction averages {lev.mean_pos:+.4g} N moving forward and "
+              f"{lev.mean_neg:+.4g} N moving back")
+    if ratio > threshold:
+        return True, (f"{levels}, {100 * ratio:.0f} % apart from symmetric, so the physical models are fitted "
+                      "with direction-dependent levels and an offset (asymmetric=True, offset=True)")
+    return False, (f"{levels}, within {100 * threshold:.0f} % of symmetric, so the physical models are fitted "
+                   "symmetric")
 
 
 def _describe(s, model) -> str:
@@ -226,11 +254,11 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         model = spec.build_model()
         solver = spec.build_solver(model)
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
-            f"{describe_solver(solver, model, spec.paper)}")
+            f"{describe_solver(solver, model, spec.paper, spec.refine)}")
         t0 = time.perf_counter()
         bar = None if args.quiet else progress_bar(
             solver, model, label(name, model), spec.paper,
-            None if spec.refine == "none" else spec.refine)
+            None if spec.refine == "default" else (False if spec.refine == "none" else spec.refine))
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")

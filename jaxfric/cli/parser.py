@@ -124,10 +124,16 @@ Set JAXFRIC_DEBUG=1 (or pass --debug) to see tracebacks instead of one-line erro
 """
 
 DEMO_EPILOG = """\
-The demo reproduces the paper end to end on the synthetic rig (docs/algorithms.md §1, §7):
+The demo runs the paper's setting end to end on the synthetic rig (docs/algorithms.md §1, §7):
 2000 samples at 128 Hz, 5 Hz Butterworth, friction by force balance, first 1600 samples
-for estimation and the last 400 for validation; ENN (30 neurons, 180 parameters) and
-LuGre (6 parameters), both fitted by MAPSO -> Nelder-Mead.
+for estimation and the last 400 for validation. Pipelines (the same words as the stage
+lines and the report):
+  ENN (30 neurons, 180 parameters):
+    MAPSO (8x8 agents, G = 50) on the first 2000 samples -> BFGS (<= 500 steps)
+  LuGre (asymmetric + offset, 10 parameters, as the rig's asymmetric friction needs; --form):
+    MAPSO (5x5 agents, G = 200) -> Nelder-Mead (<= 2000 evaluations)
+  with --paper, both: MAPSO -> Nelder-Mead (the paper's MAPSO-NMDS), no gradient stage.
+Then a position loop on the same rig compares each fit's friction feed-forward.
 
 The report folder holds report.md, results.json, figures (*.png), the saved fits
 (models/*.npz, for 'jaxfric predict') and the simulated raw channels
@@ -220,9 +226,14 @@ def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
                    "the model, see --quick")
     g.add_argument("--nm-evals", type=positive_int, default=None, metavar="N",
                    help="Nelder-Mead evaluation budget of mapso-nmds (default: chosen with the generations)")
-    g.add_argument("--refine", choices=REFINE_CHOICES, default="none",
-                   help="gradient polish after the optimiser (not in the paper; 'auto': LM for small models, "
-                   "BFGS for the networks)")
+    g.add_argument("--refine", choices=("default", *REFINE_CHOICES), default="default",
+                   help="gradient stage after the search: 'default' is the method's own (BFGS, <= 500 steps, for "
+                   "the networks; none for the physical models and with --paper), 'none' turns it off, 'auto' is "
+                   "LM for small models and BFGS for the networks")
+    g.add_argument("--form", choices=("auto", "symmetric", "asymmetric"), default="auto",
+                   help="physical models (LuGre, Dahl, Coulomb, Stribeck, GMS): 'asymmetric' adds direction-dependent "
+                   "levels and a force offset; 'auto' chooses it when the data's sliding friction differs by more "
+                   "than 5 %% between the two directions")
     g.add_argument("--paper", action="store_true",
                    help="the paper's method exactly: MAPSO-NMDS, no gradient stage (default: jaxfric's "
                    "faster, more accurate pipeline; for the networks a short MAPSO then BFGS)")
@@ -264,8 +275,10 @@ def build_parser() -> Parser:
     """The full ``jaxfric`` parser (sub-commands demo, identify, predict, bench)."""
     from jaxfric import __version__
 
-    p = Parser(prog="jaxfric", description="Identify friction in hydraulic cylinders: Elman network (ENN) or "
-               "LuGre fitted by MAPSO -> Nelder-Mead.", epilog=MAIN_EPILOG, formatter_class=_Formatter)
+    p = Parser(prog="jaxfric", description="Identify friction in hydraulic cylinders: an Elman network (ENN), "
+               "LuGre and other models, fitted by jaxfric's pipeline (MAPSO -> BFGS for the networks, MAPSO -> "
+               "Nelder-Mead for the physical models) or the paper's MAPSO-NMDS (--paper).", epilog=MAIN_EPILOG,
+               formatter_class=_Formatter)
     p.add_argument("--version", action="version", version=f"jaxfric {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True

@@ -19,6 +19,9 @@ QUICK_NM_EVALS = 200
 
 SOLVERS = ("mapso-nmds", "mapso", "pso", "nelder-mead")
 
+#: Models with direction-dependent levels and an offset (``asymmetric=True, offset=True``).
+ASYMMETRIC_MODELS = ("coulomb", "stribeck", "lugre", "dahl", "gms")
+
 
 @dataclass(frozen=True)
 class FitSpec:
@@ -32,12 +35,18 @@ class FitSpec:
         generations: swarm generations (Nelder–Mead alone: its step cap); ``None`` keeps
             the library's choice.
         nm_evals: Nelder–Mead evaluation budget; ``None`` keeps the library's choice.
-        refine: gradient refinement after the search (``"none"`` = off).
+        refine: the gradient stage after the search: ``"default"`` = the method's own
+            (BFGS, 500 steps, for the networks under jaxfric's pipeline; none for the
+            physical models and for ``paper``), ``"none"`` = off, or a
+            ``jaxfric.identify(refine=...)`` name (``"bfgs"``, ``"lm"``, ...).
         paper: the paper's method exactly (``identify(method="paper")``: MAPSO–NMDS, no
             gradient stage) instead of the library's default pipeline.
         seed: the key is ``jax.random.key(seed)`` unless a key is passed to :meth:`identify`.
         box: search-box entries ``((name, (low, high)), ...)`` (``--box``) handed to
             ``identify(box=...)``; the rest of the box is the library's (data-centred).
+        asymmetric: fit a physical model with direction-dependent levels and a force
+            offset (``asymmetric=True, offset=True``; :data:`ASYMMETRIC_MODELS`), the form
+            asymmetric data need; ignored by the networks and the cylinder model.
     """
 
     model: str
@@ -45,10 +54,11 @@ class FitSpec:
     solver: str = "mapso-nmds"
     generations: int | None = None
     nm_evals: int | None = None
-    refine: str = "none"
+    refine: str = "default"
     paper: bool = False
     seed: int = 0
     box: tuple = ()
+    asymmetric: bool = False
 
     def __post_init__(self):
         if self.solver not in SOLVERS:
@@ -63,15 +73,19 @@ class FitSpec:
             nm_evals = nm_evals or QUICK_NM_EVALS
         neurons = args.neurons if name in ("elman", "elman_full") else None
         spec = cls(model=name, neurons=neurons, solver=args.solver, generations=generations,
-                   nm_evals=nm_evals, refine=getattr(args, "refine", "none"),
-                   paper=getattr(args, "paper", False), seed=args.seed)
+                   nm_evals=nm_evals, refine=getattr(args, "refine", "default"),
+                   paper=getattr(args, "paper", False), seed=args.seed,
+                   asymmetric=bool(getattr(args, "asymmetric", False)) and name in ASYMMETRIC_MODELS)
         entries = dict(getattr(args, "box", None) or ())
         keys = spec.build_model().box_keys  # each model takes the entries it searches
         return dataclasses.replace(spec, box=tuple((k, r) for k, r in entries.items() if k in keys))
 
     @property
     def model_options(self) -> dict | None:
-        return {"neurons": self.neurons} if self.neurons is not None else None
+        options = {"neurons": self.neurons} if self.neurons is not None else {}
+        if self.asymmetric:
+            options.update(asymmetric=True, offset=True)
+        return options or None
 
     @property
     def default_budget(self) -> bool:
@@ -118,7 +132,9 @@ class FitSpec:
                   "key": jax.random.key(self.seed) if key is None else key}
         if self.box:
             kwargs["box"] = dict(self.box)
-        if self.refine != "none":
+        if self.refine == "none":
+            kwargs["refine"] = False
+        elif self.refine != "default":
             kwargs["refine"] = self.refine
         if self.paper:
             kwargs["method"] = "paper"
