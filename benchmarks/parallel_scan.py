@@ -43,7 +43,7 @@ def elman_cases(T: int, P: int, rounds: int):
 
     rows = []
     for box, model in (("default", Elman(neurons=30, context_weight_bound=1.0)),
-                       ("contracting", Elman(neurons=30, context_weight_bound=0.5, alpha_max=0.9))):
+                       ("contracting", Elman(neurons=30, context_weight_bound=0.4, alpha_max=0.5))):
         lo, hi = model.bounds()
         th = jax.random.uniform(jax.random.key(0), (P, model.num_params), minval=lo, maxval=hi).astype(jnp.float32)
         t = jnp.linspace(0.0, 1.0, T, dtype=jnp.float32)
@@ -107,14 +107,17 @@ def main(argv=None) -> int:
     add_output_arguments(p)
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--tag", default="", help="suffix of the output names (e.g. gpu)")
+    p.add_argument("--elman", default="2000x1,2000x64,24741x1,24741x16", metavar="TxP,...",
+                   help="Elman cases: record length x candidates")
+    p.add_argument("--motion", default="2000,24741", metavar="T,...", help="motion cases: record lengths")
     args = p.parse_args(argv)
     out = results_dir(args.out, quick=args.quick)
-    sizes = [(500, 8)] if args.quick else [(2000, 1), (2000, 64), (24741, 1), (24741, 16)]
+    sizes = [(500, 8)] if args.quick else [tuple(int(x) for x in c.split("x")) for c in args.elman.split(",") if c]
     rounds = 2 if args.quick else args.rounds
     rows = []
     for T, P in sizes:
         rows += elman_cases(T, P, rounds)
-    for T in ([500] if args.quick else [2000, 24741]):
+    for T in ([500] if args.quick else [int(x) for x in args.motion.split(",") if x]):
         rows += motion_cases(T, rounds)
     name = "parallel_scan" + (f"_{args.tag}" if args.tag else "")
     write_csv(rows, out / f"{name}.csv")

@@ -111,7 +111,7 @@ def _elman_case(model, seed=0, P=6, T=600):
 @pytest.mark.parametrize("model", [
     M.Elman(neurons=12, context_weight_bound=0.5, alpha_max=0.9),
     M.Elman(neurons=12, context_weight_bound=1.0, alpha_max=0.5, output_bias=True),
-], ids=["contracting", "output_bias"])
+], ids=["slope_below_1.4", "output_bias"])
 def test_elman_contexts_in_parallel_equal_the_scan(model):
     th, u = _elman_case(model)
     y, info = jax.jit(lambda t, v: elman_rollout(model, t, v, return_info=True))(th, u)
