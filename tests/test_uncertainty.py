@@ -281,3 +281,38 @@ def test_identify_attaches_uncertainty_and_plausibility(rig_velocity, tmp_path):
         assert iv["Fc"][0] < FC < iv["Fc"][1]
         fit.save(tmp_path / "f.npz")
         assert load_fit(tmp_path / "f.npz").intervals() == pytest.approx(iv)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model, params", [
+    (models.Dahl(), dict(sigma0=2e4, Fc=40.0)),
+    (models.GMS(), dict(k1=3e4, k2=1e4, k3=3e3, alpha1=0.5, alpha2=0.3, alpha3=0.2, C=50.0, Fc=40.0,
+                        Fs=55.0, vs=0.01, sigma2=200.0)),
+    (models.Cylinder(), dict(F_pr=10.0, f_cfr=5e-5, K_brk=1.5, vs=0.01, sigma2=200.0)),
+    (models.Stribeck(asymmetric=True, offset=True),
+     dict(Fc_pos=40.0, Fc_neg=35.0, Fs_pos=50.0, Fs_neg=45.0, vs=0.01, sigma2_pos=200.0,
+          sigma2_neg=220.0, F_off=2.0)),
+], ids=lambda x: type(x).__name__ if isinstance(x, models.AbstractFrictionModel) else "")
+def test_every_physical_model_gets_finite_intervals_from_a_frictiondata(model, params):
+    """Each physical family through the public path, from a FrictionData (the Cylinder
+    reads its chamber pressures from it), fitted at the truth of a lightly noisy record:
+    positive finite standard errors and finite intervals around the estimate."""
+    from jaxfric import FrictionData
+
+    with jax.enable_x64(True):
+        dt, n = 2e-3, 1500
+        t = np.arange(n) * dt
+        v = 0.05 * np.sin(2 * np.pi * 0.8 * t) + 0.02 * np.sin(2 * np.pi * 2.1 * t)
+        p1, p2 = 3e5 + 1e5 * np.sin(2 * np.pi * 0.3 * t), 2e5 + 5e4 * np.cos(2 * np.pi * 0.5 * t)
+        theta = model.from_physical(**params)
+        x = model.inputs_from(FrictionData.from_arrays(v, v, dt, p1=p1, p2=p2), n)
+        f = np.asarray(model.simulate(theta, v, dt, x)) + 0.5 * np.random.default_rng(9).standard_normal(n)
+        data = FrictionData.from_arrays(v, f, dt, n_train=1200, p1=p1, p2=p2)
+        fit = _fit(model, theta, v, dt, n_train=1200)
+        u = parameter_uncertainty(fit, data, method=("hac", "jacobian"))
+    assert u.n == 1200 and len(u.names) == model.num_params
+    se = np.array(list(u.stderr("jacobian").values()))
+    assert np.all(np.isfinite(se)) and np.all(se > 0)
+    est = dict(zip(u.names, u.estimate))
+    for k, (lo, hi) in u.intervals(0.95, "jacobian").items():
+        assert np.isfinite(lo) and np.isfinite(hi) and lo < est[k] < hi, k
