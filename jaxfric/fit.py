@@ -193,11 +193,16 @@ class Fit:
         version: jaxfric version that produced the fit.
         velocity_range: ``(min, max)`` [m/s] of the training velocity (``None`` if
             unknown: fits saved before 0.7); prediction beyond it warns.
+        uncertainty: the :class:`jaxfric.uncertainty.ParameterUncertainty` of a physical
+            fit (:attr:`stderr`, :meth:`intervals`, :attr:`correlation`,
+            :meth:`prediction_interval`; docs/uncertainty.md), computed on first use.
         diagnostics: ``{"on_bound": [...], "unidentifiable": [...]}``: parameters
             that ended on a bound of the search box (name, side, value, range, what
             to widen) and parameters the model says the data cannot determine, as
             ``"name: reason"`` strings (:func:`unidentifiable_names` takes the names);
-            :meth:`summary` and the report mark both kinds.
+            :meth:`summary` and the report mark both kinds. ``"implausible"``: the
+            :mod:`jaxfric.plausibility` rules a physical fit breaks (name, rule, message,
+            evidence).
         ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
             final costs ``J``, keys, per-member validation MSE %, the index of the
             best member (this fit) and the spread of each parameter; else ``None``.
@@ -251,7 +256,8 @@ class Fit:
             data, self._training_data = self._training_data, None
             try:
                 self._uncertainty = parameter_uncertainty(self, data, method=("hac", "jacobian"))
-            except ValueError as err:
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
+                # a fit stays usable (and savable) without its intervals; say why
                 self.diagnostics["uncertainty_error"] = str(err)
         return self._uncertainty
 
@@ -450,6 +456,7 @@ class Fit:
         def scaler(s):
             return None if s is None else [float(np.asarray(s.lo)), float(np.asarray(s.hi))]
 
+        uncertainty = self.uncertainty  # first, so a failure is in the diagnostics below
         out = {
             "model": {
                 "class": type(self.model).__name__,
@@ -473,8 +480,8 @@ class Fit:
             "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
             "diagnostics": jsonable(self.diagnostics),
         }
-        if self.uncertainty is not None:
-            out["uncertainty"] = self.uncertainty.to_json()
+        if uncertainty is not None:
+            out["uncertainty"] = uncertainty.to_json()
         if self.ensemble:
             out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items()
                                          if include_theta or k != "theta"})

@@ -57,6 +57,8 @@ __all__ = [
 METHODS = ("hac", "jacobian", "block_bootstrap")
 #: Default level of :meth:`ParameterUncertainty.intervals`.
 DEFAULT_LEVEL = 0.95
+#: report.md prints the whole correlation matrix up to this many parameters.
+MAX_REPORT_CORRELATION = 12
 #: Bootstrap replicates of ``"block_bootstrap"``.
 DEFAULT_REPLICATES = 400
 
@@ -645,6 +647,8 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
     if u is not None:
         out.update(method=u.default, residual=u.residual, n=u.n, lag1=u.lag1, bandwidth=u.bandwidth,
                    rank=u.rank, table=u.table(level), correlated=[list(x) for x in u.strongly_correlated()],
+                   correlation={"names": list(u.names),
+                                "matrix": np.round(u.correlation(), 3).tolist()},
                    error=fit.diagnostics.get("uncertainty_error"))
         if "motion" not in fit.settings and getattr(data, "velocity", None) is not None \
                 and len(data.velocity) == fit.n_samples:
@@ -688,6 +692,13 @@ def report_markdown(summary: dict | None) -> list[str]:
                      f"{_g(row.get('se_jacobian'))} | [{_g(row['low'], '.4g')}, {_g(row['high'], '.4g')}] | "
                      + ("covers the search box: **not determined by the data**" if row["covers_box"] else "")
                      + " |")
+        corr = summary.get("correlation")
+        if corr and 1 < len(corr["names"]) <= MAX_REPORT_CORRELATION:
+            names = corr["names"]
+            L += ["", "Correlation of the estimates:", "", "| | " + " | ".join(names) + " |",
+                  "|---|" + "---|" * len(names)]
+            L += [f"| {a} | " + " | ".join(f"{x:+.2f}" for x in row) + " |"
+                  for a, row in zip(names, corr["matrix"])]
         for a, b, r in summary.get("correlated", []):
             L += ["", f"corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each."]
         band = summary.get("band")

@@ -33,6 +33,7 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
     md = (tmp_path / "report.md").read_text()
     res = json.loads((tmp_path / "results.json").read_text())["models"]
     assert "Parameter uncertainty (95% intervals" in md and "se (Newey–West)" in md
+    assert "| | Fc | sigma2 |" in md and "| Fc | +1.00 |" in md
     band = res["coulomb"]["uncertainty"]["band"]
     assert 0.85 < band["valid"] <= 1.0 and 0.85 < band["train"] <= 1.0
     assert f"holds {band['train']:.1%} of the training samples" in md
