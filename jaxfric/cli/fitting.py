@@ -152,7 +152,10 @@ def physical_form(data, *, threshold: float = 0.05) -> tuple[bool, str]:
 
     v = np.asarray(data.velocity[: data.n_train], dtype=np.float64)
     f = np.asarray(data.friction[: data.n_train], dtype=np.float64)
-    lev = rig.coulomb_levels(v, f, 0.1 * float(np.max(np.abs(v))))
+    try:
+        lev = rig.coulomb_levels(v, f, 0.1 * float(np.max(np.abs(v))))
+    except ValueError as err:  # e.g. a record that slides one way only
+        return False, f"the physical models are fitted symmetric: the training data do not show a direction ({err})"
     ratio = abs(lev.offset) / abs(lev.halfrange) if lev.halfrange else 0.0
     levels = (f"the training data's sliding friction averages {lev.mean_pos:+.4g} N moving forward and "
               f"{lev.mean_neg:+.4g} N moving back")
