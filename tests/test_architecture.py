@@ -9,7 +9,8 @@ ROOT = Path(__file__).resolve().parents[1] / "jaxfric"
 #: The README's order: cli → report, plot → identification, motion, compensation → fit →
 #: export → optim, models, rig, metrics, functions → records, files → compiler helpers and
 #: the warning categories.
-LAYER = {"cli": 8, "report": 7, "plot": 7, "identification": 6, "motion": 6, "compensation": 6,
+LAYER = {"cli": 8, "report": 7, "plot": 7, "sweeps": 7, "identification": 6, "motion": 6, "compensation": 6,
+         "parallel_scan": 6,
          "fit": 5, "export": 4, "datasets": 4, "optim": 3, "models": 3, "rig": 3, "metrics": 3, "functions": 3,
          "records": 2, "files": 2, "_xla": 1, "_timing": 1, "_warnings": 1}
 
