@@ -641,17 +641,19 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
     and validation windows. ``None`` for a fit without uncertainty or warnings."""
     u = None if fit.model.needs_scaling else fit.uncertainty
     implausible = list(fit.diagnostics.get("implausible", []))
-    if u is None and not implausible:
+    one_record = (getattr(data, "velocity", None) is not None and len(data.velocity) == fit.n_samples
+                  and "motion" not in fit.settings)
+    ensemble = _ensemble_band(fit, data) if one_record and fit.ensemble else None
+    if u is None and not implausible and ensemble is None:
         return None
-    out: dict[str, Any] = {"level": level, "implausible": implausible}
+    out: dict[str, Any] = {"level": level, "implausible": implausible, "ensemble_band": ensemble}
     if u is not None:
         out.update(method=u.default, residual=u.residual, n=u.n, lag1=u.lag1, bandwidth=u.bandwidth,
                    rank=u.rank, table=u.table(level), correlated=[list(x) for x in u.strongly_correlated()],
                    correlation={"names": list(u.names),
                                 "matrix": np.round(u.correlation(), 3).tolist()},
                    error=fit.diagnostics.get("uncertainty_error"))
-        if "motion" not in fit.settings and getattr(data, "velocity", None) is not None \
-                and len(data.velocity) == fit.n_samples:
+        if one_record:
             try:
                 inputs = fit.model.inputs_from(data, len(data.velocity))
                 y, lo, hi = prediction_interval(fit, data.velocity, level, inputs=inputs)
@@ -673,6 +675,24 @@ def _g(x, fmt: str = ".3g") -> str:
         return format(float(x), fmt)
     except (TypeError, ValueError):
         return str(x)
+
+
+def _ensemble_band(fit, data) -> dict | None:
+    """Measured coverage of an ensemble's min–max band (``fit.predict_band``)."""
+    import warnings
+
+    from ._warnings import ExtrapolationWarning
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            lo, hi = fit.predict_band(data.velocity)
+    except ValueError:
+        return None
+    f, n = np.asarray(data.friction), fit.n_train
+    return {"members": len(fit.ensemble.get("J", [])), "train": coverage(f[:n], lo[:n], hi[:n]),
+            "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None,
+            "mean_half_width_N": float(np.mean(hi - lo) / 2)}
 
 
 def report_markdown(summary: dict | None) -> list[str]:
@@ -708,6 +728,12 @@ def report_markdown(summary: dict | None) -> list[str]:
                 cov.append(f"{band['valid']:.1%} of the validation samples")
             L += ["", f"{lvl} prediction band (parameter covariance plus the training residual variance, "
                   f"mean half-width {band['mean_half_width_N']:.3g} N) holds " + " and ".join(cov) + "."]
+    eb = summary.get("ensemble_band")
+    if eb:
+        L += ["", f"The {eb['members']} members' min–max band (mean half-width {eb['mean_half_width_N']:.3g} N) "
+              f"holds {eb['train']:.1%} of the training"
+              + (f" and {eb['valid']:.1%} of the validation samples" if eb.get("valid") is not None else " samples")
+              + ": it shows the optimiser's spread, not where new data fall."]
     for d in summary.get("implausible", []):
         L += ["", f"**Physically implausible ({d['rule']}):** {d['message']}."]
     return L

@@ -21,8 +21,10 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
         coul = models.Coulomb()
         f = 20 * np.tanh(v / coul.v_eps) + 200 * v + rng.standard_normal(n)
         data = FrictionData.from_arrays(v, f, dt, 0.8)
-        good = Fit(model=coul, theta=np.asarray(coul.from_physical(**coul.fit_least_squares(v[:2400], f[:2400]))),
-                   velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400, n_samples=n, metrics={})
+        theta = np.asarray(coul.from_physical(**coul.fit_least_squares(v[:2400], f[:2400])))
+        members = theta + np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.001]])   # three close optima
+        good = Fit(model=coul, theta=theta, velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400,
+                   n_samples=n, metrics={}, ensemble={"theta": members, "J": [0.1, 0.1, 0.1], "best": 0})
         strib = models.Stribeck()
         bad = Fit(model=strib, theta=np.asarray(strib.from_physical(Fc=20.0, Fs=80.0, vs=1e-4, sigma2=200.0)),
                   velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400, n_samples=n, metrics={})
@@ -37,6 +39,11 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
     band = res["coulomb"]["uncertainty"]["band"]
     assert 0.85 < band["valid"] <= 1.0 and 0.85 < band["train"] <= 1.0
     assert f"holds {band['train']:.1%} of the training samples" in md
+    eb = res["coulomb"]["uncertainty"]["ensemble_band"]
+    lo = np.min([coul.simulate(m, v) for m in members], axis=0)
+    hi = np.max([coul.simulate(m, v) for m in members], axis=0)
+    assert eb["valid"] == pytest.approx(np.mean((f[2400:] >= lo[2400:]) & (f[2400:] <= hi[2400:])))
+    assert eb["valid"] < 0.3 and "3 members' min–max band" in md
     assert "**Physically implausible (stribeck_spike):**" in md
     assert res["stribeck"]["uncertainty"]["implausible"][0]["name"] == "Fs"
     assert res["coulomb"]["fit"]["uncertainty"]["names"] == ["Fc", "sigma2"]
