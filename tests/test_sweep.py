@@ -184,3 +184,28 @@ def in_process_cli(capsys):
         return status, out, err
 
     return run
+
+
+@pytest.mark.slow
+def test_motion_records_sweep_through_identify_motion(tmp_path):
+    """MotionData records go to identify_motion; a run equals its single call."""
+    from jaxfric.motion import MotionData, friction_step, identify_motion
+    from jaxfric.motion._forward import simulate_motion
+
+    dt, n = 1e-3, 600
+    t = np.arange(n) * dt
+    force = 30.0 * np.sin(2 * np.pi * 2.0 * t)
+    coulomb = jaxfric.models.Coulomb()
+    theta = coulomb.from_physical(Fc=8.0, sigma2=20.0)
+    x = np.asarray(simulate_motion(friction_step(coulomb), theta, 2.0, force, dt, 0.0, 0.0)["x"])
+    data = MotionData.from_arrays(force, x, dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = sweep(["coulomb"], {"sim": data}, [0, 1], tmp_path / "motion", progress=False,
+                    mass=2.0, solver=SOLVER)
+        single = identify_motion("coulomb", data, key=1, mass=2.0, solver=SOLVER)
+    assert res.motion and [r["seed"] for r in res.rows] == [0, 1]
+    np.testing.assert_array_equal(res.fit("coulomb", "sim", 1).theta, single.theta)
+    assert "valid_rmse_mm" in res.rows[1] and np.isfinite(res.rows[1]["valid_rmse_mm"])
+    with pytest.raises(ValueError, match="mix MotionData"):
+        sweep(["coulomb"], {"sim": data, "a": RECORDS["a"]}, 1, tmp_path / "mixed", progress=False)
