@@ -119,7 +119,7 @@ def main(argv=None):
         f"Fc {ls.Fc:.2f}, offset {ls.offset:.2f})", ls_fit, kind="baseline")
     row("IDIM-LS published parameters", fixed_fit(IDIM["M"], IDIM["Fv"], IDIM["Fc"], IDIM["offset"], est.dt),
         kind="reference")
-    search = MotionSearch(particles=6, generations=3, shooting_steps=3, free_run_steps=3) if args.quick else None
+    search = MotionSearch(particles=6, generations=3, horizons=(None,), steps=(3,)) if args.quick else None
     for name in [m.strip() for m in args.models.split(",") if m.strip()]:
         opts = {"neurons": 10} if name.startswith("elman") else None
         t0 = time.perf_counter()

@@ -48,7 +48,11 @@ from jaxfric.motion import MotionData, MotionFit, identify_motion
 from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
 
-from _harness import add_output_arguments, results_dir  # noqa: E402
+from _harness import add_output_arguments, markdown_table, results_dir  # noqa: E402
+
+
+def _cell(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 EMPS_DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 #: Published IDIM-LS values of SOURCE.md (Janot, Gautier, Brunot 2019).
@@ -84,38 +88,55 @@ def _solver(n_params, quick):
                      nelder_mead=NelderMead(max_steps=nm, max_evals=nm))
 
 
-#: The EMPS search box (fixed, not data-centred); each model searches the entries it has.
-EMPS_BOX = {"Fc": (1.0, 100.0), "sigma2": (10.0, 1000.0), "F_off": (-20.0, 20.0), "sigma0": (1e4, 1e9),
-            "sigma1": (1.0, 1e5), "vs": (1e-4, 0.1), "k": (1e4, 1e9), "C": (1.0, 1e5)}
-
-
-def emps_box(model):
-    """:data:`EMPS_BOX` restricted to ``model``'s entries (``None`` for the networks)."""
-    keys = getattr(model, "box_keys", None)
-    return None if keys is None else {k: r for k, r in EMPS_BOX.items() if k in keys}
-
-
 def asymmetric_coulomb():
     """The library's asymmetric Coulomb + viscous friction with its own output offset
     (docs/algorithms.md §13.1): F = Fc+ [v>0] - Fc- [v<0] + Fv+- v + F_off."""
     return models.Coulomb(asymmetric=True, offset=True, v_eps=1e-4)
 
 
-def emps_candidates():
-    """name -> friction model; a model with its own ``F_off`` (``offset=True``) is fitted
-    without the mechanics' separate offset (the two would be one parameter twice)."""
-    return {
-        "static+offset (Coulomb+viscous)": models.Coulomb(v_eps=1e-4),
-        "asymmetric+offset": asymmetric_coulomb(),
-        "LuGre+offset": models.LuGre(),
-        "GMS(3)+offset": models.GMS(num_elements=3),
-        "Elman(10)+offset": models.Elman(neurons=10, context_weight_bound=1.0),
-    }
+#: The EMPS rows: label -> (model name or instance, model options). Every row uses
+#: identify_motion's defaults (data-centred box, MotionSearch()) with the mass searched in
+#: [50, 200] kg and a constant offset.
+EMPS_MODELS = {
+    "coulomb": ("static Coulomb+viscous+offset", "coulomb", None),
+    "stribeck": ("static Stribeck+offset", "stribeck", None),
+    "asymmetric": ("asymmetric Coulomb+viscous, own offset", None, None),
+    "dahl": ("Dahl+viscous+offset", "dahl", {"viscous": True}),
+    "lugre": ("LuGre+offset", "lugre", None),
+    "gms": ("GMS(3)+offset", "gms", None),
+    "elman": ("Elman(10)+offset", "elman", {"neurons": 10}),
+}
+DEFAULT_EMPS_MODELS = "coulomb,stribeck,asymmetric,dahl,lugre,gms,elman"
 
 
 def total_offset(fit) -> float:
     """The constant force of a fit: the mechanics' offset plus the model's ``F_off``."""
     return fit.offset + float(fit.params.get("F_off", 0.0))
+
+
+def least_squares_fit(path, data, n_train) -> MotionFit:
+    """The least-squares Coulomb + viscous + offset baseline: IDIM-LS (M, Fv, Fc, offset;
+    the benchmark's filter and differences) on the estimation part only."""
+    from jaxfric.rig.emps import emps_states, idim_ls
+
+    s = emps_states(load_emps(path))
+    keep = s["t"] < n_train * data.dt
+    est = idim_ls(s["v"][keep], s["a"][keep], s["force"][keep])
+    coul = models.Coulomb(v_eps=1e-4)
+    return reference_fit(coul, coul.from_physical(Fc=est.Fc, sigma2=est.Fv), est.M, est.offset, data, n_train)
+
+
+def identify_default(key_name, data, n_train, seed=0, progress=None, metric_horizon=K_STEP):
+    """One EMPS row with identify_motion's defaults (``metric_horizon=None``: the default k
+    of the k-step metrics too); returns (label, fit, wall seconds)."""
+    extra = {} if metric_horizon is None else {"metric_horizon": metric_horizon}
+    label, name, opts = EMPS_MODELS[key_name]
+    model = asymmetric_coulomb() if name is None else name
+    own_offset = name is None
+    t0 = time.perf_counter()
+    fit = identify_motion(model, data, key=seed, mass=(50.0, 200.0), train=n_train, fit_offset=not own_offset,
+                          dtype=jnp.float64, model_options=opts, progress=progress, **extra)
+    return label, fit, time.perf_counter() - t0
 
 
 def run_emps(path, quick, key=0, only=None):
@@ -125,30 +146,43 @@ def run_emps(path, quick, key=0, only=None):
     ref = reference_fit(coul, coul.from_physical(Fc=IDIM["Fc"], sigma2=IDIM["Fv"]), IDIM["M"],
                         IDIM["offset"], data, n_train)
     rows.append(("IDIM-LS reference (published)", ref, 0.0))
-    asym = asymmetric_coulomb()
-    ref_a = reference_fit(asym, asym.from_physical(Fc_pos=IDIM_ASYM["Fc+"], Fc_neg=IDIM_ASYM["Fc-"],
-                                                   sigma2_pos=IDIM_ASYM["Fv+"], sigma2_neg=IDIM_ASYM["Fv-"],
-                                                   F_off=IDIM["offset"]),
-                          IDIM["M"], 0.0, data, n_train)
-    rows.append(("IDIM-LS asymmetric (published Fc+-, Fv+-; offset of the symmetric fit)", ref_a, 0.0))
-    fits = {}
-    runs = [(name, model, None) for name, model in emps_candidates().items()]
-    for name, model, horizon in runs:
-        if (quick and "Elman" in name) or (only and not any(o in name for o in only)):
+    rows.append(("least squares Coulomb+viscous+offset (IDIM-LS on the estimation part)",
+                 least_squares_fit(path, data, n_train), 0.0))
+    names = only or DEFAULT_EMPS_MODELS.split(",")
+    for name in names:
+        if quick and name == "elman":
             continue
-        own_offset = bool(getattr(model, "offset", False))
-        t0 = time.perf_counter()
-        fit = identify_motion(model, data, key=key, mass=(50.0, 200.0), train=n_train, horizon=horizon,
-                              solver=_solver(model.num_params + 2 - own_offset, quick),
-                              fit_offset=not own_offset,
-                              offset_range=(-20.0, 20.0), box=emps_box(model), data_bounds=False,
-                              dtype=jnp.float64,
-                              metric_horizon=K_STEP)
-        secs = time.perf_counter() - t0
-        print(name, fit.summary(), f"{secs:.1f} s", sep="\n", flush=True)
-        rows.append((name, fit, secs))
-        fits[name] = fit
+        label, fit, secs = identify_default(name, data, n_train, key)
+        print(label, fit.summary(), f"{secs:.1f} s", sep="\n", flush=True)
+        rows.append((label, fit, secs))
     return data, n_train, rows
+
+
+def run_timing(path, names, seed=0, reference=True):
+    """Wall time of exactly the default calls for ``names`` in this process (compilation
+    included), and, as a same-run reference for the machine's load, the pre-0.9 default
+    search (MAPSO-NMDS) for LuGre on the first 2 000 samples."""
+    from jaxfric.identification import default_solver
+
+    data, n_train = emps_motion_data(path)
+    out = []
+    t_all = time.perf_counter()
+    for name in names:
+        label, fit, secs = identify_default(name, data, n_train, seed, metric_horizon=None)
+        out.append({"model": label, "seconds": secs, "valid_rmse_mm": fit.metrics["valid"]["rmse_mm"],
+                    "train_rmse_mm": fit.metrics["train"]["rmse_mm"],
+                    "stages": "; ".join(f"{s['stage']} {s['seconds']:.1f} s/{s['num_steps']} steps"
+                                        for s in fit.stages)})
+        print(out[-1], flush=True)
+    total = time.perf_counter() - t_all
+    ref = None
+    if reference:
+        short = data.window(0, 2000)
+        t0 = time.perf_counter()
+        fit = identify_motion("lugre", short, key=seed, mass=(50.0, 200.0), fit_offset=True, dtype=jnp.float64,
+                              solver=default_solver(models.LuGre()))
+        ref = (time.perf_counter() - t0, fit.metrics["valid"]["rmse_mm"])
+    return out, total, ref
 
 
 def emps_table(rows) -> str:
@@ -252,10 +286,32 @@ def main(argv=None):
     ap.add_argument("--parts", default="emps,rig,compensation")
     add_output_arguments(ap, "smaller budgets, no Elman row (smoke test)")
     ap.add_argument("--rows", default=None,
-                    help="comma-separated substrings: fit only the EMPS rows whose names contain one "
-                         "(the result then goes to motion_rows.md, never over motion.md)")
+                    help=f"comma-separated EMPS rows to fit (of {DEFAULT_EMPS_MODELS}); the result then "
+                         "goes to motion_rows.md, never over motion.md")
+    ap.add_argument("--models", default=None,
+                    help="time exactly identify_motion's default calls for these EMPS rows (e.g. "
+                         "coulomb,stribeck,lugre,gms) in this process, compilation included, beside the "
+                         "pre-0.9 default on 2 000 samples as a load reference; writes motion_timing.md")
+    ap.add_argument("--no-reference", action="store_true", help="with --models: skip the reference run")
     args = ap.parse_args(argv)
     out = results_dir(args.out, quick=args.quick)
+    if args.models:
+        names = [m.strip() for m in args.models.split(",") if m.strip()]
+        rows, total, ref = run_timing(args.emps, names, reference=not args.no_reference)
+        md = ["# identify_motion default calls on the whole EMPS estimation split (benchmarks/motion.py)", "",
+              f"Command: `python benchmarks/motion.py --models {args.models}`", "",
+              "Each row: `identify_motion(name, data, key=0, mass=(50, 200), train=19873, "
+              "fit_offset=True, dtype=float64)` with the default search, in one fresh process (so "
+              "compilation is included), float64; RMSE of the held-back last 20 %.", "",
+              markdown_table(rows, fmt=_cell), "", f"Total wall for these calls: **{total:.1f} s**.", ""]
+        if ref is not None:
+            md += [f"Same-run load reference: the pre-0.9 default search (MAPSO 5x5, 200 generations, then "
+                   f"Nelder-Mead) for LuGre + mass + offset on the first 2 000 samples: {ref[0]:.1f} s "
+                   f"(held-back RMSE {ref[1]:.3f} mm).", ""]
+        text = "\n".join(md)
+        (out / "motion_timing.md").write_text(text)
+        print(text)
+        return
     parts = set(args.parts.split(","))
     md = ["# Motion identification and friction compensation (benchmarks/motion.py)", "",
           f"Command: `python benchmarks/motion.py --parts {args.parts}{' --quick' if args.quick else ''}`", ""]
@@ -263,7 +319,7 @@ def main(argv=None):
         if not Path(args.emps).exists():
             print(f"EMPS file {args.emps} not found: skipping the EMPS part")
         else:
-            only = args.rows.split(",") if args.rows else None
+            only = [r.strip() for r in args.rows.split(",")] if args.rows else None
             data, n_train, rows = run_emps(args.emps, args.quick, only=only)
             if not only:
                 emps_figure(data, n_train, rows, out)
@@ -308,18 +364,19 @@ model classes."""
 
 
 EMPS_NOTE = f"""Input `gtau*vir` [N], output `qm` [m], 1 kHz, first 80 % (19 873 samples) for
-estimation, last 20 % (4 968 samples) held back. Every model is simulated in free run
-with `jaxfric.motion.simulate_motion` (one step per sample, friction at the end of the
-step, linearly implicit). Closed-loop data drift in open-loop simulation, so the
-validation free run starts from the state estimated at the start of the held-back part
-(measured position, velocity from the 100 Hz zero-phase low-pass of `qm`, friction state
-tracked along that velocity), and the {K_STEP}-step-ahead error (MATLAB `compare(..., {K_STEP})`,
-from every measured state) is reported beside it. Mass and a constant force offset are
-identified with the friction (mass searched in [50, 200] kg; the asymmetric row's offset
-is the library model's own `F_off`, `Coulomb(asymmetric=True, offset=True)`); the cost is
-the free-run position MSE over the estimation part. The data come from
-`jaxfric.rig.emps.load_emps`. The IDIM-LS rows simulate the published parameters of
-SOURCE.md the same way."""
+estimation, last 20 % (4 968 samples) held back. Every fitted row is
+`identify_motion(model, data, key=0, mass=(50, 200), train=19873, fit_offset=True)` with the
+defaults: data-centred search box and the default search (`jaxfric.motion.MotionSearch()`:
+PSO 25 x 20 on windows, then Levenberg-Marquardt on 5 000-sample shooting segments;
+docs/motion.md). Every model is simulated with `jaxfric.motion.simulate_motion`
+(one step per sample, friction at the end of the step, linearly implicit). The held-back
+free run starts from the state estimated at its start (measured position, velocity from the
+100 Hz zero-phase low-pass of `qm`, friction state tracked along it); the {K_STEP}-step-ahead
+error (MATLAB `compare(..., {K_STEP})`) is reported beside it. The asymmetric row's offset is
+the library model's own `F_off`. Time: wall seconds of the call in this process (the first
+call of each model compiles). The IDIM-LS row simulates the published parameters of
+SOURCE.md the same way; the least-squares row fits M, Fv, Fc and offset by IDIM-LS on the
+estimation part (the benchmark's filter) and simulates them the same way."""
 
 
 if __name__ == "__main__":

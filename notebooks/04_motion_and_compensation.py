@@ -72,7 +72,8 @@ ax[1].set_xlabel("time [s]");
 # `max_evals` bound it; `progress=True` shows a bar per stage.
 
 # %%
-search = jaxfric.motion.MotionSearch(particles=10, generations=8, global_window=150, segment=300) \
+search = jaxfric.motion.MotionSearch(particles=10, generations=8, global_window=150, horizons=(300, None),
+                                      steps=(15, 25)) \
     if SMALL else None  # None: the defaults
 fit = identify_motion(true, data, key=0, mass=(0.5, 10.0), fit_offset=True, box=box,
                       data_bounds=False, dtype=jnp.float64, search=search, max_time=120)

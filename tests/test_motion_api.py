@@ -19,8 +19,7 @@ from jaxfric.motion._shooting import schedule, shoot
 TRUTH = dict(Fc=12.0, sigma2=60.0)
 MASS, OFFSET = 2.5, 3.0
 #: A small search for the unit tests (the defaults are sized for long records).
-SMALL = MotionSearch(particles=10, generations=8, global_window=150, segment=300,
-                     shooting_steps=15, free_run_steps=25)
+SMALL = MotionSearch(particles=10, generations=8, global_window=150, horizons=(300, None), steps=(15, 25))
 
 
 def _record(n=1500, dt=1e-3, phase=0.0, seed=0, model=None, theta=None, velocity=False):
@@ -100,11 +99,12 @@ def test_default_search_recovers_mass_offset_and_friction():
         assert abs(float(got[k]) - val) <= 0.01 * val, (k, got[k])
     assert abs(fit.mass - MASS) <= 0.01 * MASS
     assert abs(fit.offset - OFFSET) <= 0.01 * OFFSET
-    assert [s["stage"] for s in fit.stages] == ["pso", "shooting", "free_run"]
+    assert [s["stage"] for s in fit.stages] == ["pso", "shooting_300", "free_run"]
     assert fit.metrics["valid"]["fit_percent"] > 99.0
     assert fit.settings["motion"]["stopped"] is None
 
 
+@pytest.mark.slow
 def test_records_are_used_whole_with_metrics_per_record():
     a, b, c = _record(1200, phase=0.0), _record(1000, phase=1.0, seed=2), _record(900, phase=2.0, seed=4)
     fit = _fit(train=[a, b], valid=c)
@@ -156,6 +156,7 @@ def test_budget_stops_the_run_with_the_best_so_far():
         _fit(data=rec, max_evals=5)
 
 
+@pytest.mark.slow
 def test_same_key_same_fit():
     rec = _record(800)
     a, b = _fit(data=rec), _fit(data=rec)
@@ -242,6 +243,7 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
             rank_fits({"coulomb": coul, "stribeck": good})
 
 
+@pytest.mark.slow
 def test_compare_motion_ranks_and_needs_validation():
     rec = _record(1200)
     with pytest.raises(ValueError, match="validation"):
@@ -253,3 +255,27 @@ def test_compare_motion_ranks_and_needs_validation():
     scores = [out.fits[k].metrics["valid"]["rmse_mm"] for k in out.ranking]
     assert scores == sorted(scores)
     assert out.best is out.fits[out.ranking[0]]
+
+
+@pytest.mark.slow
+def test_cli_ranks_models_by_validation_and_takes_a_budget(tmp_path, capsys):
+    from jaxfric.cli import main
+
+    rec = _record(800)
+    path = tmp_path / "m.csv"
+    np.savetxt(path, np.c_[np.arange(800) * 1e-3, rec.force, rec.position], delimiter=",", header="t,F,x",
+               comments="")
+    rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t",
+               "--mass-range", "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet",
+               "--x64", "--max-evals", "40", "--no-cache", "--out", str(tmp_path / "r")])
+    assert rc == 0, capsys.readouterr().err
+    text = (tmp_path / "r" / "motion.md").read_text()
+    assert "| rank | model | parameters |" in text
+    ranks = [line.split("|")[2].split(" (")[0].strip() for line in text.splitlines() if line.startswith("| 1 ")
+             or line.startswith("| 2 ")]
+    assert sorted(ranks) == ["coulomb", "stribeck"]
+    from jaxfric.motion import load_motion_fit
+
+    for name in ranks:
+        fit = load_motion_fit(tmp_path / "r" / "models" / f"{name}.npz")
+        assert sum(s["num_evals"] for s in fit.stages) <= 40

@@ -127,7 +127,7 @@ def cmd_identify_motion(args, argv) -> int:
 
         opts = {"neurons": args.neurons} if name.startswith("elman") else {}
         model = _models.get(name, **opts)
-        search = (MotionSearch(particles=4, generations=2, shooting_steps=2, free_run_steps=2)
+        search = (MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
                   if args.quick else MotionSearch())
         say(f"identifying {name} inside the mechanics ({data.n_samples} samples)")
         try:

@@ -608,8 +608,8 @@ def identify_motion(
             validation; its state is estimated from its first ``init_window`` samples
             (:meth:`MotionFit.initial_state`) and the rest is scored.
         search: the default pipeline's settings (:class:`MotionSearch`: a short PSO on
-            windows, Levenberg–Marquardt on shooting segments, then on the free run;
-            docs/motion.md). Ignored when ``solver`` is given.
+            windows, then Levenberg–Marquardt on multiple-shooting segments of growing
+            length; docs/motion.md). Ignored when ``solver`` is given.
         solver: a jaxfric solver to run instead, on the final cost (the pre-0.9 behaviour
             with :func:`jaxfric.identification.default_solver`; slow on long records).
         error: ``"position"`` (default), ``"velocity"`` (against the filtered velocity)
@@ -718,15 +718,23 @@ def identify_motion(
                 "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
             }
             residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
-            cost, glob, shooting = residuals, free, None
+            cost, glob = residuals, free
         else:
             residuals = ShootingResiduals(model, layout)
             cost = SumOfSquares(residuals)
             free = _pooled(tr_records, dtype, scalers, mass0)
             glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
                            windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
-            shooting = None if search.segment is None else _pooled(
-                tr_records, dtype, scalers, mass0, segment=search.segment, lead=search.lead)
+        if legacy_cost:  # one cost (k-step or velocity): one Levenberg-Marquardt stage on it
+            search = MotionSearch(search.particles, search.generations, search.global_window, search.lead,
+                                  (None,), (sum(search.steps),), search.rtol)
+
+            def stage_data(h):
+                return free
+        else:
+            def stage_data(h):
+                return free if h is None else _pooled(tr_records, dtype, scalers, mass0, segment=h,
+                                                      lead=search.lead)
         sol, stopped = None, None
         with Stopwatch() as sw:
             if solver is not None:
@@ -736,10 +744,10 @@ def identify_motion(
                 stages = _stages(sol, solver)
             else:
                 y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
-                                                global_data=glob, shooting_data=shooting, free_data=free,
+                                                global_data=glob, stage_data=stage_data,
                                                 key=key, dtype=dtype, progress=progress)
         y = np.asarray(y, np.float64)
-        j_final = float(eqx.filter_jit(cost)(jnp.asarray(y, dtype), free))
+        j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)
         theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
         key_data, key_impl = _key_record(key)
         n_tr_total = sum(r.n_samples for r in tr_records)
@@ -774,6 +782,20 @@ def identify_motion(
     assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     fit.timings["total_s"] = total.wall_s
     return fit
+
+
+def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) -> float:
+    """J of the free run at ``y``. After the default search this reuses the residual
+    function Levenberg–Marquardt compiled (same shapes), instead of compiling the cost again."""
+    if scalar:
+        return float(eqx.filter_jit(cost)(jnp.asarray(y, dtype), free))
+    from ..identification._refine import from_box
+    from ._lm import _res_jit
+
+    lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
+    z = from_box(jnp.asarray(y, dtype), lo, hi, 0.0)
+    r = np.asarray(_res_jit(z, (residuals, lo, hi, free)), np.float64)
+    return float(r @ r) if np.all(np.isfinite(r)) else float("inf")
 
 
 def _concatenated(records) -> MotionData:

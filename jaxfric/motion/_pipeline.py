@@ -11,11 +11,12 @@ default pipeline therefore grows the simulation horizon:
    friction state carried along the measured velocity over the ``lead`` samples,
    :mod:`._shooting`). It only has to find the basin;
 2. **shooting** — Levenberg–Marquardt (:mod:`._lm`) on the whole training data cut
-   into segments of ``segment`` samples, each started from the measurement
-   (multiple shooting): the errors no longer accumulate over the record, so the
-   problem is close to a least-squares fit of the force balance;
-3. **free run** — Levenberg–Marquardt on the cost the fit is judged by, each training
-   record simulated whole from its first sample.
+   into segments, each started from the measurement (multiple shooting). ``horizons``
+   lists the segment lengths of successive stages (default one stage of 5 000 samples,
+   5 s at 1 kHz); a list of growing lengths gives a coarse-to-fine schedule, ``None`` is
+   the free run of each whole training record. Within a segment the errors accumulate as
+   in a free run of that length; across segments they do not, which keeps the cost
+   smooth enough for a gradient method.
 
 Measured on the EMPS estimation file (benchmarks/motion.py): the earlier default
 (MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of the
@@ -56,8 +57,9 @@ class MotionSearch(eqx.Module):
         global_window: samples simulated per window in the global stage.
         lead: forced samples before every window or segment start (the friction state is
             carried along the measured velocity over them; they carry no error).
-        segment: multiple-shooting segment length of the second stage (``None`` skips it).
-        shooting_steps, free_run_steps: Levenberg–Marquardt step caps of stages 2 and 3.
+        horizons: multiple-shooting segment lengths [samples] of the Levenberg–Marquardt
+            stages, in order (``None``: free run of each whole record).
+        steps: Levenberg–Marquardt step cap of each of ``horizons``.
         rtol: a stage ends when ``3`` accepted steps in a row lower its cost by less than
             ``rtol`` relative.
     """
@@ -66,22 +68,28 @@ class MotionSearch(eqx.Module):
     generations: int = eqx.field(default=20, static=True)
     global_window: int = eqx.field(default=200, static=True)
     lead: int = eqx.field(default=20, static=True)
-    segment: int | None = eqx.field(default=1000, static=True)
-    shooting_steps: int = eqx.field(default=15, static=True)
-    free_run_steps: int = eqx.field(default=40, static=True)
+    horizons: tuple = eqx.field(default=(5000,), static=True)
+    steps: tuple = eqx.field(default=(60,), static=True)
     rtol: float = eqx.field(default=1e-4, static=True)
 
     def check(self) -> None:
-        for name in ("particles", "generations", "global_window", "shooting_steps", "free_run_steps"):
+        for name in ("particles", "generations", "global_window"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < (2 if name == "particles" else 0):
                 raise ValueError(f"MotionSearch.{name} must be a non-negative integer"
                                  f"{' >= 2' if name == 'particles' else ''}, got {value!r}")
         if isinstance(self.lead, bool) or not isinstance(self.lead, int) or self.lead < 0:
             raise ValueError(f"MotionSearch.lead must be a non-negative integer, got {self.lead!r}")
-        if self.segment is not None and (isinstance(self.segment, bool) or not isinstance(self.segment, int)
-                                         or self.segment < 2):
-            raise ValueError(f"MotionSearch.segment must be None or an integer >= 2, got {self.segment!r}")
+        if not isinstance(self.horizons, tuple) or not isinstance(self.steps, tuple) \
+                or len(self.horizons) != len(self.steps):
+            raise ValueError(f"MotionSearch.horizons and .steps must be tuples of one length, got "
+                             f"{self.horizons!r} and {self.steps!r}")
+        for h in self.horizons:
+            if h is not None and (isinstance(h, bool) or not isinstance(h, int) or h < 2):
+                raise ValueError(f"MotionSearch.horizons entries must be None or integers >= 2, got {h!r}")
+        for k in self.steps:
+            if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+                raise ValueError(f"MotionSearch.steps entries must be non-negative integers, got {k!r}")
         if not (isinstance(self.rtol, (int, float)) and self.rtol >= 0):
             raise ValueError(f"MotionSearch.rtol must be >= 0, got {self.rtol!r}")
 
@@ -142,8 +150,8 @@ class _Clock:
 
 
 def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost, lower, upper, *,
-               global_data, shooting_data, free_data, key, dtype, progress=None, y0=None):
-    """Run the stages; returns ``(y, stages, stopped)``: the best search vector, one dict per
+               global_data, stage_data, key, dtype, progress=None, y0=None):
+    """Run the stages (``stage_data(horizon)``: the cost's data for one horizon); returns ``(y, stages, stopped)``: the best search vector, one dict per
     stage (``stage``, ``J``, ``num_evals``, ``num_steps``, ``seconds``, ``reason``) and why the
     budget ended the run (``None`` when it did not)."""
     clock = _Clock(budget)
@@ -167,11 +175,8 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
         clock.evals += n_ev
         stages.append({"stage": "pso", "J": float(sol.f), "num_evals": n_ev, "num_steps": max(gens, 0),
                        "seconds": time.perf_counter() - t, "reason": "done"})
-    plan = []
-    if search.segment is not None and shooting_data is not None and search.shooting_steps > 0:
-        plan.append(("shooting", shooting_data, search.shooting_steps))
-    if search.free_run_steps > 0:
-        plan.append(("free_run", free_data, search.free_run_steps))
+    plan = [(("free_run" if h is None else f"shooting_{h}"), stage_data(h), k)
+            for h, k in zip(search.horizons, search.steps) if k > 0]
     for name, data, steps in plan:
         if clock.out_of_time():
             clock.stopped = "max_time"
