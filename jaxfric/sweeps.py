@@ -442,10 +442,8 @@ def sweep(
             fit.save(out / run.fit_file)
             rows[run.index] = _row(run, fit)
             computed.append(run)
-            if not distributed:
-                # one process: the table is whole after every run; several: process 0
-                # writes it after the barrier below, from every process's files
-                write_table(rows if count == 1 else {**_rows_on_disk(out, runs, motion), **rows})
+            if count == 1:  # one process: the table is whole after every run
+                write_table(rows)
             bar.update(1)
             if on_run is not None:
                 on_run(run, fit)
@@ -458,7 +456,9 @@ def sweep(
             write_table(rows)
         _barrier(f"jaxfric.sweep.table:{out.resolve()}")
     elif count > 1:
+        # a share of a job array: the table of every run finished so far, once at the end
         rows = _rows_on_disk(out, runs, motion)
+        write_table(rows)
     ordered = [rows[i] for i in sorted(rows)]
     return SweepResult(out_dir=out, runs=runs, rows=ordered, computed=computed, done=done, motion=motion)
 
