@@ -315,8 +315,8 @@ def _velocity_as_trained(args, fit, v, dt):
         if not args.quiet:
             text = (f"this fit was trained on velocity filtered by {what}; pass --filter-velocity to filter this "
                     "record the same way, unless it is filtered already" if saved else
-                    "this fit was trained on the velocity as its file gave it; give this record's velocity "
-                    "processed the same way")
+                    "this fit records no velocity filter (it was trained on the velocity it was given); give "
+                    "this record's velocity processed as that one was")
             print(f"jaxfric: note: {text}", file=sys.stderr, flush=True)
         return v
     if args.cutoff is None and not saved:
