@@ -297,13 +297,17 @@ def main(argv=None):
     out = results_dir(args.out, quick=args.quick)
     if args.models:
         names = [m.strip() for m in args.models.split(",") if m.strip()]
+        load0 = os.getloadavg()[0]
         rows, total, ref = run_timing(args.emps, names, reference=not args.no_reference)
+        load1 = os.getloadavg()[0]
         md = ["# identify_motion default calls on the whole EMPS estimation split (benchmarks/motion.py)", "",
               f"Command: `python benchmarks/motion.py --models {args.models}`", "",
               "Each row: `identify_motion(name, data, key=0, mass=(50, 200), train=19873, "
               "fit_offset=True, dtype=float64)` with the default search, in one fresh process (so "
               "compilation is included), float64; RMSE of the held-back last 20 %.", "",
-              markdown_table(rows, fmt=_cell), "", f"Total wall for these calls: **{total:.1f} s**.", ""]
+              markdown_table(rows, fmt=_cell), "", f"Total wall for these calls: **{total:.1f} s** "
+              f"(1-minute load average {load0:.1f} at the start, {load1:.1f} at the end, on "
+              f"{os.cpu_count()} CPUs).", ""]
         if ref is not None:
             md += [f"Same-run load reference: the pre-0.9 default search (MAPSO 5x5, 200 generations, then "
                    f"Nelder-Mead) for LuGre + mass + offset on the first 2 000 samples: {ref[0]:.1f} s "

@@ -18,10 +18,12 @@ default pipeline therefore grows the simulation horizon:
    in a free run of that length; across segments they do not, which keeps the cost
    smooth enough for a gradient method.
 
-Measured on the EMPS estimation file (benchmarks/motion.py): the earlier default
-(MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of the
-free run) took 87–136 s per physical model on a quiet machine; this pipeline takes a
-few seconds per model after compilation and reaches a lower held-back error.
+Measured on the EMPS estimation split (80 % trains, ``benchmarks/motion.py``): the
+earlier default (MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of
+the free run) took 87 s (LuGre) and 136 s (GMS) per model; this pipeline took 8–36 s
+per model, compilation included, on a busier machine
+(``benchmarks/results/motion_timing.md``), with a lower held-back error for every
+physical model (``benchmarks/results/motion.md``).
 
 The budget (:class:`MotionBudget`) is checked between the stages and after every
 Levenberg–Marquardt step, so a run stops with the best point so far.
