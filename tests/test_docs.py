@@ -150,3 +150,21 @@ def test_every_nav_page_exists_or_is_an_optional_guide():
     kept = hook._prune([{"a": "index.md"}, {"b": "scale.md"}], str(ROOT / "docs"))
     assert {"a": "index.md"} in kept
     assert ({"b": "scale.md"} in kept) == (ROOT / "docs" / "scale.md").is_file()
+
+
+def test_documentation_code_names_exist():
+    """Every Python block of the site compiles, and every ``jf.NAME`` (and ``jf.rig.NAME``,
+    ``jf.datasets.NAME``, ...) it uses exists: the how-to pages cannot drift from the API
+    without this failing. (The README's blocks are run by test_readme.py.)"""
+    import jaxfric as jf
+
+    checked = 0
+    for path in sorted((ROOT / "docs").rglob("*.md")):
+        text = path.read_text(encoding="utf-8")
+        for block in re.findall(r"^```python\n(.*?)^```", text, re.S | re.M):
+            compile(block, str(path), "exec")
+            for sub, name in re.findall(r"\bjf\.(?:(\w+)\.)?(\w+)", block):
+                owner = getattr(jf, sub) if sub else jf  # a submodule (jf.rig) or a class (jf.MotionData)
+                assert hasattr(owner, name), f"{path.name}: jf.{sub + '.' if sub else ''}{name}"
+                checked += 1
+    assert checked >= 15
