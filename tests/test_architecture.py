@@ -61,7 +61,8 @@ def test_imports_go_down():
 #: and function-level imports alike), so the package has no import circle: the pieces
 #: every solver shares, the checks of a problem, the evaluation rounds, the solvers, the
 #: chains, then the one driver that runs them all.
-OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "rounds",
+OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "loop",
+               "asktell", "rounds",
                "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "chained", "hybrid",
                "evosax_adapter", "driver", "__init__"]
 

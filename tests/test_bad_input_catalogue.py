@@ -304,9 +304,10 @@ API_CASES = [
      ["key must be a JAX PRNG key (or an int seed)", "bool"]),
     ("minimise_many/keys-int", lambda f: jf.minimise_many(counted, PSO, (LO, HI), keys=8), ValueError,
      ["keys must be a batch of keys", "not an int"]),
-    ("minimise/bounds-two-pairs-ambiguous",
-     lambda f: jf.minimise(counted, PSO, [(-1.0, 1.0), (2.0, 3.0)], key=KEY), ValueError,
-     ["are ambiguous", "scipy.optimize.Bounds"]),
+    ("minimise/bounds-two-lists-read-as-scipy-pairs",
+     lambda f: jf.minimise(counted, PSO, ([0.0, 0.0], [1.0, 1.0]), key=KEY), ValueError,
+     ["parameter 0 has lower=0.0 >= upper=0.0", "read as SciPy's (lo, hi) pairs",
+      "(np.array(lower), np.array(upper))"]),
     ("minimise/y0-population-for-nelder-mead",
      lambda f: jf.minimise(counted, jf.NelderMead(), (LO, HI), key=KEY, y0=np.full((2, 3), 0.5)),
      ValueError, ["this solver takes one start"]),
@@ -868,8 +869,9 @@ def test_large_budgets_count_in_int64_under_x64():
 
 
 def test_scipy_style_bounds_are_read_as_scipy_reads_them():
-    """Issue 20.8: a sequence of (lo, hi) pairs, or scipy.optimize.Bounds, is one pair per
-    parameter; the result lies in the box the user meant."""
+    """A sequence of (lo, hi) pairs, or scipy.optimize.Bounds, is one pair per parameter,
+    also for two parameters (SciPy's Branin01 box); the result lies in the box the user
+    meant, and (lower, upper) arrays keep their meaning."""
     import scipy.optimize
 
     pairs = [(-1.0, 1.0), (2.0, 3.0), (0.0, 5.0)]
@@ -877,9 +879,22 @@ def test_scipy_style_bounds_are_read_as_scipy_reads_them():
         sol = jf.minimise(lambda y, a: jnp.sum(y**2), PSO, bounds, key=KEY)
         v = np.asarray(sol.value)
         assert np.all(v >= [-1.0, 2.0, 0.0]) and np.all(v <= [1.0, 3.0, 5.0])
-    # two pairs that are a valid box only one way are read that way
-    sol = jf.minimise(lambda y, a: jnp.sum(y**2), PSO, ([0.0, 0.0], [1.0, 1.0]), key=KEY)
-    assert np.all(np.asarray(sol.value) >= 0.0)
+    # Branin01's box in SciPy's benchmark suite: x1 in [-5, 10], x2 in [0, 15]
+    def branin(y, a):
+        x1, x2 = y[0], y[1]
+        return ((x2 - 5.1 / (4 * jnp.pi**2) * x1**2 + 5 / jnp.pi * x1 - 6) ** 2
+                + 10 * (1 - 1 / (8 * jnp.pi)) * jnp.cos(x1) + 10)
+
+    sol = jf.minimise(branin, jf.PSO(num_generations=60), [(-5, 10), (0, 15)], key=KEY)
+    v = np.asarray(sol.value)
+    assert v.shape == (2,) and -5 <= v[0] <= 10 and 0 <= v[1] <= 15
+    # Branin's minimum 0.397887 (three global minimisers, all inside this box)
+    assert abs(float(sol.f) - 0.3978873577) < 1e-3
+    # the same box as (lower, upper) arrays, and as scipy.optimize.Bounds: the same run
+    for same in ((np.array([-5.0, 0.0]), np.array([10.0, 15.0])),
+                 scipy.optimize.Bounds([-5.0, 0.0], [10.0, 15.0])):
+        other = jf.minimise(branin, jf.PSO(num_generations=60), same, key=KEY)
+        np.testing.assert_array_equal(np.asarray(other.value), v)
 
 
 def test_one_key_rule():

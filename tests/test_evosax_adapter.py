@@ -94,18 +94,32 @@ def test_nan_is_never_the_best(counter):
     assert float(sol.f) == pytest.approx(float(jnp.sum(sol.value**2)), rel=1e-5)
 
 
-def test_run_ends_when_the_strategy_state_breaks_down(counter):
+def test_strategy_restarts_when_its_state_breaks_down(counter):
     """Long after convergence CMA-ES's step size underflows (float32: within a few
-    hundred generations on a 2-D sphere) and its state turns NaN: the run stops there,
-    with a finite state, an exact count and the best point kept."""
-    solver = Evosax("CMA_ES", num_generations=20000)
+    hundred generations on a 2-D sphere) and its state turns NaN: the strategy restarts
+    (pycma's rule) and the run spends its whole budget, with a finite state, an exact
+    count and the best point kept."""
+    solver = Evosax("CMA_ES", num_generations=3000)
     lo, hi = -np.ones(2, np.float32), np.ones(2, np.float32)
     sol = jf.minimise(counter.wrap(lambda y, a: jnp.sum((y - 0.3) ** 2)), solver, (lo, hi), key=0)
-    assert counter.count == int(sol.stats["num_evals"]) < solver.evaluations(2)
-    assert int(sol.stats["num_steps"]) < 20000
+    assert counter.count == int(sol.stats["num_evals"]) == solver.evaluations(2)
+    assert int(sol.stats["num_steps"]) == 3000
+    assert int(sol.state.restarts) >= 1
     assert all(bool(jnp.all(jnp.isfinite(a))) for a in jax.tree_util.tree_leaves(sol.state.inner)
                if jnp.issubdtype(a.dtype, jnp.floating))
     assert float(sol.f) < 1e-10 and np.allclose(np.asarray(sol.value), 0.3, atol=1e-4)
+
+
+def test_points_stay_in_the_box_after_the_unit_box_map():
+    """lower + u·(upper − lower) rounds past upper for u = 1 (float64: 1.2000000000000002
+    for the box [-1, 1.2]); the evaluated points are clipped back into the box."""
+    from jaxfric.optim.evosax_adapter import _to_box
+
+    with jax.enable_x64(True):
+        lo, hi = jnp.array([-1.0]), jnp.array([1.2])
+        assert float((lo + 1.0 * (hi - lo))[0]) > 1.2  # the rounding this guards against
+        assert float(_to_box(jnp.array([1.0]), lo, hi)[0]) == 1.2
+        assert float(_to_box(jnp.array([0.0]), lo, hi)[0]) == -1.0
 
 
 def test_chain_cmaes_then_nelder_mead(counter):

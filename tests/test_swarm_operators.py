@@ -1,7 +1,7 @@
 """The swarms' bounding: the select form of clip gives jnp.clip's numbers.
 
 MAPSO bounds with :func:`jaxfric.optim._base.clip` (two selects) because XLA:CPU
-compiles it 1.2-2.2x faster inside MAPSO's generation (benchmarks/clip_forms.py); that
+compiles it 1.2-2.2x faster inside MAPSO's generation (docs/solvers.md); that
 is only allowed if it is the same function as ``jnp.clip``.
 """
 

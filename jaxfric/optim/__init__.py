@@ -11,8 +11,9 @@ from .nelder_mead import NelderMead, NelderMeadState
 from .optx_adapter import OptxMinimiser, OptxState
 from .progress import ProgressHook, RecordingProgress, TqdmProgress
 from .pso import PSO
+from .asktell import AskTellState
 from .rounds import AbstractAskTellSolver, AbstractGenerational, Batch, Scan
-from .swarm import AbstractSwarm, AskTellState, SwarmState
+from .swarm import AbstractSwarm, SwarmState
 
 __all__ = [
     "RESULTS",

@@ -118,22 +118,6 @@ class History(eqx.Module):
             ),
         )
 
-    def offset(self, num_evals) -> "History":
-        """Shift the evaluation axis by ``num_evals`` (a later phase of a hybrid)."""
-        return eqx.tree_at(lambda h: h.evals, self, self.evals + num_evals)
-
-
-def concat_histories(first: History, second: History) -> History:
-    """Join two histories (``second`` already offset), keeping fixed total size."""
-    first, second = first.filled(), second.filled()
-    return History(
-        evals=jnp.concatenate([first.evals, second.evals]),
-        f=jnp.concatenate([first.f, jnp.minimum(second.f, first.f[-1])]),
-        length=jnp.array(first.f.shape[0] + second.f.shape[0], jnp.int32),
-        stride=jnp.array(1, jnp.int32),
-        counter=first.counter + second.counter,
-    )
-
 
 # -------------------------------------------------------------------------- solution
 class Solution(eqx.Module):
@@ -151,7 +135,7 @@ class Solution(eqx.Module):
             continue the run with a larger budget.
     """
 
-    def __repr__(self):  # issue 20 item 12: show what was found, not array shapes
+    def __repr__(self):  # what was found, not array shapes
         try:
             f = np.asarray(self.f)
             value = jax.tree_util.tree_map(np.asarray, self.value)
@@ -202,13 +186,6 @@ def batch_objective(fn: Callable, args) -> Callable:
     return f_batch
 
 
-def scalar_objective(fn: Callable, args) -> Callable:
-    def f_one(x):
-        return safe_value(fn(x, args))
-
-    return f_one
-
-
 def clip(x, lower, upper):
     """``jnp.clip(x, lower, upper)`` as two selects: ``lower`` where ``x < lower``,
     ``upper`` where ``x > upper``, else ``x`` (a NaN stays NaN, as with ``jnp.clip``).
@@ -241,11 +218,6 @@ def uniform_in_box(key, shape, lower, upper):
     return lower + uniform_flat(key, shape, lower.dtype) * (upper - lower)
 
 
-def best_of(x, f):
-    i = jnp.argmin(f)
-    return x[i], f[i]
-
-
 def result_from_f(f_best):
     return RESULTS.where(jnp.isfinite(f_best), RESULTS.successful, RESULTS.nonfinite)
 
@@ -269,8 +241,8 @@ class AbstractSolver(eqx.Module):
     """
 
     def __check_init__(self):
-        # Solvers validate on construction, as the models do (issue 19 item 3): a bad
-        # hyperparameter fails where it is written, naming the field.
+        # Solvers validate on construction, as the models do: a bad hyperparameter
+        # fails where it is written, naming the field.
         self.check()
 
     def progress_totals(self) -> tuple[int | None, int | None]:
@@ -284,6 +256,16 @@ class AbstractSolver(eqx.Module):
     def population_size(self) -> int | None:
         """Agents of a population solver (a start ``y0`` may then be an initial
         population of up to this many rows); ``None``: the solver takes one start."""
+        return None
+
+    def personal_bests(self, state) -> tuple[Array, Array] | None:
+        """``(X, f)``: each agent's best point and value, for a population solver (a
+        chain then starts its local stage from the best of them); ``None`` otherwise."""
+        return None
+
+    def start_options(self, spread, lower, upper) -> dict | None:
+        """Options for a local run started where a population of per-coordinate
+        standard deviation ``spread`` converged (``None``: this solver takes none)."""
         return None
 
     def steps_for(self, n: int) -> int | None:

@@ -4,8 +4,7 @@
 :func:`chain` builds one from any global solver (PSO, MAPSO, ...) and any local one
 (:class:`~jaxfric.NelderMead` or another ``optimistix`` minimiser);
 :class:`~jaxfric.MAPSONMDS` is the paper's instance. The run's key is split once,
-``k_global, k_local = jax.random.split(key)``, as in jaxfric 0.6.0, so MAPSO–NMDS gives
-0.6.0's values for the same key.
+``k_global, k_local = jax.random.split(key)``.
 
 The chain is two *stages* of the step protocol: the driver runs stage 0 (global steps)
 in one loop and stage 1 (local steps) in the next, so batched runs never compute one
@@ -43,10 +42,8 @@ from ._base import (
     Solution,
     check_positive_int,
 )
-from .nelder_mead import NelderMead
 from .optx_adapter import as_protocol
 from .rounds import AbstractAskTellSolver, drive, only_if, skipped
-from .swarm import AbstractSwarm
 
 
 class ChainState(eqx.Module):
@@ -99,13 +96,12 @@ class AbstractChain(AbstractAskTellSolver):
         self._local.check()
         check_positive_int("num_starts", self.num_starts)
         if self.num_starts > 1:
-            if not isinstance(self.global_solver, AbstractSwarm):
+            agents = self._global.population_size()
+            if agents is None:
                 raise ValueError("num_starts > 1 needs a swarm (PSO, MAPSO) as the global solver")
-            if self.num_starts > self.global_solver.num_agents:
+            if self.num_starts > agents:
                 raise ValueError(
-                    f"num_starts ({self.num_starts}) exceeds the number of agents "
-                    f"({self.global_solver.num_agents})"
-                )
+                    f"num_starts ({self.num_starts}) exceeds the number of agents ({agents})")
 
     def check_ask_tell(self):
         self._global.check_ask_tell()
@@ -122,21 +118,19 @@ class AbstractChain(AbstractAskTellSolver):
         return state.stage
 
     def _local_options(self, lower, upper, g):
-        """The first simplex sized from the swarm's spread (``simplex_from_swarm``):
-        per-coordinate std of the personal bests, at least ``initial_step``·1e-3 of
-        the box. After a converged global stage the basin is much smaller than the
-        box, so a box-sized simplex first spends many evaluations shrinking."""
-        if not (self.simplex_from_swarm and isinstance(self.global_solver, AbstractSwarm)
-                and isinstance(self.local_solver, NelderMead)):
+        """The local stage's first step sized from the spread of the global stage's
+        personal bests (``simplex_from_swarm``; see the local solver's
+        :meth:`~jaxfric.optim.AbstractSolver.start_options`)."""
+        bests = self._global.personal_bests(g) if self.simplex_from_swarm else None
+        if bests is None:
             return None
-        spread = jnp.std(g.pbest, axis=0)
-        floor = 1e-3 * self.local_solver.initial_step * (upper - lower)
-        return {"initial_step": jnp.maximum(spread, floor)}
+        return self._local.start_options(jnp.std(bests[0], axis=0), lower, upper)
 
     def _starts(self, g):
         if self.num_starts == 1:
             return self._global.best(g)[0][None]
-        return g.pbest[jnp.argsort(g.pbest_f)[: self.num_starts]]
+        x, f = self._global.personal_bests(g)
+        return x[jnp.argsort(f)[: self.num_starts]]
 
     def _switch(self, lower, upper, state: ChainState, objective) -> ChainState:
         """Rounds that start the local stage from the global stage's best point(s), one

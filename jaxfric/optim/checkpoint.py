@@ -30,7 +30,7 @@ import numpy as np
 from ..files import atomic_write
 
 FORMAT = "jaxfric-checkpoint"
-VERSION = 3  # 3: the driver's carry, equinox serialisation (0.7.0)
+VERSION = 4  # the version of the carry's layout: older files are refused by name
 MAGIC = b"JAXFRIC-CHECKPOINT\n"
 
 

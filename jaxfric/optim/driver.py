@@ -2,14 +2,9 @@
 solver (docs/algorithms.md §5.1 for the two-stage case).
 
 They validate what the user gave *before* tracing, flatten pytree bounds to one vector,
-and run the solver's step protocol (:class:`~jaxfric.optim.AbstractIterativeSolver`;
-an ``optimistix`` minimiser through :mod:`~jaxfric.optim.optx_adapter`) as one jitted
-computation::
-
-    state = init(...)
-    for stage in range(num_stages):            # a chain: global, then local
-        while not done and stage(state) == stage:
-            state = step_stage(..., stage); record history; report progress
+and run the solver (a foreign ``optimistix`` minimiser through
+:mod:`~jaxfric.optim.optx_adapter`) in the loop of :mod:`~jaxfric.optim.loop` as one
+jitted computation.
 
 In this one place, for every solver: the history of the best value against
 evaluations, progress reports, checkpoint/resume (:mod:`~jaxfric.optim.checkpoint`),
@@ -31,24 +26,12 @@ import numpy as np
 
 from .. import _xla
 from . import checkpoint as ckpt
-from ._base import History, Solution, check_positive_int
+from ._base import Solution, check_positive_int
+from .loop import NO_STOP, _begin, _run
 from .optx_adapter import OptxMinimiser, as_protocol
 from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
 from .progress import ProgressHook, TqdmProgress, register
 from .sharding import Layout, resolve_devices, shard_keys
-
-#: Most history entries kept (a longer run keeps every 2nd, 4th, ... step).
-HISTORY_SIZE = 4096
-
-
-class Carry(eqx.Module):
-    """What the loop carries (and a checkpoint stores): the solver's state, the
-    history, and the number of steps taken by this call's loop so far."""
-
-    state: Any
-    history: History
-    steps: Any
-
 
 # ------------------------------------------------------------------ validation
 def _prepare(fn, solver, bounds, args, y0, dtype):
@@ -95,66 +78,6 @@ def _progress(progress, proto):
     return ctx()
 
 
-# -------------------------------------------------------------------- the loop
-def _record(proto, state, history):
-    _, f = proto.best(state)
-    return history.record(proto.num_evals(state), f)
-
-
-def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
-    state = proto.init(flat, lower, upper, args, key, x0) if warm is None else warm
-    size = min(proto.max_steps(lower.shape[0]) + 2, HISTORY_SIZE)  # + the first entry, + room
-    history = _record(proto, state, History.empty(size, lower.dtype))
-    return Carry(state, history, jnp.array(0, jnp.int32))
-
-
-def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry:
-    """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
-
-    def report(c: Carry, force: bool):
-        if hook is not None:
-            phase, step = proto.progress(c.state)
-            hook.emit(phase, step, proto.num_evals(c.state), proto.best(c.state)[1], force)
-
-    for s in range(proto.num_stages()):
-        def cond(c, s=s):
-            done, _ = proto.terminate(flat, lower, upper, args, c.state)
-            return ~done & (proto.stage(c.state) == s) & (c.steps < stop_at)
-
-        def body(c, s=s):
-            state = proto.step_stage(flat, lower, upper, args, c.state, s)
-            c = Carry(state, _record(proto, state, c.history), c.steps + 1)
-            report(c, False)
-            return c
-
-        carry = jax.lax.while_loop(cond, body, carry)
-    report(carry, True)
-    return carry
-
-
-def _end(proto, flat, lower, upper, args, carry: Carry) -> Solution:
-    _, result = proto.terminate(flat, lower, upper, args, carry.state)
-    sol = proto.postprocess(flat, lower, upper, args, carry.state, result)
-    _, f = proto.best(carry.state)
-    history = carry.history.close(proto.num_evals(carry.state), f).filled()
-    return eqx.tree_at(lambda s: s.history, sol, history)
-
-
-#: ``stop_at`` of a run that is not chunked (always an array: one compiled loop for
-#: chunked and whole runs, so they take bit-identical steps)
-NO_STOP = 2**31 - 1
-
-
-def _run(proto, flat, lower, upper, args, key, x0, hook, carry=None, warm=None, stop_at=None):
-    """One compiled call: start (unless ``carry`` continues a chunked run), loop until
-    done or ``stop_at`` steps, and the solution. Returns ``(carry, solution)``."""
-    if carry is None:
-        carry = _begin(proto, flat, lower, upper, args, key, x0, warm)
-    stop_at = jnp.asarray(NO_STOP if stop_at is None else stop_at, jnp.int32)
-    carry = _loop(proto, flat, lower, upper, args, carry, stop_at, hook)
-    return carry, _end(proto, flat, lower, upper, args, carry)
-
-
 def _one(proto, flat, lower, upper, args, key, x0, hook):
     return _run(proto, flat, lower, upper, args, key, x0, hook)[1]
 
@@ -181,7 +104,7 @@ def _batching(batching, proto, layout: Layout | None) -> str:
         )
     if batching == "auto":
         # A vmapped optimistix minimiser (Nelder-Mead) computes both sides of every
-        # branch; on one CPU running the keys in turn is faster (peers.md §1). Swarms
+        # branch; on one CPU running the keys in turn is faster (docs/solvers.md). Swarms
         # batch their evaluations well, so they keep vmap.
         one_cpu = layout is None and _platform(layout) == "cpu"
         return "map" if one_cpu and isinstance(proto, OptxMinimiser) else "vmap"
@@ -264,10 +187,10 @@ def minimise(
             NaN or inf values count as the worst possible value.
         solver: a jaxfric solver (:class:`PSO`, :class:`MAPSO`, :class:`NelderMead`,
             :class:`MAPSONMDS`, :func:`chain`) or any ``optimistix`` minimiser.
-        bounds: ``(lower, upper)`` (arrays or matching pytrees of arrays), a sequence of
-            ``(lo, hi)`` pairs, one per parameter (scipy's form), or
-            ``scipy.optimize.Bounds``. Two pairs of numbers, which read both ways, are
-            refused unless only one reading is a valid box.
+        bounds: a list or tuple of ``(lo, hi)`` pairs of numbers, read as SciPy reads
+            it: one pair per parameter, however many (``[(-5, 10), (0, 15)]`` is two
+            parameters); ``(lower, upper)`` with each side an array or a matching
+            pytree of arrays; or ``scipy.optimize.Bounds``.
         args: data passed to ``fn``; arrays here do not trigger recompilation.
         key: a JAX PRNG key (``jax.random.key(0)``) or an int seed (``key=0`` is
             ``jax.random.key(0)``). Same key, same result.
@@ -369,7 +292,7 @@ def minimise_many(
     ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]`` still
     counts the evaluations the algorithm asked for, but XLA computes both branches,
     which made 8 vmapped runs on 30-D Rosenbrock about 1.5× slower than the same runs
-    mapped (benchmarks/results/peers.md §1).
+    mapped (docs/solvers.md, "What measurements decided").
     """
     proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = check_key(keys, "keys", batch=True)

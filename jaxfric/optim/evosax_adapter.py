@@ -1,4 +1,4 @@
-"""Any evosax (≥ 0.3) evolution strategy as a jaxfric solver (issue 16 item 2).
+"""Any evosax (≥ 0.3) evolution strategy as a jaxfric solver.
 
 :class:`Evosax` runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
 (``evosax.algorithms.algorithms``) — through jaxfric's step protocol
@@ -13,9 +13,10 @@ and a ``solver=`` of :func:`jaxfric.identify`.
 different scales get the same initial spread (docs/algorithms.md §5.1's box ``Ω``).
 Every candidate the strategy asks for is *projected* onto the box, ``u ← clip(u, 0, 1)``
 (what jaxfric's PSO does with its particles), the projected point is evaluated, and the
-projected point is what the strategy is told (repair, not penalty). So every evaluated
-point, every member of a population-based strategy and the reported best lie in the
-bounds.
+projected point is what the strategy is told (repair, not penalty). The map is clipped
+to the box too (``lower + u·(upper − lower)`` can round past ``upper``), so every
+evaluated point, every member of a population-based strategy and the reported best lie
+in the bounds.
 
 **Start.** Distribution-based strategies (CMA-ES, SNES, …) start with their mean at a
 uniform random point of the box (``y0`` when given) and, where the strategy has a
@@ -26,10 +27,15 @@ uniform random population (row 0 = ``y0`` when given), all evaluated.
 
 **Counts.** Evaluations of a run are exact: ``1 + P·G`` (distribution-based) or
 ``P·(G + 1)`` (population-based) for population size ``P`` and ``G`` generations
-(:meth:`Evosax.evaluations`), fewer when the strategy's own state turns non-finite
-(CMA-ES's step size underflows some thousand generations after it has converged): the
-run then ends, keeping the last finite state and the best point (no restarts yet). NaN and inf fitness become ``+inf`` before the strategy
+(:meth:`Evosax.evaluations`). NaN and inf fitness become ``+inf`` before the strategy
 sees them, so they rank last and never become the best.
+
+**Restarts.** When the strategy's own state turns non-finite (CMA-ES's step size
+underflows some thousand generations after it has converged) the strategy restarts, as
+pycma does, instead of ending the run with budget left: a distribution-based strategy
+from a fresh uniform random mean with its first spread, a population-based one from its
+last (evaluated) population. The best point so far is kept; ``state.restarts`` counts
+the restarts.
 
 **Cost in many dimensions.** Full CMA-ES eigendecomposes its D×D covariance every
 generation (``jnp.linalg.eigh``, O(D³)). On a 2-core CPU that took 3–7 ms at D = 30 but
@@ -105,6 +111,12 @@ def resolve_strategy(strategy) -> type:
     return by_norm[key]
 
 
+def _to_box(U, lower, upper):
+    """``lower + U·(upper − lower)`` for ``U`` in the unit box, clipped to the box (the
+    map can round past ``upper``: 1.2000000000000002 for an upper bound of 1.2)."""
+    return jnp.clip(lower + U * (upper - lower), lower, upper)
+
+
 def _all_finite(tree):
     leaves = [jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(tree)
               if jnp.issubdtype(jnp.result_type(a), jnp.inexact)]
@@ -124,8 +136,8 @@ def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
 
 class EvosaxState(eqx.Module):
     """The strategy's own state, the best projected point and its value, the exact
-    evaluation count, generations done, the run's key, and whether the strategy's
-    state broke down (turned non-finite: the run then ends, see :class:`Evosax`)."""
+    evaluation count, generations done, the run's key, and how often the strategy
+    restarted after its state turned non-finite (see :class:`Evosax`)."""
 
     inner: Any
     x_best: Any
@@ -133,7 +145,7 @@ class EvosaxState(eqx.Module):
     num_evals: Any
     generation: Any
     key: Any
-    broken: Any
+    restarts: Any
 
 
 class Evosax(AbstractGenerational):
@@ -240,7 +252,7 @@ class Evosax(AbstractGenerational):
         if self.distribution_based:
             mean = jax.random.uniform(k_start, (n,), lower.dtype) if u0 is None else u0[0]
             inner = es.init(k_init, mean, params)
-            x = lower + mean * width
+            x = _to_box(mean, lower, upper)
             f = (yield x[None])[0]
             evals = 1
         else:
@@ -248,13 +260,13 @@ class Evosax(AbstractGenerational):
             U = uniform_flat(k_start, (P, n), lower.dtype)
             if u0 is not None:
                 U = U.at[: u0.shape[0]].set(u0)
-            X = lower + U * width
+            X = _to_box(U, lower, upper)
             F = yield X
             inner = es.init(k_init, U, F, params)
             i = jnp.argmin(F)
             x, f, evals = X[i], F[i], P
         return EvosaxState(inner, x, f, jnp.array(evals, count_dtype()),
-                           jnp.array(0, jnp.int32), key, jnp.array(False))
+                           jnp.array(0, jnp.int32), key, jnp.array(0, jnp.int32))
 
     def step_rounds(self, lower, upper, state: EvosaxState, stage=0, objective=None) -> Rounds:
         es = self._es(lower)
@@ -262,17 +274,21 @@ class Evosax(AbstractGenerational):
         k_ask, k_tell = jax.random.split(jax.random.fold_in(state.key, state.generation))
         U, inner = es.ask(k_ask, state.inner, params)
         U = jnp.clip(U.astype(lower.dtype), 0.0, 1.0)  # projection onto the box
-        X = lower + U * (upper - lower)
+        X = _to_box(U, lower, upper)
         F = yield X
         inner, _ = es.tell(k_tell, U, F, inner, params)
-        # keep the carried state's dtypes (evosax's constants follow JAX's default float)
-        inner = jax.tree_util.tree_map(lambda new, old: jnp.asarray(new, jnp.result_type(old)),
-                                       inner, state.inner)
+        inner = self._like(inner, state.inner)
         # After convergence CMA-ES's step size underflows to 0 and its state to NaN:
-        # every later sample would be NaN, so the run ends with the last finite state.
+        # every later sample would be NaN, so the strategy starts again (pycma's rule).
         broken = ~_all_finite(inner)
-        inner = jax.tree_util.tree_map(lambda new, old: jnp.where(broken, old, new),
-                                       inner, state.inner)
+        k_restart = jax.random.fold_in(k_tell, 1)
+        if self.distribution_based:
+            fresh = es.init(k_restart, jax.random.uniform(k_restart, lower.shape, lower.dtype),
+                            params)
+        else:
+            fresh = es.init(k_restart, U, F, params)
+        inner = jax.tree_util.tree_map(lambda f, i: jnp.where(broken, f, i),
+                                       self._like(fresh, state.inner), inner)
         i = jnp.argmin(F)
         better = F[i] < state.f_best
         return EvosaxState(
@@ -282,11 +298,15 @@ class Evosax(AbstractGenerational):
             state.num_evals + es.population_size,
             state.generation + 1,
             state.key,
-            broken,
+            state.restarts + broken.astype(jnp.int32),
         )
 
-    def stopped(self, state):
-        return state.broken
+    @staticmethod
+    def _like(inner, old):
+        """``inner`` in the carried state's dtypes (evosax's constants follow JAX's
+        default float)."""
+        return jax.tree_util.tree_map(lambda new, o: jnp.asarray(new, jnp.result_type(o)),
+                                      inner, old)
 
     def best(self, state):
         return state.x_best, state.f_best

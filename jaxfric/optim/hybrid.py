@@ -5,7 +5,7 @@ gBest, the paper's instance of :func:`~jaxfric.optim.chained.chain`.
 ``num_starts`` best agents (by personal best) seed Nelder–Mead runs and the best
 refined point wins.
 
-One object, two spellings with different jobs (issue 19 item 3): :class:`MAPSONMDS` is
+One object, two spellings with different jobs: :class:`MAPSONMDS` is
 the solver, a chain whose stages are named ``mapso`` and ``nelder_mead`` and checked to
 be a :class:`MAPSO` and a :class:`NelderMead`; :func:`mapso_nmds` is its flat-keyword
 factory (``nm_*`` keywords go to Nelder–Mead, the rest to MAPSO), for settings that

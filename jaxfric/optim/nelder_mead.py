@@ -16,7 +16,7 @@ the pre-update simplex. This is a correct replacement that runs through
 * the trial points of a step evaluated one after the other (fewest evaluations) or
   as one batch (``batched_trials``: one call of the objective per step);
 * restarts from its own result with a fresh simplex (``restarts``);
-* exact evaluation counts and a fixed-size history of the best value.
+* exact evaluation counts.
 
 Bounds and an optional per-coordinate first step reach the solver through
 ``optx.minimise(..., options={"lower": lo, "upper": hi, "initial_step": step})``.
@@ -36,12 +36,9 @@ from jaxtyping import Array
 from ._base import (
     RESULTS,
     AbstractSolver,
-    History,
-    Solution,
     check_positive_int,
     check_range,
     safe_value,
-    uniform_in_box,
 )
 from .rounds import Batch, drive, skipped
 
@@ -50,7 +47,7 @@ _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
 
 class NelderMeadState(eqx.Module):
     """Simplex sorted by value (``f_simplex[0]`` best), the auxiliary output of the best
-    vertex, restart bookkeeping, counters and history."""
+    vertex, restart bookkeeping and counters."""
 
     simplex: Array
     f_simplex: Array
@@ -63,7 +60,6 @@ class NelderMeadState(eqx.Module):
     num_contractions: Array
     num_shrinks: Array
     num_restarts: Array
-    history: History
 
 
 def _flat_bounds(options, y_flat):
@@ -100,9 +96,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)``;
     * ``optx.minimise(fn, NelderMead(), y0, args, options={"lower": lo, "upper": hi},
       has_aux=..., max_steps=..., throw=...)`` (``options`` may also hold
-      ``"initial_step"``, a per-coordinate first step, and ``"progress"``, a
-      ``ProgressHook``). ``sol.aux`` is the auxiliary output at the best vertex;
-      ``sol.stats`` holds the evaluation and move counts.
+      ``"initial_step"``, a per-coordinate first step). ``sol.aux`` is the auxiliary
+      output at the best vertex; ``sol.stats`` holds the evaluation and move counts.
 
     Args:
         rtol, atol: stop when every vertex is within ``atol + rtol·|x_best|`` of the best
@@ -122,7 +117,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         max_steps: iteration cap used by :func:`jaxfric.minimise` (``None``:
             ``200·n·(1 + restarts)``, SciPy's and fminsearch's default per (re)start).
         max_evals: optional evaluation budget; the run stops once it is spent.
-        history_size: entries of the fixed-size history.
         batched_trials: evaluate reflection, expansion and both contractions of a step
             as one batch of 4 (one call of the objective per step) instead of the
             sequential rule (reflection, then at most one more point). The simplex moves
@@ -142,7 +136,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     initial_step: float = 0.05
     max_steps: int | None = None
     max_evals: int | None = None
-    history_size: int = 256
     batched_trials: bool = False
     restarts: int = 0
 
@@ -159,7 +152,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             check_positive_int("max_steps", self.max_steps)
         if self.max_evals is not None:
             check_positive_int("max_evals", self.max_evals)
-        check_positive_int("history_size", self.history_size, minimum=2)
         check_positive_int("restarts", self.restarts, minimum=0)
         if not isinstance(self.batched_trials, bool):
             raise ValueError(f"batched_trials must be True or False, got {self.batched_trials!r}")
@@ -171,6 +163,13 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         if adaptive:
             return 1.0, 1.0 + 2.0 / n, 0.75 - 1.0 / (2.0 * n), 1.0 - 1.0 / n
         return 1.0, 2.0, 0.5, 0.5
+
+    def start_options(self, spread, lower, upper):
+        """The first simplex sized from a converged population's spread: after a
+        global stage the basin is much smaller than the box, so a box-sized simplex
+        would first spend many evaluations shrinking. At least ``initial_step``·1e-3
+        of the box."""
+        return {"initial_step": jnp.maximum(spread, 1e-3 * self.initial_step * (upper - lower))}
 
     def steps_for(self, n: int) -> int:
         if self.max_steps is not None:
@@ -239,7 +238,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         simplex = jnp.clip(simplex, lower[None], upper[None])
         f, aux = yield simplex
         order = jnp.argsort(f)
-        hist = History.empty(self.history_size, f.dtype)
         num_evals = jnp.array(x0.shape[0] + 1, jnp.int32)
         return NelderMeadState(
             simplex=simplex[order],
@@ -248,7 +246,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             restarts_left=jnp.array(self.restarts, jnp.int32),
             f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
-            history=hist.record(num_evals, f[order][0]),
             **dict.fromkeys(("num_reflections", "num_expansions", "num_contractions",
                              "num_shrinks", "num_restarts"), jnp.array(0, jnp.int32)),
         )
@@ -265,9 +262,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
 
         x, new_state, aux = drive(self.step_rounds(state, options),
                                   self._evaluator(fn, unravel, args), skip)
-        hook = options.get("progress") if options else None
-        if hook is not None:
-            hook.emit(1, new_state.history.counter, new_state.num_evals, new_state.f_simplex[0])
         return unravel(x), new_state, aux
 
     def step_rounds(self, state, options):
@@ -354,7 +348,6 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             num_contractions=state.num_contractions + _i32(oc_ok | ic_ok),
             num_shrinks=state.num_shrinks + _i32(shrink),
             num_restarts=state.num_restarts + _i32(restart),
-            history=state.history.record(num_evals, F2[0]),
         )
         return S2[0], new_state, aux_best
 
@@ -393,32 +386,3 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     # ----------------------------------------------------------- jaxfric protocol
     def progress_totals(self):
         return None, self.max_steps
-
-    def run(self, fn, lower, upper, args, key, x0=None, progress=None, initial_step=None) -> Solution:
-        if x0 is None:
-            x0 = uniform_in_box(key, lower.shape, lower, upper)
-        options: dict[str, Any] = {"lower": lower, "upper": upper}
-        if initial_step is not None:
-            options["initial_step"] = initial_step
-        if progress is not None:
-            options["progress"] = progress
-        sol = optx.minimise(
-            fn,
-            self,
-            x0,
-            args,
-            options=options,
-            max_steps=self.steps_for(lower.shape[0]),
-            throw=False,
-        )
-        st = sol.state
-        return Solution(
-            value=sol.value,
-            f=st.f_simplex[0],
-            result=sol.result,
-            stats={
-                "num_steps": jnp.asarray(sol.stats["num_steps"], jnp.int32),
-                "num_evals": st.num_evals,
-            },
-            history=st.history.filled(),
-        )

@@ -97,6 +97,11 @@ class OptxMinimiser(AbstractAskTellSolver):
         return None, self.steps if self.steps is not None else (
             self.minimiser.max_steps if isinstance(self.minimiser, NelderMead) else None)
 
+    def start_options(self, spread, lower, upper):
+        if isinstance(self.minimiser, AbstractSolver):
+            return self.minimiser.start_options(spread, lower, upper)
+        return None
+
     def _options(self, lower, upper, extra=None):
         return {"lower": lower, "upper": upper, **(extra or {})}
 

@@ -64,30 +64,18 @@ def _is_pair(p) -> bool:
 
 
 def _scipy_bounds(bounds):
-    """scipy's forms as ``(lower, upper)``: ``scipy.optimize.Bounds``, or a sequence of
-    ``(lo, hi)`` pairs, one per parameter (issue 20.8). Two pairs of numbers are
-    ambiguous (``[(a, b), (c, d)]``: two parameters in ``[a, b]`` and ``[c, d]``, or
-    lower ``(a, b)`` and upper ``(c, d)``?); when both readings are valid boxes they are
-    refused, else the valid reading is taken."""
+    """``((lower, upper), read_from_pairs)``. SciPy's forms: ``scipy.optimize.Bounds``, or
+    a list or tuple whose every item is a ``(lo, hi)`` pair of numbers, one pair per
+    parameter whatever their number (SciPy's rule: Branin's ``[(-5, 10), (0, 15)]`` is
+    two parameters). Anything else comes back as given: the ``(lower, upper)`` form,
+    whose two sides are arrays or pytrees of arrays."""
     if type(bounds).__name__ == "Bounds" and hasattr(bounds, "lb") and hasattr(bounds, "ub"):
         lb, ub = np.broadcast_arrays(np.asarray(bounds.lb, float), np.asarray(bounds.ub, float))
-        return (np.array(lb), np.array(ub))
-    if not isinstance(bounds, (tuple, list)) or not bounds or not all(_is_pair(p) for p in bounds):
-        return bounds
-    pairs = np.asarray(bounds, dtype=float)
-    if len(bounds) != 2:
-        return (pairs[:, 0], pairs[:, 1])
-    as_pairs_ok = bool(np.all(pairs[:, 0] < pairs[:, 1]))
-    as_lower_upper_ok = bool(np.all(pairs[0] < pairs[1]))
-    if as_pairs_ok and as_lower_upper_ok:
-        raise ValueError(
-            f"bounds {bounds!r} are ambiguous: two (lo, hi) pairs, one per parameter, or "
-            "(lower, upper) of two parameters? Pass (np.array(lower), np.array(upper)) or "
-            "scipy.optimize.Bounds(lower, upper)"
-        )
-    if as_pairs_ok:
-        return (pairs[:, 0], pairs[:, 1])
-    return (pairs[0], pairs[1])
+        return (np.array(lb), np.array(ub)), False
+    if isinstance(bounds, (tuple, list)) and bounds and all(_is_pair(p) for p in bounds):
+        pairs = np.asarray(bounds, dtype=float)
+        return (pairs[:, 0], pairs[:, 1]), True
+    return bounds, False
 
 
 def _refuse_first(ok, message):
@@ -99,13 +87,16 @@ def _refuse_first(ok, message):
 
 
 def prepare_bounds(bounds, dtype=None):
-    """Validate ``bounds`` (``(lower, upper)`` pytrees, or scipy's forms) and flatten them.
+    """Validate ``bounds`` and flatten them. A list or tuple of ``(lo, hi)`` pairs of
+    numbers is read as SciPy reads it, one pair per parameter; any other pair is
+    ``(lower, upper)``, each side an array or a pytree of arrays; or
+    ``scipy.optimize.Bounds``.
 
     Returns ``(lower_flat, upper_flat, treedef, shapes)``. Raises ``ValueError``
     naming the problem: wrong shape of ``bounds``, mismatched structures or shapes,
     non-finite values, ``lower >= upper``, or no parameters at all.
     """
-    bounds = _scipy_bounds(bounds)
+    bounds, pairs = _scipy_bounds(bounds)
     if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
         raise ValueError(
             "bounds must be a pair (lower, upper), a sequence of (lo, hi) pairs, one per "
@@ -131,15 +122,19 @@ def prepare_bounds(bounds, dtype=None):
         raise ValueError("bounds describe zero parameters")
     if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
         raise ValueError("bounds must be finite (found NaN or inf)")
+    read_as = (" (bounds read as SciPy's (lo, hi) pairs, one per parameter; for vectors "
+               "of lower and upper bounds pass arrays: (np.array(lower), np.array(upper)))"
+               if pairs else "")
     _refuse_first(lower < upper, lambda i, count: (
         f"every lower bound must be < its upper bound; parameter {i} has "
-        f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({count} such parameter(s))"))
+        f"lower={float(lower[i])!r} >= upper={float(upper[i])!r} ({count} such parameter(s))"
+        + read_as))
     if dtype is None:
         dtype = np.result_type(*[a.dtype for a in lo_leaves + hi_leaves])
         if not np.issubdtype(dtype, np.floating):
             dtype = np.float64
         elif np.dtype(dtype).itemsize < 4:
-            # float16 bounds: search in float32 (issue 20.2: in float16 the velocities and
+            # float16 bounds: search in float32 (in float16 the velocities and
             # random draws overflow and the swarm stalls without a word)
             dtype = np.float32
     else:

@@ -111,7 +111,7 @@ class TqdmProgress:
         """Start the bar's clock at the first report of a stage, counting ``step`` as done
         before it: that report comes after compilation (or after the previous stage), so
         a rate measured from the bar's creation would include it and the first ETA would
-        be several times too long (issue 20.10)."""
+        be several times too long."""
         self.bar.reset(total=self.bar.total)
         self.bar.initial = self.bar.n = self.bar.last_print_n = step
         self._started = True

@@ -13,12 +13,7 @@ import jax.numpy as jnp
 
 from ._base import check_positive_int, linear_inertia
 from .rng import counter_seed, counter_uniform
-from .swarm import (  # noqa: F401  (SwarmState, init_swarm: their 0.6.0 import path)
-    AbstractSwarm,
-    SwarmState,
-    init_swarm,
-    update_bests,
-)
+from .swarm import AbstractSwarm, update_bests
 
 
 def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_bounds=True,
@@ -34,8 +29,8 @@ def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_boun
     ``clip(x, lo, hi)`` bounds both; it gives the same numbers either way. :class:`PSO`
     keeps ``jnp.clip``; :class:`~jaxfric.optim.MAPSO` passes the select form
     (:func:`jaxfric.optim._base.clip`), with which its generation runs 1.2-2.2x faster,
-    while the select form made PSO's vmapped Ackley runs 1.5x slower
-    (``benchmarks/clip_forms.py``).
+    while the select form made PSO's vmapped Ackley runs 1.5x slower (docs/solvers.md,
+    "What measurements decided").
     """
     v = w * v + c1 * r[0] * (pbest - x) + c2 * r[1] * (social - x)
     v = clip(v, -vmax, vmax)

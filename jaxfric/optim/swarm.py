@@ -26,13 +26,7 @@ from ._base import (
     count_dtype,
     uniform_in_box,
 )
-from .rounds import (  # noqa: F401  (drive, replay, AskTellState: their 0.7 import path)
-    AbstractGenerational,
-    AskTellState,
-    Rounds,
-    drive,
-    replay,
-)
+from .rounds import AbstractGenerational, Rounds
 
 
 class SwarmState(eqx.Module):
@@ -98,12 +92,6 @@ def swarm_from(x, v, f, key) -> SwarmState:
                       num_evals=jnp.array(x.shape[0], count_dtype()), key=key)
 
 
-def init_swarm(key, f_batch, num, lower, upper, vmax, x0=None) -> SwarmState:
-    """Evaluated first population (kept for callers of 0.6.0's helper)."""
-    x, v, key = first_population(key, num, lower, upper, vmax, x0)
-    return swarm_from(x, v, f_batch(x), key)
-
-
 class AbstractSwarm(AbstractGenerational):
     """A population solver: a fixed number of generations, optionally stopped early.
 
@@ -136,6 +124,9 @@ class AbstractSwarm(AbstractGenerational):
 
     def population_size(self) -> int:
         return self.num_agents
+
+    def personal_bests(self, state: SwarmState):
+        return state.pbest, state.pbest_f
 
     def vmax(self, lower, upper):
         return self.vmax_fraction * (upper - lower)
