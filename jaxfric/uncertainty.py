@@ -274,6 +274,19 @@ class ParameterUncertainty:
         return [k for i, k in enumerate(self.names)
                 if lo[i] <= self.lower[i] and hi[i] >= self.upper[i]]
 
+    def box_capped(self, method=None, level: float = DEFAULT_LEVEL) -> np.ndarray:
+        """The search-coordinate covariance with every parameter whose interval at
+        ``level`` is wider than its search box scaled down to the box (Σ' = S Σ S,
+        S = diag(min(1, half box width / (t se)))): correlations are kept, and a
+        parameter the data do not determine moves over its box, not beyond it."""
+        c = self.cov_theta[self._method(method)]
+        se = np.sqrt(np.clip(np.diag(c), 0.0, None))
+        half = 0.5 * (np.asarray(self.upper) - np.asarray(self.lower))
+        t = self.t_quantile(level)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(np.isfinite(half) & (t * se > half), half / (t * se), 1.0)
+        return c * scale[:, None] * scale[None, :]
+
     def strongly_correlated(self, threshold: float = 0.99, method=None) -> list[tuple[str, str, float]]:
         """Pairs with |correlation| above ``threshold``: the data fix a combination only."""
         r = self.correlation(method)
@@ -575,9 +588,12 @@ def prediction_interval(fit, velocity, level: float = DEFAULT_LEVEL, *, dt=None,
                         method=None, noise: bool = True):
     """``(prediction, low, high)`` [N] for a velocity record: ŷ ± t sqrt(j Σ jᵀ + s²),
     j = ∂ŷ/∂θ at the fit (``jax.jacfwd``), Σ the fit's covariance (``method``, default
-    the fit's), s² its residual variance (left out with ``noise=False``: then the band
-    is the confidence band of the mean prediction only). The band of a new
-    *measurement* assumes the training residual variance holds on the new record."""
+    the fit's) with each parameter's interval capped at its search box
+    (:meth:`ParameterUncertainty.box_capped`: an undetermined parameter moves inside its
+    box, not by its linearised ±10⁹), s² its residual variance (left out with
+    ``noise=False``: then the band is the confidence band of the mean prediction only).
+    The band of a new *measurement* assumes the training residual variance holds on
+    the new record."""
     from .fit import predict
 
     _check_level(level)
@@ -596,7 +612,8 @@ def prediction_interval(fit, velocity, level: float = DEFAULT_LEVEL, *, dt=None,
         return predict(fit.model, th, (fit.velocity_scaler, fit.friction_scaler), velocity, dt, inputs)
 
     y, jvp_cols = f(theta), jax.jacfwd(f)(theta)
-    var = jnp.einsum("ta,ab,tb->t", jvp_cols, jnp.asarray(u.cov_theta[method], theta.dtype), jvp_cols)
+    cov = u.box_capped(method, level)
+    var = jnp.einsum("ta,ab,tb->t", jvp_cols, jnp.asarray(cov, theta.dtype), jvp_cols)
     var = np.asarray(var, np.float64) + (u.s2 if noise else 0.0)
     half = u.t_quantile(level) * np.sqrt(np.clip(var, 0.0, None))
     y = np.asarray(y, np.float64)
@@ -663,7 +680,8 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
                 f, n = np.asarray(data.friction), fit.n_train
                 out["band"] = {"train": coverage(f[:n], lo[:n], hi[:n]),
                                "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None,
-                               "mean_half_width_N": float(np.mean(hi - lo) / 2)}
+                               "median_half_width_N": float(np.median(hi - lo) / 2),
+                               "max_half_width_N": float(np.max(hi - lo) / 2)}
     return out
 
 
@@ -726,8 +744,9 @@ def report_markdown(summary: dict | None) -> list[str]:
             cov = [f"{band['train']:.1%} of the training samples"]
             if band.get("valid") is not None:
                 cov.append(f"{band['valid']:.1%} of the validation samples")
-            L += ["", f"{lvl} prediction band (parameter covariance plus the training residual variance, "
-                  f"mean half-width {band['mean_half_width_N']:.3g} N) holds " + " and ".join(cov) + "."]
+            L += ["", f"{lvl} prediction band (parameter covariance, capped at the search box, plus the "
+                  f"training residual variance; half-width median {band['median_half_width_N']:.3g} N, "
+                  f"max {band['max_half_width_N']:.3g} N) holds " + " and ".join(cov) + "."]
     eb = summary.get("ensemble_band")
     if eb:
         L += ["", f"The {eb['members']} members' min–max band (mean half-width {eb['mean_half_width_N']:.3g} N) "

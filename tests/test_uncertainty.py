@@ -198,6 +198,16 @@ def test_stiffness_without_presliding_is_not_a_confident_number():
     se = u.stderr()
     assert se["Fc"] < 0.05 * 50.0 and se["sigma2"] < 0.1 * 300.0, se
     assert u.estimate[i] == pytest.approx(1e7)
+    # the band moves the undetermined parameters over their box, not by their linearised ±1e9:
+    # on a slow sweep (where Fs and vs act) it stays within the friction levels the box allows
+    fit._uncertainty = u
+    with jax.enable_x64(True):
+        slow = np.linspace(-0.02, 0.02, 400)
+        y, lo, hi = fit.prediction_interval(slow, 0.95)
+        cols = np.asarray(jax.jacfwd(lambda th: model.simulate(th, slow, dt))(jnp.asarray(fit.theta)))
+    raw = np.sqrt(np.einsum("ta,ab,tb->t", cols, u.cov_theta["hac"], cols))
+    assert raw.max() > 1e4                      # uncapped: meaningless
+    assert (hi - lo).max() / 2 < 3 * 86.96      # capped: below 3 × the box's largest Coulomb level
 
 
 def test_singular_direction_is_regularised_not_dropped():
