@@ -38,7 +38,7 @@ from processes import jax_subprocess
 import jaxfric as jf
 from jaxfric import models, rig
 from jaxfric.fit import Fit
-from jaxfric.identification import _api as identify_api
+from jaxfric.identification import stages as identify_api
 
 ROOT = Path(__file__).resolve().parents[1]
 # the driver module (every compiled optimiser run goes through its _run / _run_many)

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 import jaxfric
 from jaxfric.identification import GradientRefinement, identify
-from jaxfric.identification import _api
+from jaxfric.identification import _api, stages
 from jaxfric.identification._timing import Stopwatch
 from jaxfric.models import Elman, LuGre
 from jaxfric.rig import FrictionData
@@ -271,7 +271,7 @@ def no_optimiser(monkeypatch):
     def forbidden(*a, **k):
         raise AssertionError("identify started optimising before rejecting the input")
 
-    monkeypatch.setattr(_api, "minimise", forbidden)
+    monkeypatch.setattr(stages, "minimise", forbidden)
 
 
 def _good():

@@ -247,7 +247,7 @@ def test_a_parameter_stopped_by_its_range_is_flagged():
 
 def test_model_options_as_keywords_reach_the_model(monkeypatch):
     """``identify("elman", ..., neurons=2)`` builds a 2-neuron network (seen by the optimiser)."""
-    from jaxfric.identification import _api
+    from jaxfric.identification import stages
 
     seen = {}
 
@@ -258,7 +258,7 @@ def test_model_options_as_keywords_reach_the_model(monkeypatch):
         seen["model"] = cost.model
         raise Stop
 
-    monkeypatch.setattr(_api, "minimise", capture)
+    monkeypatch.setattr(stages, "minimise", capture)
     v, f, _ = coulomb_record(0.0, 200)
     with pytest.raises(Stop):
         identify("elman", (v, f, DT), key=0, neurons=2)

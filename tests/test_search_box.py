@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import jaxfric as jf
-from jaxfric.identification import BoundWarning, _api
+from jaxfric.identification import BoundWarning, stages
 from jaxfric.identification._timing import Stopwatch
 from jaxfric.models import DEFAULT_RANGES, GMS, Coulomb, Cylinder, LuGre, SearchBox
 
@@ -75,7 +75,7 @@ def test_a_bad_box_is_refused_before_any_computation(monkeypatch, box, words):
     def forbidden(*args, **kwargs):
         raise AssertionError("the optimiser ran")
 
-    monkeypatch.setattr(_api, "minimise", forbidden)
+    monkeypatch.setattr(stages, "minimise", forbidden)
     v, f, _ = coulomb_record()
     f_before = f.copy()
     with pytest.raises(ValueError) as info:

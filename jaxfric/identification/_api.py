@@ -28,28 +28,41 @@ compiled run, and to the gradient stage, which reports between compiled chunks.
 from __future__ import annotations
 
 import dataclasses
-import numbers
-import warnings
 from typing import Any
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from .. import _xla
 from .. import models as _models
-from ..fit import Fit, model_config, model_name, predict
-from ..metrics import friction_metrics
+from ..fit import Fit
 from ..models import AbstractFrictionModel
-from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead, minimise, minimise_many
+from ..optim import MAPSO, AbstractSolver, MAPSONMDS, NelderMead
 from ..uncertainty import assess_fit
-from ._data import Record, RecordSet, as_record, as_records
-from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
-from ._objective import OutputErrorCost, cost_data, fit_scalers, search_dtype
-from ._pooled import PooledOutputErrorCost, pooled_cost_data
-from ._refine import GradientRefinement, as_refinement, refine_impl, result_name
+from ._data import as_record, as_records  # noqa: F401  (re-exported: _api.as_record)
+from ._objective import search_dtype
+from ._refine import GradientRefinement, as_refinement
 from ._timing import Stopwatch
+# The underscored names stay importable from here for jaxfric.motion, the CLI and the
+# benchmarks.
+from .stages import (  # noqa: F401
+    as_key as _as_key,
+    as_member_keys as _as_keys,
+    box_stage,
+    check_theta0,
+    ensemble_summary as _ensemble_summary,
+    fit_stage,
+    global_stage,
+    gradient_stage,
+    history as _history,
+    key_record as _key_record,
+    objective_stage,
+    record_inputs as _record_inputs,
+    record_metrics as _record_metrics,
+    records_stage,
+    resolve_keys,
+    solver_stages as _stages,
+    stage_mse as _stage_mse,
+    warn_if_divergent as _warn_if_divergent,
+)
 
 #: Defaults applied when a model is given by *name* (explicit options win).
 #: The Elman context-weight box is |r| <= 1 instead of the spec's 5 (§2.4): with 5
@@ -177,183 +190,6 @@ def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
         f"model must be a friction model instance or a name ({', '.join(_models.available())}), "
         f"got {type(model).__name__}"
     )
-
-
-def _as_key(key):
-    if key is None:
-        raise ValueError("key is required: pass jax.random.key(seed) (or an int seed)")
-    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
-        return jax.random.key(int(key)), int(key)
-    k = jnp.asarray(key)
-    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
-    if not ((typed and k.shape == ()) or (k.dtype == jnp.uint32 and k.shape == (2,))):
-        raise ValueError(
-            f"key must be one JAX PRNG key (jax.random.key(seed)) or an int seed, got "
-            f"{'a batch of keys of shape ' + str(k.shape) if typed else repr(key)}"
-        )
-    return key, None
-
-
-def _as_keys(key, keys):
-    """The members' keys of ``identify(..., keys=K)``: ``K`` keys split from ``key``, or
-    the given batch. Returns ``(typed key batch, K)``."""
-    if isinstance(keys, numbers.Integral) and not isinstance(keys, bool):
-        if keys < 1:
-            raise ValueError(f"keys must be a number of members >= 1 or a batch of keys, got {keys}")
-        return jax.random.split(_as_key(key)[0], int(keys)), int(keys)
-    if key is not None:
-        raise ValueError("give key= (one run, or the root of keys=K) or a batch keys=[...], not both")
-    k = jnp.asarray(keys)
-    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key) and k.ndim == 1 and k.shape[0] >= 1:
-        return k, int(k.shape[0])
-    if k.dtype == jnp.uint32 and k.ndim == 2 and k.shape[1] == 2 and k.shape[0] >= 1:
-        return jax.random.wrap_key_data(k), int(k.shape[0])
-    raise ValueError(
-        "keys must be a number of members K (split from key=) or a 1-D batch of JAX PRNG keys "
-        f"(jax.random.split(key, K)), got {keys!r}"
-    )
-
-
-def _key_record(key):
-    k = jnp.asarray(key)
-    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key):
-        return np.asarray(jax.random.key_data(k)).ravel().tolist(), str(jax.random.key_impl(k))
-    return np.asarray(k).ravel().tolist(), None
-
-
-def _record_inputs(model: AbstractFrictionModel, records: RecordSet) -> list:
-    """Each record's ``(C, T)`` measured channels for ``model`` (``None`` per record for a
-    model without ``input_names``); ``ValueError`` naming the record that lacks them."""
-    out = []
-    for r in records.records:
-        try:
-            out.append(model.inputs_from(r, r.n_samples))
-        except ValueError as e:
-            if records.single is not None:
-                raise
-            raise ValueError(f"{r.name}: {e}") from None
-    return out
-
-
-def _train_inputs(records: RecordSet, inputs: list):
-    """The training samples of every training record's channels, side by side (for the
-    search box), or ``None`` for a model without them."""
-    parts = [x[:, : r.n_train] for r, x in zip(records.records, inputs)
-             if x is not None and r.n_train > 0]
-    return np.concatenate(parts, axis=1) if parts else None
-
-
-def _check_theta0(model, theta0, lower, upper):
-    if theta0 is None:
-        return None
-    theta0 = model.check_theta(theta0)
-    if theta0.ndim != 1:
-        raise ValueError(f"theta0 must be one parameter vector, got shape {theta0.shape}")
-    outside = np.flatnonzero((theta0 < lower) | (theta0 > upper))
-    if outside.size:
-        i = int(outside[0])
-        raise ValueError(
-            f"theta0 lies outside the search box: {model.param_names[i]} = {theta0[i]!r} not in "
-            f"[{lower[i]!r}, {upper[i]!r}] ({outside.size} such parameter(s))"
-        )
-    return theta0
-
-
-def _stages(sol, solver) -> list[dict]:
-    stats = {k: int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else float(v)
-             for k, v in sol.stats.items()}
-    if "f_global" in stats:
-        n_global = stats["num_evals_global"]
-        # the chain's own global stage (MAPSO, PSO, Evosax, ...), not always MAPSO
-        g_name = type(solver.global_solver).__name__.lower()
-        return [
-            {"stage": g_name, "J": stats["f_global"], "num_evals": n_global},
-            {"stage": "nelder_mead", "J": float(sol.f), "num_evals": stats["num_evals"] - n_global},
-        ]
-    return [{"stage": type(solver).__name__.lower(), "J": float(sol.f),
-             "num_evals": stats["num_evals"]}]
-
-
-def _history(sol) -> dict[str, np.ndarray]:
-    n = int(sol.history.length)
-    return {"evals": np.asarray(sol.history.evals)[:n], "f": np.asarray(sol.history.f)[:n]}
-
-
-def _window_metrics(y_hat, record: Record) -> dict:
-    """§6 metrics in newtons on the training, validation and whole record (free run
-    over the whole record, so the validation window continues the training state)."""
-    y_hat = np.asarray(y_hat, np.float64)
-    if not np.all(np.isfinite(y_hat)):
-        # Bounded models cannot get here; an exotic one might. Report, do not crash.
-        return {"train": None, "valid": None, "all": None, "prediction_finite": False}
-    n, f = record.n_train, record.friction
-    return {
-        "train": friction_metrics(f[:n], y_hat[:n]) if n and np.ptp(f[:n]) > 0 else None,
-        "valid": friction_metrics(f[n:], y_hat[n:]) if n < f.size and np.ptp(f[n:]) > 0 else None,
-        "all": friction_metrics(f, y_hat) if np.ptp(f) > 0 else None,
-    }
-
-
-def _record_metrics(predictions, records: RecordSet) -> dict:
-    """§6 metrics in newtons, per record and pooled over records.
-
-    Each record is rolled out from its own initial state (``predictions[i]`` is
-    record ``i``'s free run). ``train``/``valid``/``all`` pool the samples of the
-    training windows, the validation windows and everything; ``records`` lists each
-    record's own ``train``/``valid``/``all``. One split record gives the classic
-    windows (its validation window continues the training state).
-    """
-    one = records.single
-    if one is not None:
-        out = _window_metrics(predictions[0], one)
-    else:
-        y_hats = [np.asarray(p, np.float64) for p in predictions]
-        if not all(np.all(np.isfinite(p)) for p in y_hats):
-            return {"train": None, "valid": None, "all": None, "prediction_finite": False,
-                    "records": []}
-
-        def pooled(part):
-            f = np.concatenate([r.friction[part(r)] for r in records.records])
-            p = np.concatenate([y[part(r)] for y, r in zip(y_hats, records.records)])
-            return friction_metrics(f, p) if f.size and np.ptp(f) > 0 else None
-
-        out = {"train": pooled(lambda r: slice(0, r.n_train)),
-               "valid": pooled(lambda r: slice(r.n_train, None)),
-               "all": pooled(lambda r: slice(None))}
-    per = []
-    for y_hat, r in zip(predictions, records.records):
-        m = _window_metrics(y_hat, r) if np.all(np.isfinite(np.asarray(y_hat))) else {}
-        per.append({"name": r.name or "record", "role": r.role, "n_samples": r.n_samples,
-                    "n_train": r.n_train, **{w: m.get(w) for w in ("train", "valid", "all")}})
-    out["records"] = per
-    return out
-
-
-def _stage_mse(metrics: dict) -> dict:
-    """MSE %, MAX and FIT % per window of one stage's θ (so a report can compare stages)."""
-    return {f"{k}_{w}": (metrics.get(w) or {}).get(k)
-            for k in ("mse_percent", "max_abs", "fit_percent") for w in ("train", "valid", "all")}
-
-
-def _warn_if_divergent(metrics: dict) -> None:
-    """Warn when the free run fits the training window but not the validation window.
-
-    A recurrent model can have several attractors; one that the training data never
-    visit may capture the free run later (seen once with the Elman network at
-    |r| <= 2: training 0.2 %, validation 231 %). The fit is still returned.
-    """
-    tr, va = metrics.get("train"), metrics.get("valid")
-    if not (tr and va):
-        return
-    if va["mse_percent"] > max(10.0 * tr["mse_percent"], 5.0):
-        warnings.warn(
-            f"validation MSE {va['mse_percent']:.3g} % is far above training MSE "
-            f"{tr['mse_percent']:.3g} %: the free-run prediction leaves the training "
-            "behaviour (for the Elman network try another key or a smaller "
-            "context_weight_bound)",
-            RuntimeWarning,
-            stacklevel=3,
-        )
 
 
 def identify(
@@ -486,183 +322,45 @@ def identify(
             "(in model_options and as keywords)"
         )
     with Stopwatch() as total:
-        records = as_records(data, train, valid)
-        crossed = friction_sign(records.train_velocity, records.train_friction)
-        if crossed is not None:
-            warnings.warn(crossed, FrictionSignWarning, stacklevel=2)
+        # Every check first, so bad input fails before any long computation.
+        records = records_stage(data, train, valid, stacklevel=3)
         model = resolve_model(model, {**(model_options or {}), **options})
-        inputs = _record_inputs(model, records)  # fails early, naming the record
-        box = model.search_box(box, *(
-            (records.train_velocity, records.train_friction, _train_inputs(records, inputs))
-            if data_bounds else ()))
-        _check_method(method)
-        coarse = solver is None and _fast_pipeline(model, method)
-        if solver is None:
-            solver = default_solver(model, method)
-        if refine is None and _fast_pipeline(model, method):
-            refine = GradientRefinement(method="bfgs", max_steps=FAST_REFINE_STEPS)
-        if not isinstance(solver, AbstractSolver):
-            raise ValueError(
-                f"solver must be a jaxfric solver (MAPSONMDS, MAPSO, PSO, NelderMead), "
-                f"got {type(solver).__name__}"
-            )
-        solver.check()
-        settings_refine = as_refinement(refine, model.num_params)
-        refine_options = _xla.resolve(compiler_options, "rollout")
-        lower, upper = model.bounds(box)
-        theta0 = _check_theta0(model, theta0, lower, upper)
-        if keys is None:
-            key, seed = _as_key(key)
-            member_keys = None
-        else:
-            seed = key if isinstance(key, numbers.Integral) and not isinstance(key, bool) else None
-            member_keys, _ = _as_keys(key, keys)
+        bounds = box_stage(model, records, box, data_bounds)
+        solver, refine, head = _plan(model, method, solver, refine)
+        theta0 = check_theta0(model, theta0, bounds)
+        keys = resolve_keys(key, keys)
         dtype = search_dtype(dtype)
 
-        scalers = fit_scalers(model, records)
-        # The cost holds the model as a static field (its jit cache key); the box
-        # travels as the (lower, upper) arrays, so a new box does not recompile.
-        if records.single is not None:
-            data_j = cost_data(model, records.single, scalers, dtype)
-            cost = OutputErrorCost(model)
-        else:
-            data_j = pooled_cost_data(model, records, scalers, dtype)
-            cost = PooledOutputErrorCost(model)
-        # Coarse-to-fine: the default pipeline's swarm sees the first samples only.
-        data_global = data_j
-        if coarse and records.single is not None and records.single.n_train > GLOBAL_STAGE_SAMPLES:
-            data_global = eqx.tree_at(lambda d: (d.u, d.y), data_j,
-                                      (data_j.u[:GLOBAL_STAGE_SAMPLES], data_j.y[:GLOBAL_STAGE_SAMPLES]))
-
-        def run_predictions(theta):
-            return [predict(model, theta, scalers, r.velocity, r.dt, x)
-                    for r, x in zip(records.records, inputs)]
-
-        with Stopwatch() as sw:
-            if member_keys is None:
-                sol = minimise(cost, solver, (lower, upper), args=data_global, key=key, y0=theta0,
-                               dtype=dtype, progress=progress, compiler_options=compiler_options)
-            else:
-                sol = minimise_many(cost, solver, (lower, upper), keys=member_keys, args=data_global,
-                                    y0=theta0, dtype=dtype, progress=progress,
-                                    compiler_options=compiler_options)
-            sol = jax.block_until_ready(sol)
-        timings = {"compile_s": sw.compile_s, "run_s": sw.run_s}
-        thetas = jnp.atleast_2d(sol.value)
-        f_final = jnp.atleast_1d(sol.f)
-
-        refined = None
-        if settings_refine is not None:
-            lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
-            with Stopwatch() as swr:
-                # One member after another: the gradient stage runs in compiled chunks
-                # between progress reports, the same program for every member.
-                outs = [refine_impl(settings_refine, cost, th, lo, hi, data_j,
-                                    progress=progress if member_keys is None else None,
-                                    compiler_options=refine_options) for th in thetas]
-                refined = jax.block_until_ready(
-                    jax.tree_util.tree_map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *outs))
-            thetas, f_final = refined.theta, refined.f
-            timings.update(refine_compile_s=swr.compile_s, refine_run_s=swr.run_s)
-
-        f_np = np.asarray(f_final, np.float64)
-        best = int(np.argmin(np.where(np.isfinite(f_np), f_np, np.inf)))
-        sol_best = sol if member_keys is None else jax.tree_util.tree_map(lambda a: a[best], sol)
-        stages = _stages(sol_best, solver)
-        theta_opt = sol_best.value
-        if refined is not None:
-            stages[-1].update(_stage_mse(_record_metrics(run_predictions(theta_opt), records)))
-            r = jax.tree_util.tree_map(lambda a: a[best], refined)
-            theta = r.theta
-            metrics = _record_metrics(run_predictions(theta), records)
-            stages.append({
-                "stage": settings_refine.method,
-                "J": float(r.f),
-                "J_refined": float(r.f_refined),
-                "improved": bool(r.improved),
-                "num_steps": int(r.num_steps),
-                "result": result_name(r.result),
-                **_stage_mse(metrics),
-            })
-        else:
-            theta = theta_opt
-            metrics = _record_metrics(run_predictions(theta), records)
-            stages[-1].update(_stage_mse(metrics))
-
-        ensemble = None
-        if member_keys is not None:
-            ensemble = _ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records)
-        key_used = key if member_keys is None else member_keys[best]
-        key_data, key_impl = _key_record(key_used)
-        _warn_if_divergent(metrics)
-        diagnostics = {
-            "on_bound": on_bound(model, theta, box),
-            "unidentifiable": list(unidentifiable(model, records.train_velocity)),
-        }
-        for d in diagnostics["on_bound"]:
-            warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning, stacklevel=2)
-        fit = Fit(
-            model=model,
-            theta=np.asarray(theta),
-            velocity_scaler=scalers[0],
-            friction_scaler=scalers[1],
-            dt=records.dt,
-            n_train=records.n_train,
-            n_samples=records.n_samples,
-            metrics={**metrics, "num_params": model.num_params, "cost": float(stages[-1]["J"])},
-            stages=stages,
-            history=_history(sol_best),
-            solution=sol,
-            key_data=key_data,
-            key_impl=key_impl,
-            seed=seed if member_keys is None else None,
-            velocity_range=(float(records.train_velocity.min()), float(records.train_velocity.max())),
-            diagnostics=diagnostics,
-            ensemble=ensemble,
-            box=box,
-            settings={
-                "model_name": model_name(model),
-                "model_config": model_config(model),
-                "solver": repr(solver),
-                "refine": None if settings_refine is None else {
-                    "method": settings_refine.method, "max_steps": settings_refine.max_steps,
-                    "rtol": settings_refine.rtol, "atol": settings_refine.atol,
-                    "edge": settings_refine.edge},
-                "dtype": str(np.dtype(dtype)),
-                "data_bounds": bool(data_bounds),
-                "method": method,
-                "global_stage_samples": (int(data_global.y.shape[0]) if records.single is not None
-                                         else None),
-                "theta0_given": theta0 is not None,
-                "cost": "mean squared scaled error" if model.needs_scaling
-                        else "mean squared error / var(F_train)",
-                "records": [{"name": r.name or "record", "role": r.role, "n_samples": r.n_samples}
-                            for r in records.records],
-                **({"ensemble_size": int(thetas.shape[0]),
-                    "ensemble_root_seed": seed} if member_keys is not None else {}),
-            },
-        )
+        objective = objective_stage(model, records, dtype, head)
+        sol, timings = global_stage(objective, solver, bounds, keys, theta0=theta0, dtype=dtype,
+                                    progress=progress, compiler_options=compiler_options)
+        refined, refine_timings = gradient_stage(
+            refine, objective, sol.value, bounds, dtype, ensemble=keys.members is not None,
+            progress=progress, compiler_options=compiler_options)
+        fit = fit_stage(model, records, bounds, objective, solver, sol, refined, keys,
+                        settings={"dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
+                                  "method": method},
+                        refine=refine, theta0_given=theta0 is not None)
     assess_fit(fit, records)  # plausibility now, parameter uncertainty on first use
-    fit.timings = {**timings, "total_s": total.wall_s}
+    fit.timings = {**timings, **refine_timings, "total_s": total.wall_s}
     return fit
 
 
-def _ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records) -> dict:
-    """``Fit.ensemble``: members, their costs and validation errors, parameter spread."""
-    thetas = np.asarray(thetas)
-    valid_mse = []
-    for th in thetas:
-        m = _record_metrics(run_predictions(jnp.asarray(th)), records)
-        valid_mse.append((m.get("valid") or {}).get("mse_percent"))
-    if model.needs_scaling:
-        named = {}
-    else:
-        named = {k: np.asarray(v, np.float64).reshape(len(thetas))
-                 for k, v in model.to_physical(jnp.asarray(thetas)).items()}
-    spread = {k: {"min": float(v.min()), "p5": float(np.percentile(v, 5)),
-                  "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
-                  "max": float(v.max())} for k, v in named.items()}
-    key_data = np.asarray(jax.random.key_data(member_keys)).reshape(len(thetas), -1).tolist()
-    return {"theta": thetas, "J": [float(x) for x in f_np], "best": best,
-            "valid_mse_percent": valid_mse, "keys": key_data, "spread": spread,
-            "params": {k: v.tolist() for k, v in named.items()}}
+def _plan(model: AbstractFrictionModel, method: str, solver, refine):
+    """``identify``'s stages for ``method``: ``(solver, gradient-stage settings or None,
+    samples the global stage sees or None)``, the user's ``solver`` and ``refine``
+    winning over the method's; checked."""
+    _check_method(method)
+    fast = _fast_pipeline(model, method)
+    head = GLOBAL_STAGE_SAMPLES if solver is None and fast else None
+    if solver is None:
+        solver = default_solver(model, method)
+    if refine is None and fast:
+        refine = GradientRefinement(method="bfgs", max_steps=FAST_REFINE_STEPS)
+    if not isinstance(solver, AbstractSolver):
+        raise ValueError(
+            f"solver must be a jaxfric solver (MAPSONMDS, MAPSO, PSO, NelderMead), "
+            f"got {type(solver).__name__}"
+        )
+    solver.check()
+    return solver, as_refinement(refine, model.num_params), head

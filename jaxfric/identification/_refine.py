@@ -277,6 +277,62 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
                   settings.max_steps)
 
 
+def _start_many(settings, cost, thetas, lower, upper, data):
+    return eqx.filter_vmap(lambda t: _start(settings, cost, t, lower, upper, data))(thetas)
+
+
+def _advance_many(settings, cost, z, state, steps, done, result, lower, upper, data):
+    # A member that has stopped keeps its state: under vmap the while loop runs while any
+    # member runs and selects the stopped members' carry unchanged.
+    return eqx.filter_vmap(lambda *c: _advance(settings, cost, *c, lower, upper, data))(
+        z, state, steps, done, result)
+
+
+def _finish_many(cost, thetas, f_old, z, steps, done, result, lower, upper, data, max_steps):
+    return eqx.filter_vmap(
+        lambda t, f, *c: _finish(cost, t, f, *c, lower, upper, data, max_steps))(
+        thetas, f_old, z, steps, done, result)
+
+
+def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, lower, upper,
+                data: CostData, *, progress=None, compiler_options=()) -> RefineOutcome:
+    """:func:`refine_impl` for a batch of starts ``thetas`` (``(K, n)``), side by side.
+
+    One compiled program advances every member: each step rolls out all K members
+    in one batched evaluation, which for the Elman network costs little more than one
+    (the rollout is bound by the loop, not the arithmetic). A member that has stopped
+    is carried unchanged until the last one stops (the shared stopping rule), so member
+    ``i`` takes exactly the steps of ``refine_impl(..., thetas[i], ...)``; its numbers
+    equal that run up to floating-point reassociation in the batched arithmetic.
+    ``progress`` is told the furthest member's step count after each chunk.
+    Returns a :class:`RefineOutcome` whose fields have a leading axis of length K.
+    """
+    from .. import _xla
+
+    update, close = _progress_sink(progress, settings)
+    start = _xla.filter_jit(_start_many, compiler_options)
+    advance = _xla.filter_jit(_advance_many, compiler_options)
+    finish = _xla.filter_jit(_finish_many, compiler_options)
+    z, state, done, result, f_old = start(settings, cost, thetas, lower, upper, data)
+    steps = jnp.zeros(thetas.shape[0], jnp.int32)
+
+    def running(steps, done, result):
+        return bool(jnp.any((steps < settings.max_steps) & jnp.invert(done)
+                            & (result == optx.RESULTS.successful)))
+
+    top = 0
+    try:
+        while running(steps, done, result):
+            z, state, steps, done, result, f = advance(settings, cost, z, state, steps, done,
+                                                       result, lower, upper, data)
+            top = int(jnp.max(steps))
+            update(top, float(jnp.min(jnp.where(jnp.isfinite(f), f, jnp.inf))))
+    finally:
+        close(top)
+    return finish(cost, thetas, f_old, z, steps, done, result, lower, upper, data,
+                  settings.max_steps)
+
+
 _RESULT_NAMES = (
     "successful",
     "nonlinear_max_steps_reached",

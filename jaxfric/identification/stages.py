@@ -1,0 +1,531 @@
+"""The stages of :func:`jaxfric.identify`, each a function of what the stage before it made.
+
+docs/algorithms.md §11. ``identify`` is this sequence::
+
+    records   = records_stage(data, train, valid)                    # split and check (steps 2-3)
+    bounds    = box_stage(model, records, box, data_bounds)          # the search box
+    objective = objective_stage(model, records, dtype, head)         # J and its data (step 4)
+    found     = global_stage(objective, solver, bounds, keys, ...)   # derivative-free (steps 5-6)
+    polished  = gradient_stage(refine, objective, found, bounds, ...) # optional (step 7)
+    fit       = fit_stage(...)                                       # metrics, diagnostics (step 8)
+
+Every stage takes and returns plain values (a :class:`RecordSet`, a :class:`Bounds`,
+an :class:`Objective`, a :class:`jaxfric.Solution`, a :class:`RefineOutcome`), so each
+can be run and tested alone, and another pipeline (``identify_motion``) can use the
+ones it shares.
+
+Ensembles (``keys=K``): the global stage runs the K members in one
+:func:`jaxfric.minimise_many` call and the gradient stage runs their quasi-Newton
+iterations side by side (:func:`refine_many`), so the Elman networks' K rollouts
+share each time loop. Member ``i`` equals the run with key ``i`` up to
+floating-point reassociation in the batched arithmetic.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+import warnings
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _xla
+from ..fit import Fit, model_config, model_name, predict
+from ..metrics import friction_metrics
+from ..models import AbstractFrictionModel
+from ..optim import AbstractChain, AbstractSolver, Solution, minimise, minimise_many
+from ._data import Record, RecordSet, as_records
+from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
+from ._objective import CostData, OutputErrorCost, cost_data, fit_scalers
+from ._pooled import PooledOutputErrorCost, pooled_cost_data
+from ._refine import GradientRefinement, RefineOutcome, refine_impl, refine_many, result_name
+from ._timing import Stopwatch
+
+__all__ = [
+    "Bounds",
+    "Keys",
+    "Objective",
+    "box_stage",
+    "ensemble_batching",
+    "fit_stage",
+    "global_stage",
+    "gradient_stage",
+    "objective_stage",
+    "records_stage",
+    "resolve_keys",
+]
+
+
+# ------------------------------------------------------------------ records
+def records_stage(data=None, train=None, valid=None, *, stacklevel: int = 2) -> RecordSet:
+    """The records of a call (:func:`~jaxfric.identification.as_records`), checked, with a
+    :class:`FrictionSignWarning` when the training friction mostly pushes along the
+    motion (a crossed sign convention)."""
+    records = as_records(data, train, valid)
+    crossed = friction_sign(records.train_velocity, records.train_friction)
+    if crossed is not None:
+        warnings.warn(crossed, FrictionSignWarning, stacklevel=stacklevel + 1)
+    return records
+
+
+# ---------------------------------------------------------------------- box
+@dataclasses.dataclass(frozen=True)
+class Bounds:
+    """The search box of one identification.
+
+    ``box``: the model's :class:`~jaxfric.models.SearchBox` (``None`` for the networks,
+    whose box is part of the model); ``lower``, ``upper``: its bounds in search
+    coordinates; ``inputs``: each record's ``(C, T)`` measured channels for the model
+    (``None`` per record for a model without ``input_names``)."""
+
+    box: Any
+    lower: np.ndarray
+    upper: np.ndarray
+    inputs: list
+
+
+def record_inputs(model: AbstractFrictionModel, records: RecordSet) -> list:
+    """Each record's ``(C, T)`` measured channels for ``model`` (``None`` per record for a
+    model without ``input_names``); ``ValueError`` naming the record that lacks them."""
+    out = []
+    for r in records.records:
+        try:
+            out.append(model.inputs_from(r, r.n_samples))
+        except ValueError as e:
+            if records.single is not None:
+                raise
+            raise ValueError(f"{r.name}: {e}") from None
+    return out
+
+
+def _train_inputs(records: RecordSet, inputs: list):
+    """The training samples of every training record's channels, side by side (for the
+    search box), or ``None`` for a model without them."""
+    parts = [x[:, : r.n_train] for r, x in zip(records.records, inputs)
+             if x is not None and r.n_train > 0]
+    return np.concatenate(parts, axis=1) if parts else None
+
+
+def box_stage(model: AbstractFrictionModel, records: RecordSet, box=None,
+              data_bounds: bool = True) -> Bounds:
+    """The search box: the user's ``box`` entries over the data-centred ones
+    (``data_bounds``) or the §8.5 defaults (:meth:`~jaxfric.models.AbstractPhysicalModel.search_box`)."""
+    inputs = record_inputs(model, records)  # fails early, naming the record
+    box = model.search_box(box, *(
+        (records.train_velocity, records.train_friction, _train_inputs(records, inputs))
+        if data_bounds else ()))
+    lower, upper = model.bounds(box)
+    return Bounds(box=box, lower=lower, upper=upper, inputs=inputs)
+
+
+def check_theta0(model: AbstractFrictionModel, theta0, bounds: Bounds):
+    """``theta0`` checked (finite, one vector, inside the box), or ``None``."""
+    if theta0 is None:
+        return None
+    lower, upper = bounds.lower, bounds.upper
+    theta0 = model.check_theta(theta0)
+    if theta0.ndim != 1:
+        raise ValueError(f"theta0 must be one parameter vector, got shape {theta0.shape}")
+    outside = np.flatnonzero((theta0 < lower) | (theta0 > upper))
+    if outside.size:
+        i = int(outside[0])
+        raise ValueError(
+            f"theta0 lies outside the search box: {model.param_names[i]} = {theta0[i]!r} not in "
+            f"[{lower[i]!r}, {upper[i]!r}] ({outside.size} such parameter(s))"
+        )
+    return theta0
+
+
+# --------------------------------------------------------------------- keys
+@dataclasses.dataclass(frozen=True)
+class Keys:
+    """The keys of one identification: ``key`` for one run, or ``members`` (a batch of
+    K typed keys) for an ensemble; ``seed`` is the int seed when one was given."""
+
+    key: Any
+    seed: int | None
+    members: Any = None
+
+    @property
+    def size(self) -> int | None:
+        return None if self.members is None else int(self.members.shape[0])
+
+
+def as_key(key):
+    """``(JAX PRNG key, int seed or None)`` from a key or an int seed."""
+    if key is None:
+        raise ValueError("key is required: pass jax.random.key(seed) (or an int seed)")
+    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
+        return jax.random.key(int(key)), int(key)
+    k = jnp.asarray(key)
+    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
+    if not ((typed and k.shape == ()) or (k.dtype == jnp.uint32 and k.shape == (2,))):
+        raise ValueError(
+            f"key must be one JAX PRNG key (jax.random.key(seed)) or an int seed, got "
+            f"{'a batch of keys of shape ' + str(k.shape) if typed else repr(key)}"
+        )
+    return key, None
+
+
+def as_member_keys(key, keys):
+    """The members' keys of ``identify(..., keys=K)``: ``K`` keys split from ``key``, or
+    the given batch. Returns ``(typed key batch, K)``."""
+    if isinstance(keys, numbers.Integral) and not isinstance(keys, bool):
+        if keys < 1:
+            raise ValueError(f"keys must be a number of members >= 1 or a batch of keys, got {keys}")
+        return jax.random.split(as_key(key)[0], int(keys)), int(keys)
+    if key is not None:
+        raise ValueError("give key= (one run, or the root of keys=K) or a batch keys=[...], not both")
+    k = jnp.asarray(keys)
+    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key) and k.ndim == 1 and k.shape[0] >= 1:
+        return k, int(k.shape[0])
+    if k.dtype == jnp.uint32 and k.ndim == 2 and k.shape[1] == 2 and k.shape[0] >= 1:
+        return jax.random.wrap_key_data(k), int(k.shape[0])
+    raise ValueError(
+        "keys must be a number of members K (split from key=) or a 1-D batch of JAX PRNG keys "
+        f"(jax.random.split(key, K)), got {keys!r}"
+    )
+
+
+def resolve_keys(key, keys=None) -> Keys:
+    """:class:`Keys` from ``identify``'s ``key=`` and ``keys=`` (checked)."""
+    if keys is None:
+        key, seed = as_key(key)
+        return Keys(key=key, seed=seed)
+    seed = key if isinstance(key, numbers.Integral) and not isinstance(key, bool) else None
+    members, _ = as_member_keys(key, keys)
+    return Keys(key=None, seed=seed, members=members)
+
+
+def key_record(key):
+    """``(key data as a list, key implementation name or None)`` for a fit's record."""
+    k = jnp.asarray(key)
+    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key):
+        return np.asarray(jax.random.key_data(k)).ravel().tolist(), str(jax.random.key_impl(k))
+    return np.asarray(k).ravel().tolist(), None
+
+
+# ---------------------------------------------------------------- objective
+@dataclasses.dataclass(frozen=True)
+class Objective:
+    """The cost J of §2.4 and its data: ``cost(theta, data)``; ``data`` holds the whole
+    training window(s), ``data_global`` what the global stage sees (the first
+    samples only under coarse-to-fine); ``scalers`` the networks' input/output maps
+    (``(None, None)`` for physical models)."""
+
+    cost: Any
+    data: Any
+    data_global: Any
+    scalers: tuple
+
+
+def objective_stage(model: AbstractFrictionModel, records: RecordSet, dtype,
+                    head: int | None = None) -> Objective:
+    """J for ``model`` on ``records`` in the search ``dtype``.
+
+    ``head``: the global stage sees only the first ``head`` training samples of a
+    single record (coarse-to-fine); ``None``: the whole window. The cost holds the
+    model as a static field (its jit cache key) and the data travel as arrays, so a
+    new record of the same length, or a new box, does not recompile.
+    """
+    scalers = fit_scalers(model, records)
+    if records.single is not None:
+        data = cost_data(model, records.single, scalers, dtype)
+        cost = OutputErrorCost(model)
+    else:
+        data = pooled_cost_data(model, records, scalers, dtype)
+        cost = PooledOutputErrorCost(model)
+    data_global = data
+    if head is not None and records.single is not None and records.single.n_train > head:
+        data_global = eqx.tree_at(lambda d: (d.u, d.y), data, (data.u[:head], data.y[:head]))
+    return Objective(cost=cost, data=data, data_global=data_global, scalers=scalers)
+
+
+# ------------------------------------------------------------- global stage
+def ensemble_batching(model: AbstractFrictionModel, solver: AbstractSolver) -> str:
+    """How :func:`global_stage` lays out an ensemble's members (``minimise_many``'s
+    ``batching``).
+
+    ``"vmap"`` (side by side) where that is cheaper than one member after another:
+    off the CPU, and on the CPU for a one-stage population solver on a network, whose
+    rollout costs far less per candidate in a larger batch (the time loop, not the
+    arithmetic, bounds it). ``"map"`` otherwise on the CPU: a physical model's
+    rollout costs the same per candidate at any batch size (measured on EMPS: LuGre
+    0.8–1.3 ms per candidate for batches of 1 to 200), and a vmapped Nelder–Mead stage
+    computes every conditional batch (a shrink's n points) on every step.
+    """
+    if jax.default_backend() != "cpu":
+        return "vmap"
+    batches = model.needs_scaling  # the networks
+    population = solver.population_size() is not None and not isinstance(solver, AbstractChain)
+    return "vmap" if batches and population else "map"
+
+
+def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, keys: Keys, *,
+                 theta0=None, dtype=None, progress=None, compiler_options="auto",
+                 batching: str | None = None) -> tuple[Solution, dict]:
+    """The derivative-free search on ``objective.data_global``: one
+    :func:`jaxfric.minimise` run, or one :func:`jaxfric.minimise_many` call for an
+    ensemble (``batching`` as there; default :func:`ensemble_batching`). Returns the
+    solution (fields with a leading member axis for an ensemble) and its
+    ``{"compile_s", "run_s"}``."""
+    lower, upper = bounds.lower, bounds.upper
+    with Stopwatch() as sw:
+        if keys.members is None:
+            sol = minimise(objective.cost, solver, (lower, upper), args=objective.data_global,
+                           key=keys.key, y0=theta0, dtype=dtype, progress=progress,
+                           compiler_options=compiler_options)
+        else:
+            if batching is None:
+                batching = ensemble_batching(objective.cost.model, solver)
+            sol = minimise_many(objective.cost, solver, (lower, upper), keys=keys.members,
+                                args=objective.data_global, y0=theta0, dtype=dtype,
+                                progress=progress, compiler_options=compiler_options,
+                                batching=batching)
+        sol = jax.block_until_ready(sol)
+    return sol, {"compile_s": sw.compile_s, "run_s": sw.run_s}
+
+
+# ----------------------------------------------------------- gradient stage
+def gradient_stage(settings: GradientRefinement | None, objective: Objective, thetas,
+                   bounds: Bounds, dtype, *, ensemble: bool = False, progress=None,
+                   compiler_options="auto") -> tuple[RefineOutcome | None, dict]:
+    """Quasi-Newton or least-squares polish of ``thetas`` on the whole training window
+    (docs/algorithms.md §11 step 7), or nothing when ``settings`` is ``None``.
+
+    ``thetas``: ``(n,)`` for one run, ``(K, n)`` for an ensemble (``ensemble=True``),
+    whose members run side by side (:func:`refine_many`). Returns the
+    :class:`RefineOutcome` (with a leading member axis for an ensemble) and its
+    ``{"refine_compile_s", "refine_run_s"}``."""
+    if settings is None:
+        return None, {}
+    options = _xla.resolve(compiler_options, "rollout")
+    lo, hi = jnp.asarray(bounds.lower, dtype), jnp.asarray(bounds.upper, dtype)
+    with Stopwatch() as sw:
+        if ensemble:
+            out = refine_many(settings, objective.cost, jnp.asarray(thetas), lo, hi, objective.data,
+                              progress=progress, compiler_options=options)
+        else:
+            out = refine_impl(settings, objective.cost, thetas, lo, hi, objective.data,
+                              progress=progress, compiler_options=options)
+        out = jax.block_until_ready(out)
+    return out, {"refine_compile_s": sw.compile_s, "refine_run_s": sw.run_s}
+
+
+# ------------------------------------------------------------------ the fit
+def solver_stages(sol, solver) -> list[dict]:
+    """``Fit.stages`` rows of a solver run: each stage's J and evaluations."""
+    stats = {k: int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else float(v)
+             for k, v in sol.stats.items()}
+    if "f_global" in stats:
+        n_global = stats["num_evals_global"]
+        # the chain's own global stage (MAPSO, PSO, Evosax, ...), not always MAPSO
+        g_name = type(solver.global_solver).__name__.lower()
+        return [
+            {"stage": g_name, "J": stats["f_global"], "num_evals": n_global},
+            {"stage": "nelder_mead", "J": float(sol.f), "num_evals": stats["num_evals"] - n_global},
+        ]
+    return [{"stage": type(solver).__name__.lower(), "J": float(sol.f),
+             "num_evals": stats["num_evals"]}]
+
+
+def history(sol) -> dict[str, np.ndarray]:
+    """The best-so-far J against evaluations of a solver run."""
+    n = int(sol.history.length)
+    return {"evals": np.asarray(sol.history.evals)[:n], "f": np.asarray(sol.history.f)[:n]}
+
+
+def _window_metrics(y_hat, record: Record) -> dict:
+    """§6 metrics in newtons on the training, validation and whole record (free run
+    over the whole record, so the validation window continues the training state)."""
+    y_hat = np.asarray(y_hat, np.float64)
+    if not np.all(np.isfinite(y_hat)):
+        # Bounded models cannot get here; an exotic one might. Report, do not crash.
+        return {"train": None, "valid": None, "all": None, "prediction_finite": False}
+    n, f = record.n_train, record.friction
+    return {
+        "train": friction_metrics(f[:n], y_hat[:n]) if n and np.ptp(f[:n]) > 0 else None,
+        "valid": friction_metrics(f[n:], y_hat[n:]) if n < f.size and np.ptp(f[n:]) > 0 else None,
+        "all": friction_metrics(f, y_hat) if np.ptp(f) > 0 else None,
+    }
+
+
+def record_metrics(predictions, records: RecordSet) -> dict:
+    """§6 metrics in newtons, per record and pooled over records.
+
+    Each record is rolled out from its own initial state (``predictions[i]`` is
+    record ``i``'s free run). ``train``/``valid``/``all`` pool the samples of the
+    training windows, the validation windows and everything; ``records`` lists each
+    record's own ``train``/``valid``/``all``. One split record gives the classic
+    windows (its validation window continues the training state).
+    """
+    one = records.single
+    if one is not None:
+        out = _window_metrics(predictions[0], one)
+    else:
+        y_hats = [np.asarray(p, np.float64) for p in predictions]
+        if not all(np.all(np.isfinite(p)) for p in y_hats):
+            return {"train": None, "valid": None, "all": None, "prediction_finite": False,
+                    "records": []}
+
+        def pooled(part):
+            f = np.concatenate([r.friction[part(r)] for r in records.records])
+            p = np.concatenate([y[part(r)] for y, r in zip(y_hats, records.records)])
+            return friction_metrics(f, p) if f.size and np.ptp(f) > 0 else None
+
+        out = {"train": pooled(lambda r: slice(0, r.n_train)),
+               "valid": pooled(lambda r: slice(r.n_train, None)),
+               "all": pooled(lambda r: slice(None))}
+    per = []
+    for y_hat, r in zip(predictions, records.records):
+        m = _window_metrics(y_hat, r) if np.all(np.isfinite(np.asarray(y_hat))) else {}
+        per.append({"name": r.name or "record", "role": r.role, "n_samples": r.n_samples,
+                    "n_train": r.n_train, **{w: m.get(w) for w in ("train", "valid", "all")}})
+    out["records"] = per
+    return out
+
+
+def stage_mse(metrics: dict) -> dict:
+    """MSE %, MAX and FIT % per window of one stage's θ (so a report can compare stages)."""
+    return {f"{k}_{w}": (metrics.get(w) or {}).get(k)
+            for k in ("mse_percent", "max_abs", "fit_percent") for w in ("train", "valid", "all")}
+
+
+def warn_if_divergent(metrics: dict, stacklevel: int = 3) -> None:
+    """Warn when the free run fits the training window but not the validation window.
+
+    A recurrent model can have several attractors; one that the training data never
+    visit may capture the free run later (seen once with the Elman network at
+    |r| <= 2: training 0.2 %, validation 231 %). The fit is still returned.
+    """
+    tr, va = metrics.get("train"), metrics.get("valid")
+    if not (tr and va):
+        return
+    if va["mse_percent"] > max(10.0 * tr["mse_percent"], 5.0):
+        warnings.warn(
+            f"validation MSE {va['mse_percent']:.3g} % is far above training MSE "
+            f"{tr['mse_percent']:.3g} %: the free-run prediction leaves the training "
+            "behaviour (for the Elman network try another key or a smaller "
+            "context_weight_bound)",
+            RuntimeWarning,
+            stacklevel=stacklevel,
+        )
+
+
+def ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records) -> dict:
+    """``Fit.ensemble``: members, their costs and validation errors, parameter spread."""
+    thetas = np.asarray(thetas)
+    valid_mse = []
+    for th in thetas:
+        m = record_metrics(run_predictions(jnp.asarray(th)), records)
+        valid_mse.append((m.get("valid") or {}).get("mse_percent"))
+    if model.needs_scaling:
+        named = {}
+    else:
+        named = {k: np.asarray(v, np.float64).reshape(len(thetas))
+                 for k, v in model.to_physical(jnp.asarray(thetas)).items()}
+    spread = {k: {"min": float(v.min()), "p5": float(np.percentile(v, 5)),
+                  "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
+                  "max": float(v.max())} for k, v in named.items()}
+    key_data = np.asarray(jax.random.key_data(member_keys)).reshape(len(thetas), -1).tolist()
+    return {"theta": thetas, "J": [float(x) for x in f_np], "best": best,
+            "valid_mse_percent": valid_mse, "keys": key_data, "spread": spread,
+            "params": {k: v.tolist() for k, v in named.items()}}
+
+
+def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
+              objective: Objective, solver: AbstractSolver, sol: Solution,
+              refined: RefineOutcome | None, keys: Keys, settings: dict,
+              refine: GradientRefinement | None = None, theta0_given: bool = False,
+              stacklevel: int = 3) -> Fit:
+    """The :class:`jaxfric.Fit`: the best member (lowest finite J), its stages, §6
+    metrics per window and record, diagnostics (parameters on a bound, with a
+    :class:`BoundWarning` each; unidentifiable parameters), the ensemble's members."""
+    scalers = objective.scalers
+    ensemble = keys.members is not None
+
+    def run_predictions(theta):
+        return [predict(model, theta, scalers, r.velocity, r.dt, x)
+                for r, x in zip(records.records, bounds.inputs)]
+
+    thetas = jnp.atleast_2d(sol.value if refined is None else refined.theta)
+    f_final = jnp.atleast_1d(sol.f if refined is None else refined.f)
+    f_np = np.asarray(f_final, np.float64)
+    best = int(np.argmin(np.where(np.isfinite(f_np), f_np, np.inf)))
+    sol_best = jax.tree_util.tree_map(lambda a: a[best], sol) if ensemble else sol
+    stages = solver_stages(sol_best, solver)
+    theta_opt = sol_best.value
+    if refined is not None:
+        stages[-1].update(stage_mse(record_metrics(run_predictions(theta_opt), records)))
+        r = jax.tree_util.tree_map(lambda a: a[best], refined) if ensemble else refined
+        theta = r.theta
+        metrics = record_metrics(run_predictions(theta), records)
+        stages.append({
+            "stage": refine.method,
+            "J": float(r.f),
+            "J_refined": float(r.f_refined),
+            "improved": bool(r.improved),
+            "num_steps": int(r.num_steps),
+            "result": result_name(r.result),
+            **stage_mse(metrics),
+        })
+    else:
+        theta = theta_opt
+        metrics = record_metrics(run_predictions(theta), records)
+        stages[-1].update(stage_mse(metrics))
+
+    members = None
+    if ensemble:
+        members = ensemble_summary(model, thetas, f_np, keys.members, best, run_predictions,
+                                   records)
+    key_data, key_impl = key_record(keys.members[best] if ensemble else keys.key)
+    warn_if_divergent(metrics, stacklevel=stacklevel + 1)
+    diagnostics = {
+        "on_bound": on_bound(model, theta, bounds.box),
+        "unidentifiable": list(unidentifiable(model, records.train_velocity)),
+    }
+    for d in diagnostics["on_bound"]:
+        warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning,
+                      stacklevel=stacklevel)
+    return Fit(
+        model=model,
+        theta=np.asarray(theta),
+        velocity_scaler=scalers[0],
+        friction_scaler=scalers[1],
+        dt=records.dt,
+        n_train=records.n_train,
+        n_samples=records.n_samples,
+        metrics={**metrics, "num_params": model.num_params, "cost": float(stages[-1]["J"])},
+        stages=stages,
+        history=history(sol_best),
+        solution=sol,
+        key_data=key_data,
+        key_impl=key_impl,
+        seed=None if ensemble else keys.seed,
+        velocity_range=(float(records.train_velocity.min()), float(records.train_velocity.max())),
+        diagnostics=diagnostics,
+        ensemble=members,
+        box=bounds.box,
+        settings={
+            "model_name": model_name(model),
+            "model_config": model_config(model),
+            "solver": repr(solver),
+            "refine": None if refine is None else {
+                "method": refine.method, "max_steps": refine.max_steps,
+                "rtol": refine.rtol, "atol": refine.atol, "edge": refine.edge},
+            **settings,
+            "global_stage_samples": (int(objective.data_global.y.shape[0])
+                                     if records.single is not None else None),
+            "theta0_given": theta0_given,
+            "cost": "mean squared scaled error" if model.needs_scaling
+                    else "mean squared error / var(F_train)",
+            "records": [{"name": r.name or "record", "role": r.role, "n_samples": r.n_samples}
+                        for r in records.records],
+            **({"ensemble_size": int(thetas.shape[0]),
+                "ensemble_root_seed": keys.seed} if ensemble else {}),
+        },
+    )
