@@ -14,7 +14,7 @@
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,
                    motion_metrics)
 from ._compare import MotionComparison, OverfitWarning, compare_motion
-from ._pipeline import MotionBudget, MotionSearch
+from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
                     friction_step)
@@ -26,6 +26,7 @@ __all__ = [
     "MotionSearch",
     "OverfitWarning",
     "compare_motion",
+    "default_search",
     "BristleStep",
     "ElmanFullStep",
     "ElmanStep",

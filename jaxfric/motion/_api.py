@@ -34,7 +34,7 @@ from ..optim import AbstractSolver, minimise
 from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
 from ..uncertainty import assess_fit
 from ._forward import k_step_positions, simulate_motion, track_states
-from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, run_search
+from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
@@ -608,8 +608,9 @@ def identify_motion(
             validation; its state is estimated from its first ``init_window`` samples
             (:meth:`MotionFit.initial_state`) and the rest is scored.
         search: the default pipeline's settings (:class:`MotionSearch`: a short PSO on
-            windows, then Levenberg–Marquardt on multiple-shooting segments of growing
-            length; docs/motion.md). Ignored when ``solver`` is given.
+            windows, then Levenberg–Marquardt on multiple-shooting segments; default
+            :func:`jaxfric.motion.default_search` of the model; docs/motion.md). Ignored
+            when ``solver`` is given.
         solver: a jaxfric solver to run instead, on the final cost (the pre-0.9 behaviour
             with :func:`jaxfric.identification.default_solver`; slow on long records).
         error: ``"position"`` (default), ``"velocity"`` (against the filtered velocity)
@@ -670,12 +671,12 @@ def identify_motion(
                 raise ValueError(f"valid[{i}] has {r.n_samples} samples, not more than init_window={init_window}")
         budget = MotionBudget(max_evals, max_time)
         budget.check()
-        search = MotionSearch() if search is None else search
-        if not isinstance(search, MotionSearch):
+        if search is not None and not isinstance(search, MotionSearch):
             raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
-        search.check()
         mass0, mass_range = _mass_setting(mass)
         model = resolve_model(model, model_options)
+        search = default_search(model) if search is None else search
+        search.check()
         vt = np.concatenate([r.velocity for r in tr_records])
         ut = np.concatenate([r.net_force for r in tr_records])
         f_level = float(np.percentile(np.abs(ut), 95.0))

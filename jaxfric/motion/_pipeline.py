@@ -44,7 +44,7 @@ from ..identification._refine import GRADIENT_PHASE
 from ..optim import PSO, minimise
 from ._lm import levenberg_marquardt
 
-__all__ = ["MotionBudget", "MotionSearch"]
+__all__ = ["MotionBudget", "MotionSearch", "default_search"]
 
 #: Samples the global stage simulates per candidate (short windows spread over the data).
 GLOBAL_SAMPLES = 4000
@@ -94,6 +94,27 @@ class MotionSearch(eqx.Module):
                 raise ValueError(f"MotionSearch.steps entries must be non-negative integers, got {k!r}")
         if not (isinstance(self.rtol, (int, float)) and self.rtol >= 0):
             raise ValueError(f"MotionSearch.rtol must be >= 0, got {self.rtol!r}")
+
+
+#: Above this many search parameters (the networks) :func:`default_search` grows the
+#: horizon: 60 steps on 1 000-sample segments, then 150 on 5 000.
+NETWORK_PARAMS = 20
+
+
+def default_search(model) -> MotionSearch:
+    """The default :class:`MotionSearch` for ``model``.
+
+    Physical models (a dozen parameters at most): one Levenberg–Marquardt stage on
+    5 000-sample segments, at most 60 steps. Networks (more than :data:`NETWORK_PARAMS`
+    parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
+    gradient stages do the work, coarse to fine: 60 steps on 1 000-sample segments, then 150
+    on 5 000. On the EMPS estimation split this took the Elman(10) network's held-back error
+    from 15.3 mm (the physical models' schedule, converged at a poor point) to 3.1 mm
+    (``benchmarks/results/motion.md``).
+    """
+    if model.num_params > NETWORK_PARAMS:
+        return MotionSearch(horizons=(1000, 5000), steps=(60, 150))
+    return MotionSearch()
 
 
 @dataclasses.dataclass
