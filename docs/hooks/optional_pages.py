@@ -1,7 +1,7 @@
 """mkdocs hook: nav entries whose page does not exist yet are left out of the site.
 
-The nav lists the guides other parts of the project write (``motion.md``, ``uncertainty.md``,
-``solvers.md``, ``scale.md``); until a page exists its entry is dropped here, so the strict
+The nav lists the guides other parts of the project write (``identify.md``, ``motion.md``,
+``uncertainty.md``, ``solvers.md``, ``scale.md``); until a page exists its entry is dropped here, so the strict
 build (``mkdocs build --strict``) stays an error for every other missing page or link.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-OPTIONAL = {"motion.md", "uncertainty.md", "solvers.md", "scale.md"}
+OPTIONAL = {"identify.md", "motion.md", "uncertainty.md", "solvers.md", "scale.md"}
 
 
 def _prune(items, docs_dir):
