@@ -14,8 +14,12 @@ evaluating one 20 000-step rollout at a time; ``benchmarks/pipelines.py`` measur
 
 Beyond the paper: several records (``train=[...]``, ``valid=...``; the cost pools
 them, each rolled out from its own initial state, :mod:`._pooled`), an ensemble of K
-keys in one :func:`jaxfric.minimise_many` call (``keys=K``), and the flags of
-:mod:`._diagnostics` (parameters on a bound, unidentifiable parameters).
+keys (``keys=K``), and the flags of :mod:`._diagnostics` (parameters on a bound,
+unidentifiable parameters).
+
+``identify`` is a sequence of named stages, each a function of
+:mod:`jaxfric.identification.stages` (records → box → objective → global stage →
+gradient stage → Fit; docs/identify.md).
 
 Everything the user passed is checked first (:mod:`._data`, the model's own
 checks, the solver's ``check``), so bad input fails in milliseconds with a
@@ -230,13 +234,17 @@ def identify(
         solver: any jaxfric solver; default :func:`default_solver` for ``method``. ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.
         keys: an ensemble: ``K`` (an int; the members' keys are
-            ``jax.random.split(key, K)``) or a batch of keys (then no ``key``). The K
-            runs go through :func:`jaxfric.minimise_many` in one vmapped call; the
-            returned fit is the member with the lowest training cost J, and
+            ``jax.random.split(key, K)``) or a batch of keys (then no ``key``). The
+            global stage runs the K members in one :func:`jaxfric.minimise_many` call
+            and the gradient stage runs their iterations side by side (docs/identify.md);
+            the returned fit is the member with the lowest finite training cost J, and
             ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
             MSE %, the spread of each parameter); ``fit.predict_band(v)`` is the
             members' min-max prediction band. Member ``i`` equals
-            ``identify(..., key=keys[i])`` (up to floating-point reassociation).
+            ``identify(..., key=keys[i])``: to the bit where the members run one after
+            another (physical models and chains on a CPU), else up to floating-point
+            reassociation (J within 1e-6 relative on a small float64 problem; long
+            float32 gradient stages can separate, docs/identify.md).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
             window and must hold at least :data:`~jaxfric.identification.MIN_VALID_SAMPLES`
