@@ -64,7 +64,16 @@ QUICK_GENERATIONS = 3
 
 
 def data_path(arg) -> Path:
-    return Path(arg or os.environ.get("JAXFRIC_EMPS") or DEFAULT_DATA)
+    path = Path(arg or os.environ.get("JAXFRIC_EMPS") or DEFAULT_DATA)
+    if path.is_file() or arg or os.environ.get("JAXFRIC_EMPS"):
+        return path
+    from jaxfric import datasets  # no local copy: the checked download (or its one-line reason)
+
+    try:
+        return datasets.emps_path()
+    except datasets.DatasetUnavailable as err:
+        print(f"emps: {err}", file=sys.stderr)
+        return path
 
 
 def parse(argv=None):

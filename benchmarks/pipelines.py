@@ -76,6 +76,17 @@ def parse(argv=None):
 
 
 # --------------------------------------------------------------------- data
+def _fetched(get, fallback: Path) -> Path:
+    """No local copy: ``jaxfric.datasets``' checked download, or ``fallback`` with its one-line reason."""
+    from jaxfric import datasets
+
+    try:
+        return get(datasets)
+    except datasets.DatasetUnavailable as err:
+        print(f"pipelines: {err}", file=sys.stderr)
+        return fallback
+
+
 def load(args):
     from jaxfric import rig
 
@@ -83,12 +94,16 @@ def load(args):
         return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
     if args.record == "emps":
         path = Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"
+        if not path.is_file() and not args.data_dir:
+            path = _fetched(lambda d: d.emps_path(), path)
         if not path.is_file():
             return None, f"no EMPS file at {path}"
         return (rig.emps_friction_data(rig.load_emps(path)),
                 "EMPS estimation file at 1 kHz, the benchmark's recipe, IDIM-LS mass")
     folder = Path(args.data_dir or DATA_ROOT / "pneumatic_seal_friction")
     path = folder / "raw" / "O-ring_3bar.csv"
+    if not path.is_file() and not args.data_dir:
+        path = _fetched(lambda d: d.pneumatic_path("O-ring", 3), path)
     if not path.is_file():
         return None, f"no O-ring file at {path}"
     sys.path.insert(0, str(HERE))

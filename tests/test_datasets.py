@@ -121,3 +121,18 @@ def test_a_corrupted_copy_is_refused(empty_cache, tmp_path):
         fh.write(b"\0\0\0\0")
     with pytest.raises(datasets.DatasetUnavailable, match="does not match its published SHA-256"):
         datasets.emps_path(folder)
+
+
+def test_a_failed_download_leaves_no_folder(tmp_path, monkeypatch):
+    """The real downloader with the network refused (urlopen raising, as offline): one line,
+    and nothing made in the data folder."""
+    import urllib.error
+
+    def refuse(url, timeout=None):
+        raise urllib.error.URLError("network unreachable")
+
+    monkeypatch.setattr(datasets.urllib.request, "urlopen", refuse)
+    monkeypatch.setenv(datasets.DATA_ENV, str(tmp_path / "data"))
+    with pytest.raises(datasets.DatasetUnavailable, match=r"could not download O-ring_3bar.csv \(network unreachable\)"):
+        datasets.pneumatic_path("O-ring", 3)
+    assert not (tmp_path / "data").exists()
