@@ -299,3 +299,13 @@ def test_elman_inside_the_mechanics_converges_by_its_gradient_stages():
     assert [s["stage"] for s in swarm_only.stages] == ["pso"]
     assert fit.metrics["cost"] < 0.01 * swarm_only.metrics["cost"]
     assert fit.metrics["train"]["fit_percent"] > 90.0
+
+
+def test_search_settings_are_checked_before_the_run():
+    rec = _record(300)
+    for bad in (MotionSearch(generations=0), MotionSearch(horizons=(100,), steps=(1, 2)),
+                MotionSearch(horizons=(1,), steps=(5,)), MotionSearch(steps=(-1,))):
+        with pytest.raises(ValueError, match="MotionSearch"):
+            identify_motion("coulomb", rec, key=0, mass=1.0, search=bad)
+    with pytest.raises(ValueError, match="max_evals"):
+        identify_motion("coulomb", rec, key=0, mass=1.0, max_evals=0)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import time
 
 import equinox as eqx
@@ -75,11 +76,10 @@ class MotionSearch(eqx.Module):
     rtol: float = eqx.field(default=1e-4, static=True)
 
     def check(self) -> None:
-        for name in ("particles", "generations", "global_window"):
+        for name, least in (("particles", 2), ("generations", 1), ("global_window", 2)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < (2 if name == "particles" else 0):
-                raise ValueError(f"MotionSearch.{name} must be a non-negative integer"
-                                 f"{' >= 2' if name == 'particles' else ''}, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ValueError(f"MotionSearch.{name} must be an integer >= {least}, got {value!r}")
         if isinstance(self.lead, bool) or not isinstance(self.lead, int) or self.lead < 0:
             raise ValueError(f"MotionSearch.lead must be a non-negative integer, got {self.lead!r}")
         if not isinstance(self.horizons, tuple) or not isinstance(self.steps, tuple) \
@@ -128,10 +128,11 @@ class MotionBudget:
     max_time: float | None = None
 
     def check(self) -> None:
-        if self.max_evals is not None and (isinstance(self.max_evals, bool) or not isinstance(self.max_evals, int)
+        if self.max_evals is not None and (isinstance(self.max_evals, bool)
+                                           or not isinstance(self.max_evals, numbers.Integral)
                                            or self.max_evals < 1):
             raise ValueError(f"max_evals must be None or a positive integer, got {self.max_evals!r}")
-        if self.max_time is not None and not (isinstance(self.max_time, (int, float))
+        if self.max_time is not None and not (isinstance(self.max_time, numbers.Real)
                                               and not isinstance(self.max_time, bool)
                                               and math.isfinite(self.max_time) and self.max_time > 0):
             raise ValueError(f"max_time must be None or a positive number of seconds, got {self.max_time!r}")
@@ -186,17 +187,17 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
     left = clock.left()
     if left is not None:
         gens = min(gens, left // search.particles - 1)
-    if y is None and gens < 0:
-        raise ValueError(f"max_evals={budget.max_evals} leaves no room for the global stage's first "
-                         f"population ({search.particles} evaluations)")
+    if y is None and gens < 1:
+        raise ValueError(f"max_evals={budget.max_evals} leaves no room for the global stage: it needs "
+                         f"at least 2 x {search.particles} evaluations (a population and one generation)")
     if y is None:
         t = time.perf_counter()
-        sol = minimise(total_cost, PSO(num_particles=search.particles, num_generations=max(gens, 0)),
+        sol = minimise(total_cost, PSO(num_particles=search.particles, num_generations=gens),
                        (lower, upper), args=global_data, key=key, dtype=dtype, progress=progress)
         y = np.asarray(jax.block_until_ready(sol.value), np.float64)
         n_ev = int(sol.stats["num_evals"])
         clock.evals += n_ev
-        stages.append({"stage": "pso", "J": float(sol.f), "num_evals": n_ev, "num_steps": max(gens, 0),
+        stages.append({"stage": "pso", "J": float(sol.f), "num_evals": n_ev, "num_steps": gens,
                        "seconds": time.perf_counter() - t, "reason": "done"})
     plan = [(("free_run" if h is None else f"shooting_{h}"), stage_data(h), k)
             for h, k in zip(search.horizons, search.steps) if k > 0]
