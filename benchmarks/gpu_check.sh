@@ -122,9 +122,9 @@ step emps_identify gpu 100 $PY "$TMP/emps.py" gpu "$RES" $DRY
 step emps_identify cpu 60 $PY "$TMP/emps.py" gpu_host_cpu "$RES" $DRY
 
 # 2. parallel-in-time against the sequential scan
-if [ $DRY = 1 ]; then PS=(--quick --out "$RES"); else PS=(--elman 2000x64,24741x1,24741x16 --motion 24741 --rounds 3); fi
-step parallel_scan gpu 70 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu
-step parallel_scan cpu 50 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu_host_cpu
+if [ $DRY = 1 ]; then PS=(--quick --out "$RES"); else PS=(--elman 2000x64,24741x1,24741x16 --motion 24741 --chunks 250,1000 --rounds 3); fi
+step parallel_scan gpu 90 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu
+step parallel_scan cpu 60 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu_host_cpu
 
 # 3. sweep throughput
 if [ $DRY = 1 ]; then SW=(--quick --out "$RES"); else SW=(--models lugre --segments 2 --keys 3); fi

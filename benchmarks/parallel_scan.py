@@ -9,7 +9,8 @@ difference of the outputs. Cases:
   default dtype) -- the default box (α ≤ 0.99, |r| ≤ 1) and a contracting one
   (α ≤ 0.9, |r| ≤ 0.5);
 * ``motion``: the friction model inside the mechanics (``simulate_motion``), float64, a
-  multi-sine force on a 95 kg axis -- Coulomb, Stribeck (x, v) and LuGre, Dahl (x, v, z).
+  multi-sine force on a 95 kg axis -- Coulomb, Stribeck (x, v) and LuGre, Dahl (x, v, z);
+  the whole record at once and in chunks (``deer_scan(chunk=...)``).
 
 ``--tag gpu`` names the outputs ``parallel_scan_gpu.*`` (benchmarks/gpu_check.sh); the
 device is written into every row.
@@ -60,7 +61,7 @@ def elman_cases(T: int, P: int, rounds: int):
     return rows
 
 
-def motion_cases(T: int, rounds: int):
+def motion_cases(T: int, rounds: int, chunks=(None,)):
     import jax
     import jax.numpy as jnp
 
@@ -80,16 +81,18 @@ def motion_cases(T: int, rounds: int):
             step = friction_step(model)
             f = jnp.asarray(force)
             seq = jax.jit(lambda th, s=step: simulate_motion(s, th, 95.0, f, dt, 0.0, 0.0))
-            par = jax.jit(lambda th, s=step: simulate_motion_parallel(s, th, 95.0, f, dt, 0.0, 0.0,
-                                                                      return_info=True))
-            cases = [Case("sequential", lambda r: jax.block_until_ready(seq(theta)), x64=True),
-                     Case("deer", lambda r: jax.block_until_ready(par(theta)), x64=True)]
-            run_round_robin(cases, rounds)
-            a = cases[0].results[-1]
-            b, info = cases[1].results[-1]
-            diff = max(float(np.max(np.abs(np.asarray(b[k]) - np.asarray(a[k]))) / np.max(np.abs(np.asarray(a[k]))))
-                       for k in ("x", "v"))
-            rows.append(_row("motion", type(model).__name__, T, 1, "float64", cases, info, diff))
+            for chunk in chunks:
+                par = jax.jit(lambda th, s=step, c=chunk: simulate_motion_parallel(
+                    s, th, 95.0, f, dt, 0.0, 0.0, chunk=c, return_info=True))
+                cases = [Case("sequential", lambda r: jax.block_until_ready(seq(theta)), x64=True),
+                         Case("deer", lambda r, p=par: jax.block_until_ready(p(theta)), x64=True)]
+                run_round_robin(cases, rounds)
+                a = cases[0].results[-1]
+                b, info = cases[1].results[-1]
+                diff = max(float(np.max(np.abs(np.asarray(b[k]) - np.asarray(a[k])))
+                                 / np.max(np.abs(np.asarray(a[k])))) for k in ("x", "v"))
+                label = type(model).__name__ + ("" if chunk is None else f", chunks of {chunk}")
+                rows.append(_row("motion", label, T, 1, "float64", cases, info, diff))
     return rows
 
 
@@ -110,6 +113,8 @@ def main(argv=None) -> int:
     p.add_argument("--elman", default="2000x1,2000x64,24741x1,24741x16", metavar="TxP,...",
                    help="Elman cases: record length x candidates")
     p.add_argument("--motion", default="2000,24741", metavar="T,...", help="motion cases: record lengths")
+    p.add_argument("--chunks", default="none,250,1000", metavar="L,...",
+                   help="motion cases: DEER chunk lengths ('none': the whole record at once)")
     args = p.parse_args(argv)
     out = results_dir(args.out, quick=args.quick)
     sizes = [(500, 8)] if args.quick else [tuple(int(x) for x in c.split("x")) for c in args.elman.split(",") if c]
@@ -117,8 +122,9 @@ def main(argv=None) -> int:
     rows = []
     for T, P in sizes:
         rows += elman_cases(T, P, rounds)
+    chunks = [None if c == "none" else int(c) for c in args.chunks.split(",") if c]
     for T in ([500] if args.quick else [int(x) for x in args.motion.split(",") if x]):
-        rows += motion_cases(T, rounds)
+        rows += motion_cases(T, rounds, [None, 128] if args.quick else [c for c in chunks if c is None or c < T])
     name = "parallel_scan" + (f"_{args.tag}" if args.tag else "")
     write_csv(rows, out / f"{name}.csv")
     fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731

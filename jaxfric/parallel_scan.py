@@ -90,7 +90,8 @@ def linear_solve(jac, bias, s0, elementwise: bool):
 
 
 def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float | None = None,
-              max_iterations: int | None = None, fallback: bool = True) -> DeerResult:
+              max_iterations: int | None = None, fallback: bool = True,
+              chunk: int | None = None) -> DeerResult:
     """The carries of ``lax.scan(lambda c, x: (step(c, x), None), init, xs)`` after every
     step, computed by Newton iterations over the whole trajectory (module docstring).
 
@@ -106,6 +107,10 @@ def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float 
         max_iterations: Newton iterations before falling back (default ``min(T, 100)``).
         fallback: use the sequential scan when the iterations did not converge or an
             iterate is not finite; ``False`` returns the last iterate as it is.
+        chunk: solve ``chunk`` steps at a time, one stretch after another, each from the
+            last state of the one before (``None``: the whole record at once). Newton then
+            sees a shorter horizon; ``iterations`` sums over the chunks, ``converged`` is
+            whether all did, ``fell_back`` whether any did not.
     """
     if jacobian not in JACOBIANS:
         raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
@@ -125,6 +130,9 @@ def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float 
     iters = min(T, 100) if max_iterations is None else int(max_iterations)
     if iters < 1:
         raise ValueError(f"max_iterations must be >= 1, got {max_iterations!r}")
+    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
+        raise ValueError(f"chunk must be None or >= 1, got {chunk!r}")
+    chunk = None if chunk is None else int(chunk)
 
     def f(s, x):
         out, _ = ravel_pytree(step(unravel(s), x))
@@ -138,52 +146,78 @@ def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float 
         def linearise(s, x):
             return f(s, x), jax.jacfwd(f)(s, x)
 
-    def newton(states):
-        # In correction form: the scan carries the change δ_k (δ_0 = 0) driven by the
-        # residual f(s_k) - s_{k+1}, which goes to 0, so its rounding shrinks with it;
-        # scanning the states themselves (bias f - J s) left a floor of 1e-8 relative
-        # in the velocity of a Stribeck motion model, 1e4 times the problem's own.
-        prev = jnp.concatenate([s0[None], states[:-1]], axis=0)
-        value, jac = jax.vmap(linearise)(prev, xs)
-        return states + linear_solve(jac, value - states, jnp.zeros_like(s0), elementwise)
+    def solve(first, xc):
+        """Newton over one stretch of inputs from the state ``first``; returns the states,
+        the iterations, whether they converged and whether the scan answered instead."""
+        n = jax.tree_util.tree_leaves(xc)[0].shape[0]
+
+        def newton(states):
+            # In correction form: the scan carries the change δ_k (δ_0 = 0) driven by the
+            # residual f(s_k) - s_{k+1}, which goes to 0, so its rounding shrinks with it;
+            # scanning the states themselves (bias f - J s) left a floor of 1e-8 relative
+            # in the velocity of a Stribeck motion model, 1e4 times the problem's own.
+            prev = jnp.concatenate([first[None], states[:-1]], axis=0)
+            value, jac = jax.vmap(linearise)(prev, xc)
+            return states + linear_solve(jac, value - states, jnp.zeros_like(first), elementwise)
+
+        def cond(carry):
+            i, _, done, finite = carry
+            return (i < min(iters, n)) & ~done & finite
+
+        def body(carry):
+            i, states, _, _ = carry
+            new = newton(states)
+            moved = jnp.max(jnp.abs(new - states), axis=0)
+            scale = jnp.max(jnp.abs(new), axis=0)
+            finite = jnp.all(jnp.isfinite(new))
+            done = finite & jnp.all(moved <= tol * scale + tiny)
+            return i + 1, new, done, finite
+
+        guess = jnp.broadcast_to(first, (n,) + first.shape)
+        i, states, converged, _ = jax.lax.while_loop(
+            cond, body, (jnp.asarray(0), guess, jnp.asarray(False), jnp.asarray(True)))
+
+        def sequential(_):
+            def one(c, x):
+                nxt = f(c, x)
+                return nxt, nxt
+
+            return jax.lax.scan(one, first, xc)[1]
+
+        fell_back = jnp.asarray(False)
+        if fallback:
+            fell_back = ~converged
+            states = jax.lax.cond(converged, lambda _: states, sequential, None)
+        return states, i, converged, fell_back
 
     tiny = jnp.finfo(s0.dtype).tiny
+    if chunk is None or chunk >= T:
+        states, i, converged, fell_back = solve(s0, xs)
+    else:
+        # Chunks one after another, each from the last state of the one before: a shorter
+        # horizon for Newton (fewer stick-slip events, less growth of the linearised
+        # error). The tail is padded with the last input; padded steps come after every
+        # real one, so they change none of them, and are dropped.
+        count = -(-T // chunk)
+        pad = count * chunk - T
+        xs_c = jax.tree_util.tree_map(
+            lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]).reshape(
+                (count, chunk) + a.shape[1:]), xs)
 
-    def cond(carry):
-        i, _, done, finite = carry
-        return (i < iters) & ~done & finite
+        def over_chunks(first, xc):
+            st, it, conv, fb = solve(first, xc)
+            return st[-1], (st, it, conv, fb)
 
-    def body(carry):
-        i, states, _, _ = carry
-        new = newton(states)
-        moved = jnp.max(jnp.abs(new - states), axis=0)
-        scale = jnp.max(jnp.abs(new), axis=0)
-        finite = jnp.all(jnp.isfinite(new))
-        done = finite & jnp.all(moved <= tol * scale + tiny)
-        return i + 1, new, done, finite
-
-    guess = jnp.broadcast_to(s0, (T,) + s0.shape)
-    i, states, converged, finite = jax.lax.while_loop(
-        cond, body, (jnp.asarray(0), guess, jnp.asarray(False), jnp.asarray(True)))
-
-    def sequential(_):
-        def one(s, x):
-            n = f(s, x)
-            return n, n
-
-        return jax.lax.scan(one, s0, xs)[1]
-
-    fell_back = jnp.asarray(False)
-    if fallback:
-        fell_back = ~converged
-        states = jax.lax.cond(converged, lambda _: states, sequential, None)
+        _, (st, its, convs, fbs) = jax.lax.scan(over_chunks, s0, xs_c)
+        states = st.reshape((count * chunk,) + s0.shape)[:T]
+        i, converged, fell_back = jnp.sum(its), jnp.all(convs), jnp.any(fbs)
     return DeerResult(jax.vmap(unravel)(states), i, converged, fell_back)
 
 
 # ------------------------------------------------------------------ the models
 def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
                   max_iterations: int | None = None, fallback: bool = True,
-                  return_info: bool = False):
+                  chunk: int | None = None, return_info: bool = False):
     """:meth:`jaxfric.models.Elman.simulate_batch` (docs/algorithms.md §2.2) with the
     context recurrence ``c_{k+1} = α c_k + tanh(w u_k + r c_k + b)`` solved by
     :func:`deer_scan` (elementwise: each neuron's context of each candidate is its own
@@ -202,7 +236,7 @@ def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
         return alpha * c + jnp.tanh(w * uk + r * c + b)
 
     info = deer_scan(step, c0, u, jacobian="elementwise", rtol=rtol, max_iterations=max_iterations,
-                     fallback=fallback)
+                     fallback=fallback, chunk=chunk)
     prev = jnp.concatenate([c0[None], info.states[:-1]], axis=0)  # c_0 .. c_{T-1}
     h = jnp.tanh(w * u[:, None] + r * prev + b)
     y = jnp.sum((v * h).reshape((u.shape[0],) + shape), axis=1).T
@@ -213,7 +247,8 @@ def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
 
 def simulate_motion_parallel(step, theta, mass, force, dt, x0, v0, state0=None, *,
                              rtol: float | None = None, max_iterations: int | None = None,
-                             fallback: bool = True, return_info: bool = False):
+                             fallback: bool = True, chunk: int | None = None,
+                             return_info: bool = False):
     """:func:`jaxfric.motion.simulate_motion` (docs/algorithms.md §13.2) with the state
     ``(x, v, friction state)`` -- 2 states for static maps, 3 for LuGre and Dahl --
     solved by :func:`deer_scan` with dense Jacobians. Same arguments and outputs
@@ -234,7 +269,7 @@ def simulate_motion_parallel(step, theta, mass, force, dt, x0, v0, state0=None, 
         return x, v, s
 
     info = deer_scan(one, (x0, v0, s0), force, jacobian="dense", rtol=rtol,
-                     max_iterations=max_iterations, fallback=fallback)
+                     max_iterations=max_iterations, fallback=fallback, chunk=chunk)
     prev = jax.tree_util.tree_map(lambda first, rest: jnp.concatenate([first[None], rest[:-1]], axis=0),
                                   (x0, v0, s0), info.states)
     x, v, s = prev

@@ -165,3 +165,25 @@ def test_motion_states_in_parallel_equal_the_scan(model):
     assert bool(info.converged) and not bool(info.fell_back)
     assert _rel(got["x"], want["x"]) < RTOL64 and _rel(got["v"], want["v"]) < RTOL64
     assert _rel(got["friction"], want["friction"]) < RTOL64_FRICTION
+
+
+@pytest.mark.parametrize("chunk", [64, 150])  # 150 does not divide 400: a padded tail
+def test_chunked_motion_equals_the_scan(chunk):
+    model = M.LuGre()
+    dt, T = 1e-3, 400
+    t = np.arange(T) * dt
+    force = 30.0 * np.sin(2 * np.pi * 1.3 * t) + 5.0 * np.sin(2 * np.pi * 7.0 * t)
+    lo, hi = model.bounds(model.search_box(None, 0.1 * np.sin(t), force))
+    theta = jnp.asarray(lo + 0.4 * (hi - lo))
+    step = friction_step(model)
+    want = simulate_motion(step, theta, 5.0, force, dt, 0.01, 0.02)
+    got, info = simulate_motion_parallel(step, theta, 5.0, force, dt, 0.01, 0.02, chunk=chunk,
+                                         return_info=True)
+    assert bool(info.converged) and not bool(info.fell_back)
+    for k in ("x", "v", "friction"):
+        assert got[k].shape == (T,) and _rel(got[k], want[k]) < RTOL64, k
+
+
+def test_chunk_must_be_positive():
+    with pytest.raises(ValueError, match="chunk"):
+        deer_scan(lambda c, x: c + x, jnp.asarray(0.0), jnp.ones(3), chunk=0)
