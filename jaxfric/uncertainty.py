@@ -275,17 +275,23 @@ class ParameterUncertainty:
                 if lo[i] <= self.lower[i] and hi[i] >= self.upper[i]]
 
     def box_capped(self, method=None, level: float = DEFAULT_LEVEL) -> np.ndarray:
-        """The search-coordinate covariance with every parameter whose interval at
-        ``level`` is wider than its search box scaled down to the box (Σ' = S Σ S,
-        S = diag(min(1, half box width / (t se)))): correlations are kept, and a
-        parameter the data do not determine moves over its box, not beyond it."""
-        c = self.cov_theta[self._method(method)]
-        se = np.sqrt(np.clip(np.diag(c), 0.0, None))
-        half = 0.5 * (np.asarray(self.upper) - np.asarray(self.lower))
+        """The search-coordinate covariance with its undetermined *directions* shrunk to
+        the search box. In box-normalised coordinates (each parameter divided by its box
+        half-width) Σ = Q Λ Qᵀ; an eigenvalue whose t-interval along its direction q
+        reaches beyond the box (t √λ max|q_i| > 1) is lowered to the box's edge. A
+        combination the data determine (small λ) keeps its variance, so a pair correlated
+        at −1 still cancels; a direction the data leave free moves over the box, not by
+        its linearised ±10⁹."""
+        c = np.asarray(self.cov_theta[self._method(method)], np.float64)
         t = self.t_quantile(level)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(np.isfinite(half) & (t * se > half), half / (t * se), 1.0)
-        return c * scale[:, None] * scale[None, :]
+        se = np.sqrt(np.clip(np.diag(c), 0.0, None))
+        half = 0.5 * (np.asarray(self.upper, np.float64) - np.asarray(self.lower, np.float64))
+        half = np.where(np.isfinite(half) & (half > 0), half, np.maximum(10.0 * t * se, 1e-300))
+        z = c / half[:, None] / half[None, :]
+        lam, q = np.linalg.eigh(0.5 * (z + z.T))
+        reach = t * np.sqrt(np.clip(lam, 0.0, None)) * np.max(np.abs(q), axis=0)
+        lam = np.where(reach > 1.0, lam / np.maximum(reach, 1.0) ** 2, lam)
+        return (q * lam) @ q.T * half[:, None] * half[None, :]
 
     def strongly_correlated(self, threshold: float = 0.99, method=None) -> list[tuple[str, str, float]]:
         """Pairs with |correlation| above ``threshold``: the data fix a combination only."""

@@ -326,3 +326,23 @@ def test_every_physical_model_gets_finite_intervals_from_a_frictiondata(model, p
     est = dict(zip(u.names, u.estimate))
     for k, (lo, hi) in u.intervals(0.95, "jacobian").items():
         assert np.isfinite(lo) and np.isfinite(hi) and lo < est[k] < hi, k
+
+
+def test_box_capping_keeps_a_determined_combination():
+    """Two nearly collinear parameters: their sum is determined, each alone is not. The
+    band's covariance shrinks the free direction to the box and keeps the sum's variance."""
+    rng = np.random.default_rng(10)
+    a = rng.standard_normal(400)
+    jac = np.stack([a, a + 1e-7 * rng.standard_normal(400), rng.standard_normal(400)], axis=1)
+    r = 0.1 * rng.standard_normal(400)
+    cov = jacobian_covariance(jac, r)[0]
+    u = ParameterUncertainty(names=("a", "b", "c"), kinds=("linear",) * 3, estimate=np.zeros(3),
+                             theta=np.zeros(3), lower=-np.ones(3), upper=np.ones(3),
+                             cov_theta={"jacobian": cov}, cov={"jacobian": cov}, n=400, dof=397,
+                             s2=0.01, rank=2, bandwidth=0.0, default="jacobian")
+    capped = u.box_capped()
+    t = u.t_quantile(0.95)
+    assert cov[0, 0] * t**2 > 1e6 and capped[0, 0] * t**2 <= 1.01
+    s = np.array([1.0, 1.0, 0.0])
+    assert s @ capped @ s == pytest.approx(s @ cov @ s, rel=1e-6)
+    np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-6)
