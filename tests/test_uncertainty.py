@@ -345,4 +345,4 @@ def test_box_capping_keeps_a_determined_combination():
     assert cov[0, 0] * t**2 > 1e6 and capped[0, 0] * t**2 <= 1.01
     s = np.array([1.0, 1.0, 0.0])
     assert s @ capped @ s == pytest.approx(s @ cov @ s, rel=1e-3)   # vs 1e6 times for a marginal cap
-    np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-6)
+    np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-3)
