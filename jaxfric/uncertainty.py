@@ -55,6 +55,8 @@ __all__ = [
 
 #: Covariance estimators (see the module docstring); the first is the default shown.
 METHODS = ("hac", "jacobian", "block_bootstrap")
+#: What :func:`parameter_uncertainty` computes unless told (the bootstrap needs a key).
+DEFAULT_METHODS = ("hac", "jacobian")
 #: Default level of :meth:`ParameterUncertainty.intervals`.
 DEFAULT_LEVEL = 0.95
 #: report.md prints the whole correlation matrix up to this many parameters.
@@ -526,7 +528,7 @@ def _jacobian(resid, theta):
     return jax.jacfwd(resid)(theta)
 
 
-def parameter_uncertainty(fit, data, *, method=METHODS, level: float = DEFAULT_LEVEL,
+def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = DEFAULT_LEVEL,
                           key=None, replicates: int = DEFAULT_REPLICATES, bandwidth=None,
                           rcond: float = DEFAULT_RCOND) -> ParameterUncertainty:
     """Covariances, standard errors and intervals of a physical fit's parameters.
@@ -537,8 +539,8 @@ def parameter_uncertainty(fit, data, *, method=METHODS, level: float = DEFAULT_L
         data: what the fit was trained on: the record given to ``identify`` (its first
             ``fit.n_train`` samples are used), a list of training records, or the
             :class:`jaxfric.motion.MotionData` of a motion fit.
-        method: one or more of :data:`METHODS`; the first is the default the result
-            shows. ``"block_bootstrap"`` needs ``key``.
+        method: one or more of :data:`METHODS` (default :data:`DEFAULT_METHODS`); the
+            first is the default the result shows. ``"block_bootstrap"`` needs ``key``.
         bandwidth: Newey–West lag L; default :func:`andrews_bandwidth`.
         rcond: relative singular-value floor (module docstring).
 

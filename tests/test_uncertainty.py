@@ -346,3 +346,27 @@ def test_box_capping_keeps_a_determined_combination():
     s = np.array([1.0, 1.0, 0.0])
     assert s @ capped @ s == pytest.approx(s @ cov @ s, rel=1e-3)   # vs 1e6 times for a marginal cap
     np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-3)
+
+
+def test_several_training_records_pool_their_residuals():
+    """A list of records: residuals of each, no Newey–West lag across the boundary, and
+    the independent-residual covariance is the OLS one of the stacked samples."""
+    from jaxfric import FrictionData
+
+    with jax.enable_x64(True):
+        model = models.Coulomb()
+        rng = np.random.default_rng(11)
+        recs, vs, fs = [], [], []
+        for k in range(2):
+            v = 0.01 * np.sin(np.arange(500) * 0.03 + k)
+            f = 30 * np.tanh(v / model.v_eps) + 500 * v + rng.standard_normal(500)
+            recs.append(FrictionData.from_arrays(v, f, 0.01, name=f"r{k}"))
+            vs.append(v)
+            fs.append(f)
+        v, f = np.concatenate(vs), np.concatenate(fs)
+        fit = _fit(model, model.from_physical(**model.fit_least_squares(v, f)), v, 0.01)
+        u = parameter_uncertainty(fit, recs)
+    assert u.segments == (500, 500) and u.n == 1000 and u.default == "hac"
+    x = np.stack([np.tanh(v / model.v_eps), v], axis=1)
+    r = f - x @ np.linalg.lstsq(x, f, rcond=None)[0]
+    np.testing.assert_allclose(u.cov["jacobian"], r @ r / 998 * np.linalg.inv(x.T @ x), rtol=1e-6)
