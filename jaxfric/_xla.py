@@ -5,8 +5,8 @@ instead is compile its *own* jitted calls (:func:`jaxfric.minimise`,
 :func:`jaxfric.minimise_many`, :func:`jaxfric.identify`'s stages, the models' eager
 ``simulate_batch``) with ``jax.jit(..., compiler_options=...)``: options that hold
 for that one executable and nothing else. On CPU two options are used, chosen by
-measurement on the development machine (2-core AMD EPYC with AVX-512;
-``benchmarks/compiler_options.py`` re-measures them side by side):
+measurement on the development machine (2-core AMD EPYC with AVX-512; the
+measurements are summarised in docs/solvers.md):
 
 ``xla_cpu_prefer_vector_width = 512``
     XLA's CPU default is 256-bit vectors. On a CPU with AVX-512 the batched Elman

@@ -13,7 +13,7 @@ import optimistix as optx
 import pytest
 
 import jaxfric as jf
-from jaxfric.optim import AbstractIterativeSolver, OptxMinimiser, TqdmProgress
+from jaxfric.optim import AbstractBatchSolver, OptxMinimiser, TqdmProgress
 
 LO, HI = np.full(2, -2.0, np.float32), np.full(2, 3.0, np.float32)
 TARGET = np.array([0.5, -0.25], np.float32)
@@ -397,7 +397,7 @@ def test_an_optimistix_minimiser_runs_through_the_adapter():
     sol = jf.minimise(sphere, solver, (LO, HI), key=0, y0=y0)
     np.testing.assert_allclose(sol.value, ref.value, rtol=1e-6, atol=1e-7)
     assert isinstance(jf.optim.optx_adapter.as_protocol(solver), OptxMinimiser)
-    assert isinstance(OptxMinimiser(solver), AbstractIterativeSolver)
+    assert isinstance(OptxMinimiser(solver), AbstractBatchSolver)
 
 
 def test_progress_bar_ends_at_100_percent_when_a_stage_stops_early():

@@ -8,7 +8,6 @@ fitness are mapped to ``+inf`` so they can never be reported as the best.
 
 from __future__ import annotations
 
-import abc
 import math
 from typing import Any, Callable
 
@@ -234,7 +233,7 @@ class AbstractSolver(eqx.Module):
     """Nominal base of every jaxfric solver: hyperparameter checks and progress totals.
 
     A solver runs under :func:`jaxfric.minimise` either through jaxfric's step
-    protocol (:class:`AbstractIterativeSolver`) or, for an ``optx.AbstractMinimiser``
+    protocol (:class:`~jaxfric.optim.rounds.AbstractBatchSolver`) or, for an ``optx.AbstractMinimiser``
     such as :class:`~jaxfric.NelderMead`, through optimistix's own ``init / step /
     terminate / postprocess`` (the driver adapts it, see
     :mod:`jaxfric.optim.optx_adapter`).
@@ -271,84 +270,6 @@ class AbstractSolver(eqx.Module):
     def steps_for(self, n: int) -> int | None:
         """Most steps of a run on ``n`` parameters (``None``: not known)."""
         return None
-
-
-class AbstractIterativeSolver(AbstractSolver):
-    """jaxfric's step protocol (optimistix's ``AbstractIterativeSolver`` shape, on a box).
-
-    Every method is pure and traceable; the objective ``fn(x, args) -> scalar`` takes
-    the flat parameter vector ``x`` (the driver flattens pytree bounds), ``lower`` and
-    ``upper`` are 1-D arrays of one floating dtype, and ``State`` is a pytree of arrays
-    (it is what :func:`jaxfric.minimise` checkpoints). :func:`jaxfric.minimise` runs::
-
-        state = solver.init(fn, lower, upper, args, key, x0)
-        while not solver.terminate(fn, lower, upper, args, state)[0]:
-            state = solver.step(fn, lower, upper, args, state)
-        done, result = solver.terminate(fn, lower, upper, args, state)
-        solution = solver.postprocess(fn, lower, upper, args, state, result)
-
-    and records ``solver.best(state)[1]`` against ``solver.num_evals(state)`` after
-    every step (the :class:`History`), reports progress from ``solver.progress(state)``
-    and checkpoints ``state``.
-    """
-
-    @abc.abstractmethod
-    def init(self, fn: Callable, lower, upper, args, key, x0=None):
-        """The evaluated first state (``x0``: an optional start inside the box)."""
-
-    @abc.abstractmethod
-    def step(self, fn: Callable, lower, upper, args, state):
-        """One iteration (a generation, a simplex step, ...)."""
-
-    @abc.abstractmethod
-    def terminate(self, fn: Callable, lower, upper, args, state):
-        """``(done, result)``: a boolean scalar and an ``optimistix.RESULTS``."""
-
-    @abc.abstractmethod
-    def postprocess(self, fn: Callable, lower, upper, args, state, result) -> Solution:
-        """The :class:`Solution` (flat ``value``; the driver adds the history)."""
-
-    @abc.abstractmethod
-    def best(self, state) -> tuple[Array, Array]:
-        """``(x, f)``: the best point so far and its (NaN-safe) value."""
-
-    @abc.abstractmethod
-    def num_evals(self, state) -> Array:
-        """Objective evaluations spent so far."""
-
-    def max_steps(self, n: int) -> int:
-        """Most ``step`` calls a run on ``n`` parameters can take (the driver's cap)."""
-        steps = self.steps_for(n)
-        return int(steps) if steps is not None else 2**31 - 1
-
-    def max_evaluations(self, n: int) -> int | None:
-        """Most objective evaluations of a run (``None`` if unknown): checked by the
-        driver against the evaluation counter's range before running."""
-        return None
-
-    def num_stages(self) -> int:
-        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chained.chain`
-        has 2). The driver runs each in a loop of its own, so batched runs never pay
-        for one stage's step while in another."""
-        return 1
-
-    def stage(self, state) -> Array:
-        """The stage ``state`` is in (``0 .. num_stages() − 1``)."""
-        return jnp.array(0, jnp.int32)
-
-    def step_stage(self, fn: Callable, lower, upper, args, state, stage: int):
-        """:meth:`step`, for a ``state`` known to be in stage ``stage`` (static)."""
-        return self.step(fn, lower, upper, args, state)
-
-    def continued(self, state):
-        """``state`` of a finished run, ready to go on under this solver's (larger)
-        budget (``minimise(..., warm_start=solution)``)."""
-        return state
-
-    def progress(self, state) -> tuple[Array, Array]:
-        """``(phase, step)`` for a progress display: phase 0 a global (swarm) stage,
-        phase 1 a local (Nelder–Mead) stage; ``step`` counts within the phase."""
-        return jnp.array(0, jnp.int32), jnp.array(0, jnp.int32)
 
 
 def check_positive_int(name: str, value, minimum: int = 1) -> None:

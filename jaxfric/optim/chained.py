@@ -37,13 +37,12 @@ import jax.numpy as jnp
 
 from ._base import (
     RESULTS,
-    AbstractIterativeSolver,
     History,
     Solution,
     check_positive_int,
 )
 from .optx_adapter import as_protocol
-from .rounds import AbstractAskTellSolver, drive, only_if, skipped
+from .rounds import AbstractBatchSolver, drive, only_if, skipped
 
 
 class ChainState(eqx.Module):
@@ -71,23 +70,23 @@ def _put(tree, i, leaf_tree):
     return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
 
 
-class AbstractChain(AbstractAskTellSolver):
+class AbstractChain(AbstractBatchSolver):
     """A global solver followed by a local one (see the module docstring)."""
 
     # global_solver, local_solver, num_starts, simplex_from_swarm: fields of Chain;
     # MAPSONMDS names the first two mapso and nelder_mead
 
     @property
-    def _global(self) -> AbstractIterativeSolver:
+    def _global(self) -> AbstractBatchSolver:
         return as_protocol(self.global_solver)
 
     @property
-    def _local(self) -> AbstractIterativeSolver:
+    def _local(self) -> AbstractBatchSolver:
         return as_protocol(self.local_solver)
 
     def check(self):
         for name in ("global_solver", "local_solver"):
-            if not isinstance(as_protocol(getattr(self, name)), AbstractAskTellSolver):
+            if not isinstance(as_protocol(getattr(self, name)), AbstractBatchSolver):
                 raise ValueError(
                     f"{name} must be a jaxfric solver that evaluates in batches (PSO, MAPSO, "
                     "Evosax, NelderMead) or an optimistix minimiser, got "

@@ -2,7 +2,7 @@
 
 :class:`Evosax` runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
 (``evosax.algorithms.algorithms``) — through jaxfric's step protocol
-(:class:`~jaxfric.optim.AbstractIterativeSolver`), so :func:`jaxfric.minimise` gives it
+(:class:`~jaxfric.optim.AbstractBatchSolver`), so :func:`jaxfric.minimise` gives it
 what it gives every solver: bounds, history, progress, checkpoints, warm starts and
 ``minimise_many``'s batched seeds; it is also a valid global stage of
 :func:`~jaxfric.optim.chain` (``cmaes_nm()`` = ``chain(Evosax("CMA_ES"), NelderMead())``)

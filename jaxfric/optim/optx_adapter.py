@@ -19,7 +19,6 @@ import optimistix as optx
 
 from ._base import (
     RESULTS,
-    AbstractIterativeSolver,
     AbstractSolver,
     History,
     Solution,
@@ -28,7 +27,7 @@ from ._base import (
     uniform_in_box,
 )
 from .nelder_mead import NelderMead, NelderMeadState
-from .rounds import AbstractAskTellSolver, Batch, relay
+from .rounds import AbstractBatchSolver, Batch, relay
 
 _TAGS = frozenset()
 
@@ -60,7 +59,7 @@ def _no_aux(rounds):
                  answer=lambda f: (f, None))
 
 
-class OptxMinimiser(AbstractAskTellSolver):
+class OptxMinimiser(AbstractBatchSolver):
     """Adapter: ``minimiser`` (an ``optx.AbstractMinimiser``) as a jaxfric solver.
 
     Args:
@@ -192,9 +191,9 @@ class OptxMinimiser(AbstractAskTellSolver):
         return jnp.array(1, jnp.int32), state.num_steps
 
 
-def as_protocol(solver) -> AbstractIterativeSolver:
+def as_protocol(solver) -> AbstractBatchSolver:
     """The step-protocol view of ``solver`` (a jaxfric solver or an optimistix minimiser)."""
-    if isinstance(solver, AbstractIterativeSolver):
+    if isinstance(solver, AbstractBatchSolver):
         return solver
     if isinstance(solver, optx.AbstractMinimiser):
         return OptxMinimiser(solver)

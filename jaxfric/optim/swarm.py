@@ -5,7 +5,7 @@ A swarm writes one generation as evaluation *rounds* (:mod:`jaxfric.optim.rounds
 Python generator that yields each batch of candidates it needs evaluated and receives
 their fitness back (``f = yield X``). :meth:`AbstractSwarm.step` feeds it the objective,
 evaluated on the whole batch at once inside the compiled program;
-:meth:`~jaxfric.optim.rounds.AbstractAskTellSolver.ask` / ``tell`` feed it values
+:meth:`~jaxfric.optim.rounds.AbstractBatchSolver.ask` / ``tell`` feed it values
 computed anywhere (a simulator outside JAX), one batch per call. The same code therefore
 defines both, and a run driven by ``ask``/``tell`` visits the points
 :func:`jaxfric.minimise` visits for the same key.
