@@ -309,3 +309,23 @@ def test_search_settings_are_checked_before_the_run():
             identify_motion("coulomb", rec, key=0, mass=1.0, search=bad)
     with pytest.raises(ValueError, match="max_evals"):
         identify_motion("coulomb", rec, key=0, mass=1.0, max_evals=0)
+
+
+def test_evaluate_is_simulate_from_and_k_step():
+    """evaluate's one compiled call gives the metrics of the public methods it replaces."""
+    from jaxfric.motion import motion_metrics
+
+    model = models.LuGre()
+    rec = _record(600)
+    fit = MotionFit(model=model, theta=np.asarray(model.from_physical(
+        sigma0=1e5, sigma1=50.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=5e-3), np.float64), velocity_scaler=None,
+        friction_scaler=None, dt=rec.dt, n_train=450, n_samples=600, metrics={},
+        settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 1e-3}})
+    x = rec.position
+    with jax.enable_x64(True):
+        ev = fit.evaluate(rec, 450, 10)
+        tr, va = fit.simulate_from(rec, 0, 450)["x"], fit.simulate_from(rec, 450)["x"]
+        ks = fit.k_step(rec, 10)
+    assert ev["train"] == motion_metrics(x[:450], tr)
+    assert ev["valid"] == motion_metrics(x[450:], va)
+    assert ev["valid_kstep"] == motion_metrics(x[10:][440:], ks[440:])
