@@ -132,6 +132,10 @@ def test_gradient_stage_polishes_and_its_members_follow_the_single_runs():
         assert set(timings) == {"refine_compile_s", "refine_run_s"}
         np.testing.assert_array_equal(one.theta, singles[0].theta)
         assert float(one.f) < float(obj.cost(starts[0], obj.data))  # it polished
+        # an ensemble of one runs the single run's program: to the bit
+        alone, _ = stages.gradient_stage(settings, obj, starts[:1], bounds, jnp.float64,
+                                         ensemble=True, compiler_options=None)
+        np.testing.assert_array_equal(alone.theta[0], singles[0].theta)
         many, _ = stages.gradient_stage(settings, obj, starts, bounds, jnp.float64, ensemble=True)
         for i, s in enumerate(singles):
             assert int(many.num_steps[i]) == int(s.num_steps)

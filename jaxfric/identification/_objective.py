@@ -127,9 +127,9 @@ def _elman_value_and_grad(model):
 
 
 #: Time samples per block of :func:`_elman_value_and_grad_batch`: a block's
-#: ``(TIME_BLOCK, N·K)`` arrays stay in the CPU's cache (30 neurons, 8 networks: 120 kB
+#: ``(TIME_BLOCK, K·N)`` arrays stay in the CPU's cache (30 neurons, 8 networks: 120 kB
 #: each in float32), where whole-record arrays (19 MB each on EMPS) made the
-#: vectorised parts memory-bound.
+#: vectorised parts bound by memory traffic.
 TIME_BLOCK = 128
 
 
@@ -143,11 +143,13 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
         reverse  δ_k = (v g_k + λ_{k+1})(1 − h_k²),   λ_k = α λ_{k+1} + r δ_k
 
     with ∂w = Σ δ_k u_k, ∂r = Σ δ_k c_k, ∂b = Σ δ_k, ∂v = Σ g_k h_k, ∂α = Σ λ_{k+1} c_k,
-    ∂c0 = λ_0. Time runs in blocks of ``block`` samples: inside a block each step
-    loop carries one vector and writes one array (c_k forwards, λ_{k+1} backwards)
-    and h_k, ŷ_k, δ_k and the sums are vectorised over the block. On the CPU a step
-    loop that wrote several arrays ran several times slower, and whole-record
-    ``(T, K·N)`` temporaries were bound by memory traffic.
+    ∂c0 = λ_0. Time runs in blocks of ``block`` samples. The forward pass keeps only
+    each block's first context and the outputs; the reverse pass recomputes a block's
+    contexts from its first one, then h_k, δ_k and the block's share of the sums
+    vectorised around a loop that carries λ alone. Nothing of size ``T × K·N`` is
+    stored, and each step loop writes one array: on the CPU a step loop that wrote
+    several arrays ran several times slower, and whole-record temporaries were bound
+    by memory traffic.
     """
     u = jnp.asarray(data.u)
     k_members, n_neurons, t = thetas.shape[0], model.neurons, u.shape[0]
@@ -159,42 +161,43 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
     y_b = jnp.pad(data.y, (0, pad)).reshape(n_blocks, block)
     kept = (jnp.arange(n_blocks * block) < t).reshape(n_blocks, block, 1)
 
-    def hidden(u_blk, cs):
-        return jnp.tanh(w * u_blk[:, None] + r * cs + b)
-
-    def per_member(x):  # (block, K·N) -> (block, K): the sum over each network's neurons
-        return jnp.sum(x.reshape(block, k_members, n_neurons), axis=2)
+    def context(c, uk):
+        return alpha * c + jnp.tanh(w * uk + r * c + b)
 
     def forward_block(c, u_blk):
-        c, cs = _time_loop(model, lambda c, uk: (alpha * c + jnp.tanh(w * uk + r * c + b), c),
-                           c, u_blk)
-        return c, (cs, per_member(v * hidden(u_blk, cs)))
+        def step(c, uk):
+            h = jnp.tanh(w * uk + r * c + b)
+            return alpha * c + h, jnp.sum((v * h).reshape(k_members, n_neurons), axis=1)
 
-    _, (cs, y_hat) = jax.lax.scan(forward_block, c0, u_b)  # (B, block, K·N), (B, block, K)
+        c_next, y = _time_loop(model, step, c, u_blk)
+        return c_next, (c, y)
+
+    _, (starts, y_hat) = jax.lax.scan(forward_block, c0, u_b)  # (B, K·N), (B, block, K)
     if model.output_bias:
         y_hat = y_hat + p["b_o"]
     e = jnp.where(kept, y_b[..., None] - y_hat, 0.0)
     f = jnp.sum(e * e, axis=(0, 1)) / t * data.inv_norm
     g_y = (2.0 * data.inv_norm / t) * e
     gy = -g_y
+    ones = jnp.ones((block,), u.dtype)  # column sums as dot products (BLAS)
 
     def backward_block(carry, blk):
         lam, d_w, d_r, d_b, d_v, d_alpha = carry
-        cs_blk, gy_blk, u_blk = blk
-        hs = hidden(u_blk, cs_blk)
+        start, gy_blk, u_blk = blk
+        _, cs = _time_loop(model, lambda c, uk: (context(c, uk), c), start, u_blk)
+        hs = jnp.tanh(w * u_blk[:, None] + r * cs + b)
         g = jnp.broadcast_to(gy_blk[:, :, None], gy_blk.shape + (n_neurons,)).reshape(block, -1)
         a, slope = v * g, 1.0 - hs * hs
         lam, lam_next = _time_loop(
             model, lambda lam, x: (alpha * lam + r * ((x[0] + lam) * x[1]), lam), lam, (a, slope),
             reverse=True)
         delta = (a + lam_next) * slope
-        return (lam, d_w + u_blk @ delta, d_r + jnp.sum(delta * cs_blk, axis=0),
-                d_b + jnp.sum(delta, axis=0), d_v + jnp.sum(g * hs, axis=0),
-                d_alpha + jnp.sum(lam_next * cs_blk, axis=0)), None
+        return (lam, d_w + u_blk @ delta, d_r + ones @ (delta * cs), d_b + ones @ delta,
+                d_v + ones @ (g * hs), d_alpha + ones @ (lam_next * cs)), None
 
     zero = jnp.zeros_like(c0)
     (lam0, d_w, d_r, d_b, d_v, d_alpha), _ = jax.lax.scan(
-        backward_block, (zero,) * 6, (cs, gy, u_b), reverse=True)
+        backward_block, (zero,) * 6, (starts, gy, u_b), reverse=True)
     flat = {"w": d_w, "r": d_r, "b": d_b, "v": d_v, "alpha": d_alpha, "c0": lam0}
     grads = {name: x.reshape(k_members, n_neurons) for name, x in flat.items()}
     if model.output_bias:

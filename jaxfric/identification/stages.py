@@ -281,7 +281,9 @@ def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, k
                            compiler_options=compiler_options)
         else:
             if batching is None:
-                batching = ensemble_batching(objective.cost.model, solver)
+                # one member: "map" runs exactly the single run's program
+                batching = ("map" if keys.size == 1
+                            else ensemble_batching(objective.cost.model, solver))
             sol = minimise_many(objective.cost, solver, (lower, upper), keys=keys.members,
                                 args=objective.data_global, y0=theta0, dtype=dtype,
                                 progress=progress, compiler_options=compiler_options,
@@ -306,9 +308,13 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
     options = _xla.resolve(compiler_options, "rollout")
     lo, hi = jnp.asarray(bounds.lower, dtype), jnp.asarray(bounds.upper, dtype)
     with Stopwatch() as sw:
-        if ensemble:
+        if ensemble and jnp.shape(thetas)[0] > 1:
             out = refine_many(settings, objective.cost, jnp.asarray(thetas), lo, hi, objective.data,
                               progress=progress, compiler_options=options)
+        elif ensemble:  # one member: the single run's program, with a member axis
+            out = refine_impl(settings, objective.cost, thetas[0], lo, hi, objective.data,
+                              progress=progress, compiler_options=options)
+            out = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], out)
         else:
             out = refine_impl(settings, objective.cost, thetas, lo, hi, objective.data,
                               progress=progress, compiler_options=options)
