@@ -20,7 +20,7 @@ default pipeline therefore grows the simulation horizon:
 
 Measured on the EMPS estimation split (80 % trains, ``benchmarks/motion.py``): the
 earlier default (MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of
-the free run) took 87 s (LuGre) and 136 s (GMS) per model; this pipeline took 8–36 s
+the free run) took 87 s (LuGre) and 136 s (GMS) per model; this pipeline took 8–25 s
 per model, compilation included, on a busier machine
 (``benchmarks/results/motion_timing.md``), with a lower held-back error for every
 physical model (``benchmarks/results/motion.md``).
