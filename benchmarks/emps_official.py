@@ -59,9 +59,26 @@ PUBLISHED = [("IDIM-LS physics, open loop (published parameters; ANCHORS.md, 0.1
              ("dynoNet (Forgione & Piga 2021)", 2.64, 96.8)]
 
 
+#: The drive gain of the benchmark files (SOURCE.md), used when a file does not hold ``gtau``.
+GTAU = 35.15065188248547
+
+
 def motion_data(path) -> MotionData:
-    rec = load_emps(path)
-    return MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
+    """Force ``gtau*vir`` and position ``qm`` of an EMPS ``.mat`` file. The estimation file
+    goes through :func:`jaxfric.rig.emps.load_emps`; a file without all of its channels (a
+    test recording may lack ``qg`` or the loop gains) is read for ``qm``, ``vir``, ``t`` and
+    ``gtau`` only."""
+    try:
+        rec = load_emps(path)
+        return MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
+    except (KeyError, ValueError):
+        from scipy.io import loadmat
+
+        mat = loadmat(path)
+        qm, vir = (np.asarray(mat[k], np.float64).ravel() for k in ("qm", "vir"))
+        gtau = float(np.asarray(mat["gtau"]).ravel()[0]) if "gtau" in mat else GTAU
+        dt = float(np.median(np.diff(np.asarray(mat["t"], np.float64).ravel()))) if "t" in mat else 1e-3
+        return MotionData.from_arrays(gtau * vir, qm, dt, cutoff=EMPS_CUTOFF_HZ)
 
 
 def fixed_fit(mass, fv, fc, offset, dt) -> MotionFit:

@@ -329,3 +329,20 @@ def test_evaluate_is_simulate_from_and_k_step():
     assert ev["train"] == motion_metrics(x[:450], tr)
     assert ev["valid"] == motion_metrics(x[450:], va)
     assert ev["valid_kstep"] == motion_metrics(x[10:][440:], ks[440:])
+
+
+def test_emps_official_benchmark_skips_cleanly_without_the_test_recording(tmp_path):
+    """The benchmark's test file is not shipped: the script says so, exits 0, writes nothing."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "JAXFRIC_EMPS_TEST"}
+    out = subprocess.run([sys.executable, str(root / "benchmarks" / "emps_official.py"), "--test",
+                          str(tmp_path / "DATA_EMPS_PULSES.mat"), "--out", str(tmp_path / "res")],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "skipping the official task" in out.stdout
+    assert not (tmp_path / "res").exists()
