@@ -122,6 +122,11 @@ def cmd_sweep(args, argv) -> int:
             raise UserError("--distributed takes the split from JAX's runtime: leave out --process-index/--process-count")
         if not 0 <= args.process_index < args.process_count:
             raise UserError(f"--process-index must lie in 0..{args.process_count - 1}, got {args.process_index}")
+    if args.distributed:
+        import jax
+
+        # before anything touches a JAX backend (the runtime must come first)
+        jax.distributed.initialize()
     check_models(args.models, args.box)
     say = (lambda *_: None) if args.quiet else (lambda text: print(text, flush=True))
     records = {}
@@ -149,10 +154,6 @@ def cmd_sweep(args, argv) -> int:
         if spec.paper:
             options["method"] = "paper"
         models[name] = (name, options)
-    if args.distributed:
-        import jax
-
-        jax.distributed.initialize()
     processes = ({} if args.process_index is None
                  else {"process_index": args.process_index, "process_count": args.process_count})
     result = sweep(models, records, args.keys, args.dir, progress=not args.quiet, **processes)
