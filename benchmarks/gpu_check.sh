@@ -18,7 +18,15 @@
 #
 # Inputs the GPU machine lacks travel in benchmarks/results/quick/gpu_inputs/ (git-ignored):
 # DATA_EMPS.mat (else $JAXFRIC_EMPS or ../shared/data/emps/DATA_EMPS.mat) and wheels/
-# (pyswarms and future for the speed table). The device tool call:
+# (pyswarms, future, evosax, dotmap for the speed table). Prepare them once, on the
+# development machine (the GPU machine reaches no registry):
+#   mkdir -p benchmarks/results/quick/gpu_inputs/wheels
+#   cp ../shared/data/emps/DATA_EMPS.mat benchmarks/results/quick/gpu_inputs/
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux2014_x86_64 -d benchmarks/results/quick/gpu_inputs/wheels \
+#     pyswarms==1.3.0 future==1.0.0 evosax==0.3.2 dotmap==1.3.30
+# Afterwards unpack the returned gpu_check.tar.gz in the repository root and commit the files.
+# The device tool call:
 #   run(command="bash benchmarks/gpu_check.sh", carry=["benchmarks/results/quick/gpu_inputs"],
 #       timeout_s=560)
 set -uo pipefail
