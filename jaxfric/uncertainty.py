@@ -773,7 +773,8 @@ def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
     if u is None:
         return []
     loose = set(u.covers_box(level))
-    parts = [f"{k} {float(u.estimate[i]):.4g} [{lo:.3g}, {hi:.3g}]" + (" (not determined)" if k in loose else "")
+    parts = [f"{k} {float(u.estimate[i]):.4g} " + ("(not determined: the interval covers the box)" if k in loose
+                                                  else f"[{lo:.3g}, {hi:.3g}]")
              for i, (k, (lo, hi)) in enumerate(u.intervals(level).items())]
     lines = [f"  {level:.0%} intervals ({u.default}): " + ", ".join(parts)]
     lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
