@@ -28,7 +28,6 @@ import itertools
 import queue
 import threading
 import weakref
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -83,9 +82,9 @@ def _objective(x, token):
 
 
 class AskTellState:
-    """Where a run driven by ask/tell stands: the batch waiting for values (``None`` once
-    the run has finished), and the values told so far. Every :func:`tell` returns a new
-    state; the older ones are spent."""
+    """Where a run driven by ask/tell stands: the batch waiting for values (``pending``,
+    ``None`` once the run has finished) and the number of values told so far. Every
+    :func:`tell` returns a new state; the older ones are spent."""
 
     def __init__(self, run: "_Run", event, num_told: int):
         self._run, self._event, self.num_told = run, event, num_told
@@ -139,6 +138,7 @@ def _work(solver, lower, upper, key, x0, token, channel: _Channel, x64: bool):
 #: still in its first call (whose objective waits for ``tell``), so two open runs would
 #: block each other.
 _EXECUTABLES: dict = {}
+_EXECUTABLES_MAX = 32
 
 
 def _executable(args):
@@ -153,6 +153,8 @@ def _executable(args):
         compiled = _xla.filter_jit(_run, _xla.resolve("auto", "solver")).lower(*args).compile()
         if sig is None:
             return compiled
+        if len(_EXECUTABLES) >= _EXECUTABLES_MAX:
+            _EXECUTABLES.pop(next(iter(_EXECUTABLES)))
         _EXECUTABLES[sig] = compiled
     return _EXECUTABLES[sig]
 
@@ -232,4 +234,4 @@ def result(st: AskTellState) -> Solution:
                     history=History.from_arrays(evals[None], f[None]))
 
 
-__all__: list[Any] = ["AskTellState", "ask", "done", "result", "start", "tell"]
+__all__ = ["AskTellState", "ask", "done", "result", "start", "tell"]
