@@ -456,6 +456,13 @@ def _motion_residuals(fit, data):
     if unknown or "y" not in mech or len(mech["y"]) != len(names):
         raise ValueError(f"motion fit with search coordinates {names} not understood by the "
                          f"uncertainty code (mechanics it knows: {sorted(_MECHANICS)})")
+    # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
+    records = (mech.get("records") or {}).get("train")
+    error, horizon = mech.get("error", "position"), mech.get("horizon")
+    if records is not None and (sum(records) != n or error != "position" or horizon is not None):
+        raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
+    if not hasattr(data, "net_force"):
+        raise ValueError(f"a motion fit's uncertainty needs its MotionData, got {type(data).__name__}")
     force = np.asarray(data.net_force[:n])
     x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
     error, horizon = mech.get("error", "position"), mech.get("horizon")
@@ -486,6 +493,11 @@ def _motion_residuals(fit, data):
             states = track_states(step, theta, vs, dt)
             xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, int(horizon))
             return xh - xs[int(horizon):]
+        if records is not None:  # whole training records, each run from its own start
+            cuts = np.cumsum((0,) + tuple(records))
+            return jnp.concatenate([
+                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
+                for a, b in zip(cuts[:-1], cuts[1:])])
         out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
         if error == "position":
             return out["x"] - xs
@@ -497,6 +509,8 @@ def _motion_residuals(fit, data):
     if horizon is not None:
         unit = f"{int(horizon)}-step position [m]"
     segs = (n,) if error != "both" or horizon is not None else (n, n)
+    if records is not None:
+        segs = tuple(records)
     y0 = np.asarray(mech["y"], np.float64)
     kinds = tuple(c[2] for c in _coords(fit.model)) + tuple(_MECHANICS[e][1] for e in extra)
     phys = tuple(c[1] for c in _coords(fit.model)) + tuple(_MECHANICS[e][0] for e in extra)
