@@ -421,13 +421,23 @@ def _one_record(data, n_train: int):
         raise ValueError(f"the record ({v.shape[0]} velocity, {f.shape[0]} friction samples) does not hold "
                          f"the fit's {n_train} training samples")
 
-    class _Rec:  # the few fields the residuals read; channels (p1, p2) from the record
-        def __getattr__(self, name):
-            return getattr(rec, name)
+    return _Window(v, f, int(n_train), rec)
 
-    out = _Rec() if rec is not None else type("_Rec", (), {})()
-    out.velocity, out.friction, out.n_train = v, f, int(n_train)
-    return out
+
+@dataclasses.dataclass(frozen=True)
+class _Window:
+    """A record's velocity, friction and training length; other attributes (a Cylinder's
+    chamber pressures) come from the record it was read from, if any."""
+
+    velocity: np.ndarray
+    friction: np.ndarray
+    n_train: int
+    source: Any = None
+
+    def __getattr__(self, name):
+        if name == "source":  # not set yet (copying): no recursion
+            raise AttributeError(name)
+        return getattr(self.source, name)
 
 
 def _is_triplet(data) -> bool:
