@@ -615,7 +615,8 @@ def identify_motion(
             train on whole records (``train=[...]``).
         key: PRNG key or int seed. Same key, same fit.
         mass: known moving mass [kg], or a ``(low, high)`` range to identify it (log search).
-        train: with ``data``: the training fraction or sample count (default 0.8). Without:
+        train: with ``data``: the training fraction or sample count (default 0.8; ``1.0`` or
+            the record's length trains on the whole record, with no held-back block). Without:
             a record, a list or a mapping name -> record, each used whole for training
             (the cost pools them, each simulated from its own first sample).
         valid: with ``train=[...]``: a record or a list of records, each used whole for
