@@ -58,6 +58,7 @@ def parse(argv=None):
     p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
     p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
     p.add_argument("--out", default=None)
+    p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
     return p.parse_args(argv)
 
 
@@ -123,6 +124,34 @@ def measure(model: str, data, k: int, rounds: int, quick: bool) -> dict:
     }
 
 
+def _fmt(x) -> str:
+    return f"{x:.3g}" if isinstance(x, float) else str(x)
+
+
+def report(rows, args, desc: str) -> str:
+    """The Markdown page of a run (``rows`` as :func:`measure` returns them)."""
+    columns = ["model", "K", "one_fit_s", "ensemble_s", "ensemble_over_one", "loop_s", "loop_over_ensemble",
+               "ensemble_over_one_cpu", "member_max_rel_dJ", "first_one_s", "first_ensemble_s"]
+    headers = ["model", "K", "one fit [s]", "ensemble [s]", "ensemble / one fit", "loop of K [s]",
+               "loop / ensemble", "ensemble / one fit, CPU time", "members: max rel. ΔJ",
+               "first fit [s]", "first ensemble [s]"]
+    return "\n".join([
+        f"# Ensembles against a loop of single fits ({args.record})",
+        "",
+        f"Record: {desc}. Every `identify` default{' (--quick: tiny budgets)' if args.quick else ''}, "
+        f"float32. Command: `python benchmarks/ensembles.py --record {args.record}"
+        f"{' --quick' if args.quick else ''}`.",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"jax {jax.__version__} on {jax.default_backend()}. Warm wall times, medians over "
+        f"{args.rounds} round(s); 'CPU time' is the process's CPU seconds (steadier on a loaded machine)."
+        + (f" {args.note}" if args.note else ""),
+        "'members: max rel. ΔJ': member i's training cost J against the single fit with key i.",
+        "",
+        markdown_table(rows, columns, headers=headers, fmt=_fmt),
+        "",
+    ])
+
+
 def main(argv=None):
     args = parse(argv)
     data, desc = load(args)
@@ -138,31 +167,12 @@ def main(argv=None):
                 row = measure(model, data, k, args.rounds, args.quick)
                 rows.append(row)
                 print(f"{model} K={k}: one fit {row['one_fit_s']:.2f} s, ensemble {row['ensemble_s']:.2f} s "
-                      f"({row['ensemble_over_one']:.2f}x one fit, loop/ensemble "
-                      f"{row['loop_over_ensemble']:.2f}), members' max rel dJ {row['member_max_rel_dJ']:.2g}",
-                      flush=True)
+                      f"({row['ensemble_over_one']:.2f}x one fit, {row['ensemble_over_one_cpu']:.2f}x in CPU "
+                      f"time, loop/ensemble {row['loop_over_ensemble']:.2f}), members' max rel dJ "
+                      f"{row['member_max_rel_dJ']:.2g}", flush=True)
     stem = f"ensembles_{args.record}"
     write_csv(rows, out / f"{stem}.csv")
-    columns = ["model", "K", "one_fit_s", "ensemble_s", "ensemble_over_one", "loop_s", "loop_over_ensemble",
-               "ensemble_over_one_cpu", "member_max_rel_dJ", "first_one_s", "first_ensemble_s"]
-    headers = ["model", "K", "one fit [s]", "ensemble [s]", "ensemble / one fit", "loop of K [s]",
-               "loop / ensemble", "same, CPU time", "members: max rel. ΔJ", "first fit [s]",
-               "first ensemble [s]"]
-    text = "\n".join([
-        f"# Ensembles against a loop of single fits ({args.record})",
-        "",
-        f"Record: {desc}. Every `identify` default{' (--quick: tiny budgets)' if args.quick else ''}, "
-        f"float32. Command: `python benchmarks/ensembles.py --record {args.record}"
-        f"{' --quick' if args.quick else ''}`.",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"jax {jax.__version__} on {jax.default_backend()}. Warm wall times, medians over "
-        f"{args.rounds} round(s); 'CPU time' is the process's CPU seconds (steadier on a loaded machine).",
-        "'members: max rel. ΔJ': member i's training cost J against the single fit with key i.",
-        "",
-        markdown_table(rows, columns, headers=headers),
-        "",
-    ])
-    (out / f"{stem}.md").write_text(text)
+    (out / f"{stem}.md").write_text(report(rows, args, desc))
     print(f"wrote {out / stem}.md")
     return 0
 
