@@ -125,6 +125,9 @@ def test_whole_record_trains_with_train_one():
     fit = _fit(data=rec, train=1.0)
     assert fit.n_train == 1000 and "valid" not in fit.metrics
     assert fit.metrics["train"]["fit_percent"] > 99.0
+    # a held-back block shorter than the k-step horizon gets a shorter k, not an error
+    short = _fit(data=rec, train=997)
+    assert short.metrics["horizon"] == 2 and np.isfinite(short.metrics["valid_kstep"]["rmse_mm"])
 
 
 def test_records_form_refuses_mixed_and_missing_input():
