@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _xla
 from .. import models as _models
 from ..fit import Fit
 from ..models import AbstractFrictionModel
@@ -338,6 +339,7 @@ def identify(
         theta0 = check_theta0(model, theta0, bounds)
         keys = resolve_keys(key, keys)
         dtype = search_dtype(dtype)
+        _xla.resolve(compiler_options, "rollout")  # checked here; each stage resolves its own
 
         objective = objective_stage(model, records, dtype, head)
         sol, timings = global_stage(objective, solver, bounds, keys, theta0=theta0, dtype=dtype,
