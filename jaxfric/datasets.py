@@ -175,7 +175,7 @@ def emps(local=None, *, download: bool = True):
     """The EMPS estimation recording (24 841 samples at 1 kHz) as a
     :class:`jaxfric.rig.EMPSRecording`; :func:`jaxfric.rig.emps_friction_data` turns it
     into friction by the benchmark's recipe."""
-    from jaxfric import rig
+    from . import rig
 
     return rig.load_emps(emps_path(local, download=download))
 
@@ -208,7 +208,7 @@ def pneumatic(seal: str = "O-ring", bar: int = 3, local=None, *, download: bool 
     """
     import warnings
 
-    from jaxfric import rig
+    from . import rig
 
     path = pneumatic_path(seal, bar, local, download=download)
     with warnings.catch_warnings():

@@ -39,6 +39,7 @@ import numpy as np
 
 from . import models as _models
 from ._warnings import ExtrapolationWarning, ResamplingWarning
+from .covariance import ParameterUncertainty, _check_level
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 
@@ -238,10 +239,11 @@ class Fit:
                                else (float(velocity_range[0]), float(velocity_range[1])))
         self.diagnostics = {"on_bound": [], "unidentifiable": [], **dict(diagnostics or {})}
         self.ensemble = None if ensemble is None else dict(ensemble)
-        # parameter uncertainty (jaxfric.uncertainty): given, or computed on first use
-        # from the training data identify attaches (never saved: only the result is)
+        # parameter uncertainty (jaxfric.uncertainty): given, or computed on first use by
+        # the zero-argument callable identify attaches with the training data (never
+        # saved: only the result is); jaxfric.uncertainty sits above this module
         self._uncertainty = uncertainty
-        self._training_data = None
+        self._uncertainty_source = None
 
     # ---------------------------------------------------------- uncertainty
     @property
@@ -250,12 +252,10 @@ class Fit:
         parameters (Newey–West and Jacobian covariances, docs/uncertainty.md), or
         ``None`` (a network; a fit loaded from a file without it). Computed on first
         use from the training data :func:`jaxfric.identify` attached."""
-        if self._uncertainty is None and self._training_data is not None:
-            from .uncertainty import parameter_uncertainty
-
-            data, self._training_data = self._training_data, None
+        if self._uncertainty is None and self._uncertainty_source is not None:
+            compute, self._uncertainty_source = self._uncertainty_source, None
             try:
-                self._uncertainty = parameter_uncertainty(self, data, method=("hac", "jacobian"))
+                self._uncertainty = compute()
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
                 # a fit stays usable (and savable) without its intervals; say why
                 self.diagnostics["uncertainty_error"] = str(err)
@@ -288,13 +288,35 @@ class Fit:
         entries near ±1 mark combinations the data fix while the parts stay free."""
         return self._need_uncertainty().correlation()
 
-    def prediction_interval(self, velocity, level: float = 0.95, dt=None, inputs=None, method=None):
-        """``(prediction, low, high)`` [N]: the band a new measurement falls in with
-        probability ``level`` (:func:`jaxfric.uncertainty.prediction_interval`)."""
-        from .uncertainty import prediction_interval
+    def prediction_interval(self, velocity, level: float = 0.95, dt=None, inputs=None, method=None,
+                            noise: bool = True):
+        """``(prediction, low, high)`` [N] for a velocity record: ŷ ± t sqrt(j Σ jᵀ + s²),
+        j = ∂ŷ/∂θ at the fit (``jax.jacfwd``), Σ the fit's covariance (``method``, default
+        the fit's) with each parameter's interval capped at its search box
+        (:meth:`jaxfric.covariance.ParameterUncertainty.box_capped`: an undetermined
+        parameter moves inside its box, not by its linearised ±10⁹), s² its residual
+        variance (left out with ``noise=False``: then the band is the confidence band of
+        the mean prediction only). The band of a new *measurement* assumes the training
+        residual variance holds on the new record (docs/uncertainty.md)."""
+        _check_level(level)
+        u = self._need_uncertainty()
+        if "motion" in self.settings:
+            raise ValueError("prediction_interval gives friction bands of a force-balance fit; a motion "
+                             "fit's uncertainty is about position")
+        method = u._method(method)
+        theta = jnp.asarray(self.theta)
+        dt = self.dt if dt is None else dt
 
-        self._need_uncertainty()
-        return prediction_interval(self, velocity, level, dt=dt, inputs=inputs, method=method)
+        def f(th):
+            return predict(self.model, th, (self.velocity_scaler, self.friction_scaler), velocity, dt, inputs)
+
+        y, jvp_cols = f(theta), jax.jacfwd(f)(theta)
+        cov = u.box_capped(method, level)
+        var = jnp.einsum("ta,ab,tb->t", jvp_cols, jnp.asarray(cov, theta.dtype), jvp_cols)
+        var = np.asarray(var, np.float64) + (u.s2 if noise else 0.0)
+        half = u.t_quantile(level) * np.sqrt(np.clip(var, 0.0, None))
+        y = np.asarray(y, np.float64)
+        return y, y - half, y + half
 
     # ------------------------------------------------------------------ use
     @property
@@ -663,8 +685,6 @@ def load_fit(path) -> Fit:
             raise ValueError(f"{path}: the fit's sample time dt = {dt!r} is not a positive number")
         uncertainty = header.get("uncertainty")
         if uncertainty is not None:
-            from .uncertainty import ParameterUncertainty
-
             uncertainty = ParameterUncertainty.from_json(uncertainty)
         ensemble = header.get("ensemble")
         if ensemble is not None and "ensemble_theta" in arrays:

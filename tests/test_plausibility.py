@@ -58,7 +58,7 @@ def test_emps_like_lugre_warns_with_evidence(tmp_path):
     assert found["presliding_unvisited"]["evidence"]["range_m"] == pytest.approx(20.0 / 1e9)
     assert len(rec) == 3 and "Fs/Fc_neg = 3" in str(rec[0].message)
     assert "! implausible Fs_neg" in fit.summary()
-    fit._training_data = None          # no uncertainty needed for the file check
+    fit._uncertainty_source = None     # no uncertainty needed for the file check
     fit.save(tmp_path / "f.npz")
     assert load_fit(tmp_path / "f.npz").diagnostics["implausible"] == fit.diagnostics["implausible"]
 

@@ -57,7 +57,7 @@ def test_motion_jacobian_matches_finite_differences():
 def test_motion_fit_shows_intervals():
     with jax.enable_x64(True):
         _, fit, data, _ = _motion_fit()
-        fit._training_data = data
+        fit._uncertainty_source = lambda: parameter_uncertainty(fit, data)
         iv = fit.intervals(0.95)
         assert iv["Fc"][0] < 12.0 < iv["Fc"][1] and iv["mass"][0] < 2.5 < iv["mass"][1]
         assert "uncertainty (hac" in fit.summary()
