@@ -143,11 +143,8 @@ def _check_against_single(single, out: Path, outcomes):
 def test_jax_distributed_two_processes_equal_one(single, tmp_path):
     out = tmp_path / "distributed"
     outcomes = _two_processes("distributed", out)
-    if all(rc == 3 and LAYOUT_DEFECT in o for rc, o, _ in outcomes):
-        # Known: jaxfric.optim's default layout (jax.devices()) spans every process, so one
-        # process's run would be compiled as a program of both; the sweep refuses to run.
-        msg = next(o for _, o, _ in outcomes).split(LAYOUT_DEFECT, 1)[1].strip()
-        pytest.xfail(f"optimiser lays runs over other processes' devices: {msg}")
+    # each process lays its runs over its own devices (jax.local_devices()); a layout over
+    # both processes would exit 3 with LAYOUT_DEFECT and fail the equality check below
     table = _check_against_single(single, out, outcomes)
     # process 0 wrote the whole table after the barrier
     assert _rows(table) == _rows(single.rows)

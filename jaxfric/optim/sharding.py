@@ -1,4 +1,4 @@
-"""Spreading the work over every device (``jax.devices()``) without code changes.
+"""Spreading the work over this process's devices (``jax.local_devices()``) without code changes.
 
 Two kinds of parallelism, both expressed with ``jax.sharding`` so XLA inserts the
 communication:
@@ -13,11 +13,11 @@ With one device both are no-ops. Results do not depend on the layout: the same
 key gives the same solution sharded or not (up to floating-point reassociation in
 reductions, which the population split does not introduce).
 
-Several hosts: start every process with ``jax.distributed.initialize()`` (on
-SLURM/TPU pods the arguments are discovered; otherwise pass
-``coordinator_address``, ``num_processes`` and ``process_id``) and then call the
-same ``minimise``/``minimise_many``: ``jax.devices()`` then lists every host's
-devices and the mesh spans them all.
+Several hosts: under ``jax.distributed.initialize()`` each process lays its own runs
+over its own devices (``jax.local_devices()``): a run is never one program of several
+processes, whose keys would mix. Split the independent runs across processes with
+:func:`jaxfric.sweep` (``process_index``/``process_count``, or its ``distributed``
+mode; docs/scale.md).
 """
 
 from __future__ import annotations
@@ -55,16 +55,16 @@ class Layout(eqx.Module):
 
 
 def resolve_devices(devices) -> Layout | None:
-    """``None`` → every device if there is more than one; ``False``/``1`` → none;
+    """``None`` → every device of this process if there is more than one; ``False``/``1`` → none;
     a sequence of devices → those."""
     if devices is False:
         return None
     if devices is None:
-        devs: Sequence = jax.devices()
+        devs: Sequence = jax.local_devices()
     elif isinstance(devices, int) and not isinstance(devices, bool):
         if devices < 1:
             raise ValueError(f"devices must be >= 1, got {devices}")
-        devs = jax.devices()[:devices]
+        devs = jax.local_devices()[:devices]
     else:
         if isinstance(devices, (str, bytes)) or not hasattr(devices, "__iter__"):
             raise ValueError(
