@@ -24,6 +24,7 @@ may be open at once.
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import queue
 import threading
@@ -54,6 +55,7 @@ class _Channel:
         self.back: queue.Queue = queue.Queue()  # values, or None: abandoned
         self.one_at_a_time = threading.Lock()
         self.abandoned = False
+        self.thread: threading.Thread | None = None
 
     def evaluate(self, X):
         with self.one_at_a_time:
@@ -107,12 +109,17 @@ class _Run:
         args = (solver, lower, upper, key, x0, self.token, self.channel, x64)
         self.thread = threading.Thread(target=_work, args=args, daemon=True,
                                        name=f"jaxfric-ask-tell-{self.token}")
+        self.channel.thread = self.thread
         self.thread.start()
-        # not at interpreter exit: the run's thread is a daemon and may just stop there
+        # at interpreter exit _abandon_all stops every open run instead
         weakref.finalize(self, _abandon, self.token, self.channel).atexit = False
 
     def next_event(self):
         kind, payload = self.channel.out.get()
+        if kind != "ask":
+            # the worker has left the compiled run: let it finish before the caller goes
+            # on, so no thread of ours is inside XLA when the interpreter shuts down
+            self.thread.join()
         if kind == "error":
             raise payload
         return kind, payload
@@ -162,6 +169,24 @@ def _executable(args):
 def _abandon(token, channel: _Channel):
     if token in _CHANNELS:
         channel.back.put(None)
+
+
+#: How long interpreter exit waits for an abandoned run to answer its remaining batches
+#: with +inf and leave the compiled run.
+_EXIT_JOIN_S = 30.0
+
+
+@atexit.register
+def _abandon_all():
+    """Stop the runs still open at interpreter exit. A worker thread left waiting inside
+    the compiled run (in a ``pure_callback``) would be unwound through XLA's frames when
+    the interpreter finalises, which aborts the process."""
+    open_runs = list(_CHANNELS.items())
+    for token, channel in open_runs:
+        _abandon(token, channel)
+    for _, channel in open_runs:
+        if channel.thread is not None:
+            channel.thread.join(_EXIT_JOIN_S)
 
 
 def start(solver, lower, upper, key, x0=None) -> AskTellState:
