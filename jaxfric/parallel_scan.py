@@ -253,15 +253,9 @@ def simulate_motion_parallel(step, theta, mass, force, dt, x0, v0, state0=None, 
     ``(x, v, friction state)`` -- 2 states for static maps, 3 for LuGre and Dahl --
     solved by :func:`deer_scan` with dense Jacobians. Same arguments and outputs
     (``{"x", "v", "friction"}``, sample k before the step driven by ``force[k]``)."""
-    from .motion._forward import _advance
+    from .motion._forward import _advance, _start
 
-    force = jnp.asarray(force)
-    dtype = jnp.result_type(force, jnp.asarray(theta), float)
-    force = force.astype(dtype)
-    dt = jnp.asarray(dt, dtype)
-    inv_m = 1.0 / jnp.asarray(mass, dtype)
-    x0, v0 = jnp.asarray(x0, dtype), jnp.asarray(v0, dtype)
-    s0 = step.init(theta, v0, dt) if state0 is None else state0
+    force, dt, inv_m, x0, v0, s0 = _start(step, theta, mass, force, dt, x0, v0, state0)
 
     def one(carry, u):
         x, v, s = carry

@@ -166,6 +166,8 @@ SLOW_TESTS = {
 # costs balance, never a test.
 LONGEST_FIRST = [
     "test_optim_protocol.py", "test_cli.py", "test_readme.py", "test_notebooks.py", "test_reproducibility.py",
+    "test_multihost.py", "test_motion_api.py", "test_sweep.py", "test_uncertainty.py", "test_parallel_scan.py",
+    "test_identify_stages.py", "test_uncertainty_motion.py", "test_uncertainty_report.py",
     "test_optim_properties.py", "test_records.py", "test_evosax_adapter.py", "test_optim_api.py",
     "test_compiler_options.py", "test_models_scan.py", "test_nelder_mead_optimistix.py",
     "test_rig_simulator.py", "test_identify.py", "test_reliability.py", "test_motion.py",

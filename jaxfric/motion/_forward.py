@@ -56,6 +56,20 @@ def _advance(step: FrictionStep, theta, inv_m, dt, x, v, s, u):
     return x_new, v_new, s_new, f_now
 
 
+def _start(step, theta, mass, force, dt, x0, v0, state0):
+    """The free run's inputs in one dtype (the force's and theta's, at least float) and its
+    initial state ``(x0, v0, friction state)``; the friction state defaults to
+    ``step.init(theta, v0, dt)``."""
+    force = jnp.asarray(force)
+    dtype = jnp.result_type(force, jnp.asarray(theta), float)
+    force = force.astype(dtype)
+    dt = jnp.asarray(dt, dtype)
+    inv_m = 1.0 / jnp.asarray(mass, dtype)
+    x0, v0 = jnp.asarray(x0, dtype), jnp.asarray(v0, dtype)
+    s0 = step.init(theta, v0, dt) if state0 is None else state0
+    return force, dt, inv_m, x0, v0, s0
+
+
 def simulate_motion(step: FrictionStep, theta, mass, force, dt, x0, v0, state0=None) -> dict:
     """Free-run position, velocity and friction for the net force ``force`` [N], §13.2.
 
@@ -66,13 +80,7 @@ def simulate_motion(step: FrictionStep, theta, mass, force, dt, x0, v0, state0=N
     each ``(T,)``, sample k before the step driven by ``force[k]``. Pure JAX: jit,
     grad and vmap work.
     """
-    force = jnp.asarray(force)
-    dtype = jnp.result_type(force, jnp.asarray(theta), float)
-    force = force.astype(dtype)
-    dt = jnp.asarray(dt, dtype)
-    inv_m = 1.0 / jnp.asarray(mass, dtype)
-    x0, v0 = jnp.asarray(x0, dtype), jnp.asarray(v0, dtype)
-    s0 = step.init(theta, v0, dt) if state0 is None else state0
+    force, dt, inv_m, x0, v0, s0 = _start(step, theta, mass, force, dt, x0, v0, state0)
 
     def body(carry, u):
         x, v, s = carry
