@@ -196,6 +196,19 @@ def pytest_collection_modifyitems(config, items):
 RESIDENT_LIMIT_MB = 600
 
 
+@pytest.fixture(autouse=True)
+def _x64_as_it_was():
+    """A test that runs the command line in this process (``main([..., "--x64"])``) makes
+    the CLI's start-up choice of float64 for the whole process; put it back, so that the
+    tests after it in the same worker run in the precision they were written for."""
+    import jax
+
+    before = bool(jax.config.jax_enable_x64)
+    yield
+    if bool(jax.config.jax_enable_x64) != before:
+        jax.config.update("jax_enable_x64", before)
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _fresh_compilation_caches():
     """Every test module ends by dropping JAX's compiled programs, so that what one module
