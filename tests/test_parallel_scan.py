@@ -151,15 +151,22 @@ def test_elman_rollout_refuses_other_models():
 MOTION_MODELS = [M.Coulomb(), M.Stribeck(), M.LuGre(asymmetric=True, offset=True), M.Dahl(viscous=True)]
 
 
-@pytest.mark.parametrize("model", MOTION_MODELS, ids=lambda m: repr(m).split("(")[0] + str(len(m.param_names)))
-def test_motion_states_in_parallel_equal_the_scan(model):
-    dt, T = 1e-3, 400
+def _motion_case(model, T=400):
+    """A two-tone force on 5 kg from (0.01 m, 0.02 m/s), the model's parameters 40 % into
+    its data-centred box, and the sequential scan's free run: ``(step, theta, force, dt, T,
+    want)``."""
+    dt = 1e-3
     t = np.arange(T) * dt
     force = 30.0 * np.sin(2 * np.pi * 1.3 * t) + 5.0 * np.sin(2 * np.pi * 7.0 * t)
     lo, hi = model.bounds(model.search_box(None, 0.1 * np.sin(t), force))
     theta = jnp.asarray(lo + 0.4 * (hi - lo))
     step = friction_step(model)
-    want = simulate_motion(step, theta, 5.0, force, dt, 0.01, 0.02)
+    return step, theta, force, dt, T, simulate_motion(step, theta, 5.0, force, dt, 0.01, 0.02)
+
+
+@pytest.mark.parametrize("model", MOTION_MODELS, ids=lambda m: repr(m).split("(")[0] + str(len(m.param_names)))
+def test_motion_states_in_parallel_equal_the_scan(model):
+    step, theta, force, dt, T, want = _motion_case(model)
     got, info = jax.jit(lambda th: simulate_motion_parallel(
         step, th, 5.0, force, dt, 0.01, 0.02, return_info=True, max_iterations=T))(theta)
     assert bool(info.converged) and not bool(info.fell_back)
@@ -170,13 +177,7 @@ def test_motion_states_in_parallel_equal_the_scan(model):
 @pytest.mark.parametrize("chunk", [64, 150])  # 150 does not divide 400: a padded tail
 def test_chunked_motion_equals_the_scan(chunk):
     model = M.LuGre()
-    dt, T = 1e-3, 400
-    t = np.arange(T) * dt
-    force = 30.0 * np.sin(2 * np.pi * 1.3 * t) + 5.0 * np.sin(2 * np.pi * 7.0 * t)
-    lo, hi = model.bounds(model.search_box(None, 0.1 * np.sin(t), force))
-    theta = jnp.asarray(lo + 0.4 * (hi - lo))
-    step = friction_step(model)
-    want = simulate_motion(step, theta, 5.0, force, dt, 0.01, 0.02)
+    step, theta, force, dt, T, want = _motion_case(model)
     got, info = simulate_motion_parallel(step, theta, 5.0, force, dt, 0.01, 0.02, chunk=chunk,
                                          return_info=True)
     assert bool(info.converged) and not bool(info.fell_back)
