@@ -77,8 +77,10 @@ fi
 } > "$SUMMARY"
 
 # step NAME PLATFORM(gpu|cpu) TIMEOUT_S COMMAND...
+STEPS=${GPU_CHECK_STEPS:-emps_identify,parallel_scan,sweep,speed_optim,table1,ensemble}
 step() {
   local name=$1 platform=$2 limit=$3; shift 3
+  case ",$STEPS," in *",$name,"*) ;; *) return ;; esac
   local now=$(( $(date +%s) - START ))
   if [ $now -ge "$BUDGET" ]; then
     echo "| $name | $platform | skipped (budget) | |" >> "$SUMMARY"; return
@@ -155,6 +157,45 @@ for plat in gpu cpu; do
     [ -f "$f" ] && cp "$f" "$RES/table1_${tag}.${f##*.}"
   done
 done
+
+# 6. an ensemble of K members against one fit (identify(..., keys=K) beside identify(..., key=0))
+cat > "$TMP/ensemble.py" <<'EOF2'
+import csv, os, sys, time, warnings
+import jax
+import jaxfric
+from jaxfric import rig
+
+tag, res, dry, k = sys.argv[1], sys.argv[2], sys.argv[3] == "1", int(sys.argv[4])
+d = jax.devices()[0]
+device = f"{getattr(d, 'device_kind', d.platform)} ({d.platform})"
+path = os.environ.get("JAXFRIC_EMPS")
+if not path:
+    print("no EMPS file: step skipped"); sys.exit(0)
+data = rig.emps_friction_data(rig.load_emps(path))
+opts = {}
+if dry:
+    data = jaxfric.FrictionData.from_arrays(data.velocity[:3000], data.friction[:3000], data.dt)
+    opts = {"solver": jaxfric.MAPSO(lattice_size=3, num_generations=2),
+            "refine": jaxfric.GradientRefinement(method="bfgs", max_steps=5)}
+rows = []
+out = os.path.join(res, f"ensemble_emps_{tag}.csv")
+for model in ("elman", "lugre"):
+    for label, kw in (("one fit", {"key": 0}), (f"K={k}", {"keys": k})):
+        for call in ("first", "second"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                t0 = time.perf_counter()
+                fit = jaxfric.identify(model, data, **kw, **opts)
+                wall = time.perf_counter() - t0
+            rows.append({"device": device, "model": model, "run": label, "call": call,
+                         "wall_s": round(wall, 2), "train_mse_percent": fit.metrics["train"]["mse_percent"], "valid_mse_percent": fit.metrics["valid"]["mse_percent"], "dry_run": dry})
+            print(rows[-1], flush=True)
+            with open(out, "w", newline="") as fh:  # after every row: a timeout keeps what ran
+                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                w.writeheader(); w.writerows(rows)
+EOF2
+if [ $DRY = 1 ]; then KE=4; else KE=64; fi
+step ensemble gpu 200 $PY "$TMP/ensemble.py" gpu "$RES" $DRY $KE
 
 echo >> "$SUMMARY"
 echo "Whole script: $(( $(date +%s) - START )) s." >> "$SUMMARY"
