@@ -1,26 +1,40 @@
 """Parameter uncertainty of a physical friction fit (docs/uncertainty.md).
 
-The residual vector r(θ) of each kind of fit (friction prediction minus measured friction
-for :func:`jaxfric.identify`, simulated minus measured position for
-:func:`jaxfric.identify_motion`), its Jacobian J = ∂r/∂θ at θ̂ (``jax.jacfwd``), and the
-covariance estimators of :mod:`jaxfric.covariance` (Jacobian, Newey–West, block
-bootstrap) applied to them; the plausibility rules; what the report and CLI show.
+The residual vector r(θ) of each kind of fit, its Jacobian J = ∂r/∂θ at θ̂
+(``jax.jacfwd``), and the covariance estimators of :mod:`jaxfric.covariance` (Jacobian,
+Newey–West, block bootstrap) applied to them; the plausibility rules; what the report
+and CLI show.
+
+Each kind of fit says how its residuals are built (:class:`FitKind`): a force-balance
+:class:`jaxfric.Fit` here (friction prediction minus measured friction), a
+:class:`jaxfric.motion.MotionFit` in :mod:`jaxfric.motion` (simulated minus measured
+position), which registers it with :func:`register_fit_kind`. A record type defined
+above this module (``jaxfric.identification.RecordSet``) registers how to read its
+training records with :func:`register_training_records`. Both are looked up along the
+class's MRO, and registered by the module that defines the class, so the registration
+has run whenever an instance exists; this module imports nothing above it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
+from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._warnings import ExtrapolationWarning
 from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_REPLICATES, METHODS,
                          MAX_REPORT_CORRELATION, ParameterUncertainty, _check_level, _check_methods,
                          andrews_bandwidth, block_bootstrap_covariance, hac_covariance,
                          jacobian_covariance)
+from .fit import Fit, predict
+from .plausibility import check_plausibility, warn_implausible
+from .records import FrictionData, as_channel
 
 __all__ = [
     "METHODS",
@@ -35,25 +49,87 @@ __all__ = [
     "prediction_interval",
 ]
 
-# ----------------------------------------------------------------------- residuals
+
+# ----------------------------------------------------------------------- fit kinds
+@dataclasses.dataclass(frozen=True)
+class Residuals:
+    """A fit's training residuals r(y) (``fn``: ``(p,) -> (n,)``) in its search
+    coordinates ``y`` (linearised at ``y``), the lengths of the independent ``segments``
+    r is made of (no Newey–West lag crosses one), the ``unit`` of r, and per coordinate
+    its physical ``names``, ``kinds`` (``"log10"``, ``"linear"``, ...) and search box."""
+
+    fn: Callable
+    y: Any
+    segments: tuple[int, ...]
+    unit: str
+    names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class FitKind:
+    """How the uncertainty code reads one class of fit: ``residuals(fit, data)`` gives its
+    :class:`Residuals` over the training data, ``train_velocity(fit, data)`` the
+    training velocity the plausibility rules look at."""
+
+    residuals: Callable[[Any, Any], Residuals]
+    train_velocity: Callable[[Any, Any], np.ndarray]
+
+
+_FIT_KINDS: dict[type, FitKind] = {}
+_TRAINING_RECORDS: dict[type, Callable[[Any], tuple]] = {}
+
+
+def register_fit_kind(fit_type: type, kind: FitKind) -> None:
+    """Use ``kind`` for fits of ``fit_type`` and its subclasses (unless they register
+    their own)."""
+    _FIT_KINDS[fit_type] = kind
+
+
+def register_training_records(data_type: type, records: Callable[[Any], tuple]) -> None:
+    """Read the training records of a force-balance fit's data of ``data_type`` with
+    ``records(data)``: records (:class:`jaxfric.FrictionData`) whose first ``n_train``
+    samples trained the fit."""
+    _TRAINING_RECORDS[data_type] = records
+
+
+def _registered(registry: dict, obj):
+    return next((registry[c] for c in type(obj).__mro__ if c in registry), None)
+
+
+def _fit_kind(fit) -> FitKind:
+    kind = _registered(_FIT_KINDS, fit)
+    if kind is None:
+        raise TypeError(f"no parameter uncertainty for a {type(fit).__name__}: not a jaxfric fit")
+    return kind
+
+
 def _coords(model):
     return tuple(model._coords)
 
 
-def _friction_residuals(fit, data):
-    """``(r(θ) -> (n,), segments)`` over the training samples the fit was made on."""
-    from .fit import predict
-    from .identification._data import RecordSet, as_records
+# ----------------------------------------------------------------------- force balance
+def _training_windows(fit, data) -> tuple:
+    """The records a force-balance fit was trained on, each with its training length."""
+    records = _registered(_TRAINING_RECORDS, data)
+    if records is not None:
+        return tuple(records(data))
+    if isinstance(data, (list, tuple)) and data and not _is_triplet(data):
+        return tuple(_one_record(d) for d in data)  # a list of records, each trained on whole
+    return (_one_record(data, fit.n_train),)
 
+
+def _friction_residuals(fit, data) -> Residuals:
+    """Prediction minus measured friction over the training samples the fit was made on,
+    each record run from its own initial state."""
+    if "motion" in fit.settings:
+        raise ValueError("a motion fit read as a force-balance Fit (load_fit): read it with "
+                         "jaxfric.motion.load_motion_fit for its uncertainty")
     model = fit.model
-    if isinstance(data, RecordSet):
-        recs = list(data.train_records)
-    elif isinstance(data, (list, tuple)) and data and not _is_triplet(data):
-        recs = list(as_records(None, list(data), None).train_records)
-    else:
-        recs = [_one_record(data, fit.n_train)]
     parts = []
-    for r in recs:
+    for r in _training_windows(fit, data):
         x = model.inputs_from(r, r.velocity.shape[0])
         parts.append((np.asarray(r.velocity), np.asarray(r.friction)[: r.n_train], r.n_train,
                       None if x is None else np.asarray(x)))
@@ -64,14 +140,20 @@ def _friction_residuals(fit, data):
                for v, f, n, x in parts]
         return jnp.concatenate(out)
 
-    return resid, tuple(p[2] for p in parts), "friction [N]"
+    lower, upper = (np.asarray(b, np.float64) for b in model.bounds(fit.box))
+    return Residuals(fn=resid, y=fit.theta, segments=tuple(p[2] for p in parts), unit="friction [N]",
+                     names=tuple(c[1] for c in _coords(model)), kinds=tuple(c[2] for c in _coords(model)),
+                     lower=lower, upper=upper)
 
 
-def _one_record(data, n_train: int):
-    """The record a single-record fit was trained on, with its first ``n_train`` samples
-    as the training window (a ``(velocity, friction, dt)`` tuple or a FrictionData)."""
-    from .records import FrictionData, as_channel
+def _friction_train_velocity(fit, data) -> np.ndarray:
+    return np.concatenate([np.asarray(r.velocity)[: r.n_train] for r in _training_windows(fit, data)])
 
+
+def _one_record(data, n_train: int | None = None):
+    """A record a force-balance fit was trained on (a ``(velocity, friction, dt)`` tuple or
+    a FrictionData), with its first ``n_train`` samples (default: all) as the training
+    window."""
     if _is_triplet(data):
         v, f, _ = data
         rec = None
@@ -81,6 +163,7 @@ def _one_record(data, n_train: int):
         raise ValueError("data must be the fit's training record (FrictionData or (velocity, friction, dt)), "
                          f"a list of training records, or a RecordSet; got {type(data).__name__}")
     v, f = as_channel("velocity", v), as_channel("friction", f)
+    n_train = v.shape[0] if n_train is None else n_train
     if v.shape != f.shape or v.shape[0] < n_train:
         raise ValueError(f"the record ({v.shape[0]} velocity, {f.shape[0]} friction samples) does not hold "
                          f"the fit's {n_train} training samples")
@@ -108,99 +191,11 @@ def _is_triplet(data) -> bool:
     return isinstance(data, tuple) and len(data) == 3 and np.ndim(data[2]) == 0
 
 
-#: A motion fit's mechanics coordinates: search name -> (physical name, kind).
-_MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v0": ("v0", "linear")}
+register_fit_kind(Fit, FitKind(residuals=_friction_residuals, train_velocity=_friction_train_velocity))
 
 
-def _motion_residuals(fit, data):
-    """Simulation residuals of an :func:`jaxfric.identify_motion` fit over its training
-    window (free-run position and/or velocity, each divided by its standard deviation
-    for ``error="both"``; k-step positions for a k-step fit), and the extra mechanics
-    coordinates it identified."""
-    from .motion import MotionData, k_step_positions, simulate_motion, track_states
-    from .motion._step import friction_step
-
-    mech = fit.settings["motion"]
-    if not isinstance(data, MotionData):
-        data = MotionData.from_arrays(*data) if isinstance(data, tuple) else data
-    n = fit.n_train
-    names = list(mech.get("search_names") or [])
-    extra = names[fit.model.num_params:]
-    unknown = [e for e in extra if e not in _MECHANICS]
-    if unknown or "y" not in mech or len(mech["y"]) != len(names):
-        raise ValueError(f"motion fit with search coordinates {names} not understood by the "
-                         f"uncertainty code (mechanics it knows: {sorted(_MECHANICS)})")
-    # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
-    records = (mech.get("records") or {}).get("train")
-    error, horizon = mech.get("error", "position"), mech.get("horizon")
-    if records is not None and (sum(records) != n or error != "position" or horizon is not None):
-        raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
-    if not hasattr(data, "net_force"):
-        raise ValueError(f"a motion fit's uncertainty needs its MotionData, got {type(data).__name__}")
-    force = np.asarray(data.net_force[:n])
-    x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
-    error, horizon = mech.get("error", "position"), mech.get("horizon")
-    step = friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler))
-    sx, sv = float(np.std(x)), float(max(np.std(v), 1e-300))
-    m_fixed = float(mech["mass"])
-
-    def split(y):
-        theta = y[: fit.model.num_params]
-        i = fit.model.num_params
-        mass, off, dv0 = jnp.asarray(m_fixed, y.dtype), jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
-        for name in extra:
-            if name == "log10_mass":
-                mass = 10.0 ** y[i]
-            elif name == "offset":
-                off = y[i]
-            elif name == "v0":
-                dv0 = y[i]
-            i += 1
-        return theta, mass, off, dv0
-
-    def resid(y):
-        theta, mass, off, dv0 = split(y)
-        dt = jnp.asarray(fit.dt, y.dtype)
-        u = jnp.asarray(force, y.dtype) - off
-        xs, vs = jnp.asarray(x, y.dtype), jnp.asarray(v, y.dtype)
-        if horizon is not None:
-            states = track_states(step, theta, vs, dt)
-            xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, int(horizon))
-            return xh - xs[int(horizon):]
-        if records is not None:  # whole training records, each run from its own start
-            cuts = np.cumsum((0,) + tuple(records))
-            return jnp.concatenate([
-                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
-                for a, b in zip(cuts[:-1], cuts[1:])])
-        out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
-        if error == "position":
-            return out["x"] - xs
-        if error == "velocity":
-            return out["v"] - vs
-        return jnp.concatenate([(out["x"] - xs) / sx, (out["v"] - vs) / sv])
-
-    unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
-    if horizon is not None:
-        unit = f"{int(horizon)}-step position [m]"
-    segs = (n,) if error != "both" or horizon is not None else (n, n)
-    if records is not None:
-        segs = tuple(records)
-    y0 = np.asarray(mech["y"], np.float64)
-    kinds = tuple(c[2] for c in _coords(fit.model)) + tuple(_MECHANICS[e][1] for e in extra)
-    phys = tuple(c[1] for c in _coords(fit.model)) + tuple(_MECHANICS[e][0] for e in extra)
-    lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
-    if extra:
-        sb = mech.get("search_bounds")
-        if sb is not None:
-            lower = np.asarray(sb[0], np.float64)
-            upper = np.asarray(sb[1], np.float64)
-        else:  # bounds of the mechanics were not recorded: treat them as unbounded
-            lower = np.concatenate([lower, np.full(len(extra), -np.inf)])
-            upper = np.concatenate([upper, np.full(len(extra), np.inf)])
-    return resid, segs, unit, y0, kinds, phys, lower, upper
-
-
-def _physical(fit, y, kinds, phys):
+# ----------------------------------------------------------------------- uncertainty
+def _physical(fit, y, kinds):
     """Physical value of every coordinate of ``y`` (a motion fit's mechanics appended)."""
     model = fit.model
     k = model.num_params
@@ -238,20 +233,15 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
     """
     methods = _check_methods(method)
     _check_level(level)
+    kind = _fit_kind(fit)
     if fit.model.needs_scaling:
         raise ValueError(f"{type(fit.model).__name__} is a black-box network: its weights have no "
                          "physical meaning, so no parameter intervals (use keys=K for an ensemble band)")
     if "block_bootstrap" in methods and key is None:
         raise ValueError("method 'block_bootstrap' needs key= (a PRNG key or int seed)")
-    if "motion" in fit.settings:
-        resid, segs, unit, y0, kinds, phys, lower, upper = _motion_residuals(fit, data)
-        theta = jnp.asarray(y0, jnp.asarray(fit.theta).dtype)
-    else:
-        resid, segs, unit = _friction_residuals(fit, data)
-        theta = jnp.asarray(fit.theta)
-        kinds = tuple(c[2] for c in _coords(fit.model))
-        phys = tuple(c[1] for c in _coords(fit.model))
-        lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
+    res = kind.residuals(fit, data)
+    resid, segs, kinds = res.fn, res.segments, res.kinds
+    theta = jnp.asarray(res.y, jnp.asarray(fit.theta).dtype)
     r = np.asarray(resid(theta), np.float64)
     jac = np.asarray(_jacobian(resid, theta), np.float64)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):
@@ -269,14 +259,14 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
             covs[m] = hac_covariance(jac, r, L, rcond, segs)
         else:
             covs[m] = block_bootstrap_covariance(jac, r, key, int(round(L)) + 1, replicates, rcond)
-    d = np.asarray(jax.jacfwd(lambda y: _physical(fit, y, kinds, phys))(theta), np.float64)
+    d = np.asarray(jax.jacfwd(lambda y: _physical(fit, y, kinds))(theta), np.float64)
     lag1 = float(np.dot(r[1:], r[:-1]) / max(np.dot(r, r), 1e-300))
     return ParameterUncertainty(
-        names=phys, kinds=kinds, estimate=np.asarray(_physical(fit, theta, kinds, phys), np.float64),
-        theta=np.asarray(theta, np.float64), lower=lower, upper=upper,
+        names=res.names, kinds=kinds, estimate=np.asarray(_physical(fit, theta, kinds), np.float64),
+        theta=np.asarray(theta, np.float64), lower=res.lower, upper=res.upper,
         cov_theta={m: np.asarray(c, np.float64) for m, c in covs.items()},
         cov={m: np.asarray(d @ c @ d.T, np.float64) for m, c in covs.items()},
-        n=n, dof=max(n - p, 1), s2=float(s2), rank=int(rank), bandwidth=float(L), residual=unit,
+        n=n, dof=max(n - p, 1), s2=float(s2), rank=int(rank), bandwidth=float(L), residual=res.unit,
         default=methods[0], lag1=lag1, segments=tuple(int(s) for s in segs))
 
 
@@ -297,7 +287,6 @@ def coverage(y, low, high) -> float:
     return float(np.mean((y >= low) & (y <= high)))
 
 
-
 def assess_fit(fit, data) -> None:
     """What :func:`jaxfric.identify` and :func:`jaxfric.identify_motion` run on every
     physical fit: the plausibility rules (:func:`jaxfric.plausibility.check_plausibility`,
@@ -305,16 +294,9 @@ def assess_fit(fit, data) -> None:
     :class:`~jaxfric.plausibility.PlausibilityWarning`), and the training ``data``
     attached so that :attr:`jaxfric.Fit.uncertainty` is computed on first use (the
     Jacobian's compilation costs seconds that a fit nobody inspects should not pay)."""
-    from .plausibility import check_plausibility, warn_implausible
-
     if fit.model.needs_scaling:
         return
-    if "motion" in fit.settings:
-        velocity = np.asarray(data.velocity)[: fit.n_train]
-    elif hasattr(data, "train_velocity"):
-        velocity = np.asarray(data.train_velocity)
-    else:
-        velocity = np.asarray(data[0] if _is_triplet(data) else data.velocity)[: fit.n_train]
+    velocity = _fit_kind(fit).train_velocity(fit, data)
     found = check_plausibility(fit.model, fit.params, velocity, fit.dt)
     fit.diagnostics["implausible"] = [f.to_json() for f in found]
     warn_implausible(fit.model, found, stacklevel=4)
@@ -368,10 +350,6 @@ def _g(x, fmt: str = ".3g") -> str:
 
 def _ensemble_band(fit, data) -> dict | None:
     """Measured coverage of an ensemble's min–max band (``fit.predict_band``)."""
-    import warnings
-
-    from ._warnings import ExtrapolationWarning
-
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ExtrapolationWarning)

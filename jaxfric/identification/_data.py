@@ -33,6 +33,7 @@ import numpy as np
 from ..records import (DEFAULT_TRAIN_FRACTION, MIN_VALID_SAMPLES, FrictionData, as_channel,
                        check_sample_time, split_count)
 from ..rig.simulator import RigRecord
+from ..uncertainty import register_training_records
 
 #: The one record type; identification code calls it a record.
 Record = FrictionData
@@ -278,3 +279,6 @@ def as_records(data=None, train=None, valid=None) -> RecordSet:
             "the cost and MSE % are undefined"
         )
     return rs
+
+
+register_training_records(RecordSet, lambda records: records.train_records)

@@ -27,14 +27,18 @@ from jaxtyping import Array
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
 from ..identification._api import _as_key, _history, _key_record, _stages, resolve_model
 from ..identification._objective import search_dtype
+from ..identification._refine import from_box
 from ..identification._timing import Stopwatch
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
 from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
-from ..uncertainty import assess_fit
+from ..rig.pipeline import differentiate, lowpass
+from ..uncertainty import FitKind, assess_fit, register_fit_kind
 from ._forward import k_step_positions, simulate_motion, track_states
+from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search
+from ._residuals import motion_residuals, motion_train_velocity
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
@@ -91,8 +95,6 @@ class MotionData:
         cutoff = 0.1 * fs if cutoff is None else float(cutoff)
         if not 0.0 < cutoff < 0.5 * fs:
             raise ValueError(f"cutoff must lie in (0, fs/2) = (0, {0.5 * fs}) Hz, got {cutoff}")
-        from ..rig.pipeline import differentiate, lowpass
-
         v, _ = differentiate(lowpass(x, fs, cutoff), float(dt))
         return cls(f, x, float(dt), ld, v, cutoff)
 
@@ -468,6 +470,11 @@ class MotionFit(Fit):
         return f"MotionFit({type(self.model).__name__}, mass {self.mass:.4g} kg{tail})"
 
 
+register_fit_kind(MotionFit, FitKind(
+    residuals=lambda fit, data: motion_residuals(fit, _as_motion_data(data)),
+    train_velocity=lambda fit, data: motion_train_velocity(fit, _as_motion_data(data))))
+
+
 _simulate_jit = eqx.filter_jit(simulate_motion)
 _track_jit = eqx.filter_jit(track_states)
 
@@ -805,9 +812,6 @@ def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) 
     function Levenberg–Marquardt compiled (same shapes), instead of compiling the cost again."""
     if scalar:
         return float(eqx.filter_jit(cost)(jnp.asarray(y, dtype), free))
-    from ..identification._refine import from_box
-    from ._lm import _res_jit
-
     lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
     z = from_box(jnp.asarray(y, dtype), lo, hi, 0.0)
     r = np.asarray(_res_jit(z, (residuals, lo, hi, free)), np.float64)

@@ -1,0 +1,102 @@
+"""The training residuals of an :func:`jaxfric.identify_motion` fit, for its parameter
+uncertainty (:mod:`jaxfric.uncertainty`, docs/uncertainty.md): the fit's own cost's
+residuals as a function of its search coordinates (the model's, then the mechanics it
+identified), so that their Jacobian is that of what the search minimised."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..uncertainty import Residuals
+from ._forward import k_step_positions, simulate_motion, track_states
+from ._step import friction_step
+
+#: A motion fit's mechanics coordinates: search name -> (physical name, kind).
+MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v0": ("v0", "linear")}
+
+
+def motion_residuals(fit, data) -> Residuals:
+    """Simulation residuals of a motion fit over its training window of ``data`` (a
+    :class:`jaxfric.motion.MotionData`): free-run position and/or velocity, each divided
+    by its standard deviation for ``error="both"``; k-step positions for a k-step fit;
+    each training record run from its own start for a fit on whole records."""
+    mech = fit.settings["motion"]
+    n = fit.n_train
+    names = list(mech.get("search_names") or [])
+    extra = names[fit.model.num_params:]
+    unknown = [e for e in extra if e not in MECHANICS]
+    if unknown or "y" not in mech or len(mech["y"]) != len(names):
+        raise ValueError(f"motion fit with search coordinates {names} not understood by the "
+                         f"uncertainty code (mechanics it knows: {sorted(MECHANICS)})")
+    # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
+    records = (mech.get("records") or {}).get("train")
+    error, horizon = mech.get("error", "position"), mech.get("horizon")
+    if records is not None and (sum(records) != n or error != "position" or horizon is not None):
+        raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
+    force = np.asarray(data.net_force[:n])
+    x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
+    step = friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler))
+    sx, sv = float(np.std(x)), float(max(np.std(v), 1e-300))
+    m_fixed = float(mech["mass"])
+
+    def split(y):
+        theta = y[: fit.model.num_params]
+        i = fit.model.num_params
+        mass, off, dv0 = jnp.asarray(m_fixed, y.dtype), jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
+        for name in extra:
+            if name == "log10_mass":
+                mass = 10.0 ** y[i]
+            elif name == "offset":
+                off = y[i]
+            elif name == "v0":
+                dv0 = y[i]
+            i += 1
+        return theta, mass, off, dv0
+
+    def resid(y):
+        theta, mass, off, dv0 = split(y)
+        dt = jnp.asarray(fit.dt, y.dtype)
+        u = jnp.asarray(force, y.dtype) - off
+        xs, vs = jnp.asarray(x, y.dtype), jnp.asarray(v, y.dtype)
+        if horizon is not None:
+            states = track_states(step, theta, vs, dt)
+            xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, int(horizon))
+            return xh - xs[int(horizon):]
+        if records is not None:  # whole training records, each run from its own start
+            cuts = np.cumsum((0,) + tuple(records))
+            return jnp.concatenate([
+                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
+                for a, b in zip(cuts[:-1], cuts[1:])])
+        out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
+        if error == "position":
+            return out["x"] - xs
+        if error == "velocity":
+            return out["v"] - vs
+        return jnp.concatenate([(out["x"] - xs) / sx, (out["v"] - vs) / sv])
+
+    unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
+    if horizon is not None:
+        unit = f"{int(horizon)}-step position [m]"
+    segs = (n,) if error != "both" or horizon is not None else (n, n)
+    if records is not None:
+        segs = tuple(records)
+    coords = tuple(fit.model._coords)
+    lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
+    if extra:
+        sb = mech.get("search_bounds")
+        if sb is not None:
+            lower = np.asarray(sb[0], np.float64)
+            upper = np.asarray(sb[1], np.float64)
+        else:  # bounds of the mechanics were not recorded: treat them as unbounded
+            lower = np.concatenate([lower, np.full(len(extra), -np.inf)])
+            upper = np.concatenate([upper, np.full(len(extra), np.inf)])
+    return Residuals(fn=resid, y=np.asarray(mech["y"], np.float64), segments=segs, unit=unit,
+                     names=tuple(c[1] for c in coords) + tuple(MECHANICS[e][0] for e in extra),
+                     kinds=tuple(c[2] for c in coords) + tuple(MECHANICS[e][1] for e in extra),
+                     lower=lower, upper=upper)
+
+
+def motion_train_velocity(fit, data) -> np.ndarray:
+    """The training window's velocity of ``data`` (a :class:`jaxfric.motion.MotionData`)."""
+    return np.asarray(data.velocity)[: fit.n_train]
