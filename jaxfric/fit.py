@@ -40,6 +40,7 @@ import numpy as np
 from . import models as _models
 from ._warnings import ExtrapolationWarning, ResamplingWarning
 from .covariance import ParameterUncertainty, _check_level
+from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 
@@ -460,15 +461,11 @@ class Fit:
     def to_numpy(self):
         """A pure-NumPy per-sample step ``f, state = step(v, state)`` of this fit
         (:func:`jaxfric.export.numpy_step`), for controllers outside JAX."""
-        from .export import numpy_step
-
         return numpy_step(self)
 
     def to_c_header(self, path=None, *, prefix: str = "jaxfric") -> str:
         """C99 header with this fit's per-sample step and weights
         (:func:`jaxfric.export.c_header`); written to ``path`` if given."""
-        from .export import c_header
-
         return c_header(self, path, prefix=prefix)
 
     # --------------------------------------------------------------- report
