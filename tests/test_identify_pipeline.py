@@ -157,3 +157,25 @@ def test_gradient_progress_ends_at_100_percent_and_never_changes_the_result(monk
     assert n_steps < 120, "LM should converge early on noise-free data"
     assert bar.closed and bar.n == bar.total  # 100 % although it stopped early
     assert f"step {n_steps}" in bar.postfix
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_elman_adjoint_both_time_loops(monkeypatch, parallel):
+    """The λ recurrence one step after another (the CPU's loop) and as a parallel prefix
+    scan (accelerators) against JAX's own reverse mode, float64."""
+    import functools
+
+    from jaxfric.models import _scan, elman
+
+    monkeypatch.setattr(elman, "reverse_affine_scan",
+                        functools.partial(_scan.reverse_affine_scan, parallel=parallel))
+    model = Elman(neurons=3, context_weight_bound=1.0)
+    rng = np.random.default_rng(4)
+    with jax.enable_x64(True):
+        theta = jnp.asarray(_theta(model, 5))
+        u = jnp.asarray(np.sin(np.linspace(0.0, 30.0, 700)) + 0.1 * rng.standard_normal(700))
+        g = jnp.asarray(rng.standard_normal(700))
+        _, pullback = model.simulate_vjp(theta, u)
+        expected = jax.vjp(lambda t: model.simulate(t, u), theta)[1](g)[0]
+        np.testing.assert_allclose(pullback(g), expected, rtol=1e-10,
+                                   atol=1e-12 * float(jnp.abs(expected).max()))

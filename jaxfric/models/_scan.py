@@ -84,3 +84,35 @@ def linear_recurrence(decay, gain, z0):
     return jax.lax.platform_dependent(
         decay, gain, z0, cpu=linear_recurrence_sequential, default=linear_recurrence_parallel
     )
+
+
+def reverse_affine_scan(step: Callable, init, xs, affine: Callable, outputs: Callable,
+                        cpu_unroll: int, unroll: int | None = None, parallel: bool | None = None):
+    """Outputs of a loop run backwards in time from ``λ_T = init`` whose carry follows an
+    affine recurrence (an adjoint, for instance)::
+
+        λ_k, out_k = step(λ_{k+1}, x_k),      λ_k = d_k λ_{k+1} + g_k
+
+    On the CPU ``step`` runs one sample after another (the reversed record through
+    :func:`time_scan`). Elsewhere ``affine(xs)`` gives ``(d, g)`` (time first, then the
+    carry's shape), :func:`linear_recurrence_parallel` composes the steps in ``log2 T``
+    levels and ``outputs(λ_next, xs)`` computes every ``out_k`` from ``λ_{k+1}`` at once;
+    that equals the loop up to floating-point reassociation. ``parallel``: ``True`` or
+    ``False`` picks one form everywhere (``None``: by platform, as above). Returns the
+    ``out_k`` stacked on a leading time axis, in time order.
+    """
+
+    def on_cpu(init, xs):
+        rev = jax.tree_util.tree_map(lambda x: x[::-1], xs)
+        out = time_scan(step, init, rev, cpu_unroll, unroll)
+        return jax.tree_util.tree_map(lambda x: x[::-1], out)
+
+    def run_parallel(init, xs):
+        d, g = affine(xs)
+        flat = (d.reshape(d.shape[0], -1)[::-1].T, g.reshape(g.shape[0], -1)[::-1].T)
+        z = linear_recurrence_parallel(*flat, init.reshape(-1))  # (P, T): λ_T .. λ_1
+        return outputs(z[:, ::-1].T.reshape(d.shape), xs)
+
+    if parallel is not None:
+        return (run_parallel if parallel else on_cpu)(init, xs)
+    return jax.lax.platform_dependent(init, xs, cpu=on_cpu, default=run_parallel)
