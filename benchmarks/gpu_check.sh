@@ -2,10 +2,11 @@
 # The one short GPU check (under 8 minutes): on the GPU and, beside it, on the same machine's
 # CPU cores (JAX_PLATFORMS=cpu), in this order of importance:
 #   1. the EMPS default identification, identify("elman", EMPS) -- first call and second call
-#   2. parallel-in-time rollouts against the sequential scan (benchmarks/parallel_scan.py)
-#   3. sweep throughput (benchmarks/sweep.py)
-#   4. the speed table (benchmarks/speed_optim.py, 30-D Rastrigin, 100 agents)
-#   5. Table 1 wall times (benchmarks/table1.py, 30-D, 30 runs, MAPSO-NMDS rows and PSO)
+#   2. an ensemble of K = 64 members (identify(..., keys=64)) beside one fit, LuGre and ENN
+#   3. parallel-in-time rollouts against the sequential scan (benchmarks/parallel_scan.py)
+#   4. sweep throughput (benchmarks/sweep.py)
+#   5. the speed table (benchmarks/speed_optim.py, 30-D Rastrigin, 100 agents)
+#   6. Table 1 wall times (benchmarks/table1.py, 30-D, 30 runs, MAPSO-NMDS rows and PSO)
 # Results: benchmarks/results/<name>_gpu.* (GPU) and <name>_gpu_host_cpu.* (the GPU machine's
 # CPU), every file naming its device; gpu_check_gpu.md lists the steps, their wall times and
 # the device. With $OUT set (the device tool), everything is also packed into
@@ -131,34 +132,7 @@ EOF
 step emps_identify gpu 100 $PY "$TMP/emps.py" gpu "$RES" $DRY
 step emps_identify cpu 60 $PY "$TMP/emps.py" gpu_host_cpu "$RES" $DRY
 
-# 2. parallel-in-time against the sequential scan
-if [ $DRY = 1 ]; then PS=(--quick --out "$RES"); else PS=(--elman 2000x64,24741x1,24741x16 --motion 24741 --chunks 250,1000 --rounds 3); fi
-step parallel_scan gpu 90 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu
-step parallel_scan cpu 60 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu_host_cpu
-
-# 3. sweep throughput
-if [ $DRY = 1 ]; then SW=(--quick --out "$RES"); else SW=(--models lugre --segments 2 --keys 3); fi
-step sweep gpu 45 $PY benchmarks/sweep.py "${SW[@]}" --tag gpu
-step sweep cpu 35 $PY benchmarks/sweep.py "${SW[@]}" --tag gpu_host_cpu
-
-# 4. the speed table (30-D Rastrigin, 100 agents, 200 generations)
-if [ $DRY = 1 ]; then SP=(--dim 5 --agents 16 --generations 10 --nm-evals 200 --repeats 1 --seeds 2); else
-  SP=(--function rastrigin --agents 100 --generations 200 --repeats 3); fi
-step speed_optim gpu 60 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu
-step speed_optim cpu 50 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu_host_cpu
-
-# 5. Table 1 wall times (the swarm rows of one function; each platform into its own folder)
-if [ $DRY = 1 ]; then T1=(--quick --functions sphere --rows swarm --no-maga); else
-  T1=(--dim 30 --runs 30 --functions rastrigin --rows swarm --no-maga); fi
-for plat in gpu cpu; do
-  tag=gpu; [ $plat = cpu ] && tag=gpu_host_cpu
-  step table1 $plat 55 $PY benchmarks/table1.py "${T1[@]}" --out "$TMP/table1_$tag"
-  for f in "$TMP/table1_$tag"/table1.*; do
-    [ -f "$f" ] && cp "$f" "$RES/table1_${tag}.${f##*.}"
-  done
-done
-
-# 6. an ensemble of K members against one fit (identify(..., keys=K) beside identify(..., key=0))
+# 2. an ensemble of K members against one fit (identify(..., keys=K) beside identify(..., key=0))
 cat > "$TMP/ensemble.py" <<'EOF2'
 import csv, os, sys, time, warnings
 import jax
@@ -179,23 +153,54 @@ if dry:
             "refine": jaxfric.GradientRefinement(method="bfgs", max_steps=5)}
 rows = []
 out = os.path.join(res, f"ensemble_emps_{tag}.csv")
-for model in ("elman", "lugre"):
-    for label, kw in (("one fit", {"key": 0}), (f"K={k}", {"keys": k})):
-        for call in ("first", "second"):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                t0 = time.perf_counter()
-                fit = jaxfric.identify(model, data, **kw, **opts)
-                wall = time.perf_counter() - t0
-            rows.append({"device": device, "model": model, "run": label, "call": call,
-                         "wall_s": round(wall, 2), "train_mse_percent": fit.metrics["train"]["mse_percent"], "valid_mse_percent": fit.metrics["valid"]["mse_percent"], "dry_run": dry})
-            print(rows[-1], flush=True)
-            with open(out, "w", newline="") as fh:  # after every row: a timeout keeps what ran
-                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                w.writeheader(); w.writerows(rows)
+runs = [("lugre", "one fit", {"key": 0}), ("lugre", f"K={k}", {"key": 0, "keys": k}),
+        ("elman", f"K={k}", {"key": 0, "keys": k})]  # elman's one fit: step 1
+for model, label, kw in runs:
+    for call in ("first", "second"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t0 = time.perf_counter()
+            fit = jaxfric.identify(model, data, **kw, **opts)
+            wall = time.perf_counter() - t0
+        rows.append({"device": device, "model": model, "run": label, "call": call,
+                     "wall_s": round(wall, 2), "dry_run": dry,
+                     "train_mse_percent": fit.metrics["train"]["mse_percent"],
+                     "valid_mse_percent": fit.metrics["valid"]["mse_percent"]})
+        print(rows[-1], flush=True)
+        with open(out, "w", newline="") as fh:  # after every row: a timeout keeps what ran
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader(); w.writerows(rows)
 EOF2
 if [ $DRY = 1 ]; then KE=4; else KE=64; fi
-step ensemble gpu 200 $PY "$TMP/ensemble.py" gpu "$RES" $DRY $KE
+step ensemble gpu 170 $PY "$TMP/ensemble.py" gpu "$RES" $DRY $KE
+
+# 3. parallel-in-time against the sequential scan
+if [ $DRY = 1 ]; then PS=(--quick --out "$RES"); else PS=(--elman 2000x64,24741x1,24741x16 --motion 24741 --chunks 250,1000 --rounds 3); fi
+step parallel_scan gpu 90 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu
+step parallel_scan cpu 60 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu_host_cpu
+
+# 4. sweep throughput
+if [ $DRY = 1 ]; then SW=(--quick --out "$RES"); else SW=(--models lugre --segments 2 --keys 3); fi
+step sweep gpu 45 $PY benchmarks/sweep.py "${SW[@]}" --tag gpu
+step sweep cpu 35 $PY benchmarks/sweep.py "${SW[@]}" --tag gpu_host_cpu
+
+# 5. the speed table (30-D Rastrigin, 100 agents, 200 generations)
+if [ $DRY = 1 ]; then SP=(--dim 5 --agents 16 --generations 10 --nm-evals 200 --repeats 1 --seeds 2); else
+  SP=(--function rastrigin --agents 100 --generations 200 --repeats 3); fi
+step speed_optim gpu 60 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu
+step speed_optim cpu 50 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu_host_cpu
+
+# 6. Table 1 wall times (the swarm rows of one function; each platform into its own folder)
+if [ $DRY = 1 ]; then T1=(--quick --functions sphere --rows swarm --no-maga); else
+  T1=(--dim 30 --runs 30 --functions rastrigin --rows swarm --no-maga); fi
+for plat in gpu cpu; do
+  tag=gpu; [ $plat = cpu ] && tag=gpu_host_cpu
+  step table1 $plat 55 $PY benchmarks/table1.py "${T1[@]}" --out "$TMP/table1_$tag"
+  for f in "$TMP/table1_$tag"/table1.*; do
+    [ -f "$f" ] && cp "$f" "$RES/table1_${tag}.${f##*.}"
+  done
+done
+
 
 echo >> "$SUMMARY"
 echo "Whole script: $(( $(date +%s) - START )) s." >> "$SUMMARY"
