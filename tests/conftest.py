@@ -165,7 +165,7 @@ SLOW_TESTS = {
 # longest-first rule). Files not listed follow in their usual order; a stale list only
 # costs balance, never a test.
 LONGEST_FIRST = [
-    "test_optim_protocol.py", "test_cli.py", "test_readme.py", "test_notebooks.py", "test_reproducibility.py",
+    "test_notebooks.py", "test_optim_protocol.py", "test_cli.py", "test_readme.py", "test_reproducibility.py",
     "test_multihost.py", "test_motion_api.py", "test_sweep.py", "test_uncertainty.py", "test_parallel_scan.py",
     "test_identify_stages.py", "test_uncertainty_motion.py", "test_uncertainty_report.py",
     "test_optim_properties.py", "test_records.py", "test_evosax_adapter.py", "test_optim_api.py",
