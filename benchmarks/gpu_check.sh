@@ -123,7 +123,8 @@ for call in ("first (compile + run)", "second (run)"):
         fit = jaxfric.identify("elman", data, key=0, **opts)
         wall = time.perf_counter() - t0
     rows.append({"device": device, "call": call, "n_samples": data.n_samples, "wall_s": round(wall, 2),
-                 "valid_mse_percent": fit.metrics["valid"]["mse_percent"], "dry_run": dry})
+                 "valid_mse_percent": fit.metrics["valid"]["mse_percent"], "dry_run": dry,
+                 **{k: round(v, 2) for k, v in fit.timings.items()}})
     print(rows[-1], flush=True)
 with open(os.path.join(res, f"emps_identify_{tag}.csv"), "w", newline="") as fh:
     w = csv.DictWriter(fh, fieldnames=list(rows[0]))
