@@ -40,13 +40,180 @@ On a CPU the sequential scan does T steps of little work each, and stays faster
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
 import jax
 import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+from jaxtyping import Array
 
-from .models._scan import JACOBIANS, DeerResult, deer_scan, linear_solve
+from .models._scan import time_scan
 
-__all__ = ["JACOBIANS", "DeerResult", "deer_scan", "linear_solve", "elman_rollout",
-           "simulate_motion_parallel"]
+__all__ = ["DeerResult", "deer_scan", "elman_rollout", "simulate_motion_parallel"]
+
+JACOBIANS = ("dense", "elementwise")
+
+
+class DeerResult(NamedTuple):
+    """States after each step (a pytree like the carry with a leading ``T`` axis, as
+    ``lax.scan``'s stacked carries), the Newton ``iterations`` taken, whether they
+    ``converged`` and whether the sequential scan was used instead (``fell_back``)."""
+
+    states: Any
+    iterations: Array
+    converged: Array
+    fell_back: Array
+
+
+def _default_rtol(dtype) -> float:
+    # sqrt(eps): one more quadratic step after the update fell below it leaves ~eps.
+    return float(jnp.finfo(dtype).eps) ** 0.5
+
+
+def _compose(first, then, elementwise: bool):
+    """The affine map ``then ∘ first`` of ``s ↦ A s + b`` pairs (leading axes batched)."""
+    a1, b1 = first
+    a2, b2 = then
+    if elementwise:
+        return a2 * a1, a2 * b1 + b2
+    return jnp.einsum("...ij,...jk->...ik", a2, a1), jnp.einsum("...ij,...j->...i", a2, b1) + b2
+
+
+def linear_solve(jac, bias, s0, elementwise: bool):
+    """States ``s_1 .. s_T`` of ``s_{k+1} = J_k s_k + b_k`` by an associative scan over time.
+
+    ``jac``: ``(T, n)`` (elementwise) or ``(T, n, n)``; ``bias``: ``(T, n)``; ``s0``: ``(n,)``.
+    """
+    a, c = jax.lax.associative_scan(lambda p, q: _compose(p, q, elementwise), (jac, bias), axis=0)
+    if elementwise:
+        return a * s0 + c
+    return jnp.einsum("tij,j->ti", a, s0) + c
+
+
+def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float | None = None,
+              max_iterations: int | None = None, fallback: bool = True,
+              chunk: int | None = None) -> DeerResult:
+    """The carries of ``lax.scan(lambda c, x: (step(c, x), None), init, xs)`` after every
+    step, computed by Newton iterations over the whole trajectory (module docstring).
+
+    Args:
+        step: ``step(carry, x) -> carry`` (a pytree of floating arrays, same structure).
+        init: the carry ``s_0``.
+        xs: the inputs, a pytree with a leading time axis ``T``.
+        jacobian: ``"dense"`` (``jax.jacfwd``; for small states) or ``"elementwise"``
+            (the step's Jacobian is diagonal: entry i of the new carry depends on entry
+            i of the old one only; not checked).
+        rtol: per-component tolerance on the last Newton update (default
+            ``sqrt(eps)`` of the carry's dtype).
+        max_iterations: Newton iterations before falling back (default ``min(T, 100)``).
+        fallback: use the sequential scan when the iterations did not converge or an
+            iterate is not finite; ``False`` returns the last iterate as it is.
+        chunk: solve ``chunk`` steps at a time, one stretch after another, each from the
+            last state of the one before (``None``: the whole record at once). Newton then
+            sees a shorter horizon; ``iterations`` sums over the chunks, ``converged`` is
+            whether all did, ``fell_back`` whether any did not.
+    """
+    if jacobian not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
+    s0, unravel = ravel_pytree(init)
+    if not jnp.issubdtype(s0.dtype, jnp.floating):
+        raise ValueError(f"the carry must hold floating arrays, got dtype {s0.dtype}")
+    leaves = jax.tree_util.tree_leaves(xs)
+    if not leaves:
+        raise ValueError("xs must hold at least one array with a leading time axis")
+    T = leaves[0].shape[0]
+    if T == 0:
+        raise ValueError("xs is empty: nothing to scan")
+    elementwise = jacobian == "elementwise"
+    tol = _default_rtol(s0.dtype) if rtol is None else float(rtol)
+    if not tol > 0:
+        raise ValueError(f"rtol must be positive, got {rtol!r}")
+    iters = min(T, 100) if max_iterations is None else int(max_iterations)
+    if iters < 1:
+        raise ValueError(f"max_iterations must be >= 1, got {max_iterations!r}")
+    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
+        raise ValueError(f"chunk must be None or >= 1, got {chunk!r}")
+    chunk = None if chunk is None else int(chunk)
+
+    def f(s, x):
+        out, _ = ravel_pytree(step(unravel(s), x))
+        return out.astype(s0.dtype)
+
+    if elementwise:
+        def linearise(s, x):
+            value, slope = jax.jvp(lambda z: f(z, x), (s,), (jnp.ones_like(s),))
+            return value, slope
+    else:
+        def linearise(s, x):
+            return f(s, x), jax.jacfwd(f)(s, x)
+
+    def solve(first, xc):
+        """Newton over one stretch of inputs from the state ``first``; returns the states,
+        the iterations, whether they converged and whether the scan answered instead."""
+        n = jax.tree_util.tree_leaves(xc)[0].shape[0]
+
+        def newton(states):
+            # In correction form: the scan carries the change δ_k (δ_0 = 0) driven by the
+            # residual f(s_k) - s_{k+1}, which goes to 0, so its rounding shrinks with it;
+            # scanning the states themselves (bias f - J s) left a floor of 1e-8 relative
+            # in the velocity of a Stribeck motion model, 1e4 times the problem's own.
+            prev = jnp.concatenate([first[None], states[:-1]], axis=0)
+            value, jac = jax.vmap(linearise)(prev, xc)
+            return states + linear_solve(jac, value - states, jnp.zeros_like(first), elementwise)
+
+        def cond(carry):
+            i, _, done, finite = carry
+            return (i < min(iters, n)) & ~done & finite
+
+        def body(carry):
+            i, states, _, _ = carry
+            new = newton(states)
+            moved = jnp.max(jnp.abs(new - states), axis=0)
+            scale = jnp.max(jnp.abs(new), axis=0)
+            finite = jnp.all(jnp.isfinite(new))
+            done = finite & jnp.all(moved <= tol * scale + tiny)
+            return i + 1, new, done, finite
+
+        guess = jnp.broadcast_to(first, (n,) + first.shape)
+        i, states, converged, _ = jax.lax.while_loop(
+            cond, body, (jnp.asarray(0), guess, jnp.asarray(False), jnp.asarray(True)))
+
+        def sequential(_):  # unrolled off the CPU like every time loop (models/_scan.py)
+            def one(c, x):
+                nxt = f(c, x)
+                return nxt, nxt
+
+            return time_scan(one, first, xc, cpu_unroll=1)
+
+        fell_back = jnp.asarray(False)
+        if fallback:
+            fell_back = ~converged
+            states = jax.lax.cond(converged, lambda _: states, sequential, None)
+        return states, i, converged, fell_back
+
+    tiny = jnp.finfo(s0.dtype).tiny
+    if chunk is None or chunk >= T:
+        states, i, converged, fell_back = solve(s0, xs)
+    else:
+        # Chunks one after another, each from the last state of the one before: a shorter
+        # horizon for Newton (fewer stick-slip events, less growth of the linearised
+        # error). The tail is padded with the last input; padded steps come after every
+        # real one, so they change none of them, and are dropped.
+        count = -(-T // chunk)
+        pad = count * chunk - T
+        xs_c = jax.tree_util.tree_map(
+            lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]).reshape(
+                (count, chunk) + a.shape[1:]), xs)
+
+        def over_chunks(first, xc):
+            st, it, conv, fb = solve(first, xc)
+            return st[-1], (st, it, conv, fb)
+
+        _, (st, its, convs, fbs) = jax.lax.scan(over_chunks, s0, xs_c)
+        states = st.reshape((count * chunk,) + s0.shape)[:T]
+        i, converged, fell_back = jnp.sum(its), jnp.all(convs), jnp.any(fbs)
+    return DeerResult(jax.vmap(unravel)(states), i, converged, fell_back)
 
 
 # ------------------------------------------------------------------ the models

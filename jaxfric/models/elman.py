@@ -39,7 +39,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractFrictionModel
-from ._scan import elementwise_scan, reverse_affine_scan, time_scan
+from ._scan import reverse_affine_scan, time_scan
 
 __all__ = ["Elman", "ElmanFull"]
 
@@ -220,10 +220,7 @@ class Elman(AbstractFrictionModel):
         31 ms for a 19 800-sample record against 3.3 ms for the rollout; this loop
         carries only λ and leaves the sums to vectorised reductions. The λ recurrence is
         affine, ``λ_k = (α + r s_k) λ_{k+1} + r v g_k s_k`` with ``s_k = 1 − h_k²``, so off
-        the CPU it runs as a parallel prefix scan (:func:`~jaxfric.models._scan.reverse_affine_scan`),
-        and off the CPU the contexts come from Newton's method over the whole record
-        (:func:`~jaxfric.models._scan.elementwise_scan`, DEER, with the sequential loop as
-        its fallback): on a GPU a gradient is then a few parallel passes, not 2T steps.
+        the CPU it runs as a parallel prefix scan (:func:`~jaxfric.models._scan.reverse_affine_scan`).
         """
         theta, u = self._prepare(jnp.asarray(theta)[None, :], velocity)
         p = {k: x[0] for k, x in self.to_physical(theta).items()}
@@ -233,11 +230,8 @@ class Elman(AbstractFrictionModel):
             h = jnp.tanh(w * uk + r * c + b)
             return alpha * c + h, (c, h)
 
-        def forward_outputs(cs, u):  # forward's outputs from every context c_k at once
-            return cs, jnp.tanh(w * u[:, None] + r * cs + b)
-
         cpu_unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2
-        cs, hs = elementwise_scan(forward, c0, u, forward_outputs, cpu_unroll, self.unroll)
+        cs, hs = time_scan(forward, c0, u, cpu_unroll, self.unroll)
         y = hs @ v
         if self.output_bias:
             y = y + p["b_o"]
