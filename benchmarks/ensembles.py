@@ -4,23 +4,43 @@ Usage::
 
     python benchmarks/ensembles.py --record emps            # DATA_EMPS.mat, 1 kHz (default)
     python benchmarks/ensembles.py --record rig             # jaxfric.rig.synthetic_friction_data
-    ... [--models elman,lugre] [--sizes 1,8] [--rounds 1] [--quick] [--out DIR] [--data-dir DIR]
+    ... [--models elman,lugre,elman:map] [--sizes 1,8] [--loop-fits N] [--rounds 1] [--rollouts]
+        [--tag gpu] [--quick] [--out DIR] [--data-dir DIR] [--note TEXT]
 
 For each model (every ``identify`` default; float32) and ensemble size K, one round
 times, side by side on the same machine and in the same process:
 
-* the K single fits ``identify(model, data, key=keys[i])`` one after another (the loop);
+* single fits ``identify(model, data, key=keys[i])`` one after another (the loop): all
+  K of them, or the first ``--loop-fits`` N (a GPU row of K = 64; the loop's time is
+  then K times the median single fit, marked "est.");
 * the ensemble ``identify(model, data, keys=keys)`` with the same K keys.
+
+A model written ``elman:map`` runs the gradient stage's members one after another
+(``GradientRefinement(batching="map")``): the price of members equal to the single
+fits to the bit.
 
 Both paths are compiled before the rounds (first calls reported apart), so the
 medians are warm wall times. The table gives one fit's time (median of the loop's
 fits), the ensemble's, their ratio (the price of K members in single fits; the
-target on a 2-core CPU: ENN K = 8 at most 3, LuGre at most 2) and the loop's time
-over the ensemble's. It also checks member i against the single fit with key i
-(largest relative difference of the training cost J over the members).
+targets: on a 2-core CPU ENN K = 8 at most 3, LuGre at most 2; on a GPU K = 64 at most
+2) and the loop's time over the ensemble's, the same ratio in CPU time, and where the
+time goes: the global stage's and the gradient stage's run times as ensemble over one
+fit. It checks member i against the single fit with key i: members whose global-stage
+result equals the single run's to the bit, members whose final θ does, the largest
+relative difference of the training cost J, the largest difference of validation MSE
+(percentage points), and for scale the spread of J over the single fits' keys
+(max/min − 1).
 
-Writes ``ensembles_<record>.md`` and ``.csv`` into ``--out`` (default
+``--rollouts`` adds the floor under those ratios: the cost J of P candidates at once
+(``vmap`` of the cost, the global stage's evaluation) for P = 1 … 200, in µs per
+candidate, and for the networks the gradient stage's J-and-gradient of 1 and of K
+networks (CPU time, medians). A stage whose cost per candidate does not fall with P
+costs K times one run for K members, whatever the layout.
+
+Writes ``ensembles_<record>[_<tag>].md`` and ``.csv`` into ``--out`` (default
 ``benchmarks/results``; ``--quick``: tiny budgets, ``benchmarks/results/quick``).
+The EMPS file is ``--data-dir``/DATA_EMPS.mat, else ``$JAXFRIC_EMPS``, else
+``../shared/data/emps/DATA_EMPS.mat``.
 """
 
 from __future__ import annotations
@@ -47,19 +67,66 @@ from _harness import markdown_table, results_dir, write_csv  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
+ROLLOUT_BATCHES = (1, 8, 25, 64, 200)
 
 
 def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--record", choices=("emps", "rig"), default="emps")
-    p.add_argument("--models", default="elman,lugre", help="comma list of model names")
-    p.add_argument("--sizes", default="1,8", help="comma list of ensemble sizes K")
+    p.add_argument("--models", default="elman,lugre",
+                   help="comma list of model names; NAME:map runs the gradient stage's members "
+                        "one after another (bit-identical to single fits)")
+    p.add_argument("--sizes", "--keys", dest="sizes", default="1,8",
+                   help="comma list of ensemble sizes K")
+    p.add_argument("--loop-fits", type=int, default=None,
+                   help="single fits timed per round (default K: the whole loop)")
     p.add_argument("--rounds", type=int, default=1, help="timed rounds (medians over them)")
+    p.add_argument("--rollouts", action="store_true",
+                   help="also time the cost of P candidates at once (the floor of the ratios)")
     p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
+    p.add_argument("--tag", default="", help="suffix of the result files (e.g. gpu)")
     p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
     p.add_argument("--out", default=None)
     p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
+    p.add_argument("--append", action="store_true",
+                   help="keep the rows of the existing result files (a row of the same model and K "
+                        "is replaced) and the --note of the earlier run(s), adding this one's")
     return p.parse_args(argv)
+
+
+def _value(text: str):
+    if text in ("True", "False"):
+        return text == "True"
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def read_rows(path: Path) -> list[dict]:
+    """Rows of a CSV this script wrote, with numbers and booleans parsed (none if absent)."""
+    import csv
+
+    if not path.is_file():
+        return []
+    with path.open() as f:
+        return [{k: _value(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def merge(old: list[dict], new: list[dict], keys: tuple[str, ...]) -> list[dict]:
+    """``old`` with the rows of ``new`` added, a new row replacing an old one with the same ``keys``."""
+    fresh = {tuple(r[k] for k in keys) for r in new}
+    return [r for r in old if tuple(r[k] for k in keys) not in fresh] + new
+
+
+def emps_path(args) -> Path:
+    if args.data_dir:
+        return Path(args.data_dir) / "DATA_EMPS.mat"
+    if os.environ.get("JAXFRIC_EMPS"):
+        return Path(os.environ["JAXFRIC_EMPS"])
+    return DATA_ROOT / "emps" / "DATA_EMPS.mat"
 
 
 def load(args):
@@ -67,7 +134,7 @@ def load(args):
 
     if args.record == "rig":
         return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
-    path = Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"
+    path = emps_path(args)
     if not path.is_file():
         return None, f"no EMPS file at {path}"
     return (rig.emps_friction_data(rig.load_emps(path)),
@@ -75,16 +142,24 @@ def load(args):
 
 
 def options(model: str, quick: bool) -> dict:
-    """``identify`` keywords: every default, or tiny budgets with ``--quick``."""
-    if not quick:
-        return {}
+    """``identify`` keywords: every default, or tiny budgets with ``--quick``. A model
+    written ``elman:map`` runs its gradient stage's members one after another
+    (``GradientRefinement(batching="map")``, bit-identical members)."""
     import jaxfric as jf
     from jaxfric.identification import GradientRefinement
+    from jaxfric.identification._api import FAST_REFINE_STEPS
 
-    if model.startswith("elman"):
+    name, _, layout = model.partition(":")
+    kw = {}
+    if layout:
+        kw["refine"] = GradientRefinement(max_steps=10 if quick else FAST_REFINE_STEPS, batching=layout)
+    if not quick:
+        return kw
+    if name.startswith("elman"):
         return {"solver": jf.MAPSO(lattice_size=8, num_generations=3),
-                "refine": GradientRefinement(max_steps=10)}
-    return {"solver": jf.mapso_nmds(lattice_size=3, num_generations=5, nm_max_steps=40, nm_max_evals=40)}
+                "refine": GradientRefinement(max_steps=10), **kw}
+    return {"solver": jf.mapso_nmds(lattice_size=3, num_generations=5, nm_max_steps=40, nm_max_evals=40),
+            **kw}
 
 
 def timed(fn):
@@ -93,63 +168,203 @@ def timed(fn):
     return out, time.perf_counter() - w, time.process_time() - c
 
 
-def measure(model: str, data, k: int, rounds: int, quick: bool) -> dict:
+def _valid_mse(fit) -> float:
+    return float((fit.metrics.get("valid") or {}).get("mse_percent", np.nan))
+
+
+def _stage_s(fit, name: str) -> float:
+    return float(fit.timings.get(name, 0.0))
+
+
+def compare_members(ens, singles) -> dict:
+    """Member i of the ensemble ``ens`` against ``singles[i]`` (the fit with key i)."""
+    n = len(singles)
+    e = ens.ensemble
+    sol = ens.solution
+    j_one = np.array([s.metrics["cost"] for s in singles])
+    j_ens = np.asarray(e["J"][:n], np.float64)
+    v_one = np.array([_valid_mse(s) for s in singles])
+    v_ens = np.asarray([np.nan if x is None else x for x in e["valid_mse_percent"][:n]], np.float64)
+    global_bitwise = sum(
+        bool(np.array_equal(np.asarray(sol.value[i]), np.asarray(s.solution.value))
+             and np.array_equal(np.asarray(sol.f[i]), np.asarray(s.solution.f)))
+        for i, s in enumerate(singles))
+    theta_bitwise = sum(bool(np.array_equal(np.asarray(e["theta"][i]), np.asarray(s.theta)))
+                        for i, s in enumerate(singles))
+    return {
+        "members_checked": n,
+        "global_bitwise": global_bitwise,
+        "theta_bitwise": theta_bitwise,
+        "rel_dJ": float(np.max(np.abs(j_ens - j_one) / np.abs(j_one))),
+        "d_valid_mse": float(np.nanmax(np.abs(v_ens - v_one))) if n else float("nan"),
+        "J_spread": float(j_one.max() / j_one.min() - 1.0) if n > 1 else float("nan"),
+    }
+
+
+def measure(model: str, data, k: int, rounds: int, quick: bool, loop_fits: int | None) -> dict:
     from jaxfric.identification import identify
 
     kw = options(model, quick)
-    first_one = timed(lambda: identify(model, data, key=0, **kw))[1]
-    first_ens = timed(lambda: identify(model, data, keys=jax.random.split(jax.random.key(0), k), **kw))[1]
-    one, one_cpu, loop, loop_cpu, ens, ens_cpu, diff = [], [], [], [], [], [], []
+    name = model.partition(":")[0]
+    n = k if loop_fits is None else max(1, min(loop_fits, k))
+    first_one = timed(lambda: identify(name, data, key=0, **kw))[1]
+    first_ens = timed(lambda: identify(name, data, keys=jax.random.split(jax.random.key(0), k), **kw))[1]
+    acc = {name: [] for name in ("one", "one_cpu", "loop", "loop_cpu", "ens", "ens_cpu", "g1", "gk",
+                                 "r1", "rk", "cmp")}
     for r in range(rounds):
         keys = jax.random.split(jax.random.key(100 + r), k)
-        singles = [timed(lambda key=key: identify(model, data, key=key, **kw)) for key in keys]
-        fit, wall, cpu = timed(lambda: identify(model, data, keys=keys, **kw))
-        one += [s[1] for s in singles]
-        one_cpu += [s[2] for s in singles]
-        loop.append(sum(s[1] for s in singles))
-        loop_cpu.append(sum(s[2] for s in singles))
-        ens.append(wall)
-        ens_cpu.append(cpu)
-        j_one = np.array([s[0].metrics["cost"] for s in singles])
-        diff.append(float(np.max(np.abs(np.asarray(fit.ensemble["J"]) - j_one) / np.abs(j_one))))
+        singles = [timed(lambda key=key: identify(name, data, key=key, **kw)) for key in keys[:n]]
+        fit, wall, cpu = timed(lambda: identify(name, data, keys=keys, **kw))
+        acc["one"] += [s[1] for s in singles]
+        acc["one_cpu"] += [s[2] for s in singles]
+        scale = k / n  # the loop's time, estimated from n of its K fits when n < K
+        acc["loop"].append(scale * sum(s[1] for s in singles))
+        acc["loop_cpu"].append(scale * sum(s[2] for s in singles))
+        acc["ens"].append(wall)
+        acc["ens_cpu"].append(cpu)
+        acc["g1"] += [_stage_s(s[0], "run_s") for s in singles]
+        acc["r1"] += [_stage_s(s[0], "refine_run_s") for s in singles]
+        acc["gk"].append(_stage_s(fit, "run_s"))
+        acc["rk"].append(_stage_s(fit, "refine_run_s"))
+        acc["cmp"].append(compare_members(fit, [s[0] for s in singles]))
     med = statistics.median
+    ratio = lambda a, b: med(acc[a]) / med(acc[b]) if med(acc[b]) > 0 else float("nan")  # noqa: E731
+    cmp = acc["cmp"]
     return {
-        "model": model, "K": k, "rounds": rounds,
-        "one_fit_s": med(one), "ensemble_s": med(ens), "loop_s": med(loop),
-        "ensemble_over_one": med(ens) / med(one), "loop_over_ensemble": med(loop) / med(ens),
-        "one_fit_cpu_s": med(one_cpu), "ensemble_cpu_s": med(ens_cpu),
-        "ensemble_over_one_cpu": med(ens_cpu) / med(one_cpu),
+        "model": model, "K": k, "rounds": rounds, "loop_fits": n,
+        "one_fit_s": med(acc["one"]), "ensemble_s": med(acc["ens"]), "loop_s": med(acc["loop"]),
+        "loop_estimated": n < k,
+        "ensemble_over_one": ratio("ens", "one"), "loop_over_ensemble": ratio("loop", "ens"),
+        "one_fit_cpu_s": med(acc["one_cpu"]), "ensemble_cpu_s": med(acc["ens_cpu"]),
+        "ensemble_over_one_cpu": ratio("ens_cpu", "one_cpu"),
+        "global_one_s": med(acc["g1"]), "global_ensemble_s": med(acc["gk"]),
+        "global_over_one": ratio("gk", "g1"),
+        "gradient_one_s": med(acc["r1"]), "gradient_ensemble_s": med(acc["rk"]),
+        "gradient_over_one": ratio("rk", "r1"),
         "first_one_s": first_one, "first_ensemble_s": first_ens,
-        "member_max_rel_dJ": max(diff),
+        "members_checked": sum(c["members_checked"] for c in cmp),
+        "global_bitwise": sum(c["global_bitwise"] for c in cmp),
+        "theta_bitwise": sum(c["theta_bitwise"] for c in cmp),
+        "member_max_rel_dJ": max(c["rel_dJ"] for c in cmp),
+        "member_max_d_valid_mse": max(c["d_valid_mse"] for c in cmp),
+        "J_spread_over_keys": max(c["J_spread"] for c in cmp),
     }
+
+
+# ------------------------------------------------------------------ the floor
+def _median_cpu(fn, reps: int) -> float:
+    jax.block_until_ready(fn())
+    ts = []
+    for _ in range(reps):
+        c = time.process_time()
+        jax.block_until_ready(fn())
+        ts.append(time.process_time() - c)
+    return statistics.median(ts)
+
+
+def rollout_costs(model_name: str, data, reps: int) -> list[dict]:
+    """CPU time of the global stage's evaluation (J of P candidates at once, on the data
+    that stage sees) per candidate, and for the networks of the gradient stage's J and
+    gradient for 1 and K networks on the whole training window."""
+    import jax.numpy as jnp
+
+    from jaxfric.identification import stages
+    from jaxfric.identification._api import _plan, resolve_model
+
+    model = resolve_model(model_name, None)
+    _, refine, head = _plan(model, "jaxfric", None, None)
+    records = stages.records_stage(data)
+    bounds = stages.box_stage(model, records)
+    obj = stages.objective_stage(model, records, jnp.float32, head)
+    lo, hi = bounds.lower, bounds.upper
+    rng = np.random.default_rng(0)
+    thetas = jnp.asarray(lo + (hi - lo) * rng.random((max(ROLLOUT_BATCHES), lo.size)), jnp.float32)
+    cost = jax.jit(jax.vmap(obj.cost, (0, None)))
+    rows = []
+    samples = int(obj.data_global.y.shape[0])
+    for p in ROLLOUT_BATCHES:
+        t = _median_cpu(lambda p=p: cost(thetas[:p], obj.data_global), reps)
+        rows.append({"model": model_name, "what": f"J of P candidates ({samples} samples)", "P": p,
+                     "ms": 1e3 * t, "us_per_candidate": 1e6 * t / p})
+    if refine is not None and model.needs_scaling:
+        grad = jax.jit(jax.vmap(jax.value_and_grad(obj.cost), (0, None)))
+        one = jax.jit(jax.value_and_grad(obj.cost))
+        samples = int(obj.data.y.shape[0])
+        t1 = _median_cpu(lambda: one(thetas[0], obj.data), reps)
+        rows.append({"model": model_name, "what": f"J and gradient, one network ({samples} samples)",
+                     "P": 1, "ms": 1e3 * t1, "us_per_candidate": 1e6 * t1})
+        for p in (2, 8):
+            t = _median_cpu(lambda p=p: grad(thetas[:p], obj.data), reps)
+            rows.append({"model": model_name,
+                         "what": f"J and gradient, P networks side by side ({samples} samples)",
+                         "P": p, "ms": 1e3 * t, "us_per_candidate": 1e6 * t / p})
+    return rows
 
 
 def _fmt(x) -> str:
     return f"{x:.3g}" if isinstance(x, float) else str(x)
 
 
-def report(rows, args, desc: str) -> str:
+def _device() -> str:
+    d = jax.devices()[0]
+    return f"{getattr(d, 'device_kind', d.platform)} ({d.platform})"
+
+
+def command() -> str:
+    return " ".join(["python benchmarks/ensembles.py"] + sys.argv[1:])
+
+
+def report(rows, floor, args, desc: str, runs: list[str]) -> str:
     """The Markdown page of a run (``rows`` as :func:`measure` returns them)."""
-    columns = ["model", "K", "one_fit_s", "ensemble_s", "ensemble_over_one", "loop_s", "loop_over_ensemble",
-               "ensemble_over_one_cpu", "member_max_rel_dJ", "first_one_s", "first_ensemble_s"]
+    for r in rows:
+        r["loop_shown"] = f"{r['loop_s']:.3g}" + (" est." if r["loop_estimated"] else "")
+        r["bitwise"] = f"{r['global_bitwise']}/{r['members_checked']}, {r['theta_bitwise']}/{r['members_checked']}"
+    columns = ["model", "K", "one_fit_s", "ensemble_s", "ensemble_over_one", "loop_shown",
+               "loop_over_ensemble", "ensemble_over_one_cpu", "global_over_one", "gradient_over_one",
+               "bitwise", "member_max_rel_dJ", "member_max_d_valid_mse", "J_spread_over_keys",
+               "first_one_s", "first_ensemble_s"]
     headers = ["model", "K", "one fit [s]", "ensemble [s]", "ensemble / one fit", "loop of K [s]",
-               "loop / ensemble", "ensemble / one fit, CPU time", "members: max rel. ΔJ",
+               "loop / ensemble", "ensemble / one fit, CPU time", "global stage: ensemble / one",
+               "gradient stage: ensemble / one", "members bitwise (global stage, θ)",
+               "members: max rel. ΔJ", "members: max Δ valid. MSE [points]", "J spread over keys",
                "first fit [s]", "first ensemble [s]"]
-    return "\n".join([
-        f"# Ensembles against a loop of single fits ({args.record})",
+    lines = [
+        f"# Ensembles against a loop of single fits ({args.record}{', ' + args.tag if args.tag else ''})",
         "",
         f"Record: {desc}. Every `identify` default{' (--quick: tiny budgets)' if args.quick else ''}, "
-        f"float32. Command: `python benchmarks/ensembles.py --record {args.record}"
-        f"{' --quick' if args.quick else ''}`.",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"jax {jax.__version__} on {jax.default_backend()}. Warm wall times, medians over "
-        f"{args.rounds} round(s); 'CPU time' is the process's CPU seconds (steadier on a loaded machine)."
-        + (f" {args.note}" if args.note else ""),
-        "'members: max rel. ΔJ': member i's training cost J against the single fit with key i.",
+        "float32. Run(s), each row from the last run that measured it:",
+        "",
+        *[f"* {r}" for r in runs],
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; device "
+        f"{_device()}, jax {jax.__version__}. Warm wall times, medians over {args.rounds} round(s); "
+        "'CPU time' is the process's CPU seconds (steadier on a loaded machine).",
+        "Stage columns: the global (derivative-free) stage's and the gradient stage's run time "
+        "(compilation apart), ensemble over one fit. Members: member i against the single fit "
+        "with key i — how many equal it to the bit after the global stage and at the end, the "
+        "largest relative difference of the training cost J and of the validation MSE; "
+        "'J spread over keys' (max/min − 1 over the single fits) gives their scale."
+        + (" 'est.': the loop's time as K times the median of the single fits timed."
+           if any(r["loop_estimated"] for r in rows) else ""),
         "",
         markdown_table(rows, columns, headers=headers, fmt=_fmt),
         "",
-    ])
+    ]
+    if floor:
+        lines += [
+            "## The floor: cost per candidate against batch size",
+            "",
+            "CPU time of the global stage's evaluation (J of P candidates at once, `vmap` of the "
+            "cost, on the samples that stage sees) and, for the network, of the gradient stage's "
+            "J and gradient; medians. Where the cost per candidate does not fall as P grows, "
+            "the stage is bound by arithmetic, and K members cost K times one run whatever "
+            "their layout.",
+            "",
+            markdown_table(floor, ["model", "what", "P", "ms", "us_per_candidate"],
+                           headers=["model", "what", "P", "ms", "µs per candidate"], fmt=_fmt),
+            "",
+        ]
+    return "\n".join(lines)
 
 
 def main(argv=None):
@@ -159,20 +374,38 @@ def main(argv=None):
         print(f"ensembles: {desc}; skipped, nothing written.", file=sys.stderr)
         return 0
     out = results_dir(args.out, quick=args.quick)
-    rows = []
+    rows, floor = [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for model in args.models.split(","):
             for k in (int(s) for s in args.sizes.split(",")):
-                row = measure(model, data, k, args.rounds, args.quick)
+                row = measure(model, data, k, args.rounds, args.quick, args.loop_fits)
                 rows.append(row)
                 print(f"{model} K={k}: one fit {row['one_fit_s']:.2f} s, ensemble {row['ensemble_s']:.2f} s "
                       f"({row['ensemble_over_one']:.2f}x one fit, {row['ensemble_over_one_cpu']:.2f}x in CPU "
-                      f"time, loop/ensemble {row['loop_over_ensemble']:.2f}), members' max rel dJ "
-                      f"{row['member_max_rel_dJ']:.2g}", flush=True)
-    stem = f"ensembles_{args.record}"
+                      f"time; global stage {row['global_over_one']:.2f}x, gradient stage "
+                      f"{row['gradient_over_one']:.2f}x; loop/ensemble {row['loop_over_ensemble']:.2f}), "
+                      f"members' max rel dJ {row['member_max_rel_dJ']:.2g}, bitwise "
+                      f"{row['global_bitwise']}/{row['theta_bitwise']} of {row['members_checked']}",
+                      flush=True)
+            if args.rollouts and ":" not in model:
+                floor += rollout_costs(model, data, reps=3 if args.quick else 9)
+                for f in floor:
+                    if f["model"] == model:
+                        print(f"  {f['what']}, P={f['P']}: {f['us_per_candidate']:.1f} us per candidate",
+                              flush=True)
+    stem = f"ensembles_{args.record}" + (f"_{args.tag}" if args.tag else "")
+    runs = [f"`{command()}`" + (f": {args.note}" if args.note else "")]
+    notes = out / f"{stem}.runs"
+    if args.append:
+        rows = merge(read_rows(out / f"{stem}.csv"), rows, ("model", "K"))
+        floor = merge(read_rows(out / f"{stem}_floor.csv"), floor, ("model", "what", "P"))
+        runs = (notes.read_text().splitlines() if notes.is_file() else []) + runs
+    notes.write_text("\n".join(runs) + "\n")
     write_csv(rows, out / f"{stem}.csv")
-    (out / f"{stem}.md").write_text(report(rows, args, desc))
+    if floor:
+        write_csv(floor, out / f"{stem}_floor.csv")
+    (out / f"{stem}.md").write_text(report(rows, floor, args, desc, runs))
     print(f"wrote {out / stem}.md")
     return 0
 

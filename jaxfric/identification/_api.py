@@ -242,10 +242,15 @@ def identify(
             ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
             MSE %, the spread of each parameter); ``fit.predict_band(v)`` is the
             members' min-max prediction band. Member ``i`` equals
-            ``identify(..., key=keys[i])``: to the bit where the members run one after
-            another (physical models and chains on a CPU), else up to floating-point
-            reassociation (J within 1e-6 relative on a small float64 problem; long
-            float32 gradient stages can separate, docs/identify.md).
+            ``identify(..., key=keys[i])``: on a CPU to the bit for the physical models
+            and through the global stage for every model (``stages.ensemble_batching``);
+            the networks' gradient stage runs the members side by side
+            (``GradientRefinement(batching="vmap")``, the default), whose batched sums
+            round differently, and 500 float32 BFGS steps can carry a member to another
+            nearby optimum (measured on EMPS in docs/identify.md); with
+            ``refine=GradientRefinement(max_steps=500, batching="map")`` every member is
+            the single fit to the bit, at K times one gradient stage's cost. On a GPU
+            every stage runs the members side by side (equal up to reassociation).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
             window and must hold at least :data:`~jaxfric.identification.MIN_VALID_SAMPLES`

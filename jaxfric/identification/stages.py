@@ -15,10 +15,12 @@ can be run and tested alone, and another pipeline (``identify_motion``) can use 
 ones it shares.
 
 Ensembles (``keys=K``): the global stage runs the K members in one
-:func:`jaxfric.minimise_many` call and the gradient stage runs their quasi-Newton
-iterations side by side (:func:`refine_many`), so the Elman networks' K rollouts
-share each time loop. Member ``i`` equals the run with key ``i`` up to
-floating-point reassociation in the batched arithmetic.
+:func:`jaxfric.minimise_many` call (on a CPU mostly one after another, member i then
+being the run with key i to the bit; :func:`ensemble_batching`) and the gradient stage
+runs their quasi-Newton iterations side by side (:func:`refine_many`), so the Elman
+networks' K rollouts share each time loop; there member ``i`` equals the run with key
+``i`` up to floating-point reassociation in the batched sums, or to the bit with
+``GradientRefinement(batching="map")``.
 """
 
 from __future__ import annotations
@@ -246,23 +248,36 @@ def objective_stage(model: AbstractFrictionModel, records: RecordSet, dtype,
 
 
 # ------------------------------------------------------------- global stage
+#: On a CPU an ensemble's members share one batched evaluation only while a member's
+#: population is smaller than this: the networks' rollout then costs less per candidate
+#: in a larger batch (ENN, 1600 samples: 680 µs for 1 candidate, 68 µs each for 25, 41
+#: µs for 64, 45 µs for 200; ``python benchmarks/ensembles.py --rollouts``). From about
+#: 64 candidates up it is bound by arithmetic, and batching the members buys nothing.
+CPU_BATCH_SATURATION = 32
+
+
 def ensemble_batching(model: AbstractFrictionModel, solver: AbstractSolver) -> str:
     """How :func:`global_stage` lays out an ensemble's members (``minimise_many``'s
     ``batching``).
 
     ``"vmap"`` (side by side) where that is cheaper than one member after another:
-    off the CPU, and on the CPU for a one-stage population solver on a network, whose
-    rollout costs far less per candidate in a larger batch (the time loop, not the
-    arithmetic, bounds it). ``"map"`` otherwise on the CPU: a physical model's
-    rollout costs the same per candidate at any batch size (measured on EMPS: LuGre
-    0.8–1.3 ms per candidate for batches of 1 to 200), and a vmapped Nelder–Mead stage
-    computes every conditional batch (a shrink's n points) on every step.
+    off the CPU, and on the CPU for a one-stage population solver on a network whose
+    population is smaller than :data:`CPU_BATCH_SATURATION` agents. ``"map"``
+    otherwise on the CPU, which runs member i as the single run with key i, to the
+    bit: a physical model's rollout costs the same per candidate at any batch size
+    (LuGre on EMPS's 19 800 training samples: 126–136 µs per candidate for batches of
+    8 to 25, 309 µs at 64 and 802 µs at 200, where the batch leaves the cache), the
+    default ENN swarm (8×8 agents, 162 evaluations a generation) is already past the
+    batch size where the network's rollout stops getting cheaper (8 members took the
+    same CPU time mapped or vmapped), and a vmapped Nelder–Mead stage computes every
+    conditional batch (a shrink's n points) on every step.
     """
     if jax.default_backend() != "cpu":
         return "vmap"
-    batches = model.needs_scaling  # the networks
-    population = solver.population_size() is not None and not isinstance(solver, AbstractChain)
-    return "vmap" if batches and population else "map"
+    size = solver.population_size()
+    small_swarm = (size is not None and size < CPU_BATCH_SATURATION
+                   and not isinstance(solver, AbstractChain))
+    return "vmap" if model.needs_scaling and small_swarm else "map"
 
 
 def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, keys: Keys, *,
@@ -422,12 +437,14 @@ def warn_if_divergent(metrics: dict, stacklevel: int = 3) -> None:
         )
 
 
-def ensemble_summary(model, thetas, f_np, member_keys, best, run_predictions, records) -> dict:
-    """``Fit.ensemble``: members, their costs and validation errors, parameter spread."""
+def ensemble_summary(model, thetas, f_np, member_keys, best, member_predictions, records) -> dict:
+    """``Fit.ensemble``: members, their costs and validation errors, parameter spread.
+
+    ``member_predictions``: per record, the ``(K, T)`` free runs of the K members."""
     thetas = np.asarray(thetas)
     valid_mse = []
-    for th in thetas:
-        m = record_metrics(run_predictions(jnp.asarray(th)), records)
+    for i in range(len(thetas)):
+        m = record_metrics([p[i] for p in member_predictions], records)
         valid_mse.append((m.get("valid") or {}).get("mse_percent"))
     if model.needs_scaling:
         named = {}
@@ -458,6 +475,14 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
         return [predict(model, theta, scalers, r.velocity, r.dt, x)
                 for r, x in zip(records.records, bounds.inputs)]
 
+    def member_predictions(thetas):
+        # One batched free run per record for all members (vmap over θ reaches the
+        # model's batched rollout), not K runs one after another: on a GPU each run is
+        # a sequence of kernel launches whatever its batch.
+        return [np.asarray(jax.vmap(lambda th, r=r, x=x: predict(model, th, scalers, r.velocity,
+                                                                  r.dt, x))(thetas))
+                for r, x in zip(records.records, bounds.inputs)]
+
     thetas = jnp.atleast_2d(sol.value if refined is None else refined.theta)
     f_final = jnp.atleast_1d(sol.f if refined is None else refined.f)
     f_np = np.asarray(f_final, np.float64)
@@ -486,8 +511,8 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
 
     members = None
     if ensemble:
-        members = ensemble_summary(model, thetas, f_np, keys.members, best, run_predictions,
-                                   records)
+        members = ensemble_summary(model, thetas, f_np, keys.members, best,
+                                   member_predictions(thetas), records)
     key_data, key_impl = key_record(keys.members[best] if ensemble else keys.key)
     warn_if_divergent(metrics, stacklevel=stacklevel + 1)
     diagnostics = {
@@ -522,7 +547,8 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
             "solver": repr(solver),
             "refine": None if refine is None else {
                 "method": refine.method, "max_steps": refine.max_steps,
-                "rtol": refine.rtol, "atol": refine.atol, "edge": refine.edge},
+                "rtol": refine.rtol, "atol": refine.atol, "edge": refine.edge,
+                **({"batching": refine.batching} if ensemble else {})},
             **settings,
             "global_stage_samples": (int(objective.data_global.y.shape[0])
                                      if records.single is not None else None),
