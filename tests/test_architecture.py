@@ -60,10 +60,11 @@ def test_imports_go_down():
 
 #: Inside ``jaxfric.optim`` a module imports only modules listed before it (module-level
 #: and function-level imports alike), so the package has no import circle: the pieces
-#: every solver shares, the checks of a problem, the evaluation rounds, the solvers, the
-#: chains, then the one driver that runs them all.
-OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "loop",
-               "asktell", "rounds",
+#: every solver shares, the checks of a problem, the evaluation rounds and the loop that
+#: compiles them, ask/tell over that loop, the solver contract, the solvers, the chains,
+#: then the one driver that runs them all.
+OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "rounds",
+               "loop", "asktell", "contract",
                "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "chained", "hybrid",
                "evosax_adapter", "driver", "__init__"]
 

@@ -13,7 +13,7 @@ import optimistix as optx
 import pytest
 
 import jaxfric as jf
-from jaxfric.optim import AbstractBatchSolver, OptxMinimiser, TqdmProgress
+from jaxfric.optim import AbstractSolver, OptxMinimiser, TqdmProgress
 
 LO, HI = np.full(2, -2.0, np.float32), np.full(2, 3.0, np.float32)
 TARGET = np.array([0.5, -0.25], np.float32)
@@ -168,9 +168,9 @@ def test_ask_tell_drives_a_two_stage_chain_as_the_compiled_run(solver):
 
 
 def test_ask_tell_drives_nelder_mead_alone():
-    """Nelder–Mead through the optimistix adapter: the first simplex, then one trial
+    """Nelder–Mead alone, a jaxfric solver itself: the first simplex, then one trial
     point at a time (or a shrink's n), as minimise for the same key."""
-    solver = OptxMinimiser(jf.NelderMead(max_steps=30))
+    solver = jf.NelderMead(max_steps=30)
     key = jax.random.key(6)
     ref = jf.minimise(separable, jf.NelderMead(max_steps=30), (LO, HI),
                       args=jnp.asarray(TARGET), key=key)
@@ -389,6 +389,23 @@ def test_initial_population():
         jf.minimise(sphere, jf.NelderMead(), (LO, HI), key=0, y0=pop)
 
 
+def test_evosax_answers_the_population_capability():
+    """Evosax's population_size keyword no longer hides the contract's
+    population_size(): a population-based strategy takes an initial population, a
+    distribution-based one a single start (before, both raised TypeError)."""
+    pytest.importorskip("evosax")
+    pop = np.array([[1.0, 1.0], [0.0, 0.0], [2.0, -1.0]], np.float32)
+    de = jf.Evosax("DE", population_size=6, num_generations=2)
+    assert de.population_size() == 6 and jf.Evosax("CMA_ES").population_size() is None
+    sol = jf.minimise(sphere, de, (LO, HI), key=0, y0=pop)
+    assert float(sol.history.f[0]) < 1e-12  # the optimum, through the unit-box map
+    sol = jf.minimise(sphere, jf.Evosax("CMA_ES", num_generations=2), (LO, HI), key=0,
+                      y0=pop[1])
+    assert float(sol.history.f[0]) < 1e-12
+    with pytest.raises(ValueError, match="this solver takes one start"):
+        jf.minimise(sphere, jf.Evosax("CMA_ES"), (LO, HI), key=0, y0=pop)
+
+
 def test_an_optimistix_minimiser_runs_through_the_adapter():
     """optx.BFGS through jaxfric's driver equals optx.minimise on the same start."""
     y0 = jnp.array([1.0, 2.0], jnp.float32)
@@ -397,7 +414,7 @@ def test_an_optimistix_minimiser_runs_through_the_adapter():
     sol = jf.minimise(sphere, solver, (LO, HI), key=0, y0=y0)
     np.testing.assert_allclose(sol.value, ref.value, rtol=1e-6, atol=1e-7)
     assert isinstance(jf.optim.optx_adapter.as_protocol(solver), OptxMinimiser)
-    assert isinstance(OptxMinimiser(solver), AbstractBatchSolver)
+    assert isinstance(OptxMinimiser(solver), AbstractSolver)
 
 
 def test_progress_bar_ends_at_100_percent_when_a_stage_stops_early():

@@ -1,7 +1,7 @@
 """Derivative-free optimisers: PSO, MAPSO, Nelder–Mead, two-stage chains (MAPSO–NMDS),
 one driver (``minimise``, ``minimise_many``) and the step protocol they share."""
 
-from ._base import RESULTS, AbstractSolver, History, Solution
+from ._base import RESULTS, History, Solution
 from .chained import AbstractChain, Chain, ChainState, chain
 from .driver import minimise, minimise_many
 from .evosax_adapter import Evosax, EvosaxState, cmaes_nm
@@ -12,12 +12,12 @@ from .optx_adapter import OptxMinimiser, OptxState
 from .progress import ProgressHook, RecordingProgress, TqdmProgress
 from .pso import PSO
 from .asktell import AskTellState
-from .rounds import AbstractBatchSolver, AbstractGenerational, Batch, Scan
+from .contract import AbstractGenerational, AbstractSolver
+from .rounds import Batch, Scan
 from .swarm import AbstractSwarm, SwarmState
 
 __all__ = [
     "RESULTS",
-    "AbstractBatchSolver",
     "AbstractChain",
     "AbstractGenerational",
     "AbstractSolver",

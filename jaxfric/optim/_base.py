@@ -221,7 +221,7 @@ def result_from_f(f_best):
     return RESULTS.where(jnp.isfinite(f_best), RESULTS.successful, RESULTS.nonfinite)
 
 
-# -------------------------------------------------------------------- solver contract
+# ------------------------------------------------------------------ counters, checks
 def count_dtype():
     """Integer dtype of evaluation counters: int64 when JAX runs with 64-bit types
     (``jax.enable_x64``), else int32 (the driver then refuses budgets of 2³¹ or more
@@ -229,47 +229,8 @@ def count_dtype():
     return jax.dtypes.canonicalize_dtype(jnp.int64)
 
 
-class AbstractSolver(eqx.Module):
-    """Nominal base of every jaxfric solver: hyperparameter checks and progress totals.
-
-    A solver runs under :func:`jaxfric.minimise` either through jaxfric's step
-    protocol (:class:`~jaxfric.optim.rounds.AbstractBatchSolver`) or, for an ``optx.AbstractMinimiser``
-    such as :class:`~jaxfric.NelderMead`, through optimistix's own ``init / step /
-    terminate / postprocess`` (the driver adapts it, see
-    :mod:`jaxfric.optim.optx_adapter`).
-    """
-
-    def __check_init__(self):
-        # Solvers validate on construction, as the models do: a bad hyperparameter
-        # fails where it is written, naming the field.
-        self.check()
-
-    def progress_totals(self) -> tuple[int | None, int | None]:
-        """(global generations, local step cap) for a progress display."""
-        return None, None
-
-    def check(self) -> None:
-        """Raise ``ValueError`` on invalid hyperparameters. Run on construction
-        (``__check_init__``) and again by :func:`jaxfric.minimise` before any tracing."""
-
-    def population_size(self) -> int | None:
-        """Agents of a population solver (a start ``y0`` may then be an initial
-        population of up to this many rows); ``None``: the solver takes one start."""
-        return None
-
-    def personal_bests(self, state) -> tuple[Array, Array] | None:
-        """``(X, f)``: each agent's best point and value, for a population solver (a
-        chain then starts its local stage from the best of them); ``None`` otherwise."""
-        return None
-
-    def start_options(self, spread, lower, upper) -> dict | None:
-        """Options for a local run started where a population of per-coordinate
-        standard deviation ``spread`` converged (``None``: this solver takes none)."""
-        return None
-
-    def steps_for(self, n: int) -> int | None:
-        """Most steps of a run on ``n`` parameters (``None``: not known)."""
-        return None
+#: The step cap of a solver that gives none (``steps_for`` returns ``None``).
+NO_STEP_CAP = 2**31 - 1
 
 
 def check_positive_int(name: str, value, minimum: int = 1) -> None:

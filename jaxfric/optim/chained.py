@@ -41,8 +41,9 @@ from ._base import (
     Solution,
     check_positive_int,
 )
+from .contract import AbstractSolver
 from .optx_adapter import as_protocol
-from .rounds import AbstractBatchSolver, drive, only_if, skipped
+from .rounds import drive, only_if, skipped
 
 
 class ChainState(eqx.Module):
@@ -70,27 +71,29 @@ def _put(tree, i, leaf_tree):
     return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
 
 
-class AbstractChain(AbstractBatchSolver):
+class AbstractChain(AbstractSolver):
     """A global solver followed by a local one (see the module docstring)."""
 
     # global_solver, local_solver, num_starts, simplex_from_swarm: fields of Chain;
     # MAPSONMDS names the first two mapso and nelder_mead
 
     @property
-    def _global(self) -> AbstractBatchSolver:
+    def _global(self) -> AbstractSolver:
         return as_protocol(self.global_solver)
 
     @property
-    def _local(self) -> AbstractBatchSolver:
+    def _local(self) -> AbstractSolver:
         return as_protocol(self.local_solver)
 
     def check(self):
         for name in ("global_solver", "local_solver"):
-            if not isinstance(as_protocol(getattr(self, name)), AbstractBatchSolver):
+            try:
+                as_protocol(getattr(self, name))
+            except ValueError:
                 raise ValueError(
                     f"{name} must be a jaxfric solver that evaluates in batches (PSO, MAPSO, "
                     "Evosax, NelderMead) or an optimistix minimiser, got "
-                    f"{type(getattr(self, name)).__name__}")
+                    f"{type(getattr(self, name)).__name__}") from None
         self._global.check()
         self._local.check()
         check_positive_int("num_starts", self.num_starts)
@@ -135,7 +138,7 @@ class AbstractChain(AbstractBatchSolver):
         """Rounds that start the local stage from the global stage's best point(s), one
         start after another, where the global stage has finished (else ``state`` as it is)."""
         g = state.first
-        done, _ = self._global.terminate(None, lower, upper, None, g)
+        done, _ = self._global.finished(g)
         opts = self._local_options(lower, upper, g)
         local = self._local
         extra = {} if opts is None else {"options": opts}
@@ -145,7 +148,7 @@ class AbstractChain(AbstractBatchSolver):
             runs.append((yield from only_if(done, local.init_rounds(
                 lower, upper, state.local_key(), x0, objective, **extra))))
         second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
-        second_done = jax.vmap(lambda s: local.terminate(None, lower, upper, None, s)[0])(second)
+        second_done = jax.vmap(lambda s: local.finished(s)[0])(second)
         if state.second is None:  # the placeholders' shapes (see init_rounds)
             return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
                               state.key_impl)
@@ -172,11 +175,6 @@ class AbstractChain(AbstractBatchSolver):
         state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], raw, impl)
         return (yield from self._switch(lower, upper, state, objective))
 
-    def step(self, fn, lower, upper, args, state):
-        return jax.lax.cond(state.stage == 0,
-                            lambda s: self.step_stage(fn, lower, upper, args, s, 0),
-                            lambda s: self.step_stage(fn, lower, upper, args, s, 1), state)
-
     def step_rounds(self, lower, upper, state, stage=0, objective=None):
         """One step of stage ``stage`` (static), which ``state`` is known to be in."""
         if stage == 0:
@@ -186,7 +184,7 @@ class AbstractChain(AbstractBatchSolver):
         local = self._local
         i = self._current(state)
         s_i = yield from local.step_rounds(lower, upper, _index(state.second, i), 0, objective)
-        done_i, _ = local.terminate(None, lower, upper, None, s_i)
+        done_i, _ = local.finished(s_i)
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
             (_put(state.second, i, s_i), state.second_done.at[i].set(done_i)),
@@ -197,19 +195,18 @@ class AbstractChain(AbstractBatchSolver):
         start, so XLA updates its state in place)."""
         return 0 if self.num_starts == 1 else jnp.argmin(state.second_done)
 
-    def terminate(self, fn, lower, upper, args, state):
+    def finished(self, state):
         done = (state.stage == 1) & jnp.all(state.second_done)
-        return done, self._result(fn, lower, upper, args, state)
+        return done, self._result(state)
 
     def _local_best(self, state):
         xs, fs = jax.vmap(self._local.best)(state.second)
         i = jnp.argmin(fs)
         return i, xs[i], fs[i]
 
-    def _result(self, fn, lower, upper, args, state):
+    def _result(self, state):
         i, _, _ = self._local_best(state)
-        _, results = jax.vmap(
-            lambda s: self._local.terminate(fn, lower, upper, args, s))(state.second)
+        _, results = jax.vmap(self._local.finished)(state.second)
         local = _index(results, i)
         _, gf = self._global.best(state.first)
         return RESULTS.where(state.stage == 1, local,
@@ -226,11 +223,10 @@ class AbstractChain(AbstractBatchSolver):
         g = self._global.num_evals(state.first)
         return g + jnp.where(state.stage == 1, local, 0).astype(g.dtype)
 
-    def postprocess(self, fn, lower, upper, args, state, result) -> Solution:
+    def solution(self, fn, lower, upper, args, state, result) -> Solution:
         x, f = self.best(state)
-        g_sol = self._global.postprocess(fn, lower, upper, args, state.first,
-                                         self._global.terminate(fn, lower, upper, args,
-                                                                state.first)[1])
+        g_sol = self._global.solution(fn, lower, upper, args, state.first,
+                                      self._global.finished(state.first)[1])
         i, _, _ = self._local_best(state)
         best_local = _index(state.second, i)
         local_steps = jnp.where(state.stage == 1, self._local.progress(best_local)[1], 0)
@@ -245,8 +241,9 @@ class AbstractChain(AbstractBatchSolver):
             history=History.empty(1, f.dtype), state=state,
         )
 
-    def max_steps(self, n: int) -> int:
-        return self._global.max_steps(n) + self.num_starts * self._local.max_steps(n)
+    def steps_for(self, n: int) -> int | None:
+        g, loc = self._global.steps_for(n), self._local.steps_for(n)
+        return None if g is None or loc is None else g + self.num_starts * loc
 
     def max_evaluations(self, n: int):
         g, loc = self._global.max_evaluations(n), self._local.max_evaluations(n)

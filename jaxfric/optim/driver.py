@@ -28,7 +28,8 @@ from .. import _xla
 from . import checkpoint as ckpt
 from ._base import Solution, check_positive_int
 from .loop import NO_STOP, _begin, _run
-from .optx_adapter import OptxMinimiser, as_protocol
+from .rounds import compiled_start
+from .optx_adapter import as_protocol
 from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
 from .progress import ProgressHook, TqdmProgress, register
 from .sharding import Layout, resolve_devices, shard_keys
@@ -103,11 +104,11 @@ def _batching(batching, proto, layout: Layout | None) -> str:
             "devices pass devices=False, or batching='vmap' to lay the runs out over them"
         )
     if batching == "auto":
-        # A vmapped optimistix minimiser (Nelder-Mead) computes both sides of every
-        # branch; on one CPU running the keys in turn is faster (docs/solvers.md). Swarms
-        # batch their evaluations well, so they keep vmap.
+        # A vmapped solver with conditional batches (Nelder-Mead) computes both sides of
+        # every branch; on one CPU running the keys in turn is faster (docs/solvers.md).
+        # Swarms batch their evaluations well, so they keep vmap.
         one_cpu = layout is None and _platform(layout) == "cpu"
-        return "map" if one_cpu and isinstance(proto, OptxMinimiser) else "vmap"
+        return "map" if one_cpu and not proto.batches_runs() else "vmap"
     return batching
 
 
@@ -125,7 +126,7 @@ def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
     if not isinstance(warm_start, Solution) or warm_start.state is None:
         raise ValueError("warm_start must be a Solution returned by jaxfric.minimise")
     state = warm_start.state
-    expect = eqx.filter_eval_shape(proto.init, flat, lower, upper, args, key, x0)
+    expect = eqx.filter_eval_shape(compiled_start, proto, flat, lower, upper, args, key, x0)
     shape = lambda t: [(tuple(a.shape), str(a.dtype)) for a in jtu.tree_leaves(t)]  # noqa: E731
     if jtu.tree_structure(state) != jtu.tree_structure(expect) or shape(state) != shape(expect):
         raise ValueError(

@@ -2,7 +2,7 @@
 
 :class:`Evosax` runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
 (``evosax.algorithms.algorithms``) — through jaxfric's step protocol
-(:class:`~jaxfric.optim.AbstractBatchSolver`), so :func:`jaxfric.minimise` gives it
+(:class:`~jaxfric.optim.AbstractSolver`), so :func:`jaxfric.minimise` gives it
 what it gives every solver: bounds, history, progress, checkpoints, warm starts and
 ``minimise_many``'s batched seeds; it is also a valid global stage of
 :func:`~jaxfric.optim.chain` (``cmaes_nm()`` = ``chain(Evosax("CMA_ES"), NelderMead())``)
@@ -64,7 +64,8 @@ import jax.numpy as jnp
 from ._base import check_positive_int, check_range, count_dtype, uniform_flat
 from .chained import Chain
 from .nelder_mead import NelderMead
-from .rounds import AbstractGenerational, Rounds
+from .contract import AbstractGenerational
+from .rounds import Rounds
 
 INSTALL_HINT = 'pip install -e ".[evosax]"'
 
@@ -167,7 +168,8 @@ class Evosax(AbstractGenerational):
     """
 
     strategy: Any
-    population_size: int | None
+    # not named population_size: that is the solver contract's capability (a method)
+    pop_size: int | None
     num_generations: int
     std_init: float | None
     params: tuple
@@ -177,7 +179,7 @@ class Evosax(AbstractGenerational):
                  num_generations: int = 1000, std_init: float | None = 0.3,
                  params: dict | None = None, **strategy_kwargs):
         self.strategy = resolve_strategy(strategy)
-        self.population_size = population_size
+        self.pop_size = population_size
         self.num_generations = num_generations
         self.std_init = std_init
         self.params = tuple(sorted((params or {}).items()))
@@ -186,7 +188,7 @@ class Evosax(AbstractGenerational):
     def __repr__(self):  # the constructor call (Fit.settings records it)
         extra = "".join(f", {k}={v!r}" for k, v in self.strategy_kwargs)
         params = f", params={dict(self.params)!r}" if self.params else ""
-        return (f"Evosax({self.strategy.__name__!r}, population_size={self.population_size}, "
+        return (f"Evosax({self.strategy.__name__!r}, population_size={self.pop_size}, "
                 f"num_generations={self.num_generations}, std_init={self.std_init}{params}{extra})")
 
     # ------------------------------------------------------------------ configuration
@@ -197,9 +199,15 @@ class Evosax(AbstractGenerational):
 
     def population(self, n: int) -> int:
         """Population size ``P`` for ``n`` parameters."""
-        if self.population_size is not None:
-            return self.population_size
+        if self.pop_size is not None:
+            return self.pop_size
         return 4 + int(math.floor(3 * math.log(n))) if self.distribution_based else 25
+
+    def population_size(self) -> int | None:
+        """``P`` of a population-based strategy, whatever the dimension (a start ``y0``
+        may then hold up to ``P`` rows); ``None`` for a distribution-based one, which
+        takes one start (its first mean)."""
+        return None if self.distribution_based else self.population(1)
 
     def evaluations(self, n: int) -> int:
         """Exact objective evaluations of a run on ``n`` parameters."""
@@ -207,8 +215,8 @@ class Evosax(AbstractGenerational):
         return start + self.population(n) * self.num_generations
 
     def check(self):
-        if self.population_size is not None:
-            check_positive_int("population_size", self.population_size, minimum=2)
+        if self.pop_size is not None:
+            check_positive_int("population_size", self.pop_size, minimum=2)
         check_positive_int("num_generations", self.num_generations)
         if self.std_init is not None:
             check_range("std_init", self.std_init, 0.0, lo_open=True)

@@ -1,10 +1,11 @@
 """The loop every solver runs in, one compiled program (docs/algorithms.md §5.1 for the
 two-stage case)::
 
-    state = init(...)
-    for stage in range(num_stages):            # a chain: global, then local
-        while not done and stage(state) == stage:
-            state = step_stage(..., stage); record history; report progress
+    state = start()                            # init_rounds, evaluated in the program
+    for stage in range(num_stages()):          # a chain: global, then local
+        while not finished(state) and stage(state) == stage:
+            state = step(state, stage)         # step_rounds, evaluated in the program
+            record history; report progress
 
 :func:`jaxfric.minimise` compiles :func:`_run`; ask/tell (:mod:`jaxfric.optim.asktell`)
 compiles the same function with an objective answered from Python.
@@ -18,7 +19,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._base import History, Solution
+from ._base import NO_STEP_CAP, History, Solution
+from .rounds import compiled_start, compiled_step
 
 
 #: Most history entries kept (a longer run keeps every 2nd, 4th, ... step).
@@ -41,8 +43,9 @@ def _record(proto, state, history):
 
 
 def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
-    state = proto.init(flat, lower, upper, args, key, x0) if warm is None else warm
-    size = min(proto.max_steps(lower.shape[0]) + 2, HISTORY_SIZE)  # + the first entry, + room
+    state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
+    cap = proto.steps_for(lower.shape[0])
+    size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
     history = _record(proto, state, History.empty(size, lower.dtype))
     return Carry(state, history, jnp.array(0, jnp.int32))
 
@@ -57,11 +60,11 @@ def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry
 
     for s in range(proto.num_stages()):
         def cond(c, s=s):
-            done, _ = proto.terminate(flat, lower, upper, args, c.state)
+            done, _ = proto.finished(c.state)
             return ~done & (proto.stage(c.state) == s) & (c.steps < stop_at)
 
         def body(c, s=s):
-            state = proto.step_stage(flat, lower, upper, args, c.state, s)
+            state = compiled_step(proto, flat, lower, upper, args, c.state, s)
             c = Carry(state, _record(proto, state, c.history), c.steps + 1)
             report(c, False)
             return c
@@ -72,8 +75,8 @@ def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry
 
 
 def _end(proto, flat, lower, upper, args, carry: Carry) -> Solution:
-    _, result = proto.terminate(flat, lower, upper, args, carry.state)
-    sol = proto.postprocess(flat, lower, upper, args, carry.state, result)
+    _, result = proto.finished(carry.state)
+    sol = proto.solution(flat, lower, upper, args, carry.state, result)
     _, f = proto.best(carry.state)
     history = carry.history.close(proto.num_evals(carry.state), f).filled()
     return eqx.tree_at(lambda s: s.history, sol, history)

@@ -1,4 +1,5 @@
-"""Nelder–Mead downhill simplex (NMDS, ``docs/algorithms.md §5``) as an optimistix minimiser.
+"""Nelder–Mead downhill simplex (NMDS, ``docs/algorithms.md §5``): a jaxfric solver that
+is also an optimistix minimiser.
 
 ``optx.NelderMead`` in optimistix 0.1.0 searches a 2-D plane for any dimension ≥ 3
 (degenerate first simplex), expands greedily, and reads best/worst vertices from
@@ -20,6 +21,13 @@ the pre-update simplex. This is a correct replacement that runs through
 
 Bounds and an optional per-coordinate first step reach the solver through
 ``optx.minimise(..., options={"lower": lo, "upper": hi, "initial_step": step})``.
+
+One algorithm, two protocols under their own names: the start and the step are written
+once, as evaluation rounds (:mod:`jaxfric.optim.rounds`) that receive ``(f, aux)``;
+optimistix's ``init / step / terminate / postprocess`` drive them with the aux the
+objective returns, jaxfric's contract (``init_rounds / step_rounds / finished / best /
+num_evals``, :class:`~jaxfric.optim.contract.AbstractSolver`) with none. So
+:func:`jaxfric.minimise`, chains and ask/tell run it directly, without an adapter.
 """
 
 from __future__ import annotations
@@ -35,12 +43,16 @@ from jaxtyping import Array
 
 from ._base import (
     RESULTS,
-    AbstractSolver,
+    Solution,
+    History,
     check_positive_int,
     check_range,
+    count_dtype,
     safe_value,
+    uniform_in_box,
 )
-from .rounds import Batch, drive, skipped
+from .contract import AbstractSolver
+from .rounds import Batch, drive, relay, skipped
 
 _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
 
@@ -60,6 +72,7 @@ class NelderMeadState(eqx.Module):
     num_contractions: Array
     num_shrinks: Array
     num_restarts: Array
+    num_steps: Array
 
 
 def _flat_bounds(options, y_flat):
@@ -90,10 +103,16 @@ def _tree_select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
 
 
+def _no_aux(rounds):
+    """The simplex rounds (which receive ``(f, aux)``) fed values without aux."""
+    return relay(rounds, answer=lambda f: (f, None))
+
+
 class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     """Nelder–Mead simplex minimiser (``docs/algorithms.md §5``), usable two ways:
 
-    * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)``;
+    * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)`` (a jaxfric solver:
+      also in chains, ``minimise_many`` and ask/tell);
     * ``optx.minimise(fn, NelderMead(), y0, args, options={"lower": lo, "upper": hi},
       has_aux=..., max_steps=..., throw=...)`` (``options`` may also hold
       ``"initial_step"``, a per-coordinate first step). ``sol.aux`` is the auxiliary
@@ -226,17 +245,17 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     # ------------------------------------------------------------ optimistix protocol
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         x0, unravel = ravel_pytree(y)
-        return drive(self.init_rounds(x0, options), self._evaluator(fn, unravel, args))
+        return drive(self._first_simplex(x0, options), self._evaluator(fn, unravel, args))
 
-    def init_rounds(self, x0, options):
-        """:meth:`init` as evaluation rounds (:mod:`jaxfric.optim.rounds`) on the flat
-        start ``x0``: yields the first simplex (``n + 1`` points), receives ``(f, aux)``."""
+    def _first_simplex(self, x0, options):
+        """The start as evaluation rounds (:mod:`jaxfric.optim.rounds`) on the flat start
+        ``x0``: yields the first simplex (``n + 1`` points), receives ``(f, aux)``."""
         lower, upper = _flat_bounds(options, x0)
         x0 = jnp.clip(x0, lower, upper)
         step = self._first_steps(x0, lower, upper, options)
         simplex = jnp.concatenate([x0[None], x0[None] + jnp.diag(step)])
         simplex = jnp.clip(simplex, lower[None], upper[None])
-        f, aux = yield simplex
+        f, aux = yield Batch(simplex, split=False)
         order = jnp.argsort(f)
         num_evals = jnp.array(x0.shape[0] + 1, jnp.int32)
         return NelderMeadState(
@@ -247,7 +266,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
             **dict.fromkeys(("num_reflections", "num_expansions", "num_contractions",
-                             "num_shrinks", "num_restarts"), jnp.array(0, jnp.int32)),
+                             "num_shrinks", "num_restarts", "num_steps"),
+                          jnp.array(0, jnp.int32)),
         )
 
     def step(self, fn, y, args, options, state, tags):
@@ -260,11 +280,11 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             )
             return skipped(X), aux
 
-        x, new_state, aux = drive(self.step_rounds(state, options),
+        x, new_state, aux = drive(self._simplex_step(state, options),
                                   self._evaluator(fn, unravel, args), skip)
         return unravel(x), new_state, aux
 
-    def step_rounds(self, state, options):
+    def _simplex_step(self, state, options):
         """:meth:`step` as evaluation rounds (:mod:`jaxfric.optim.rounds`): yields the
         reflection (all four trial points with ``batched_trials``), then the second
         trial point (sequential rule) and a shrink's ``n`` points, each only where
@@ -284,7 +304,10 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         coef = jnp.asarray([rho, rho * chi, rho * gamma, -gamma], S.dtype)
         trials = jnp.clip(centroid[None] + coef[:, None] * d[None], lower[None], upper[None])
 
-        f_t, aux_t = yield Batch(trials if self.batched_trials else trials[:1], ~restart)
+        # Nelder–Mead's few points are evaluated whole (not split over devices), as
+        # optimistix's own step evaluates them
+        f_t, aux_t = yield Batch(trials if self.batched_trials else trials[:1], ~restart,
+                                 split=False)
         f_r, aux_r = f_t[0], _take(aux_t, 0)
 
         expand = f_r < f_best
@@ -297,7 +320,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             f_2, aux_2 = f_t[second], _take(aux_t, second)
             trial_evals = jnp.where(restart, 0, 4)
         else:
-            f_2v, aux_2v = yield Batch(x_2[None], need_2)
+            f_2v, aux_2v = yield Batch(x_2[None], need_2, split=False)
             f_2, aux_2 = f_2v[0], _take(aux_2v, 0)
             trial_evals = jnp.where(restart, 0, 1 + _i32(need_2))
 
@@ -316,7 +339,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         shrunk = best[None] + sigma * (S[1:] - best[None])
         pts = jnp.clip(jnp.where(restart, fresh, shrunk), lower[None], upper[None])
 
-        f_p, aux_p = yield Batch(pts, shrink | restart)
+        f_p, aux_p = yield Batch(pts, shrink | restart, split=False)
 
         def do_batch(_):
             i = jnp.argmin(f_p)
@@ -348,6 +371,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             num_contractions=state.num_contractions + _i32(oc_ok | ic_ok),
             num_shrinks=state.num_shrinks + _i32(shrink),
             num_restarts=state.num_restarts + _i32(restart),
+            num_steps=state.num_steps + 1,
         )
         return S2[0], new_state, aux_best
 
@@ -384,5 +408,62 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return unravel(state.simplex[0]), state.aux, stats
 
     # ----------------------------------------------------------- jaxfric protocol
+    def init_rounds(self, lower, upper, key, x0=None, objective=None, options=None):
+        """The first simplex around ``x0`` (a uniform draw in the box without one);
+        ``options``: ``{"initial_step": ...}`` (see :meth:`start_options`)."""
+        if x0 is None:
+            x0 = uniform_in_box(key, lower.shape, lower, upper)
+        elif x0.ndim != 1:
+            raise ValueError("Nelder–Mead takes one start y0, not a population")
+        box = {"lower": lower, "upper": upper, **(options or {})}
+        return (yield from _no_aux(self._first_simplex(x0, box)))
+
+    def step_rounds(self, lower, upper, state, stage=0, objective=None):
+        _, state, _ = yield from _no_aux(self._simplex_step(state, {"lower": lower,
+                                                                    "upper": upper}))
+        return state
+
+    def finished(self, state):
+        """optimistix's rule: :meth:`terminate`'s test, or the step cap reached
+        (``nonlinear_max_steps_reached``)."""
+        done, result = self.terminate(None, None, None, None, state, None)
+        capped = state.num_steps >= self.steps_for(state.simplex.shape[-1])
+        stop = done | (result != RESULTS.successful) | capped
+        result = RESULTS.where((result == RESULTS.successful) & ~done,
+                               RESULTS.nonlinear_max_steps_reached, result)
+        return stop, result
+
+    def best(self, state):
+        return state.simplex[0], state.f_simplex[0]
+
+    def num_evals(self, state):
+        return state.num_evals.astype(count_dtype())
+
+    def solution(self, fn, lower, upper, args, state, result) -> Solution:
+        stats = {
+            "num_evals": self.num_evals(state),
+            "num_reflections": state.num_reflections,
+            "num_expansions": state.num_expansions,
+            "num_contractions": state.num_contractions,
+            "num_shrinks": state.num_shrinks,
+            "num_restarts": state.num_restarts,
+            "num_steps": state.num_steps,
+        }
+        x, f = self.best(state)
+        return Solution(value=x, f=f, result=result, stats=stats,
+                        history=History.empty(1, f.dtype), state=state)
+
+    def max_evaluations(self, n: int) -> int:
+        worst = (n + 1) + self.steps_for(n) * (n + 2)  # a shrink costs n + 2
+        if self.max_evals is not None:
+            worst = min(worst, self.max_evals + n + 2)
+        return worst
+
+    def batches_runs(self) -> bool:
+        return False  # its trial points and shrinks are conditional batches
+
+    def progress(self, state):
+        return jnp.array(1, jnp.int32), state.num_steps
+
     def progress_totals(self):
         return None, self.max_steps

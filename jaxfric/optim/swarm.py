@@ -3,9 +3,9 @@ warm starts and ``ask / tell`` (docs/algorithms.md §3, §10).
 
 A swarm writes one generation as evaluation *rounds* (:mod:`jaxfric.optim.rounds`): a
 Python generator that yields each batch of candidates it needs evaluated and receives
-their fitness back (``f = yield X``). :meth:`AbstractSwarm.step` feeds it the objective,
-evaluated on the whole batch at once inside the compiled program;
-:meth:`~jaxfric.optim.rounds.AbstractBatchSolver.ask` / ``tell`` feed it values
+their fitness back (``f = yield X``). The compiled run feeds it the objective,
+evaluated on the whole batch at once;
+:meth:`~jaxfric.optim.contract.AbstractSolver.ask` / ``tell`` feed it values
 computed anywhere (a simulator outside JAX), one batch per call. The same code therefore
 defines both, and a run driven by ``ask``/``tell`` visits the points
 :func:`jaxfric.minimise` visits for the same key.
@@ -26,7 +26,8 @@ from ._base import (
     count_dtype,
     uniform_in_box,
 )
-from .rounds import AbstractGenerational, Rounds
+from .contract import AbstractGenerational
+from .rounds import Rounds
 
 
 class SwarmState(eqx.Module):

@@ -1,0 +1,207 @@
+"""The one solver contract (docs/solvers.md): :class:`AbstractSolver`, whose start and
+steps are evaluation rounds (:mod:`jaxfric.optim.rounds`), and
+:class:`AbstractGenerational` for population solvers that run a number of generations."""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from . import asktell
+from ._base import History, Solution, result_from_f
+from .rounds import Rounds
+
+
+class AbstractSolver(eqx.Module):
+    """The one contract of a jaxfric solver on a box (docs/solvers.md): its evaluations
+    come in rounds (see the module docstring). Required:
+
+    * :meth:`init_rounds` and :meth:`step_rounds`: the start and one step, as rounds;
+    * :meth:`finished`: ``(done, result)``, a boolean scalar and an ``optimistix.RESULTS``;
+    * :meth:`best`: ``(x, f)``, the best point so far and its (NaN-safe) value;
+    * :meth:`num_evals`: the objective evaluations spent so far.
+
+    Everything else is an optional capability with a default: the driver, the loop and
+    the chains ask these, never the solver's type. ``ask``/``tell`` (from Python) come
+    from the required methods. Every method is pure and traceable; ``lower`` and
+    ``upper`` are 1-D arrays of one floating dtype (the driver flattens pytree bounds)
+    and the state is a pytree of arrays (what a checkpoint stores). The loop
+    (:mod:`jaxfric.optim.loop`) records ``best(state)[1]`` against ``num_evals(state)``
+    after every step and reports :meth:`progress`.
+
+    The names differ from optimistix's ``init / step / terminate / postprocess`` on
+    purpose: :class:`~jaxfric.NelderMead` is both a jaxfric solver and an
+    ``optx.AbstractMinimiser``, each protocol under its own names.
+
+    ``objective`` is ``(fn, args)`` inside the compiled run: with it inner loops may
+    run as ``lax.scan`` (MAPSO's self-learning) and a minimiser that evaluates by
+    itself (an optimistix gradient method) can run at all.
+    """
+
+    def __check_init__(self):
+        # Solvers validate on construction, as the models do: a bad hyperparameter
+        # fails where it is written, naming the field.
+        self.check()
+
+    # ------------------------------------------------------------------ required
+    @abc.abstractmethod
+    def init_rounds(self, lower, upper, key, x0=None, objective=None) -> Rounds:
+        """Rounds of the start (``x0``: an optional start inside the box); returns the
+        first state."""
+
+    @abc.abstractmethod
+    def step_rounds(self, lower, upper, state, stage: int = 0, objective=None) -> Rounds:
+        """Rounds of one step of ``stage`` (static), which ``state`` is in; returns the
+        new state."""
+
+    @abc.abstractmethod
+    def finished(self, state) -> tuple[Array, Any]:
+        """``(done, result)``: a boolean scalar and an ``optimistix.RESULTS``."""
+
+    @abc.abstractmethod
+    def best(self, state) -> tuple[Array, Array]:
+        """``(x, f)``: the best point so far and its (NaN-safe) value."""
+
+    @abc.abstractmethod
+    def num_evals(self, state) -> Array:
+        """Objective evaluations spent so far."""
+
+    # ---------------------------------------------------------- optional capabilities
+    def check(self) -> None:
+        """Raise ``ValueError`` on invalid hyperparameters. Run on construction
+        (``__check_init__``) and again by :func:`jaxfric.minimise` before any tracing."""
+
+    def solution(self, fn: Callable, lower, upper, args, state, result) -> Solution:
+        """The :class:`Solution` (flat ``value``; the loop adds the history)."""
+        x, f = self.best(state)
+        return Solution(value=x, f=f, result=result, stats={"num_evals": self.num_evals(state)},
+                        history=History.empty(1, f.dtype), state=state)
+
+    def population_size(self) -> int | None:
+        """Agents of a population solver (a start ``y0`` may then be an initial
+        population of up to this many rows); ``None``: the solver takes one start."""
+        return None
+
+    def personal_bests(self, state) -> tuple[Array, Array] | None:
+        """``(X, f)``: each agent's best point and value, for a population solver (a
+        chain then starts its local stage from the best of them); ``None`` otherwise."""
+        return None
+
+    def start_options(self, spread, lower, upper) -> dict | None:
+        """Options for a local run started where a population of per-coordinate
+        standard deviation ``spread`` converged, passed to :meth:`init_rounds` as
+        ``options=`` (``None``: this solver takes none)."""
+        return None
+
+    def steps_for(self, n: int) -> int | None:
+        """The step cap: most steps of a run on ``n`` parameters (``None``: none known)."""
+        return None
+
+    def max_evaluations(self, n: int) -> int | None:
+        """The evaluation cap: most objective evaluations of a run on ``n`` parameters
+        (``None`` if unknown), checked by the driver against the evaluation counter's
+        range before running."""
+        return None
+
+    def num_stages(self) -> int:
+        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chained.chain`
+        has 2). The loop runs each in a loop of its own, so batched runs never pay for
+        one stage's step while in another."""
+        return 1
+
+    def stage(self, state) -> Array:
+        """The stage ``state`` is in (``0 .. num_stages() − 1``)."""
+        return jnp.array(0, jnp.int32)
+
+    def batches_runs(self) -> bool:
+        """Whether :func:`jaxfric.minimise_many` should, on one CPU, run several keys side
+        by side (``vmap``: ``True``, for solvers whose steps are batches of the same size)
+        rather than one after another (``lax.map``: ``False``, for a solver with
+        conditional batches, whose branches ``vmap`` turns into selects that compute
+        both sides)."""
+        return True
+
+    def continued(self, state):
+        """``state`` of a finished run, ready to go on under this solver's (larger)
+        budget (``minimise(..., warm_start=solution)``)."""
+        return state
+
+    def progress(self, state) -> tuple[Array, Array]:
+        """``(phase, step)`` for a progress display: phase 0 a global (swarm) stage,
+        phase 1 a local (Nelder–Mead) stage; ``step`` counts within the phase."""
+        return jnp.array(0, jnp.int32), jnp.array(0, jnp.int32)
+
+    def progress_totals(self) -> tuple[int | None, int | None]:
+        """(global generations, local step cap) for a progress display."""
+        return None, None
+
+    def check_ask_tell(self) -> None:
+        """Raise ``ValueError`` if ``ask``/``tell`` cannot drive this solver."""
+
+    # ------------------------------------------------------------------- ask / tell
+    def ask_init(self, lower, upper, key, x0=None) -> asktell.AskTellState:
+        """Start a run driven from Python (:mod:`jaxfric.optim.asktell`). ``lower`` /
+        ``upper``: 1-D bounds (their dtype is the search dtype, as in
+        :func:`jaxfric.minimise`); ``key``: a PRNG key or an int seed; ``x0``: an
+        optional start (swarms: or an initial population)."""
+        self.check()
+        self.check_ask_tell()
+        return asktell.start(self, lower, upper, key, x0)
+
+    def ask(self, st: asktell.AskTellState):
+        """``(X, st)``: the points (rows) whose values :meth:`tell` needs next."""
+        return asktell.ask(st)
+
+    def tell(self, st: asktell.AskTellState, X, f) -> asktell.AskTellState:
+        """Give the values ``f`` of the rows ``X`` returned by :meth:`ask` (NaN and inf
+        count as the worst value); returns the state asking for the next batch."""
+        return asktell.tell(st, X, f)
+
+    def ask_done(self, st: asktell.AskTellState) -> bool:
+        """Whether the run has finished (by the rule the compiled run stops on)."""
+        return asktell.done(st)
+
+    def ask_result(self, st: asktell.AskTellState) -> Solution:
+        """The :class:`Solution` (flat ``value``): what :func:`jaxfric.minimise` returns
+        for the same key once the run has finished; before, the best point told so far."""
+        return asktell.result(st)
+
+
+class AbstractGenerational(AbstractSolver):
+    """A population solver that runs ``num_generations`` generations (swarms, evosax
+    strategies). Its state has ``generation`` and ``num_evals``; :meth:`best` gives the
+    best point; :meth:`stopped` an optional earlier end."""
+
+    num_generations: eqx.AbstractVar[int]
+
+    def stopped(self, state):
+        """Whether the run ends before ``num_generations`` (default: never)."""
+        return False
+
+    def finished(self, state):
+        done = (state.generation >= self.num_generations) | self.stopped(state)
+        return done, result_from_f(self.best(state)[1])
+
+    def solution(self, fn, lower, upper, args, state, result) -> Solution:
+        x, f = self.best(state)
+        return Solution(
+            value=x, f=f, result=result,
+            stats={"num_steps": state.generation, "num_evals": state.num_evals},
+            history=History.empty(1, f.dtype), state=state,
+        )
+
+    def num_evals(self, state):
+        return state.num_evals
+
+    def steps_for(self, n: int) -> int:
+        return self.num_generations
+
+    def progress(self, state):
+        return jnp.array(0, jnp.int32), state.generation
+
+    def progress_totals(self):
+        return self.num_generations, None
