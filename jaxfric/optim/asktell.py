@@ -25,6 +25,7 @@ may be open at once.
 from __future__ import annotations
 
 import atexit
+import functools
 import itertools
 import queue
 import threading
@@ -68,19 +69,31 @@ class _Channel:
         return np.full(X.shape[:1], np.inf, X.dtype)
 
 
-def _answer(token, X):
-    """Host side of the objective: ``X`` is one point ``(n,)`` or a batch ``(k, n)``."""
+def _answer(token, X, wide):
+    """Host side of the objective: ``X`` is one point ``(n,)`` or a batch ``(k, n)``
+    (``wide``: float64 sent as pairs of uint32, see :func:`_objective`)."""
     channel = _CHANNELS[int(np.asarray(token).flat[0])]
-    X = np.asarray(X)
-    f = channel.evaluate(np.atleast_2d(X))
-    return f.reshape(X.shape[:-1]).astype(X.dtype)
+    X = np.ascontiguousarray(X)
+    if wide:
+        X = X.view(np.float64)[..., 0]
+    f = channel.evaluate(np.atleast_2d(X)).reshape(X.shape[:-1]).astype(X.dtype)
+    return np.ascontiguousarray(f[..., None]).view(np.uint32) if wide else f
 
 
 def _objective(x, token):
     """``fn(x, args)`` of an ask/tell run: the value comes from :func:`tell`. Batched by
-    ``vmap`` it is one callback per batch (``vmap_method="broadcast_all"``)."""
-    return jax.pure_callback(_answer, jax.ShapeDtypeStruct(x.shape[:-1], x.dtype), token, x,
-                             vmap_method="broadcast_all")
+    ``vmap`` it is one callback per batch (``vmap_method="broadcast_all"``).
+
+    A float64 run sends its points and receives its values as uint32 pairs: XLA may run
+    the callback on a thread of its own, where ``jax.enable_x64``'s thread-local setting
+    is off and JAX would round float64 operands and results to float32."""
+    wide = x.dtype == jnp.float64
+    shape = jax.ShapeDtypeStruct(x.shape[:-1] + ((2,) if wide else ()),
+                                 jnp.uint32 if wide else x.dtype)
+    send = jax.lax.bitcast_convert_type(x, jnp.uint32) if wide else x
+    f = jax.pure_callback(functools.partial(_answer, wide=wide), shape, token, send,
+                          vmap_method="broadcast_all")
+    return jax.lax.bitcast_convert_type(f, jnp.float64) if wide else f
 
 
 class AskTellState:
