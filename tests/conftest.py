@@ -163,15 +163,18 @@ SLOW_TESTS = {
 # file, two workers, no real data): under `-n 2 --dist loadfile` the longest files are handed
 # out first and the short ones fill in at the end, so the two workers finish together (the
 # longest-first rule). Files not listed follow in their usual order; a stale list only
-# costs balance, never a test.
+# costs balance, never a test. test_notebooks goes first: its kernels hold the exclusive
+# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol,
+# which starts no subprocess, instead of stalling that worker's subprocess tests.
 LONGEST_FIRST = [
     "test_notebooks.py", "test_optim_protocol.py", "test_cli.py", "test_readme.py", "test_reproducibility.py",
-    "test_multihost.py", "test_motion_api.py", "test_sweep.py", "test_uncertainty.py", "test_parallel_scan.py",
+    "test_multihost.py", "test_sharding.py", "test_evosax_adapter.py", "test_records.py", "test_parallel_scan.py",
+    "test_motion_api.py", "test_sweep.py", "test_uncertainty.py",
     "test_identify_stages.py", "test_uncertainty_motion.py", "test_uncertainty_report.py",
-    "test_optim_properties.py", "test_records.py", "test_evosax_adapter.py", "test_optim_api.py",
+    "test_optim_properties.py", "test_optim_api.py",
     "test_compiler_options.py", "test_models_scan.py", "test_nelder_mead_optimistix.py",
     "test_rig_simulator.py", "test_identify.py", "test_reliability.py", "test_motion.py",
-    "test_checkpoint.py", "test_sharding.py", "test_identify_pipeline.py", "test_rng.py",
+    "test_checkpoint.py", "test_identify_pipeline.py", "test_rng.py",
     "test_functions.py", "test_bad_input_catalogue.py", "test_nelder_mead.py",
 ]
 
