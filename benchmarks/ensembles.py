@@ -31,7 +31,8 @@ relative difference of the training cost J, the largest difference of validation
 (percentage points), and for scale the spread of J over the single fits' keys
 (max/min − 1).
 
-``--rollouts`` adds the floor under those ratios: the cost J of P candidates at once
+``--rollouts`` adds each stage's CPU time for one key and for K keys (the stages run
+alone), and the floor under those ratios: the cost J of P candidates at once
 (``vmap`` of the cost, the global stage's evaluation) for P = 1 … 200, in µs per
 candidate, and for the networks the gradient stage's J-and-gradient of 1 and of K
 networks (CPU time, medians). A stage whose cost per candidate does not fall with P
@@ -301,6 +302,49 @@ def rollout_costs(model_name: str, data, reps: int) -> list[dict]:
     return rows
 
 
+def stage_costs(model_name: str, data, k: int) -> list[dict]:
+    """CPU time of the global and the gradient stage (``identify``'s own stage functions,
+    defaults, warm) for one key and for K keys: where an ensemble's time goes."""
+    import jax.numpy as jnp
+
+    from jaxfric.identification import stages
+    from jaxfric.identification._api import _plan, resolve_model
+
+    model = resolve_model(model_name, None)
+    solver, refine, head = _plan(model, "jaxfric", None, None)
+    records = stages.records_stage(data)
+    bounds = stages.box_stage(model, records)
+    obj = stages.objective_stage(model, records, jnp.float32, head)
+    keys = jax.random.split(jax.random.key(7), k)
+
+    def run(members):
+        sol, _ = stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)
+        ref = stages.gradient_stage(refine, obj, sol.value, bounds, jnp.float32,
+                                    ensemble=members.members is not None)[0]
+        return sol, ref
+
+    one, many = stages.resolve_keys(keys[0]), stages.resolve_keys(None, keys)
+    run(one), run(many)  # compiled
+    rows = []
+    for name in ("global", "gradient"):
+        if name == "gradient" and refine is None:
+            continue
+        cpu = {}
+        for label, members in (("one", one), ("ensemble", many)):
+            sol = stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)[0] \
+                if name == "gradient" else None
+            c = time.process_time()
+            if name == "global":
+                stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)
+            else:
+                stages.gradient_stage(refine, obj, sol.value, bounds, jnp.float32,
+                                      ensemble=members.members is not None)
+            cpu[label] = time.process_time() - c
+        rows.append({"model": model_name, "K": k, "stage": name, "one_cpu_s": cpu["one"],
+                     "ensemble_cpu_s": cpu["ensemble"], "ratio": cpu["ensemble"] / cpu["one"]})
+    return rows
+
+
 def _fmt(x) -> str:
     return f"{x:.3g}" if isinstance(x, float) else str(x)
 
@@ -314,7 +358,7 @@ def command() -> str:
     return " ".join(["python benchmarks/ensembles.py"] + sys.argv[1:])
 
 
-def report(rows, floor, args, desc: str, runs: list[str]) -> str:
+def report(rows, floor, args, desc: str, runs: list[str], costs=()) -> str:
     """The Markdown page of a run (``rows`` as :func:`measure` returns them)."""
     for r in rows:
         r["loop_shown"] = f"{r['loop_s']:.3g}" + (" est." if r["loop_estimated"] else "")
@@ -350,6 +394,18 @@ def report(rows, floor, args, desc: str, runs: list[str]) -> str:
         markdown_table(rows, columns, headers=headers, fmt=_fmt),
         "",
     ]
+    if costs:
+        lines += [
+            "## Where the time goes: each stage's CPU time",
+            "",
+            "`identify`'s global and gradient stages run alone (defaults, warm), one key against "
+            "K keys; process CPU seconds, steadier than wall time on a loaded machine.",
+            "",
+            markdown_table(list(costs), ["model", "K", "stage", "one_cpu_s", "ensemble_cpu_s", "ratio"],
+                           headers=["model", "K", "stage", "one key, CPU [s]", "K keys, CPU [s]",
+                                    "K keys / one"], fmt=_fmt),
+            "",
+        ]
     if floor:
         lines += [
             "## The floor: cost per candidate against batch size",
@@ -374,7 +430,7 @@ def main(argv=None):
         print(f"ensembles: {desc}; skipped, nothing written.", file=sys.stderr)
         return 0
     out = results_dir(args.out, quick=args.quick)
-    rows, floor = [], []
+    rows, floor, costs = [], [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for model in args.models.split(","):
@@ -390,6 +446,13 @@ def main(argv=None):
                       flush=True)
             if args.rollouts and ":" not in model:
                 floor += rollout_costs(model, data, reps=3 if args.quick else 9)
+                for k in (int(s) for s in args.sizes.split(",")):
+                    if k > 1 and not args.quick:
+                        new = stage_costs(model, data, k)
+                        costs += new
+                        for c in new:
+                            print(f"  {c['model']} {c['stage']} stage, K={c['K']}: {c['ratio']:.2f}x one "
+                                  "in CPU time", flush=True)
                 for f in floor:
                     if f["model"] == model:
                         print(f"  {f['what']}, P={f['P']}: {f['us_per_candidate']:.1f} us per candidate",
@@ -400,12 +463,16 @@ def main(argv=None):
     if args.append:
         rows = merge(read_rows(out / f"{stem}.csv"), rows, ("model", "K"))
         floor = merge(read_rows(out / f"{stem}_floor.csv"), floor, ("model", "what", "P"))
+        costs = merge(read_rows(out / f"{stem}_stages.csv"), costs, ("model", "K", "stage"))
         runs = (notes.read_text().splitlines() if notes.is_file() else []) + runs
+        rows.sort(key=lambda r: (str(r["model"]), int(r["K"])))
     notes.write_text("\n".join(runs) + "\n")
     write_csv(rows, out / f"{stem}.csv")
     if floor:
         write_csv(floor, out / f"{stem}_floor.csv")
-    (out / f"{stem}.md").write_text(report(rows, floor, args, desc, runs))
+    if costs:
+        write_csv(costs, out / f"{stem}_stages.csv")
+    (out / f"{stem}.md").write_text(report(rows, floor, args, desc, runs, costs))
     print(f"wrote {out / stem}.md")
     return 0
 
