@@ -132,3 +132,21 @@ def test_gradient_stage_map_layout_is_the_single_runs_to_the_bit():
 def test_gradient_stage_batching_is_checked():
     with pytest.raises(ValueError, match="batching must be one of"):
         GradientRefinement(batching="pmap").check()
+
+
+def test_members_valid_mse_pools_the_validation_windows_as_the_metrics_table():
+    """The vectorised validation MSE of K members against ``record_metrics`` (the §6
+    table, one member at a time) on two training records and a validation record, and a
+    member whose free run is not finite."""
+    rng = np.random.default_rng(5)
+    recs = [_record(n=300 + 50 * i, n_train=200) for i in range(2)]
+    records = stages.records_stage(train=recs, valid=_record(n=260, n_train=200))
+    assert [r.n_train for r in records.records] == [300, 350, 0]  # used whole
+    preds = [np.asarray(r.friction)[None, :] + rng.normal(0, 5 + i, (4, r.n_samples))
+             for i, r in enumerate(records.records)]
+    preds[0][3, 7] = np.nan
+    got = stages.members_valid_mse(preds, records)
+    for i in range(3):
+        expected = stages.record_metrics([p[i] for p in preds], records)["valid"]["mse_percent"]
+        assert got[i] == pytest.approx(expected, rel=1e-12)
+    assert got[3] is None

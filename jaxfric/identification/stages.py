@@ -437,15 +437,33 @@ def warn_if_divergent(metrics: dict, stacklevel: int = 3) -> None:
         )
 
 
+def members_valid_mse(member_predictions, records: RecordSet) -> list:
+    """Every member's validation MSE % (§6: 100·Σe²/Σ(F − F̄)², pooled over the records'
+    validation windows, as :func:`record_metrics`' ``valid``), ``None`` for a member
+    whose free run is not finite or where there is no validation window.
+
+    ``member_predictions``: per record, the ``(K, T)`` free runs. One vectorised pass for
+    all members: the metrics table per member cost about 7 ms a window on EMPS, most of a
+    K = 64 LuGre ensemble's time on a GPU."""
+    k = int(np.shape(member_predictions[0])[0])
+    y = np.concatenate([np.asarray(r.friction, np.float64)[r.n_train:] for r in records.records])
+    if y.size == 0 or not np.ptp(y) > 0:
+        return [None] * k
+    preds = [np.asarray(p, np.float64) for p in member_predictions]
+    finite = np.all(np.stack([np.all(np.isfinite(p), axis=1) for p in preds]), axis=0)
+    e = y - np.concatenate([p[:, r.n_train:] for p, r in zip(preds, records.records)], axis=1)
+    dev = y - y.mean()
+    with np.errstate(over="ignore", invalid="ignore"):
+        mse = 100.0 * np.einsum("kt,kt->k", e, e) / (dev @ dev)
+    return [float(m) if ok and np.isfinite(m) else None for m, ok in zip(mse, finite)]
+
+
 def ensemble_summary(model, thetas, f_np, member_keys, best, member_predictions, records) -> dict:
     """``Fit.ensemble``: members, their costs and validation errors, parameter spread.
 
     ``member_predictions``: per record, the ``(K, T)`` free runs of the K members."""
     thetas = np.asarray(thetas)
-    valid_mse = []
-    for i in range(len(thetas)):
-        m = record_metrics([p[i] for p in member_predictions], records)
-        valid_mse.append((m.get("valid") or {}).get("mse_percent"))
+    valid_mse = members_valid_mse(member_predictions, records)
     if model.needs_scaling:
         named = {}
     else:
