@@ -284,3 +284,25 @@ def test_progress_reports_from_inside_the_run_without_recompiling(run_cache_size
     assert run_cache_size() == size
     with pytest.raises(ValueError, match="progress must be"):
         jf.minimise(fn, solver, bounds, key=jax.random.key(0), progress="yes")
+
+
+@pytest.mark.parametrize("x64", [False, True])
+@pytest.mark.parametrize("raw", [False, True])
+def test_first_population_draws_what_two_separate_draws_give(x64, raw):
+    """The swarms' first positions and velocities come from one threefry over both keys
+    (one generator for XLA to compile instead of two): the numbers of two separate
+    ``jax.random.uniform`` calls, for typed and raw keys, in float32 and float64."""
+    from jaxfric.optim.swarm import first_population
+
+    with jax.enable_x64(x64):
+        dtype = jnp.float64 if x64 else jnp.float32
+        key = jax.random.PRNGKey(7) if raw else jax.random.key(7)
+        lower, upper = jnp.asarray([-2.0, 0.0, 1.0], dtype), jnp.asarray([3.0, 1.0, 9.0], dtype)
+        vmax = 0.2 * (upper - lower)
+        x, v, _ = first_population(key, 6, lower, upper, vmax)
+        kx, kv, _ = jax.random.split(key, 3)
+        ux = jax.random.uniform(kx, (18,), dtype).reshape(6, 3)
+        uv = jax.random.uniform(kv, (18,), dtype).reshape(6, 3)
+        np.testing.assert_array_equal(x, lower + ux * (upper - lower))
+        np.testing.assert_array_equal(v, -vmax + uv * (vmax + vmax))
+        assert x.dtype == v.dtype == dtype

@@ -24,7 +24,7 @@ from ._base import (
     check_positive_int,
     check_range,
     count_dtype,
-    uniform_in_box,
+    uniform_flat_each,
 )
 from .contract import AbstractGenerational
 from .rounds import Rounds
@@ -76,11 +76,13 @@ def first_population(key, num, lower, upper, vmax, x0=None):
     ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``,
     ``key`` as raw words (``jax.random.key_data``)."""
     kx, kv, key = jax.random.split(key, 3)
-    x = uniform_in_box(kx, (num, lower.shape[0]), lower, upper)
+    # positions from kx and velocities from kv, drawn as one generator (uniform_flat_each)
+    ux, uv = uniform_flat_each(jnp.stack([kx, kv]), (num, lower.shape[0]), lower.dtype)
+    x = lower + ux * (upper - lower)
     if x0 is not None:
         x0 = jnp.atleast_2d(jnp.clip(x0, lower, upper))
         x = x.at[: x0.shape[0]].set(x0)
-    v = uniform_in_box(kv, x.shape, -vmax, vmax)
+    v = -vmax + uv * (vmax - -vmax)
     # the state keeps the key's raw words (all counter_seed reads), so a Solution holds
     # plain arrays only
     return x, v, jax.random.key_data(key)
