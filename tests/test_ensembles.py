@@ -3,7 +3,7 @@
 The contract (docs/identify.md, "Ensembles"): on a CPU the global stage runs member i
 as the single run with key i, to the bit, for every model and solver of the default
 layout, and a physical model's whole fit is that single fit; a network's gradient
-stage runs the members side by side (``GradientRefinement(batching="vmap")``, the
+stage runs the members side by side (``GradientRefinement(batching="auto")``, the
 default), so its members agree with the single fits up to the reassociation of the
 batched sums (J within 1e-6 relative on a small float64 problem,
 tests/test_identify_stages.py), or one after another (``batching="map"``), to the bit.
@@ -150,3 +150,13 @@ def test_members_valid_mse_pools_the_validation_windows_as_the_metrics_table():
         expected = stages.record_metrics([p[i] for p in preds], records)["valid"]["mse_percent"]
         assert got[i] == pytest.approx(expected, rel=1e-12)
     assert got[3] is None
+
+
+def test_refine_batching_maps_physical_models_on_the_cpu_and_batches_networks():
+    auto = GradientRefinement(method="lm")
+    assert auto.batching == "auto"
+    assert stages.refine_batching(Elman(neurons=3), auto).batching == "vmap"
+    cpu = jax.default_backend() == "cpu"
+    assert stages.refine_batching(LuGre(), auto).batching == ("map" if cpu else "vmap")
+    chosen = GradientRefinement(batching="vmap")
+    assert stages.refine_batching(LuGre(), chosen) is chosen  # an explicit choice wins

@@ -245,7 +245,7 @@ def identify(
             ``identify(..., key=keys[i])``: on a CPU to the bit for the physical models
             and through the global stage for every model (``stages.ensemble_batching``);
             the networks' gradient stage runs the members side by side
-            (``GradientRefinement(batching="vmap")``, the default), whose batched sums
+            (``GradientRefinement(batching="auto")``, the default), whose batched sums
             round differently, and 500 float32 BFGS steps can carry a member to another
             nearby optimum (measured on EMPS in docs/identify.md); with
             ``refine=GradientRefinement(max_steps=500, batching="map")`` every member is

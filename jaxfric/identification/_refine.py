@@ -32,8 +32,9 @@ import optimistix as optx
 from ._objective import CostData, OutputErrorCost
 
 METHODS = ("bfgs", "lbfgs", "lm", "gauss_newton")
-#: How :func:`refine_many` lays out an ensemble's members (``GradientRefinement.batching``).
-BATCHING = ("vmap", "map")
+#: How :func:`refine_many` lays out an ensemble's members (``GradientRefinement.batching``;
+#: ``"auto"`` is resolved by ``identify``'s gradient stage, ``stages.refine_batching``).
+BATCHING = ("auto", "vmap", "map")
 _LEAST_SQUARES = ("lm", "gauss_newton")
 _ALIASES = {"levenberg_marquardt": "lm", "levenberg-marquardt": "lm", "gauss-newton": "gauss_newton"}
 
@@ -51,11 +52,14 @@ class GradientRefinement(eqx.Module):
         rtol, atol: the solver's relative/absolute tolerances (on θ-steps and J).
         edge: fraction of the box a start on a bound is pulled inside (0 < edge < 0.5).
         batching: how an ensemble's members run (:func:`refine_many`): ``"vmap"``
-            (default) side by side, every step one batched evaluation of all members
-            (for the Elman networks one time loop over all of them: 8 members' J and
-            gradient cost about 3 times one member's on a CPU); ``"map"`` one after
-            another inside the same compiled call, each member the single run's program,
-            so member i equals the single run from the same start to the bit.
+            side by side, every step one batched evaluation of all members (for the
+            Elman networks one time loop over all of them: 8 members' J and gradient
+            cost about 3 times one member's on a CPU); ``"map"`` one after another
+            inside the same compiled call, each member the single run's program, so
+            member i equals the single run from the same start to the bit; ``"auto"``
+            (default): ``"vmap"`` for the networks and off the CPU, ``"map"`` for
+            physical models on the CPU, whose rollouts cost the same per candidate at
+            any batch size (``stages.refine_batching``).
     """
 
     method: str = eqx.field(default="bfgs", static=True)
@@ -63,7 +67,7 @@ class GradientRefinement(eqx.Module):
     rtol: float = eqx.field(default=1e-7, static=True)
     atol: float = eqx.field(default=1e-10, static=True)
     edge: float = eqx.field(default=1e-4, static=True)
-    batching: str = eqx.field(default="vmap", static=True)
+    batching: str = eqx.field(default="auto", static=True)
 
     def check(self) -> None:
         if self.method not in METHODS:
@@ -291,7 +295,7 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
 def _over_members(settings: GradientRefinement, fn, *batched):
     """``fn`` applied to each member's slice of ``batched``: side by side (``vmap``) or
     one after another (``lax.map``, each member the single run's program)."""
-    if settings.batching == "vmap":
+    if settings.batching != "map":  # "vmap"; "auto" is resolved before, by the caller
         return eqx.filter_vmap(fn)(*batched)
     # lax.map carries arrays only: the solver state's static leaves ride outside.
     dynamic, static = eqx.partition(batched, eqx.is_array)
@@ -330,7 +334,7 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
     """:func:`refine_impl` for a batch of starts ``thetas`` (``(K, n)``), side by side.
 
     One compiled program advances every member. With ``settings.batching == "vmap"``
-    (default) each step rolls out all K members in one batched evaluation, which for
+    (``"auto"`` here) each step rolls out all K members in one batched evaluation, which for
     the Elman network costs far less than K single ones (one network's loop is bound by
     its length, not its arithmetic: 8 members' J and gradient cost about 3 times one
     member's on a 2-core CPU). A member that has stopped is carried unchanged until the

@@ -58,6 +58,7 @@ __all__ = [
     "gradient_stage",
     "objective_stage",
     "records_stage",
+    "refine_batching",
     "resolve_keys",
 ]
 
@@ -308,6 +309,18 @@ def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, k
 
 
 # ----------------------------------------------------------- gradient stage
+def refine_batching(model: AbstractFrictionModel, settings: GradientRefinement) -> GradientRefinement:
+    """``settings`` with ``batching="auto"`` resolved for ``model``: ``"vmap"`` for the
+    networks, whose batched adjoint runs K members' J and gradient in one time loop, and
+    off the CPU; ``"map"`` for physical models on the CPU (the same per-candidate cost
+    at any batch size, :func:`ensemble_batching`), which makes member i the single run
+    to the bit."""
+    if settings.batching != "auto":
+        return settings
+    side_by_side = model.needs_scaling or jax.default_backend() != "cpu"
+    return dataclasses.replace(settings, batching="vmap" if side_by_side else "map")
+
+
 def gradient_stage(settings: GradientRefinement | None, objective: Objective, thetas,
                    bounds: Bounds, dtype, *, ensemble: bool = False, progress=None,
                    compiler_options="auto") -> tuple[RefineOutcome | None, dict]:
@@ -315,7 +328,8 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
     (docs/algorithms.md §11 step 7), or nothing when ``settings`` is ``None``.
 
     ``thetas``: ``(n,)`` for one run, ``(K, n)`` for an ensemble (``ensemble=True``),
-    whose members run side by side (:func:`refine_many`). Returns the
+    whose members run side by side or one after another (:func:`refine_many`,
+    :func:`refine_batching`). Returns the
     :class:`RefineOutcome` (with a leading member axis for an ensemble) and its
     ``{"refine_compile_s", "refine_run_s"}``."""
     if settings is None:
@@ -324,7 +338,8 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
     lo, hi = jnp.asarray(bounds.lower, dtype), jnp.asarray(bounds.upper, dtype)
     with Stopwatch() as sw:
         if ensemble and jnp.shape(thetas)[0] > 1:
-            out = refine_many(settings, objective.cost, jnp.asarray(thetas), lo, hi, objective.data,
+            out = refine_many(refine_batching(objective.cost.model, settings), objective.cost,
+                              jnp.asarray(thetas), lo, hi, objective.data,
                               progress=progress, compiler_options=options)
         elif ensemble:  # one member: the single run's program, with a member axis
             out = refine_impl(settings, objective.cost, thetas[0], lo, hi, objective.data,
@@ -567,7 +582,7 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
             "refine": None if refine is None else {
                 "method": refine.method, "max_steps": refine.max_steps,
                 "rtol": refine.rtol, "atol": refine.atol, "edge": refine.edge,
-                **({"batching": refine.batching} if ensemble else {})},
+                **({"batching": refine_batching(model, refine).batching} if ensemble else {})},
             **settings,
             "global_stage_samples": (int(objective.data_global.y.shape[0])
                                      if records.single is not None else None),
