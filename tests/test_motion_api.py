@@ -90,10 +90,16 @@ def test_free_run_schedule_is_simulate_motion_and_segments_restart_from_the_meas
 
 
 # ----------------------------------------------------------------- default search, records
-def test_default_search_recovers_mass_offset_and_friction():
+@pytest.fixture(scope="module")
+def default_fit():
+    """The small search on the default record, 80 % for training."""
+    return _fit(data=_record(), train=0.8)
+
+
+def test_default_search_recovers_mass_offset_and_friction(default_fit):
     """Noise-free data: the default pipeline (PSO, shooting, free run) recovers Fc, Fv,
     mass and offset within 1 %."""
-    fit = _fit(data=_record(), train=0.8)
+    fit = default_fit
     got = fit.params
     for k, val in TRUTH.items():
         assert abs(float(got[k]) - val) <= 0.01 * val, (k, got[k])
@@ -160,11 +166,9 @@ def test_budget_stops_the_run_with_the_best_so_far():
 
 
 @pytest.mark.slow
-def test_same_key_same_fit():
-    # the record and split of test_default_search_recovers_mass_offset_and_friction, so both
-    # fits reuse the programs that test compiled
-    rec = _record()
-    a, b = _fit(data=rec, train=0.8), _fit(data=rec, train=0.8)
+def test_same_key_same_fit(default_fit):
+    # the module fixture's call once more
+    a, b = default_fit, _fit(data=_record(), train=0.8)
     np.testing.assert_array_equal(a.theta, b.theta)
     assert a.mass == b.mass
 
