@@ -171,6 +171,27 @@ def test_batched_adjoint_equals_the_single_network_adjoint():
                                        grad, rtol=1e-10, atol=1e-14)
 
 
+def test_batched_adjoint_off_the_cpu_equals_the_blocked_batch(monkeypatch):
+    """Off the CPU, vmap over θ batches the single network's loops (its adjoint a parallel
+    prefix scan): the program a GPU runs, traced here with every platform choice taking
+    its accelerator branch, against the CPU's blocked batch."""
+    rng = np.random.default_rng(2)
+    model = Elman(neurons=4, context_weight_bound=1.0)
+    lo, hi = model.bounds()
+    with jax.enable_x64(True):
+        data = CostData(u=jnp.asarray(np.sin(np.linspace(0, 13, 301))),
+                        y=jnp.asarray(0.3 * rng.standard_normal(301)), dt=jnp.asarray(DT),
+                        inv_norm=jnp.asarray(1.7))
+        thetas = jnp.asarray(lo + (hi - lo) * rng.random((3, lo.size)))
+        f, grad, g_y = _elman_value_and_grad_batch(model, thetas, data, block=64)
+        monkeypatch.setattr(jax.lax, "platform_dependent",
+                            lambda *args, default, **branches: default(*args))
+        vf, vgrad, vg_y = jax.vmap(_elman_value_and_grad(model), (0, None))(thetas, data)
+    np.testing.assert_allclose(vf, f, rtol=1e-12)
+    np.testing.assert_allclose(vgrad, grad, rtol=1e-9, atol=1e-12 * float(jnp.abs(grad).max()))
+    np.testing.assert_allclose(vg_y, g_y, rtol=1e-12)
+
+
 # ------------------------------------------------------------------ the fit
 def test_fit_stage_picks_the_lowest_finite_member():
     model = Coulomb()

@@ -93,19 +93,21 @@ def _elman_value_and_grad(model):
     """``(J, ∇_θJ, ∂J/∂y)`` of one network by :meth:`~jaxfric.models.Elman.simulate_vjp`.
 
     Under ``vmap`` over θ (an ensemble's gradient stage runs its members' BFGS side by
-    side) the batching rule runs :func:`_elman_value_and_grad_batch`, one loop for all
-    members, instead of JAX's default batching of the single-network loops, which was
-    60× slower than one network for 8 members on EMPS's 19 800 samples.
+    side) the batching rule runs :func:`_elman_value_and_grad_batch` on the CPU, one loop
+    for all members, instead of JAX's default batching of the single-network loops, which
+    was 60× slower than one network for 8 members on EMPS's 19 800 samples there; other
+    platforms take JAX's batching (the comment in the rule says why).
     """
 
-    @jax.custom_batching.custom_vmap
-    def value_and_grad(theta, data):
+    def single(theta, data):
         y_hat, pullback = model.simulate_vjp(theta, data.u)
         e = data.y - y_hat
         n = data.y.shape[0]
         f = jnp.mean(e * e) * data.inv_norm
         g_y = (2.0 * data.inv_norm / n) * e
         return f, pullback(-g_y), g_y
+
+    value_and_grad = jax.custom_batching.custom_vmap(single)
 
     @value_and_grad.def_vmap
     def _batched(axis_size, in_batched, theta, data):
@@ -121,7 +123,13 @@ def _elman_value_and_grad(model):
             return out, (True, True, True)
         if not theta_batched:
             theta = jnp.broadcast_to(theta, (axis_size,) + theta.shape)
-        return _elman_value_and_grad_batch(model, theta, data), (True, True, True)
+        # Off the CPU, JAX's batching of the single network's loops: its adjoint runs as a
+        # parallel prefix scan there (models/_scan.py), where the blocked batch below
+        # would run two more sequential passes; memory is K·N·T per array, which a GPU holds.
+        out = jax.lax.platform_dependent(
+            theta, data, cpu=functools.partial(_elman_value_and_grad_batch, model),
+            default=jax.vmap(single, in_axes=(0, None)))
+        return out, (True, True, True)
 
     return value_and_grad
 
