@@ -252,6 +252,7 @@ def test_ask_tell_refuses_what_was_not_asked_for():
     (lambda: jf.MAPSONMDS(mapso=jf.PSO()), "mapso must be a jaxfric.MAPSO"),
     (lambda: jf.mapso_nmds(nm_max_steps=0), "max_steps must be >= 1"),
     (lambda: OptxMinimiser(jf.NelderMead(rtol=-1.0)), "rtol must be >= 0"),
+    (lambda: OptxMinimiser(jf.NelderMead()), "NelderMead is a jaxfric solver"),
 ], ids=lambda v: v if isinstance(v, str) else "")
 def test_solvers_validate_on_construction(build, match):
     """Issue 19 item 3: a bad hyperparameter fails where the solver is written
