@@ -19,7 +19,12 @@ The same recipe without ask/tell: wrap the outside objective in ``jax.pure_callb
 and call :func:`jaxfric.minimise` (docs/solvers.md, "Objectives outside JAX").
 
 A run left unfinished is stopped when its last state is garbage-collected. Several runs
-may be open at once.
+may be open at once, but each waits for :func:`tell` inside XLA: a run large enough for
+XLA:CPU to run it on its thread pool holds a pool thread while it waits, and with more
+such runs open than the pool has threads (about one per core) the next one never gets
+its first batch out (a 25-agent PSO on 5 parameters, 4 runs, 2 cores). For several seeds
+of an objective outside JAX use the ``pure_callback`` recipe with
+:func:`jaxfric.minimise_many`: one host call then carries every seed's batch.
 """
 
 from __future__ import annotations

@@ -1,0 +1,279 @@
+"""Where a new objective's compilation goes, per solver, and what an ask costs.
+
+For every solver, each of several test functions is handed to :func:`jaxfric.minimise`
+as a *new* Python function (what a user, or SciPy's global-optimisation suite, does
+with every new problem). The first call's wall time is split with JAX's own compile
+events (``jax.monitoring``): tracing to a jaxpr, lowering to StableHLO, XLA's compile,
+and the number of programs compiled; the second call (same function, another key) is
+the run alone. Then an objective outside JAX: milliseconds per host call on top of a
+trivial NumPy objective, by ask/tell (one run) and by a ``jax.pure_callback`` objective
+under ``minimise`` (one seed) or ``minimise_many`` (several seeds in one call).
+
+    python benchmarks/compile_time.py            # results/compile_time.{md,csv}
+    python benchmarks/compile_time.py --quick    # results/quick/
+    python benchmarks/compile_time.py --cache DIR  # JAX's persistent compilation cache
+                                   # (a user option) in an empty DIR: one process fills
+                                   # it, the next reads it; results/compile_time_cache.*
+
+``--baseline DIR`` measures the jaxfric package in ``DIR`` in turn with this one, solver by
+solver, each in a fresh process (``git archive <commit> jaxfric | tar -x -C DIR``);
+``--note`` records what was measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import jaxfric as jf
+from jaxfric import functions as F
+
+from _harness import add_output_arguments, markdown_table, results_dir, write_csv
+
+HERE = Path(__file__).resolve().parent
+
+FUNCTIONS = ["sphere", "rosenbrock", "rastrigin", "ackley", "griewank", "schwefel_2_22"]
+
+_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "trace_s",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower_s",
+    "/jax/core/compile/backend_compile_duration": "compile_s",
+}
+_seen: collections.Counter = collections.Counter()
+_programs: list = []
+
+
+def _listen(event, duration, **kwargs):
+    name = _EVENTS.get(event)
+    if name is not None:
+        _seen[name] += duration
+        if name == "compile_s":
+            _seen["programs"] += 1
+            _programs.append(kwargs.get("fun_name", "?"))
+
+
+jax.monitoring.register_event_duration_secs_listener(_listen)
+
+
+def solvers(quick: bool) -> dict:
+    g = 20 if quick else 200
+    out = {
+        "PSO": jf.PSO(num_generations=g),
+        "MAPSO": jf.MAPSO(num_generations=g // 2),
+        "NelderMead": jf.NelderMead(max_steps=10 * g),
+        "PSO->NM": jf.chain(jf.PSO(num_generations=g), jf.NelderMead(max_steps=10 * g)),
+        "MAPSO-NMDS": jf.mapso_nmds(num_generations=g // 2, nm_max_steps=10 * g),
+    }
+    try:
+        import evosax  # noqa: F401
+        out["Evosax CMA_ES"] = jf.Evosax("CMA_ES", num_generations=g)
+    except ImportError:
+        pass
+    return out
+
+
+def fresh_objective(name: str):
+    """A new Python function for the test function ``name`` (a jit cache miss)."""
+    fn = F.get(name).fn
+    return lambda y, args: fn(y)
+
+
+def measure_compile(solver, name: str, n: int, key: int) -> dict:
+    fn = fresh_objective(name)
+    bounds = (-2.0 * np.ones(n), 2.0 * np.ones(n))
+    _seen.clear()
+    _programs.clear()
+    t0 = time.perf_counter()
+    jf.minimise(fn, solver, bounds, key=key)
+    first = time.perf_counter() - t0
+    row = {"first_s": first, **{k: _seen.get(k, 0.0) for k in ("trace_s", "lower_s", "compile_s")},
+           "programs": int(_seen.get("programs", 0)), "compiled": " ".join(_programs)}
+    t0 = time.perf_counter()
+    jf.minimise(fn, solver, bounds, key=key + 1)
+    row["second_s"] = time.perf_counter() - t0
+    return row
+
+
+def _numpy_sphere(X):
+    return np.sum(np.asarray(X, np.float64) ** 2, axis=1)
+
+
+def ask_tell_ms(solver, n: int) -> tuple[float, int]:
+    """Milliseconds per ask of one ask/tell run told a NumPy sphere's values, after a
+    first run has compiled the program; and the asks of a run."""
+    lo, hi = np.full(n, -2.0, np.float32), np.full(n, 2.0, np.float32)
+
+    def drive(key):
+        st, asks = solver.ask_init(lo, hi, key), 0
+        while not solver.ask_done(st):
+            X, st = solver.ask(st)
+            st = solver.tell(st, X, _numpy_sphere(X))
+            asks += 1
+        return asks
+
+    drive(100)  # compiles
+    t0 = time.perf_counter()
+    asks = drive(0)
+    return 1e3 * (time.perf_counter() - t0) / asks, asks
+
+
+def callback_ms(solver, n: int, seeds: int) -> tuple[float, int]:
+    """Milliseconds per host call of the documented recipe for an objective outside JAX:
+    a ``jax.pure_callback`` objective under ``minimise`` (one seed) or ``minimise_many``
+    (``seeds`` keys, each callback carrying every run's batch when the runs are
+    vmapped); and the host calls of the whole call."""
+    calls = [0]
+
+    def host(X):
+        calls[0] += 1
+        X = np.asarray(X)
+        return _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1]).astype(X.dtype)
+
+    def fn(y, args):
+        return jax.pure_callback(host, jax.ShapeDtypeStruct(y.shape[:-1], y.dtype), y,
+                                 vmap_method="broadcast_all")
+
+    box = (np.full(n, -2.0, np.float32), np.full(n, 2.0, np.float32))
+    keys = jax.random.split(jax.random.key(0), seeds)
+    run = (lambda: jf.minimise(fn, solver, box, key=0)) if seeds == 1 else (
+        lambda: jf.minimise_many(fn, solver, box, keys=keys))
+    run()  # compiles
+    calls[0] = 0
+    t0 = time.perf_counter()
+    run()
+    return 1e3 * (time.perf_counter() - t0) / calls[0], calls[0]
+
+
+def measure(label: str, functions, dim: int, seeds: int) -> dict:
+    """Every measurement of one solver, in this process (``--one``)."""
+    with jax.enable_x64(True):
+        jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
+                    (-np.ones(2), np.ones(2)), key=0)  # JAX's own first-use costs
+        solver = solvers(quick=len(functions) < len(FUNCTIONS))[label]
+        rows = [{"function": name, **measure_compile(solver, name, dim, key=i)}
+                for i, name in enumerate(functions)]
+    asks = []
+    if label in ASK_TELL and seeds:  # in float32, JAX's default
+        if hasattr(solver, "ask_init"):  # a version whose NelderMead has no ask/tell
+            ms, n_asks = ask_tell_ms(solver, dim)
+            asks.append({"route": "ask/tell", "seeds": 1, "ms_per_host_call": ms,
+                         "host_calls": n_asks})
+        for k in (1, seeds):
+            ms, calls = callback_ms(solver, dim, k)
+            asks.append({"route": "pure_callback", "seeds": k, "ms_per_host_call": ms,
+                         "host_calls": calls})
+    return {"rows": rows, "asks": asks}
+
+
+ASK_TELL = ("PSO", "NelderMead", "PSO->NM")
+
+
+def _in_subprocess(label, a, pythonpath=None) -> dict:
+    """:func:`measure` in a fresh process (``pythonpath``: the library to measure)."""
+    env = dict(os.environ)
+    if pythonpath:
+        env["PYTHONPATH"] = os.pathsep.join([pythonpath, str(HERE)])
+    cmd = [sys.executable, str(HERE / "compile_time.py"), "--one", label, "--dim", str(a.dim),
+           "--seeds", str(a.seeds)] + (["--quick"] if a.quick else []) + (
+           ["--cache", a.cache] if a.cache else []) + (["--no-asktell"] if a.no_asktell else [])
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if done.returncode:
+        raise RuntimeError(f"{label} ({pythonpath or 'this'}) failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_output_arguments(p)
+    p.add_argument("--dim", type=int, default=5)
+    p.add_argument("--seeds", type=int, default=4, help="keys of the minimise_many recipe")
+    p.add_argument("--cache", default=None, help="JAX persistent compilation cache folder")
+    p.add_argument("--baseline", default=None,
+                   help="a folder holding another version's jaxfric package: measured in "
+                        "turn with this one, solver by solver (same load for both)")
+    p.add_argument("--note", default="", help="recorded with the results")
+    p.add_argument("--solvers", default=None, help="comma-separated labels (default: all)")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="rounds of the versions in turn; medians over all rounds")
+    p.add_argument("--no-asktell", action="store_true", help="compilation only")
+    p.add_argument("--stem", default=None, help="result file stem (default compile_time)")
+    p.add_argument("--one", default=None, help=argparse.SUPPRESS)
+    a = p.parse_args()
+    if a.cache:
+        # the script's choice, never the library's: a user option (docs/solvers.md)
+        jax.config.update("jax_compilation_cache_dir", a.cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    functions = FUNCTIONS[:2] if a.quick else FUNCTIONS
+    if a.one:
+        print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds)))
+        return
+    out = results_dir(a.out, quick=a.quick)
+    if a.cache:  # the first process fills the cache, the second reads it
+        versions = {"cache empty": None, "cache filled": None}
+    elif a.baseline:
+        versions = {"baseline": a.baseline, "this": None}
+    else:
+        versions = {"this": None}
+    rows, summary, asks = [], [], []
+    labels = a.solvers.split(",") if a.solvers else list(solvers(a.quick))
+    for label in labels:
+        pooled = collections.defaultdict(list)
+        for r in range(a.repeat):
+            for version, path in versions.items():
+                got = _in_subprocess(label, a, path)
+                pooled[version] += got["rows"]
+                rows += [{"version": version, "solver": label, "dim": a.dim, "round": r, **x}
+                         for x in got["rows"]]
+                asks += [{"version": version, "solver": label, **x} for x in got["asks"]]
+        for version, per in pooled.items():
+            med = lambda k: statistics.median(r[k] for r in per)  # noqa: E731
+            summary.append({
+                "version": version, "solver": label, "runs": len(per),
+                "first_s": med("first_s"),
+                "second_s": med("second_s"), "trace_s": med("trace_s"),
+                "lower_s": med("lower_s"), "compile_s": med("compile_s"),
+                "programs": int(med("programs")),
+            })
+            print(summary[-1], flush=True)
+    load = os.getloadavg()
+    stem = a.stem or ("compile_time_cache" if a.cache else "compile_time")
+    write_csv(rows, out / f"{stem}.csv")
+    if asks:
+        write_csv(asks, out / f"{stem}_asktell.csv")
+    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
+    baseline = (f"`baseline`: the library in {a.baseline}, measured in turn with `this` "
+                "(each solver in a fresh process, one after the other). "
+                if a.baseline else "")
+    text = "\n\n".join([
+        "# Compilation per new objective",
+        f"{a.note}\n\njax {jax.__version__}, float64, {a.dim} parameters, medians over "
+        f"{len(functions)} test functions ({', '.join(functions)}) × {a.repeat} round(s) "
+        f"(`runs`), each a new Python function; load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}; "
+        f"persistent cache: {a.cache or 'off'}. {baseline}Seconds: the first call (a new "
+        "objective), the second (same objective, another key: the run alone), and the "
+        "first call's tracing, lowering and XLA compilation as JAX reports them "
+        "(`jax.monitoring`); `programs`: XLA compilations in the first call.",
+        markdown_table(summary, fmt=fmt),
+        "An objective outside JAX, in float32 (a NumPy sphere, compiled run reused): "
+        "milliseconds per host call (an ask, or a `pure_callback` call) and host calls per "
+        f"run, by ask/tell (one seed) and by the `pure_callback` recipe under `minimise` "
+        f"(one seed) or `minimise_many` ({a.seeds} keys).",
+        markdown_table(asks, fmt=fmt) if asks else "(not measured: --no-asktell)",
+    ])
+    (out / f"{stem}.md").write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
