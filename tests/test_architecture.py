@@ -138,3 +138,27 @@ def test_no_import_circle_inside_the_optimisers_or_the_command_line():
         graph = {p.stem: {t for _, t in _imported_modules(p, package) if t in modules}
                  for p in folder.glob("*.py") if p.stem in modules}
         assert _cycle(graph) is None, (package, _cycle(graph))
+
+
+def _layer_graph() -> dict:
+    """jaxfric's top-level modules and packages -> those they import, module-level and
+    function-level imports alike (the package root left out: only the CLI imports it)."""
+    graph: dict = {}
+    for path in ROOT.rglob("*.py"):
+        me = path.relative_to(ROOT).with_suffix("").parts[0]
+        if me not in ("__init__", "__main__"):
+            graph.setdefault(me, set()).update(
+                t for _, t in _imported_subpackages(path) if t not in (None, me))
+    return graph
+
+
+def test_no_import_circle_anywhere():
+    """The layer rule lets modules of one layer import each other, and an import inside a
+    function hides a circle from Python until it runs: there is none between top-level
+    modules, nor between the modules of any package."""
+    assert _cycle(_layer_graph()) is None, _cycle(_layer_graph())
+    for folder in (p for p in ROOT.iterdir() if (p / "__init__.py").exists()):
+        modules = {p.stem for p in folder.glob("*.py")} - {"__init__"}
+        graph = {p.stem: {t for _, t in _imported_modules(p, folder.name) if t in modules}
+                 for p in folder.glob("*.py") if p.stem in modules}
+        assert _cycle(graph) is None, (folder.name, _cycle(graph))
