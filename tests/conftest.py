@@ -33,16 +33,6 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 
-# The suite is bound by XLA's compilation, not by running what it compiles: on 2 cores it
-# used about 1 300 CPU seconds, nearly all compiling small programs that then run for
-# milliseconds. XLA's CPU backend at optimisation level 0 compiled two model and stage test
-# files with 27 % less CPU (54.7 -> 39.7 s user). Tests compare runs made under the same
-# setting, or against references with tolerances, so they prove the same things; the
-# benchmarks, which time what users run, never set it. A user's own XLA_FLAGS that already
-# choose a level are kept.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-
 # One lock file per test session for tests/processes.py (the workers inherit its name).
 from processes import LOCK_ENV, jax_subprocess  # noqa: E402
 
