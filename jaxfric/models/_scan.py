@@ -18,6 +18,10 @@ ahead-of-time lowering. The branch for the other platform is folded away by XLA.
   levels: 0.15 ms against 23 ms for the sequential scan on the H100, equal to 5e-15
   relative in float64 and 4e-6 in float32. On the CPU the sequential scan stays:
   the prefix scan does twice the arithmetic there and ran 2x slower.
+* :func:`reverse_affine_scan` (a loop run backwards whose carry is affine: the Elman
+  network's adjoint). Off the CPU the same prefix scan; on the H100 it took the EMPS
+  default fit from 9.1 to 6.45 s (``benchmarks/results/gpu_check_gpu.md``). On the CPU
+  the model's own loop, unchanged to the bit.
 """
 
 from __future__ import annotations
