@@ -143,18 +143,24 @@ def test_gradient_stage_polishes_and_its_members_follow_the_single_runs():
             np.testing.assert_allclose(many.f[i], s.f, rtol=1e-8)
 
 
+def _three_networks_on_a_record(model, rng):
+    """A 301-sample record (not a multiple of the 64-sample block) and three random θ in
+    the model's box; call inside ``jax.enable_x64(True)``."""
+    lo, hi = model.bounds()
+    data = CostData(u=jnp.asarray(np.sin(np.linspace(0, 13, 301))),
+                    y=jnp.asarray(0.3 * rng.standard_normal(301)), dt=jnp.asarray(DT),
+                    inv_norm=jnp.asarray(1.7))
+    return data, jnp.asarray(lo + (hi - lo) * rng.random((3, lo.size)))
+
+
 def test_batched_adjoint_equals_the_single_network_adjoint():
     """Value, θ-gradient and y-gradient of K networks at once (time in blocks, the
     record not a multiple of the block) against the single-network path."""
     rng = np.random.default_rng(1)
     for output_bias in (True, False):
         model = Elman(neurons=4, context_weight_bound=1.0, output_bias=output_bias)
-        lo, hi = model.bounds()
         with jax.enable_x64(True):
-            data = CostData(u=jnp.asarray(np.sin(np.linspace(0, 13, 301))),
-                            y=jnp.asarray(0.3 * rng.standard_normal(301)), dt=jnp.asarray(DT),
-                            inv_norm=jnp.asarray(1.7))
-            thetas = jnp.asarray(lo + (hi - lo) * rng.random((3, lo.size)))
+            data, thetas = _three_networks_on_a_record(model, rng)
             f, grad, g_y = _elman_value_and_grad_batch(model, thetas, data, block=64)
             single = _elman_value_and_grad(model)
             for i in range(3):
@@ -177,12 +183,8 @@ def test_batched_adjoint_off_the_cpu_equals_the_blocked_batch(monkeypatch):
     its accelerator branch, against the CPU's blocked batch."""
     rng = np.random.default_rng(2)
     model = Elman(neurons=4, context_weight_bound=1.0)
-    lo, hi = model.bounds()
     with jax.enable_x64(True):
-        data = CostData(u=jnp.asarray(np.sin(np.linspace(0, 13, 301))),
-                        y=jnp.asarray(0.3 * rng.standard_normal(301)), dt=jnp.asarray(DT),
-                        inv_norm=jnp.asarray(1.7))
-        thetas = jnp.asarray(lo + (hi - lo) * rng.random((3, lo.size)))
+        data, thetas = _three_networks_on_a_record(model, rng)
         f, grad, g_y = _elman_value_and_grad_batch(model, thetas, data, block=64)
         monkeypatch.setattr(jax.lax, "platform_dependent",
                             lambda *args, default, **branches: default(*args))
