@@ -96,9 +96,10 @@ step() {
   echo "| $name | $platform | $rc | $(( $(date +%s) - t0 )) |" >> "$SUMMARY"
 }
 
-# 1. the EMPS default identification (first call compiles, second call runs the same program)
-cat > "$TMP/emps.py" <<'EOF'
-import csv, os, sys, time, warnings
+# What steps 1 and 2 share: the device's name, the EMPS record and, in a dry run, a short
+# record and a token budget.
+cat > "$TMP/emps_common.py" <<'EOF'
+import os, sys
 import jax
 import jaxfric
 from jaxfric import rig
@@ -115,6 +116,12 @@ if dry:  # the first 3000 samples and a token budget: the code path, not the fig
     data = jaxfric.FrictionData.from_arrays(data.velocity[:3000], data.friction[:3000], data.dt)
     opts = {"solver": jaxfric.MAPSO(lattice_size=3, num_generations=2),
             "refine": jaxfric.GradientRefinement(method="bfgs", max_steps=5)}
+EOF
+
+# 1. the EMPS default identification (first call compiles, second call runs the same program)
+cat > "$TMP/emps.py" <<'EOF'
+import csv, os, sys, time, warnings
+from emps_common import data, device, dry, jaxfric, opts, res, tag
 rows = []
 for call in ("first (compile + run)", "second (run)"):
     with warnings.catch_warnings():
@@ -136,22 +143,8 @@ step emps_identify cpu 60 $PY "$TMP/emps.py" gpu_host_cpu "$RES" $DRY
 # 2. an ensemble of K members against one fit (identify(..., keys=K) beside identify(..., key=0))
 cat > "$TMP/ensemble.py" <<'EOF2'
 import csv, os, sys, time, warnings
-import jax
-import jaxfric
-from jaxfric import rig
-
-tag, res, dry, k = sys.argv[1], sys.argv[2], sys.argv[3] == "1", int(sys.argv[4])
-d = jax.devices()[0]
-device = f"{getattr(d, 'device_kind', d.platform)} ({d.platform})"
-path = os.environ.get("JAXFRIC_EMPS")
-if not path:
-    print("no EMPS file: step skipped"); sys.exit(0)
-data = rig.emps_friction_data(rig.load_emps(path))
-opts = {}
-if dry:
-    data = jaxfric.FrictionData.from_arrays(data.velocity[:3000], data.friction[:3000], data.dt)
-    opts = {"solver": jaxfric.MAPSO(lattice_size=3, num_generations=2),
-            "refine": jaxfric.GradientRefinement(method="bfgs", max_steps=5)}
+from emps_common import data, device, dry, jaxfric, opts, res, tag
+k = int(sys.argv[4])
 rows = []
 out = os.path.join(res, f"ensemble_emps_{tag}.csv")
 runs = [("lugre", "one fit", {"key": 0}), ("lugre", f"K={k}", {"key": 0, "keys": k}),
