@@ -6,8 +6,9 @@ with every new problem). The first call's wall time is split with JAX's own comp
 events (``jax.monitoring``): tracing to a jaxpr, lowering to StableHLO, XLA's compile,
 and the number of programs compiled; the second call (same function, another key) is
 the run alone. Then an objective outside JAX: milliseconds per host call on top of a
-trivial NumPy objective, by ask/tell (one run) and by a ``jax.pure_callback`` objective
-under ``minimise`` (one seed) or ``minimise_many`` (several seeds in one call).
+trivial NumPy objective, by ask/tell (one seed, or several seeds in one run with
+``keys=``) and by a ``jax.pure_callback`` objective under ``minimise`` (one seed) or
+``minimise_many`` (several seeds in one call).
 
     python benchmarks/compile_time.py            # results/compile_time.{md,csv}
     python benchmarks/compile_time.py --quick    # results/quick/
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import inspect
 import json
 import os
 import statistics
@@ -108,16 +110,22 @@ def _numpy_sphere(X):
     return np.sum(np.asarray(X, np.float64) ** 2, axis=1)
 
 
-def ask_tell_ms(solver, n: int) -> tuple[float, int]:
+def ask_tell_ms(solver, n: int, seeds: int = 1) -> tuple[float, int]:
     """Milliseconds per ask of one ask/tell run told a NumPy sphere's values, after a
-    first run has compiled the program; and the asks of a run."""
+    first run has compiled the program; and the asks of a run. ``seeds`` > 1: one run of
+    that many keys (``ask_init(..., keys=)``), each ask carrying every seed's batch."""
     lo, hi = np.full(n, -2.0, np.float32), np.full(n, 2.0, np.float32)
 
-    def drive(key):
-        st, asks = solver.ask_init(lo, hi, key), 0
+    def drive(seed):
+        key = jax.random.key(seed)
+        st = (solver.ask_init(lo, hi, key) if seeds == 1 else
+              solver.ask_init(lo, hi, keys=jax.random.split(key, seeds)))
+        asks = 0
         while not solver.ask_done(st):
             X, st = solver.ask(st)
-            st = solver.tell(st, X, _numpy_sphere(X))
+            X = np.asarray(X)
+            f = _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1])
+            st = solver.tell(st, X, f)
             asks += 1
         return asks
 
@@ -165,9 +173,11 @@ def measure(label: str, functions, dim: int, seeds: int) -> dict:
     asks = []
     if label in ASK_TELL and seeds:  # in float32, JAX's default
         if hasattr(solver, "ask_init"):  # a version whose NelderMead has no ask/tell
-            ms, n_asks = ask_tell_ms(solver, dim)
-            asks.append({"route": "ask/tell", "seeds": 1, "ms_per_host_call": ms,
-                         "host_calls": n_asks})
+            many = "keys" in inspect.signature(solver.ask_init).parameters
+            for k in (1, seeds) if many else (1,):  # keys=: several seeds in one run
+                ms, n_asks = ask_tell_ms(solver, dim, k)
+                asks.append({"route": "ask/tell", "seeds": k, "ms_per_host_call": ms,
+                             "host_calls": n_asks})
         for k in (1, seeds):
             ms, calls = callback_ms(solver, dim, k)
             asks.append({"route": "pure_callback", "seeds": k, "ms_per_host_call": ms,
@@ -196,7 +206,8 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_output_arguments(p)
     p.add_argument("--dim", type=int, default=5)
-    p.add_argument("--seeds", type=int, default=4, help="keys of the minimise_many recipe")
+    p.add_argument("--seeds", type=int, default=4,
+                   help="keys of the minimise_many recipe and of ask/tell with keys=")
     p.add_argument("--cache", default=None, help="JAX persistent compilation cache folder")
     p.add_argument("--baseline", default=None,
                    help="a folder holding another version's jaxfric package: measured in "
@@ -267,7 +278,8 @@ def main():
         markdown_table(summary, fmt=fmt),
         "An objective outside JAX, in float32 (a NumPy sphere, compiled run reused): "
         "milliseconds per host call (an ask, or a `pure_callback` call) and host calls per "
-        f"run, by ask/tell (one seed) and by the `pure_callback` recipe under `minimise` "
+        f"run, by ask/tell (one seed, and {a.seeds} in one run with `keys=`) and by the "
+        "`pure_callback` recipe under `minimise` "
         f"(one seed) or `minimise_many` ({a.seeds} keys).",
         markdown_table(asks, fmt=fmt) if asks else "(not measured: --no-asktell)",
     ])

@@ -15,6 +15,17 @@ batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
         st = solver.tell(st, X, [simulate(x) for x in np.asarray(X)])
     solution = solver.ask_result(st)                # what minimise returns
 
+Several seeds in one run: ``ask_init(lower, upper, keys=keys)`` with a batch of ``S``
+keys runs the keys side by side as ``minimise_many(..., keys=keys, batching="vmap")``
+does (``vmap`` of the same run, on one device). Every ask then carries every seed's
+batch, ``X`` of shape ``(S, k, n)`` (block ``s`` is seed ``s``), :func:`tell` takes
+values of shape ``(S, k)``, and :func:`result` is ``minimise_many``'s batched
+:class:`Solution`. Under ``vmap`` every seed is asked on every step: a seed that has
+finished, and the branch of a Nelder–Mead step a seed does not take (``vmap`` computes
+both sides of a conditional), still has its rows asked, and their values are
+discarded. Swarms (PSO, MAPSO, Evosax) batch cleanly: while no seed has finished, every
+row asked is one the algorithm uses.
+
 The same recipe without ask/tell: wrap the outside objective in ``jax.pure_callback``
 and call :func:`jaxfric.minimise` (docs/solvers.md, "Objectives outside JAX").
 
@@ -23,8 +34,8 @@ may be open at once, but each waits for :func:`tell` inside XLA: a run large eno
 XLA:CPU to run it on its thread pool holds a pool thread while it waits, and with more
 such runs open than the pool has threads (about one per core) the next one never gets
 its first batch out (a 25-agent PSO on 5 parameters, 4 runs, 2 cores). For several seeds
-of an objective outside JAX use the ``pure_callback`` recipe with
-:func:`jaxfric.minimise_many`: one host call then carries every seed's batch.
+of an objective outside JAX open one run with ``keys=`` instead: one ask then carries
+every seed's batch, and only one run waits in XLA.
 """
 
 from __future__ import annotations
@@ -41,7 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _xla
-from ._base import RESULTS, History, Solution
+from ._base import History, Solution, result_from_f
 from .loop import NO_STOP, _run
 from .problem import _Flat, check_key, check_start, prepare_bounds
 
@@ -56,7 +67,8 @@ class _Channel:
     is abandoned every value is ``+inf``, so the run ends without waiting (a swarm runs
     out its generations, Nelder–Mead stops at once)."""
 
-    def __init__(self):
+    def __init__(self, seeds: int | None = None):
+        self.seeds = seeds  # S for a run of several seeds, else None
         self.out: queue.Queue = queue.Queue()   # ("ask", X) | ("done", Solution) | ("error", e)
         self.back: queue.Queue = queue.Queue()  # values, or None: abandoned
         self.one_at_a_time = threading.Lock()
@@ -71,17 +83,22 @@ class _Channel:
                 if f is not None:
                     return f
                 self.abandoned = True
-        return np.full(X.shape[:1], np.inf, X.dtype)
+        return np.full(X.shape[:-1], np.inf, X.dtype)
 
 
 def _answer(token, X, wide):
-    """Host side of the objective: ``X`` is one point ``(n,)`` or a batch ``(k, n)``
-    (``wide``: float64 sent as pairs of uint32, see :func:`_objective`)."""
+    """Host side of the objective: ``X`` is one point ``(n,)`` or a batch ``(k, n)``; in
+    a run of ``S`` seeds, with the seeds' axis in front: ``(S, n)`` or ``(S, k, n)``,
+    asked as ``(S, k, n)`` (``wide``: float64 sent as pairs of uint32, see
+    :func:`_objective`)."""
     channel = _CHANNELS[int(np.asarray(token).flat[0])]
     X = np.ascontiguousarray(X)
     if wide:
         X = X.view(np.float64)[..., 0]
-    f = channel.evaluate(np.atleast_2d(X)).reshape(X.shape[:-1]).astype(X.dtype)
+    X = np.array(X)  # a copy of its own: asked and kept after the callback returns
+    asked = (np.atleast_2d(X) if channel.seeds is None
+             else X.reshape(channel.seeds, -1, X.shape[-1]))
+    f = channel.evaluate(asked).reshape(X.shape[:-1]).astype(X.dtype)
     return np.ascontiguousarray(f[..., None]).view(np.uint32) if wide else f
 
 
@@ -103,8 +120,10 @@ def _objective(x, token):
 
 class AskTellState:
     """Where a run driven by ask/tell stands: the batch waiting for values (``pending``,
-    ``None`` once the run has finished) and the number of values told so far. Every
-    :func:`tell` returns a new state; the older ones are spent."""
+    ``None`` once the run has finished) and the number of values told so far
+    (``num_told``; in a run of several seeds, per seed: ``S * num_told`` values in all,
+    discarded ones included). Every :func:`tell` returns a new state; the older ones are
+    spent."""
 
     def __init__(self, run: "_Run", event, num_told: int):
         self._run, self._event, self.num_told = run, event, num_told
@@ -117,11 +136,18 @@ class AskTellState:
 class _Run:
     """The worker thread running the compiled run, and its channel."""
 
-    def __init__(self, solver, lower, upper, key, x0):
+    def __init__(self, solver, lower, upper, key, x0, seeds: int | None):
         self.token = next(_TOKENS)
-        self.channel = _Channel()
+        self.channel = _Channel(seeds)
         self.dtype = lower.dtype
-        self.best_x, self.best_f, self.num_evals = lower, np.inf, 0
+        self.seeds = seeds
+        # best row told so far (per seed in a run of several seeds)
+        if seeds is None:
+            self.best_x, self.best_f = np.asarray(lower), np.inf
+        else:
+            self.best_x = np.broadcast_to(np.asarray(lower), (seeds,) + lower.shape).copy()
+            self.best_f = np.full(seeds, np.inf, lower.dtype)
+        self.num_evals = 0
         _CHANNELS[self.token] = self.channel
         x64 = bool(jax.config.jax_enable_x64)  # a thread-local setting: pass it on
         args = (solver, lower, upper, key, x0, self.token, self.channel, x64)
@@ -143,14 +169,28 @@ class _Run:
         return kind, payload
 
 
+def _run_seeds(proto, flat, lower, upper, tokens, keys, x0):
+    """The runs of ``minimise_many(..., batching="vmap")``: ``vmap`` of minimise's run
+    over the keys. The token travels batched (one copy per seed) so that every callback
+    is batched over the seeds and carries their axis in front, even for points that do
+    not depend on the key (a Nelder–Mead simplex around a shared ``x0``)."""
+    run = lambda t, k: _run(proto, flat, lower, upper, t, k, x0, None)[1]  # noqa: E731
+    return jax.vmap(run)(tokens, keys)
+
+
 def _work(solver, lower, upper, key, x0, token, channel: _Channel, x64: bool):
     try:
         with jax.enable_x64(x64):
             lo, hi, treedef, shapes = prepare_bounds((lower, upper), lower.dtype)
             flat = _Flat(_objective, treedef, shapes)
-            args = (solver, flat, lo, hi, jnp.asarray(token, jnp.int32), key, x0, None, None,
-                    None, jnp.asarray(NO_STOP, jnp.int32))
-            _, sol = _executable(args)(*args)
+            if channel.seeds is None:
+                args = (solver, flat, lo, hi, jnp.asarray(token, jnp.int32), key, x0, None,
+                        None, None, jnp.asarray(NO_STOP, jnp.int32))
+                _, sol = _executable(_run, args)(*args)
+            else:
+                args = (solver, flat, lo, hi, jnp.full(channel.seeds, token, jnp.int32),
+                        key, x0)
+                sol = _executable(_run_seeds, args)(*args)
             channel.out.put(("done", jax.block_until_ready(sol)))
     except Exception as e:  # noqa: BLE001  (handed to the caller of ask/tell)
         channel.out.put(("error", e))
@@ -166,16 +206,16 @@ _EXECUTABLES: dict = {}
 _EXECUTABLES_MAX = 32
 
 
-def _executable(args):
+def _executable(fn, args):
     solver, flat, lo, _, _, key, x0 = args[:7]
     leaves = jax.tree_util.tree_leaves((lo, key, x0))
-    sig = (solver, flat, tuple((a.shape, str(a.dtype)) for a in leaves))
+    sig = (fn, solver, flat, tuple((a.shape, str(a.dtype)) for a in leaves))
     try:
         hash(sig)
     except TypeError:
         sig = None
     if sig is None or sig not in _EXECUTABLES:
-        compiled = _xla.filter_jit(_run, _xla.resolve("auto", "solver")).lower(*args).compile()
+        compiled = _xla.filter_jit(fn, _xla.resolve("auto", "solver")).lower(*args).compile()
         if sig is None:
             return compiled
         if len(_EXECUTABLES) >= _EXECUTABLES_MAX:
@@ -207,8 +247,16 @@ def _abandon_all():
             channel.thread.join(_EXIT_JOIN_S)
 
 
-def start(solver, lower, upper, key, x0=None) -> AskTellState:
-    """Start a run of ``solver`` (already checked) on the 1-D box ``[lower, upper]``."""
+def start(solver, lower, upper, key=None, x0=None, keys=None) -> AskTellState:
+    """Start a run of ``solver`` (already checked) on the 1-D box ``[lower, upper]``: one
+    seed (``key``), or one run of several seeds side by side (``keys``, a batch of
+    keys as :func:`jaxfric.minimise_many` takes them); exactly one of the two."""
+    if key is not None and keys is not None:
+        raise ValueError("ask_init takes key= (one seed) or keys= (a batch of keys, "
+                         "several seeds in one run), not both")
+    if key is None and keys is None:
+        raise ValueError("ask_init needs key= (one seed: jax.random.key(seed) or an int) "
+                         "or keys= (several seeds: jax.random.split(key, S))")
     lower, upper = jnp.asarray(lower), jnp.asarray(upper)
     if lower.ndim != 1 or lower.shape != upper.shape or lower.shape[0] == 0:
         raise ValueError(f"ask_init needs 1-D lower and upper bounds of one length, got "
@@ -216,15 +264,20 @@ def start(solver, lower, upper, key, x0=None) -> AskTellState:
     if not jnp.issubdtype(lower.dtype, jnp.floating):
         lower = lower.astype(float)
     lo, hi, treedef, shapes = prepare_bounds((np.asarray(lower), np.asarray(upper)), lower.dtype)
-    key = check_key(key)
+    if keys is None:
+        key, seeds = check_key(key), None
+    else:
+        key = check_key(keys, "keys", batch=True)
+        seeds = int(key.shape[0])
     if x0 is not None:
         x0 = check_start(np.asarray(x0), treedef, shapes, lo, hi, solver.population_size())
-    run = _Run(solver, lo, hi, key, x0)
+    run = _Run(solver, lo, hi, key, x0, seeds)
     return AskTellState(run, run.next_event(), 0)
 
 
 def ask(st: AskTellState):
-    """``(X, st)``: the points (rows) whose values :func:`tell` needs next."""
+    """``(X, st)``: the points (rows) whose values :func:`tell` needs next: ``(k, n)``,
+    or ``(S, k, n)`` in a run of ``S`` seeds (block ``s`` is seed ``s``'s)."""
     if st.pending is None:
         raise ValueError("the run has finished (ask_done is True): read ask_result")
     return st.pending, st
@@ -232,7 +285,8 @@ def ask(st: AskTellState):
 
 def tell(st: AskTellState, X, f) -> AskTellState:
     """Give the values ``f`` of the rows ``X`` that :func:`ask` returned (NaN and inf count
-    as the worst value); returns the state asking for the next batch."""
+    as the worst value): shape ``(k,)``, or ``(S, k)`` in a run of ``S`` seeds. Returns
+    the state asking for the next batch."""
     if st.pending is None:
         raise ValueError("the run has finished (ask_done is True): nothing to tell")
     run = st._run
@@ -244,16 +298,30 @@ def tell(st: AskTellState, X, f) -> AskTellState:
         raise ValueError(f"tell needs the batch ask returned, of shape {pending.shape}, "
                          f"got shape {tuple(np.shape(X))}")
     f = np.asarray(f, run.dtype)
-    if f.shape != (pending.shape[0],):
+    if f.shape != pending.shape[:-1]:
+        per = (f"{pending.shape[1]} candidates of each of {pending.shape[0]} seeds, shape "
+               f"{pending.shape[:-1]}" if run.seeds else f"{pending.shape[0]} candidates")
         raise ValueError(f"tell needs one fitness value per candidate: got shape "
-                         f"{f.shape} for {pending.shape[0]} candidates")
+                         f"{f.shape} for {per}")
     f = np.where(np.isfinite(f), f, np.inf).astype(run.dtype)
-    i = int(np.argmin(f))
-    if f[i] < run.best_f:
-        run.best_x, run.best_f = pending[i], f[i]
-    run.num_evals += f.shape[0]
+    _keep_best(run, pending, f)
+    run.num_evals += f.shape[-1]
     run.channel.back.put(f)
     return AskTellState(run, run.next_event(), run.num_evals)
+
+
+def _keep_best(run: "_Run", X, f):
+    """Update the best row told so far, of the run or of each seed."""
+    if run.seeds is None:
+        i = int(np.argmin(f))
+        if f[i] < run.best_f:
+            run.best_x, run.best_f = np.array(X[i]), f[i]
+        return
+    i = np.argmin(f, axis=1)
+    seeds = np.arange(run.seeds)
+    better = f[seeds, i] < run.best_f
+    run.best_x[better] = X[seeds, i][better]
+    run.best_f[better] = f[seeds, i][better]
 
 
 def done(st: AskTellState) -> bool:
@@ -263,18 +331,25 @@ def done(st: AskTellState) -> bool:
 
 def result(st: AskTellState) -> Solution:
     """The run's :class:`Solution` (flat ``value``) once it has finished, as
-    :func:`jaxfric.minimise` gives it; before, the best point told so far."""
+    :func:`jaxfric.minimise` gives it (a run of several seeds: as
+    ``minimise_many(..., batching="vmap")`` gives it, every field with a leading axis
+    of the seeds). Before, the best row told so far, per seed in a run of several seeds;
+    there, rows whose values the run later discards count too, so it may be better than
+    the final ``f``, and ``stats["num_evals"]`` is the values told per seed."""
     if done(st):
         return st._event[1]
     run = st._run
     if run.num_evals == 0:
         raise ValueError("no result before the first batch has been told")
     f = jnp.asarray(run.best_f, run.dtype)
-    evals = jnp.asarray(run.num_evals)
-    return Solution(value=jnp.asarray(run.best_x), f=f,
-                    result=RESULTS.where(jnp.isfinite(f), RESULTS.successful, RESULTS.nonfinite),
-                    stats={"num_evals": evals},
-                    history=History.from_arrays(evals[None], f[None]))
+    evals = jnp.full(f.shape, run.num_evals)
+    if run.seeds is None:
+        history, status = History.from_arrays(evals[None], f[None]), result_from_f(f)
+    else:
+        history = jax.vmap(History.from_arrays)(evals[:, None], f[:, None])
+        status = jax.vmap(result_from_f)(f)
+    return Solution(value=jnp.asarray(run.best_x), f=f, result=status,
+                    stats={"num_evals": evals}, history=history)
 
 
 __all__ = ["AskTellState", "ask", "done", "result", "start", "tell"]

@@ -143,22 +143,29 @@ class AbstractSolver(eqx.Module):
         """Raise ``ValueError`` if ``ask``/``tell`` cannot drive this solver."""
 
     # ------------------------------------------------------------------- ask / tell
-    def ask_init(self, lower, upper, key, x0=None) -> asktell.AskTellState:
+    def ask_init(self, lower, upper, key=None, x0=None, *, keys=None) -> asktell.AskTellState:
         """Start a run driven from Python (:mod:`jaxfric.optim.asktell`). ``lower`` /
         ``upper``: 1-D bounds (their dtype is the search dtype, as in
         :func:`jaxfric.minimise`); ``key``: a PRNG key or an int seed; ``x0``: an
-        optional start (swarms: or an initial population)."""
+        optional start (swarms: or an initial population).
+
+        ``keys`` instead of ``key``: a batch of ``S`` PRNG keys, as
+        :func:`jaxfric.minimise_many` takes them. The seeds then run side by side in one
+        run (``minimise_many``'s ``batching="vmap"``): every ask carries every seed's
+        batch, so one host call evaluates them all. Exactly one of ``key`` and ``keys``."""
         self.check()
         self.check_ask_tell()
-        return asktell.start(self, lower, upper, key, x0)
+        return asktell.start(self, lower, upper, key, x0, keys=keys)
 
     def ask(self, st: asktell.AskTellState):
-        """``(X, st)``: the points (rows) whose values :meth:`tell` needs next."""
+        """``(X, st)``: the points (rows) whose values :meth:`tell` needs next, ``(k, n)``;
+        with ``keys``, ``(S, k, n)``, block ``s`` for seed ``s``."""
         return asktell.ask(st)
 
     def tell(self, st: asktell.AskTellState, X, f) -> asktell.AskTellState:
         """Give the values ``f`` of the rows ``X`` returned by :meth:`ask` (NaN and inf
-        count as the worst value); returns the state asking for the next batch."""
+        count as the worst value), of shape ``(k,)``, or ``(S, k)`` with ``keys``; returns
+        the state asking for the next batch."""
         return asktell.tell(st, X, f)
 
     def ask_done(self, st: asktell.AskTellState) -> bool:
@@ -167,7 +174,9 @@ class AbstractSolver(eqx.Module):
 
     def ask_result(self, st: asktell.AskTellState) -> Solution:
         """The :class:`Solution` (flat ``value``): what :func:`jaxfric.minimise` returns
-        for the same key once the run has finished; before, the best point told so far."""
+        for the same key once the run has finished (with ``keys``: what
+        ``minimise_many(..., batching="vmap")`` returns); before, the best point told so
+        far (per seed, see :func:`jaxfric.optim.asktell.result`)."""
         return asktell.result(st)
 
 
