@@ -29,6 +29,27 @@ def _theta(model, seed=0):
     return lo + (hi - lo) * np.random.default_rng(seed).random(lo.size)
 
 
+def _adjoint(model):
+    """``(y, ∂/∂θ of g·y)`` by the network's hand-written adjoint, jitted: one program
+    (run op by op, its loops and small operations compiled dozens)."""
+
+    def run(theta, u, g):
+        y, pullback = model.simulate_vjp(theta, u)
+        return y, pullback(g)
+
+    return jax.jit(run)
+
+
+def _reverse_mode(model):
+    """The same pair by JAX's own reverse mode of ``model.simulate``, jitted."""
+
+    def run(theta, u, g):
+        y, vjp = jax.vjp(lambda t: model.simulate(t, u), theta)
+        return y, vjp(g)[0]
+
+    return jax.jit(run)
+
+
 @pytest.mark.parametrize("output_bias", [False, True])
 def test_elman_adjoint_matches_jax_reverse_mode(output_bias):
     model = Elman(neurons=5, context_weight_bound=1.0, output_bias=output_bias)
@@ -37,11 +58,10 @@ def test_elman_adjoint_matches_jax_reverse_mode(output_bias):
         theta = jnp.asarray(_theta(model))
         u = jnp.asarray(np.sin(np.linspace(0.0, 20.0, 300)) + 0.1 * rng.standard_normal(300))
         g = jnp.asarray(rng.standard_normal(300))
-        y, pullback = model.simulate_vjp(theta, u)
-        y_ref, vjp = jax.vjp(lambda t: model.simulate(t, u), theta)
+        y, got = _adjoint(model)(theta, u, g)
+        y_ref, expected = _reverse_mode(model)(theta, u, g)
         np.testing.assert_allclose(y, y_ref, rtol=1e-13, atol=1e-13)
-        expected = vjp(g)[0]
-        np.testing.assert_allclose(pullback(g), expected, rtol=1e-10, atol=1e-12 * float(jnp.abs(expected).max()))
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12 * float(jnp.abs(expected).max()))
 
 
 def test_cost_derivatives_match_plain_autodiff():
@@ -53,17 +73,19 @@ def test_cost_derivatives_match_plain_autodiff():
                         dt=jnp.asarray(DT), inv_norm=jnp.asarray(1.3))
         cost = OutputErrorCost(model)
         plain = lambda t, d: _plain_cost(model, t, d)  # noqa: E731
-        assert cost(theta, data) == pytest.approx(float(plain(theta, data)), rel=1e-14)
-        g_ref = jax.grad(plain)(theta, data)
+        # every derivative jitted (one program each), as the optimisers run them
+        jit = jax.jit
+        assert jit(cost)(theta, data) == pytest.approx(float(jit(plain)(theta, data)), rel=1e-14)
+        g_ref = jit(jax.grad(plain))(theta, data)
         scale = float(jnp.abs(g_ref).max())
-        np.testing.assert_allclose(jax.grad(cost)(theta, data), g_ref, atol=1e-11 * scale)
-        np.testing.assert_allclose(jax.jacfwd(cost)(theta, data), g_ref, atol=1e-11 * scale)
-        np.testing.assert_allclose(jax.grad(cost, argnums=1)(theta, data).y,
-                                   jax.grad(plain, argnums=1)(theta, data).y, atol=1e-14)
+        np.testing.assert_allclose(jit(jax.grad(cost))(theta, data), g_ref, atol=1e-11 * scale)
+        np.testing.assert_allclose(jit(jax.jacfwd(cost))(theta, data), g_ref, atol=1e-11 * scale)
+        np.testing.assert_allclose(jit(jax.grad(cost, argnums=1))(theta, data).y,
+                                   jit(jax.grad(plain, argnums=1))(theta, data).y, atol=1e-14)
         # vmap over candidates (the swarm's path) gives each candidate's own J
         batch = jnp.stack([theta, jnp.asarray(_theta(model, 4))])
-        np.testing.assert_allclose(jax.vmap(cost, (0, None))(batch, data),
-                                   [plain(t, data) for t in batch], rtol=1e-12)
+        np.testing.assert_allclose(jit(jax.vmap(cost, (0, None)))(batch, data),
+                                   [jit(plain)(t, data) for t in batch], rtol=1e-12)
 
 
 def _record(n=2300, n_train=2100):
@@ -175,7 +197,7 @@ def test_elman_adjoint_both_time_loops(monkeypatch, parallel):
         theta = jnp.asarray(_theta(model, 5))
         u = jnp.asarray(np.sin(np.linspace(0.0, 30.0, 700)) + 0.1 * rng.standard_normal(700))
         g = jnp.asarray(rng.standard_normal(700))
-        _, pullback = model.simulate_vjp(theta, u)
-        expected = jax.vjp(lambda t: model.simulate(t, u), theta)[1](g)[0]
-        np.testing.assert_allclose(pullback(g), expected, rtol=1e-10,
+        got = _adjoint(model)(theta, u, g)[1]
+        expected = _reverse_mode(model)(theta, u, g)[1]
+        np.testing.assert_allclose(got, expected, rtol=1e-10,
                                    atol=1e-12 * float(jnp.abs(expected).max()))
