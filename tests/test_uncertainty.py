@@ -2,6 +2,8 @@
 references, calibration over noisy replicates on the rig simulator's velocity, an
 unidentifiable parameter that must not look confident, and the Fit API / file round trip."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,8 +31,10 @@ def _fit(model, theta, v, dt, n_train=None, **kw):
                dt=dt, n_train=n if n_train is None else n_train, n_samples=n, metrics={}, **kw)
 
 
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def _ar1(key, shape, rho, sd):
-    """AR(1) noise of marginal standard deviation ``sd`` along the last axis."""
+    """AR(1) noise of marginal standard deviation ``sd`` along the last axis (one
+    compiled program per shape, not one per eager operation)."""
     e = jax.random.normal(key, shape) * sd * np.sqrt(1 - rho**2)
 
     def step(prev, x):
@@ -121,7 +125,15 @@ def _coulomb_replicates(v, noise):
     """Least-squares fits of Coulomb+viscous on ``REPLICATES`` noisy records (vmapped),
     returning (theta (R, 2), residuals (R, n), Jacobians (R, n, 2))."""
     model = models.Coulomb()
-    f_true = FC * np.tanh(v / model.v_eps) + SIGMA2 * v
+    theta, r, jac = _replicate_arrays(model, v, noise)
+    return model, np.asarray(theta), np.asarray(r), np.asarray(jac)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _replicate_arrays(model, v, noise):
+    """The arrays of :func:`_coulomb_replicates` as one compiled program (eager, each
+    operation compiled on its own)."""
+    f_true = FC * jnp.tanh(v / model.v_eps) + SIGMA2 * v
     x = jnp.stack([jnp.tanh(v / model.v_eps), v], axis=1)
     beta = jnp.linalg.lstsq(x, (f_true[None, :] + noise).T)[0].T          # (R, 2) physical
     theta = jax.vmap(lambda b: model.from_physical(Fc=b[0], sigma2=b[1]))(beta)
@@ -132,7 +144,7 @@ def _coulomb_replicates(v, noise):
     y = f_true[None, :] + noise
     r = jax.vmap(resid)(theta, y)
     jac = jax.vmap(jax.jacfwd(resid))(theta, y)
-    return model, np.asarray(theta), np.asarray(r), np.asarray(jac)
+    return theta, r, jac
 
 
 def _coverage(model, theta, r, jac, method, truth):
@@ -179,7 +191,8 @@ def test_the_public_path_gives_the_replicate_intervals(rig_velocity):
     """parameter_uncertainty(fit, data) on one replicate equals the estimators above."""
     with jax.enable_x64(True):
         v = jnp.asarray(rig_velocity)
-        noise = _ar1(jax.random.key(5), (1, v.size), 0.9, NOISE)
+        # the replicates' shape (its compiled programs reused); replicate 0 is checked
+        noise = _ar1(jax.random.key(5), (REPLICATES, v.size), 0.9, NOISE)
         model, theta, r, jac = _coulomb_replicates(v, noise)
         f = np.asarray(model.simulate(jnp.asarray(theta[0]), v)) - r[0]   # r = prediction - data
         fit = _fit(model, theta[0], rig_velocity, 1 / 128)
@@ -371,16 +384,16 @@ def test_several_training_records_pool_their_residuals():
         model = models.Coulomb()
         rng = np.random.default_rng(11)
         recs, vs, fs = [], [], []
-        for k in range(2):
-            v = 0.01 * np.sin(np.arange(500) * 0.03 + k)
-            f = 30 * np.tanh(v / model.v_eps) + 500 * v + rng.standard_normal(500)
+        for k in range(2):  # 2 x 1000 samples: the shapes of the rig record's tests above
+            v = 0.01 * np.sin(np.arange(1000) * 0.03 + k)
+            f = 30 * np.tanh(v / model.v_eps) + 500 * v + rng.standard_normal(1000)
             recs.append(FrictionData.from_arrays(v, f, 0.01, name=f"r{k}"))
             vs.append(v)
             fs.append(f)
         v, f = np.concatenate(vs), np.concatenate(fs)
         fit = _fit(model, model.from_physical(**model.fit_least_squares(v, f)), v, 0.01)
         u = parameter_uncertainty(fit, recs)
-    assert u.segments == (500, 500) and u.n == 1000 and u.default == "hac"
+    assert u.segments == (1000, 1000) and u.n == 2000 and u.default == "hac"
     x = np.stack([np.tanh(v / model.v_eps), v], axis=1)
     r = f - x @ np.linalg.lstsq(x, f, rcond=None)[0]
-    np.testing.assert_allclose(u.cov["jacobian"], r @ r / 998 * np.linalg.inv(x.T @ x), rtol=1e-6)
+    np.testing.assert_allclose(u.cov["jacobian"], r @ r / 1998 * np.linalg.inv(x.T @ x), rtol=1e-6)
