@@ -32,14 +32,20 @@ def _reference(decay, gain, z0):
     return out
 
 
+# Each form compiled as one program per shape and dtype: called eagerly, the associative
+# scan's log2(T) levels compiled as a hundred small programs at T = 1600.
+_PARALLEL = jax.jit(_scan.linear_recurrence_parallel)
+_SEQUENTIAL = jax.jit(_scan.linear_recurrence_sequential)
+
+
 @pytest.mark.parametrize("t", [1, 2, 7, 64, 1600])
 @pytest.mark.parametrize("x64", [False, True])
 def test_parallel_linear_recurrence_matches_a_loop(t, x64):
     with jax.enable_x64(x64):
         dtype = jnp.float64 if x64 else jnp.float32
         decay, gain, z0 = _coefficients(np.random.default_rng(t), 5, t, dtype)
-        par = _scan.linear_recurrence_parallel(decay, gain, z0)
-        seq = _scan.linear_recurrence_sequential(decay, gain, z0)
+        par = _PARALLEL(decay, gain, z0)
+        seq = _SEQUENTIAL(decay, gain, z0)
         assert par.shape == seq.shape == (5, t) and par.dtype == seq.dtype == dtype
         ref = _reference(decay, gain, z0)
         tol = 1e-12 if x64 else 2e-5
@@ -49,12 +55,12 @@ def test_parallel_linear_recurrence_matches_a_loop(t, x64):
 
 
 def test_default_linear_recurrence_is_the_platforms_own_form():
-    """The sequential loop on the CPU, the associative scan on other platforms."""
-    decay, gain, z0 = _coefficients(np.random.default_rng(0), 3, 100, jnp.float32)
-    own = (_scan.linear_recurrence_sequential if jax.default_backend() == "cpu"
-           else _scan.linear_recurrence_parallel)
+    """The sequential loop on the CPU, the associative scan on other platforms (the
+    float32 (5, 64) shape of the test above, so the pinned form's program is reused)."""
+    decay, gain, z0 = _coefficients(np.random.default_rng(0), 5, 64, jnp.float32)
+    own = _SEQUENTIAL if jax.default_backend() == "cpu" else _PARALLEL
     assert jnp.array_equal(jax.jit(_scan.linear_recurrence)(decay, gain, z0),
-                           jax.jit(own)(decay, gain, z0))
+                           own(decay, gain, z0))
 
 
 @pytest.mark.parametrize("model", [LuGre(), Dahl()], ids=["lugre", "dahl"])
@@ -69,9 +75,13 @@ def test_bristle_models_through_the_accelerator_loop(model, monkeypatch):
         v = jnp.asarray(0.01 * np.sin(2 * np.pi * 0.2 * t) + 0.004 * np.sin(2 * np.pi * 0.53 * t))
 
         def outputs():
-            f = jax.jit(lambda th: model.simulate_batch(th, v, 1 / 128.0))
-            g = jax.jit(jax.grad(lambda th: jnp.sum(model.simulate_batch(th, v, 1 / 128.0) ** 2)))
-            return np.asarray(f(th)), np.asarray(g(th))
+            """Rollout and gradient of its squared sum, as one program."""
+            def loss(th):
+                y = model.simulate_batch(th, v, 1 / 128.0)
+                return jnp.sum(y**2), y
+
+            g, y = jax.jit(jax.grad(loss, has_aux=True))(th)
+            return np.asarray(y), np.asarray(g)
 
         # Pin each form explicitly, so the comparison is the same on every platform.
         monkeypatch.setattr(lugre, "linear_recurrence", _scan.linear_recurrence_sequential)
@@ -86,19 +96,27 @@ def test_bristle_models_through_the_accelerator_loop(model, monkeypatch):
                          ids=["elman", "elman_full"])
 def test_elman_accelerator_unroll_computes_the_same_rollout(model):
     """The unroll used off the CPU changes the loop's shape, not its arithmetic
-    (values and gradients, float32; networks with |r| <= 1 are not chaotic)."""
+    (values and gradients, float32; networks with |r| <= 1 are not chaotic). 483 samples
+    are 15 unrolled blocks of 32 and a remainder of 3 (each unrolled step is compiled
+    code, so a short remainder keeps the program small); rollout and gradient are one
+    program per model."""
     wide = dataclasses.replace(model, unroll=_scan.ACCELERATOR_UNROLL)
     rng = np.random.default_rng(2)
     lo, hi = model.bounds()
     th = jnp.asarray(rng.uniform(lo, hi, (5, model.num_params)), jnp.float32)
-    u = jnp.asarray(np.sin(np.arange(500) / 30.0), jnp.float32)
-    np.testing.assert_allclose(np.asarray(wide.simulate_batch(th, u)),
-                               np.asarray(model.simulate_batch(th, u)), rtol=1e-5, atol=1e-5)
+    u = jnp.asarray(np.sin(np.arange(15 * _scan.ACCELERATOR_UNROLL + 3) / 30.0), jnp.float32)
 
-    def loss(m):
-        return jax.grad(lambda t: jnp.sum(m.simulate_batch(t, u) ** 2))(th)
+    def rollout_and_gradient(m):
+        def loss(t):
+            y = m.simulate_batch(t, u)
+            return jnp.sum(y**2), y
 
-    np.testing.assert_allclose(np.asarray(loss(wide)), np.asarray(loss(model)), rtol=1e-4, atol=1e-4)
+        g, y = jax.jit(jax.grad(loss, has_aux=True))(th)
+        return np.asarray(y), np.asarray(g)
+
+    (y_wide, g_wide), (y, g) = rollout_and_gradient(wide), rollout_and_gradient(model)
+    np.testing.assert_allclose(y_wide, y, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(g_wide, g, rtol=1e-4, atol=1e-4)
 
 
 @pytest.mark.parametrize("cls", [Elman, ElmanFull])
