@@ -4,6 +4,8 @@ for Coulomb, Stribeck, LuGre and Dahl. Float64 (``jax.enable_x64``) unless state
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -45,9 +47,11 @@ def test_the_linear_solve_matches_a_loop():
     for k in range(T):
         s = jac[k] @ s + bias[k]
         want.append(s)
-    got = linear_solve(jnp.asarray(jac), jnp.asarray(bias), jnp.asarray(s0), False)
+    # jitted: called eagerly its log2(T) levels compiled as a hundred small programs
+    solve = jax.jit(linear_solve, static_argnums=3)
+    got = solve(jnp.asarray(jac), jnp.asarray(bias), jnp.asarray(s0), False)
     np.testing.assert_allclose(got, np.array(want), rtol=1e-12, atol=1e-12)
-    diag = linear_solve(jnp.asarray(jac[:, 0, :]), jnp.asarray(bias), jnp.asarray(s0), True)
+    diag = solve(jnp.asarray(jac[:, 0, :]), jnp.asarray(bias), jnp.asarray(s0), True)
     s, want = s0, []
     for k in range(T):
         s = jac[k, 0] * s + bias[k]
@@ -64,8 +68,8 @@ def test_a_nonlinear_pytree_recurrence_equals_lax_scan():
         return jnp.tanh(0.8 * a - 0.3 * b["z"] + x), {"z": 0.5 * b["z"] + 0.2 * jnp.sin(a)}
 
     init = (jnp.asarray(0.3), {"z": jnp.asarray(-0.1)})
-    want = jax.lax.scan(lambda c, x: (step(c, x), step(c, x)), init, xs)[1]
-    got = deer_scan(step, init, xs)
+    want = jax.jit(lambda i, x: jax.lax.scan(lambda c, x: (step(c, x), step(c, x)), i, x)[1])(init, xs)
+    got = jax.jit(lambda i, x: deer_scan(step, i, x))(init, xs)
     assert bool(got.converged) and not bool(got.fell_back) and int(got.iterations) < 30
     for g, w in zip(jax.tree_util.tree_leaves(got.states), jax.tree_util.tree_leaves(want)):
         assert _rel(g, w) < RTOL64
@@ -102,10 +106,11 @@ def test_an_empty_record_is_refused():
 
 # ------------------------------------------------------------------ Elman
 def _elman_case(model, seed=0, P=6, T=600):
+    """Parameters and input drawn in NumPy (eager jnp would compile each operation)."""
     lo, hi = model.bounds()
-    th = jax.random.uniform(jax.random.key(seed), (P, model.num_params), minval=lo, maxval=hi)
-    u = 0.9 * jnp.sin(jnp.linspace(0.0, 25.0, T)) * jnp.cos(jnp.linspace(0.0, 3.0, T))
-    return th, u
+    th = np.random.default_rng(seed).uniform(lo, hi, (P, model.num_params))
+    u = 0.9 * np.sin(np.linspace(0.0, 25.0, T)) * np.cos(np.linspace(0.0, 3.0, T))
+    return jnp.asarray(th), jnp.asarray(u)
 
 
 @pytest.mark.parametrize("model", [
@@ -125,7 +130,7 @@ def test_elman_default_box_is_not_contracting_and_falls_back():
     sequential scan gives the answer (DEER's known limit for unstable recurrences)."""
     model = M.Elman(neurons=12, context_weight_bound=1.0)
     th, u = _elman_case(model, P=4, T=400)
-    y, info = elman_rollout(model, th, u, return_info=True, max_iterations=20)
+    y, info = jax.jit(lambda t, v: elman_rollout(model, t, v, return_info=True, max_iterations=20))(th, u)
     assert _rel(y, model.simulate_batch(th, u)) < RTOL64
     assert bool(info.fell_back) == (not bool(info.converged))
 
@@ -135,7 +140,7 @@ def test_elman_float32_agrees_to_float32_precision():
     th, u = _elman_case(model)
     with jax.enable_x64(False):
         th32, u32 = jnp.asarray(th, jnp.float32), jnp.asarray(u, jnp.float32)
-        y, info = elman_rollout(model, th32, u32, return_info=True)
+        y, info = jax.jit(lambda t, v: elman_rollout(model, t, v, return_info=True))(th32, u32)
         assert y.dtype == jnp.float32 and bool(info.converged)
         assert _rel(y, model.simulate_batch(th32, u32)) < 1e-5
 
@@ -151,17 +156,19 @@ def test_elman_rollout_refuses_other_models():
 MOTION_MODELS = [M.Coulomb(), M.Stribeck(), M.LuGre(asymmetric=True, offset=True), M.Dahl(viscous=True)]
 
 
+@functools.cache
 def _motion_case(model, T=400):
     """A two-tone force on 5 kg from (0.01 m, 0.02 m/s), the model's parameters 40 % into
     its data-centred box, and the sequential scan's free run: ``(step, theta, force, dt, T,
-    want)``."""
+    want)``. Cached: the chunked tests compare with the same reference run."""
     dt = 1e-3
     t = np.arange(T) * dt
     force = 30.0 * np.sin(2 * np.pi * 1.3 * t) + 5.0 * np.sin(2 * np.pi * 7.0 * t)
     lo, hi = model.bounds(model.search_box(None, 0.1 * np.sin(t), force))
     theta = jnp.asarray(lo + 0.4 * (hi - lo))
     step = friction_step(model)
-    return step, theta, force, dt, T, simulate_motion(step, theta, 5.0, force, dt, 0.01, 0.02)
+    want = jax.jit(lambda th: simulate_motion(step, th, 5.0, force, dt, 0.01, 0.02))(theta)
+    return step, theta, force, dt, T, want
 
 
 @pytest.mark.parametrize("model", MOTION_MODELS, ids=lambda m: repr(m).split("(")[0] + str(len(m.param_names)))
@@ -176,7 +183,8 @@ def test_motion_states_in_parallel_equal_the_scan(model):
 
 @pytest.mark.parametrize("chunk", [64, 150])  # 150 does not divide 400: a padded tail
 def test_chunked_motion_equals_the_scan(chunk):
-    model = M.LuGre()
+    """LuGre with its asymmetric and offset options, as above, so the reference is shared."""
+    model = M.LuGre(asymmetric=True, offset=True)
     step, theta, force, dt, T, want = _motion_case(model)
     got, info = simulate_motion_parallel(step, theta, 5.0, force, dt, 0.01, 0.02, chunk=chunk,
                                          return_info=True)
