@@ -142,7 +142,7 @@ def test_motion_fit_export_includes_its_offset(tmp_path):
     """A MotionFit's friction includes its fitted constant offset; so do both exports."""
     from jaxfric.motion import MotionFit
 
-    v = _velocity(300)
+    v = _velocity()  # the record of the tests above, whose LuGre programs it reuses
     lugre = models.LuGre()
     theta = lugre.from_physical(sigma0=1e6, sigma1=300.0, sigma2=500.0, Fc=20.0, Fs=30.0, vs=5e-3)
     fit = MotionFit(model=lugre, theta=np.asarray(theta, np.float64), velocity_scaler=None,
