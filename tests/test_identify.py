@@ -187,7 +187,9 @@ def test_gradient_refinement_lowers_the_cost_from_a_poor_start():
     lo, hi = model.bounds()
     theta0 = lo + 0.3 * (hi - lo)
     nm = jaxfric.NelderMead(max_steps=20)
-    fit = identify(model, (v, f, DT), key=0, solver=nm, theta0=theta0,
+    # enn_fit's model, training window (750 samples) and BFGS budget: its compiled
+    # gradient stage is reused
+    fit = identify(model, (v, f, DT), key=0, solver=nm, theta0=theta0, train=750,
                    refine=GradientRefinement(method="bfgs", max_steps=40))
     assert [s["stage"] for s in fit.stages] == ["neldermead", "bfgs"]
     assert fit.stages[1]["improved"] and fit.stages[1]["J"] < 0.5 * fit.stages[0]["J"]
