@@ -153,6 +153,11 @@ def _three_networks_on_a_record(model, rng):
     return data, jnp.asarray(lo + (hi - lo) * rng.random((3, lo.size)))
 
 
+def _blocked_batch(model):
+    """The CPU's blocked batch (64-sample blocks) of ``model``, jitted: one program."""
+    return jax.jit(lambda thetas, data: _elman_value_and_grad_batch(model, thetas, data, block=64))
+
+
 def test_batched_adjoint_equals_the_single_network_adjoint():
     """Value, θ-gradient and y-gradient of K networks at once (time in blocks, the
     record not a multiple of the block) against the single-network path."""
@@ -161,8 +166,10 @@ def test_batched_adjoint_equals_the_single_network_adjoint():
         model = Elman(neurons=4, context_weight_bound=1.0, output_bias=output_bias)
         with jax.enable_x64(True):
             data, thetas = _three_networks_on_a_record(model, rng)
-            f, grad, g_y = _elman_value_and_grad_batch(model, thetas, data, block=64)
-            single = _elman_value_and_grad(model)
+            f, grad, g_y = _blocked_batch(model)(thetas, data)
+            # Each path jitted as one program, as the stages run it (run op by op, the
+            # loops and their small operations compiled ~100 programs per test).
+            single = jax.jit(_elman_value_and_grad(model))
             for i in range(3):
                 f1, grad1, g_y1 = single(thetas[i], data)
                 assert float(f[i]) == pytest.approx(float(f1), rel=1e-13)
@@ -170,11 +177,11 @@ def test_batched_adjoint_equals_the_single_network_adjoint():
                                            atol=1e-12 * float(jnp.abs(grad1).max()))
                 np.testing.assert_allclose(g_y[i], g_y1, rtol=1e-13)
             # vmap over θ takes the batched path and gives the same numbers
-            vf, vgrad, _ = jax.vmap(single, (0, None))(thetas, data)
+            vf, vgrad, _ = jax.jit(jax.vmap(_elman_value_and_grad(model), (0, None)))(thetas, data)
             np.testing.assert_allclose(vgrad, grad, rtol=1e-12, atol=1e-14)
             # and the cost's gradient under vmap is that gradient
-            np.testing.assert_allclose(jax.vmap(jax.grad(OutputErrorCost(model)), (0, None))(thetas, data),
-                                       grad, rtol=1e-10, atol=1e-14)
+            cost_grad = jax.jit(jax.vmap(jax.grad(OutputErrorCost(model)), (0, None)))
+            np.testing.assert_allclose(cost_grad(thetas, data), grad, rtol=1e-10, atol=1e-14)
 
 
 def test_batched_adjoint_off_the_cpu_equals_the_blocked_batch(monkeypatch):
@@ -185,10 +192,11 @@ def test_batched_adjoint_off_the_cpu_equals_the_blocked_batch(monkeypatch):
     model = Elman(neurons=4, context_weight_bound=1.0)
     with jax.enable_x64(True):
         data, thetas = _three_networks_on_a_record(model, rng)
-        f, grad, g_y = _elman_value_and_grad_batch(model, thetas, data, block=64)
+        f, grad, g_y = _blocked_batch(model)(thetas, data)
         monkeypatch.setattr(jax.lax, "platform_dependent",
                             lambda *args, default, **branches: default(*args))
-        vf, vgrad, vg_y = jax.vmap(_elman_value_and_grad(model), (0, None))(thetas, data)
+        # traced (with the patch in force) and compiled as one program, as a GPU runs it
+        vf, vgrad, vg_y = jax.jit(jax.vmap(_elman_value_and_grad(model), (0, None)))(thetas, data)
     np.testing.assert_allclose(vf, f, rtol=1e-12)
     np.testing.assert_allclose(vgrad, grad, rtol=1e-9, atol=1e-12 * float(jnp.abs(grad).max()))
     np.testing.assert_allclose(vg_y, g_y, rtol=1e-12)
