@@ -159,7 +159,8 @@ def test_forward_model_is_stable_for_stiff_friction():
         assert abs(coarse - fine) < 0.01 * fine
         coul = models.Coulomb(v_eps=1e-5)
         th = coul.from_physical(Fc=20.0, sigma2=10.0)
-        out = simulate_motion(friction_step(coul), th, 1.0, np.full(500, 10.0), 1e-3, 0.0, 0.0)
+        # both runs 3 s long: one compiled program (the creep settles within milliseconds)
+        out = simulate_motion(friction_step(coul), th, 1.0, np.full(3000, 10.0), 1e-3, 0.0, 0.0)
         assert np.max(np.abs(np.asarray(out["v"]))) < 1e-5  # sticks (creep below v_eps)
         out = simulate_motion(friction_step(coul), th, 1.0, np.full(3000, 30.0), 1e-3, 0.0, 0.0)
         # slides towards the viscous terminal speed (30 - 20) / 10 = 1 m/s, e-folding 0.1 s

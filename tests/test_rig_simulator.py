@@ -159,15 +159,17 @@ def test_vmap_over_64_parameter_sets_is_one_jitted_call():
     @jax.jit
     def run(mass, fc, key):
         r = eqx.tree_at(lambda r: (r.cylinder.mass, r.friction.coulomb_pos), base, (mass, fc))
-        rec = rig.simulate(r, key, substeps=8)
+        rec = rig.simulate(r, key, substeps=8, **SHORT)  # 64 short records: a quarter of the run time
         return rec.friction, rec.p1
 
     keys = jax.random.split(jax.random.key(0), 64)
     friction, p1 = jax.vmap(run)(masses, coulombs, keys)
-    assert friction.shape == (64, 2000) and p1.shape == (64, 2000)
-    assert bool(jnp.all(jnp.isfinite(friction))) and bool(jnp.all(jnp.isfinite(p1)))
+    n = SHORT["n_samples"]
+    assert friction.shape == (64, n) and p1.shape == (64, n)
+    friction, p1 = np.asarray(friction), np.asarray(p1)  # checked in NumPy: no eager programs
+    assert np.all(np.isfinite(friction)) and np.all(np.isfinite(p1))
     # the parameters really differ per lane: higher Coulomb level, higher sliding friction
-    sliding = jnp.mean(jnp.where(friction > 0, friction, 0.0), axis=1)
+    sliding = np.mean(np.where(friction > 0, friction, 0.0), axis=1)
     assert np.corrcoef(np.asarray(coulombs), np.asarray(sliding))[0, 1] > 0.9
 
 

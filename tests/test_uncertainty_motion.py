@@ -37,12 +37,14 @@ def test_motion_jacobian_matches_finite_differences():
         model, fit, data, y = _motion_fit()
         u = parameter_uncertainty(fit, data, method="jacobian")
 
+        @jax.jit  # the nine evaluations below: one compiled program
+        def simulate(yy):
+            return simulate_motion(friction_step(model), yy[:2], 10.0 ** yy[2],
+                                   jnp.asarray(data.net_force[:N_TRAIN]) - yy[3], DT,
+                                   data.position[0], data.velocity[0])["x"]
+
         def resid(yy):
-            th = jnp.asarray(yy[:2])
-            out = simulate_motion(friction_step(model), th, 10.0 ** yy[2],
-                                  jnp.asarray(data.net_force[:N_TRAIN] - yy[3]), DT,
-                                  data.position[0], data.velocity[0])
-            return np.asarray(out["x"]) - data.position[:N_TRAIN]
+            return np.asarray(simulate(jnp.asarray(yy))) - data.position[:N_TRAIN]
 
         r = resid(y)
         h = 1e-6 * np.maximum(np.abs(y), 1.0)
