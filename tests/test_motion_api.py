@@ -20,6 +20,12 @@ TRUTH = dict(Fc=12.0, sigma2=60.0)
 MASS, OFFSET = 2.5, 3.0
 #: A small search for the unit tests (the defaults are sized for long records).
 SMALL = MotionSearch(particles=10, generations=8, global_window=150, horizons=(300, None), steps=(15, 25))
+#: The command line's ``--quick`` search: the model-comparison test runs the command's
+#: configuration (record, models, budget), so the command-line test reuses its programs.
+QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
+#: Their sample time: binary, so the command's median of the CSV stamps' differences is
+#: exactly it (with 1e-3 it is 1 ulp off, and the programs, which compile dt in, differ).
+CLI_DT = 2.0**-10
 
 
 def _record(n=1500, dt=1e-3, phase=0.0, seed=0, model=None, theta=None, velocity=False):
@@ -127,12 +133,13 @@ def test_records_are_used_whole_with_metrics_per_record():
 
 
 def test_whole_record_trains_with_train_one():
-    rec = _record(1000)
+    # as long as the module fixture's training block: its compiled search is reused
+    rec = _record(1200)
     fit = _fit(data=rec, train=1.0)
-    assert fit.n_train == 1000 and "valid" not in fit.metrics
+    assert fit.n_train == 1200 and "valid" not in fit.metrics
     assert fit.metrics["train"]["fit_percent"] > 99.0
     # a held-back block shorter than the k-step horizon gets a shorter k, not an error
-    short = _fit(data=rec, train=997)
+    short = _fit(data=rec, train=1197)
     assert short.metrics["horizon"] == 2 and np.isfinite(short.metrics["valid_kstep"]["rmse_mm"])
 
 
@@ -184,7 +191,7 @@ def _reference_fit(rec):
 
 def test_initial_state_reads_only_its_window():
     """Positions after the window never matter; the force drives the free run after it."""
-    rec = _record(700)
+    rec = _record(800)  # the length of the other initial-state test: its programs are reused
     fit = _reference_fit(rec)
     n = 20
     with jax.enable_x64(True):
@@ -254,13 +261,13 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
 
 @pytest.mark.slow
 def test_compare_motion_ranks_and_needs_validation():
-    rec = _record(1200)
+    rec = _record(800, dt=CLI_DT)
     with pytest.raises(ValueError, match="validation"):
         compare_motion(["coulomb"], rec, key=0, mass=2.5, train=1.0)
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        out = compare_motion({"coulomb": models.Coulomb(v_eps=1e-3), "stribeck": models.Stribeck(v_eps=1e-3)},
-                             rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=SMALL, dtype=jnp.float64)
+        out = compare_motion("coulomb,stribeck", rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=QUICK,
+                             dtype=jnp.float64, max_evals=40, progress=False)
     scores = [out.fits[k].metrics["valid"]["rmse_mm"] for k in out.ranking]
     assert scores == sorted(scores)
     assert out.best is out.fits[out.ranking[0]]
@@ -270,9 +277,9 @@ def test_compare_motion_ranks_and_needs_validation():
 def test_cli_ranks_models_by_validation_and_takes_a_budget(tmp_path, capsys):
     from jaxfric.cli import main
 
-    rec = _record(800)
+    rec = _record(800, dt=CLI_DT)
     path = tmp_path / "m.csv"
-    np.savetxt(path, np.c_[np.arange(800) * 1e-3, rec.force, rec.position], delimiter=",", header="t,F,x",
+    np.savetxt(path, np.c_[np.arange(800) * CLI_DT, rec.force, rec.position], delimiter=",", header="t,F,x",
                comments="")
     rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet",
