@@ -7,6 +7,7 @@ import csv
 import os
 import warnings
 
+import jax
 import numpy as np
 import pytest
 
@@ -14,8 +15,10 @@ import jaxfric
 from jaxfric.records import FrictionData
 from jaxfric.sweeps import read_table, sweep
 
-SOLVER = jaxfric.MAPSONMDS(mapso=jaxfric.MAPSO(lattice_size=3, num_generations=4),
-                           nelder_mead=jaxfric.NelderMead(max_steps=20))
+# The solver, record length (300 samples, dt 0.01) and dtype (float64) of tests/test_records.py's
+# Coulomb fits: the sweep's Coulomb runs reuse their compiled programs.
+SOLVER = jaxfric.MAPSONMDS(mapso=jaxfric.MAPSO(lattice_size=3, num_generations=8),
+                           nelder_mead=jaxfric.NelderMead(max_steps=150))
 MODELS = ["coulomb", "stribeck"]
 SEEDS = [0, 5]
 
@@ -31,7 +34,7 @@ RECORDS = {"a": _record(0.0), "b": _record(1.0)}
 
 
 def _quiet_sweep(*args, **kwargs):
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), jax.enable_x64(True):
         warnings.simplefilter("ignore")  # the tiny budget's fits warn about their validation error
         return sweep(*args, progress=False, solver=SOLVER, **kwargs)
 
@@ -51,7 +54,7 @@ def test_every_run_equals_its_single_identify_call(whole):
     assert [(r["model"], r["record"], r["seed"]) for r in whole.rows] == [
         (m, r, s) for m in MODELS for r in RECORDS for s in SEEDS]
     for model, record, seed in [("coulomb", "a", 0), ("stribeck", "b", 5)]:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), jax.enable_x64(True):
             warnings.simplefilter("ignore")
             single = jaxfric.identify(model, RECORDS[record], key=seed, solver=SOLVER)
         saved = whole.fit(model, record, seed)
@@ -141,7 +144,7 @@ def test_a_label_for_other_data_is_refused(whole, tmp_path):
     _quiet_sweep(["coulomb"], {"a": RECORDS["a"]}, [0], out)
     with pytest.raises(ValueError, match="record 'a' stood for other data"):
         _quiet_sweep(["coulomb"], {"a": RECORDS["b"]}, [0, 1], out)
-    with pytest.raises(ValueError, match="model 'coulomb' stood for other settings"):
+    with pytest.raises(ValueError, match="model 'coulomb' stood for other settings"), jax.enable_x64(True):
         sweep(["coulomb"], {"a": RECORDS["a"]}, [0], out, progress=False, solver=SOLVER, method="paper")
 
 
@@ -158,7 +161,7 @@ def test_the_command_writes_the_same_runs(in_process_cli, whole, tmp_path):
     out = tmp_path / "cli"
     args = ["sweep", out, "--model", "coulomb", "--data", paths[0], "--data", paths[1], "--keys", "0,5",
             "--velocity-col", "v", "--friction-col", "F", "--time-col", "t",
-            "--generations", "4", "--nm-evals", "40", "-q"]
+            "--generations", "4", "--nm-evals", "40", "--x64", "-q"]  # float64 as the sweeps above
     status, _, err = in_process_cli(*args)
     assert status == 0, err
     rows = read_table(out / "results.csv")
