@@ -17,6 +17,13 @@ from jaxfric import _xla
 from jaxfric import functions as F
 
 
+# One PSO problem for every test that runs a PSO, so its 'auto' program compiles once.
+# The problem, PSO and hybrid are also tests/test_checkpoint.py's (its uninterrupted runs
+# are these 'auto' programs, shared through the session's compilation cache).
+PSO = jf.PSO(num_particles=16, num_generations=40)
+ROSENBROCK_6 = F.get("rosenbrock").bounds(6, np.float32)
+
+
 def _xla_accepts(name, value):
     try:
         _xla.check_known(((name, value),))
@@ -57,13 +64,18 @@ def test_resolve_freezes_and_validates():
 def test_auto_leaves_out_options_this_xla_does_not_know(monkeypatch):
     """'auto' never fails a run because XLA dropped an option jaxfric chose (as jax
     0.11's XLA dropped xla_cpu_use_fusion_emitters); a user's explicit dict still does."""
-    chosen = {"xla_cpu_prefer_vector_width": 512, "xla_cpu_no_such_option_jaxfric": True}
+    # jaxfric's own choice plus an option no XLA knows: what is left is what 'auto'
+    # passes unpatched, so the run below is the program 'auto' compiles anyway
+    chosen = {"xla_cpu_prefer_vector_width": 512, "xla_cpu_use_fusion_emitters": False,
+              "xla_cpu_no_such_option_jaxfric": True}
+    known = {k: v for k, v in chosen.items() if _xla_accepts(k, v)}
+    assert known["xla_cpu_prefer_vector_width"] == 512 and "xla_cpu_no_such_option_jaxfric" not in known
     monkeypatch.setitem(_xla.CPU_OPTIONS, "solver", chosen)
-    assert jf.compiler_options("solver", "cpu") == {"xla_cpu_prefer_vector_width": 512}
-    assert dict(_xla.resolve("auto", "solver", "cpu")) == {"xla_cpu_prefer_vector_width": 512}
-    lo, hi = F.get("sphere").bounds(3, np.float32)
-    sol = jf.minimise(F.objective("sphere"), jf.PSO(num_particles=8, num_generations=5),
-                      (lo, hi), key=jax.random.key(0))
+    assert jf.compiler_options("solver", "cpu") == known
+    assert dict(_xla.resolve("auto", "solver", "cpu")) == known
+    # the run test_options_change_speed_not_results[pso] compiles with 'auto': one program
+    lo, hi = ROSENBROCK_6
+    sol = jf.minimise(F.objective("rosenbrock"), PSO, (lo, hi), key=jax.random.key(3))
     assert np.isfinite(float(sol.f))
     with pytest.raises(ValueError, match="XLA rejected compiler_options"):
         _xla.resolve(chosen, "solver")
@@ -96,16 +108,15 @@ def test_bad_options_fail_before_the_run(bad, match):
 
 
 @pytest.mark.parametrize("solver", [
-    jf.PSO(num_particles=16, num_generations=40),
+    PSO,
     jf.MAPSO(lattice_size=4, num_generations=25),
-    jf.MAPSONMDS(mapso=jf.MAPSO(lattice_size=3, num_generations=10),
-                 nelder_mead=jf.NelderMead(max_steps=200)),
+    jf.mapso_nmds(lattice_size=3, num_generations=40, sl_generations=2, nm_max_steps=60),
 ], ids=["pso", "mapso", "mapso_nmds"])
 def test_options_change_speed_not_results(solver):
     """'auto', XLA's defaults and (for PSO, the cheapest to compile) a hand-written set
     reach the same run (the swarm's decisions are comparisons of sums: allow float32
     reassociation, nothing more)."""
-    lo, hi = F.get("rosenbrock").bounds(6, np.float32)
+    lo, hi = ROSENBROCK_6
     fn = F.objective("rosenbrock")
     options = ["auto", None]
     if isinstance(solver, jf.PSO):
@@ -119,14 +130,17 @@ def test_options_change_speed_not_results(solver):
 
 
 def test_minimise_many_takes_options():
-    lo, hi = F.get("sphere").bounds(4, np.float32)
+    """The options reach minimise_many's batched program (PSO, the cheapest swarm to
+    compile: what is checked is the plumbing, not the solver)."""
+    lo, hi = ROSENBROCK_6
     keys = jax.random.split(jax.random.key(1), 3)
-    s = jf.MAPSO(lattice_size=3, num_generations=15)
-    a = jf.minimise_many(F.objective("sphere"), s, (lo, hi), keys=keys)
-    b = jf.minimise_many(F.objective("sphere"), s, (lo, hi), keys=keys, compiler_options=None)
+    fn = F.objective("rosenbrock")
+    a = jf.minimise_many(fn, PSO, (lo, hi), keys=keys)
+    b = jf.minimise_many(fn, PSO, (lo, hi), keys=keys, compiler_options=None)
     np.testing.assert_allclose(a.f, b.f, rtol=1e-5, atol=1e-12)
+    assert not np.allclose(a.f[0], a.f[1:])  # three runs, not one copied
     with pytest.raises(ValueError, match="compiler_options"):
-        jf.minimise_many(F.objective("sphere"), s, (lo, hi), keys=keys, compiler_options=[1])
+        jf.minimise_many(fn, PSO, (lo, hi), keys=keys, compiler_options=[1])
 
 
 @pytest.mark.parametrize("x64", [False, True])
