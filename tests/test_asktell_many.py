@@ -3,7 +3,6 @@ carries every seed's batch, and the run is ``minimise_many(..., batching="vmap")
 One PSO and one PSO -> Nelder-Mead chain on one box, so each compiles once."""
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -19,14 +18,8 @@ CHAIN = jf.chain(jf.PSO(num_particles=4, num_generations=3), jf.NelderMead(max_s
 SOLVERS = pytest.mark.parametrize("solver", [PSO, CHAIN], ids=["pso", "pso_nm"])
 
 
-def separable(y, target):
-    """One addition of two squares: nothing to reassociate, so NumPy and XLA agree."""
-    d = y - target
-    return d[0] * d[0] + 10.0 * (d[1] * d[1])
-
-
 def separable_np(X):
-    """``separable`` on the last axis of ``X``: ``(..., 2) -> (...)``."""
+    """A separable quadratic on the last axis of ``X``: ``(..., 2) -> (...)``."""
     d = np.asarray(X, np.float32) - TARGET
     return d[..., 0] * d[..., 0] + np.float32(10.0) * (d[..., 1] * d[..., 1])
 
@@ -42,31 +35,38 @@ def _drive(solver, objective=separable_np):
     return solver.ask_result(st), asked
 
 
+_BATCHES = []  # the host batches of the latest _recipe run
+
+
+def _host(X):
+    X = np.asarray(X)
+    _BATCHES.append(X.copy())
+    return separable_np(X).astype(X.dtype)
+
+
+def _recipe_objective(y, args):
+    """``separable_np`` through a ``pure_callback``: one function object for the module,
+    so each solver's minimise_many program compiles once for both tests that run it."""
+    return jax.pure_callback(_host, jax.ShapeDtypeStruct(y.shape[:-1], y.dtype), y,
+                             vmap_method="broadcast_all")
+
+
 def _recipe(solver):
     """The documented recipe without ask/tell: a NumPy objective in a ``pure_callback``
     under ``minimise_many(..., batching="vmap")``; its solution and every host batch."""
-    batches = []
-
-    def host(X):
-        X = np.asarray(X)
-        batches.append(X.copy())
-        return separable_np(X).astype(X.dtype)
-
-    def fn(y, args):
-        return jax.pure_callback(host, jax.ShapeDtypeStruct(y.shape[:-1], y.dtype), y,
-                                 vmap_method="broadcast_all")
-
-    sol = jf.minimise_many(fn, solver, (LO, HI), keys=KEYS, batching="vmap")
-    return sol, batches
+    _BATCHES.clear()
+    sol = jf.minimise_many(_recipe_objective, solver, (LO, HI), keys=KEYS, batching="vmap")
+    return sol, list(_BATCHES)
 
 
 @SOLVERS
 def test_several_seeds_in_one_run_give_minimise_many(solver):
     """Each ask is ``(S, k, n)``, each seed's block; the batched solution is
     minimise_many's for the same keys (same tolerance as the single-seed tests, the
-    counts exactly)."""
-    ref = jf.minimise_many(separable, solver, (LO, HI), args=jnp.asarray(TARGET), keys=KEYS,
-                           batching="vmap")
+    counts exactly). minimise_many runs the recipe's objective (``separable`` in NumPy,
+    through a pure_callback): the program test_an_ask_is_a_host_call... compiles too,
+    so the module compiles one minimise_many program per solver."""
+    ref, _ = _recipe(solver)
     sol, asked = _drive(solver)
     assert all(X.ndim == 3 and X.shape[0] == S and X.shape[2] == 2 for X in asked)
     assert np.shape(sol.value) == (S, 2) and np.shape(sol.f) == (S,)
