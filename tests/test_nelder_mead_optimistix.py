@@ -107,12 +107,14 @@ def test_optimistix_minimise_problems_with_aux(name, mode):
         sol = optx.minimise(with_aux, SOLVER, y0, args, options=dict(autodiff_mode=mode),
                             has_aux=True, max_steps=10_000, throw=False)
         f_min = fn(sol.value, args)
-        assert jnp.allclose(f_min, minimum, atol=1e-4, rtol=1e-4), (name, f_min)
+        assert np.allclose(np.asarray(f_min), minimum, atol=1e-4, rtol=1e-4), (name, f_min)
         assert sol.result == optx.RESULTS.successful
         # The aux belongs to the returned (best) point, not to the last trial point.
         assert float(sol.aux[1]["f"]) == float(sol.state.f_simplex[0])
         np.testing.assert_allclose(float(sol.aux[1]["f"]), float(f_min), rtol=1e-9, atol=1e-15)
-        assert eqx.tree_equal(sol.aux[0], jnp.ones((2, 3)))
+        # eqx.tree_equal(sol.aux[0], jnp.ones((2, 3))) in NumPy (no eager program)
+        ones = np.asarray(sol.aux[0])
+        assert ones.shape == (2, 3) and ones.dtype == np.float64 and np.all(ones == 1.0)
         # Pytree y0: same structure, shapes and dtypes come back.
         assert jtu.tree_structure(sol.value) == jtu.tree_structure(y0)
         for a, b in zip(jtu.tree_leaves(sol.value), jtu.tree_leaves(y0)):
@@ -136,8 +138,8 @@ def test_optimistix_minimise_jvp_primal(name):
                                  adjoint=optx.ImplicitAdjoint(), throw=False).value
 
         out, t_out = eqx.filter_jit(eqx.filter_jvp)(run, (y0, dyn), (t_y0, t_dyn))
-        assert jnp.allclose(fn(out, args), minimum, atol=1e-4, rtol=1e-4)
-        assert all(bool(jnp.all(jnp.isfinite(t))) for t in jtu.tree_leaves(t_out))
+        assert np.allclose(np.asarray(fn(out, args)), minimum, atol=1e-4, rtol=1e-4)
+        assert all(np.all(np.isfinite(np.asarray(t))) for t in jtu.tree_leaves(t_out))
 
 
 def test_rosenbrock_pytree_least_squares():
@@ -150,8 +152,10 @@ def test_rosenbrock_pytree_least_squares():
     with optimistix_settings():
         y0 = (1.45 * jnp.ones((2, 4)), {"a": 1.45 * jnp.ones((2, 3, 2))}, ())
         sol = optx.least_squares(residuals, SOLVER, y0, jnp.array(1.0), max_steps=10_000, throw=False)
-        r = residuals(sol.value, jnp.array(1.0))
-        assert float(sum(jnp.sum(x**2) for x in r)) < 1e-4
+        # the residuals' sum of squares in NumPy (leaves in ravel_pytree's order)
+        y = np.concatenate([np.ravel(np.asarray(x)) for x in jtu.tree_leaves(sol.value)])
+        assert y.size == sum(np.size(x) for x in jtu.tree_leaves(y0))
+        assert np.sum((100 * (y[1:] - y[:-1])) ** 2) + np.sum((1.0 - y[:-1]) ** 2) < 1e-4
 
 
 # ------------------------------------------------------------------------ beyond those
