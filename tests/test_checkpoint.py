@@ -37,9 +37,6 @@ def identical(a, b):
     return True
 
 
-# The problem, the PSO and the hybrid are tests/test_compiler_options.py's: the
-# uninterrupted runs are programs that module compiles too ('auto' options), so one of
-# the two reads them from the session's compilation cache instead of compiling them.
 BOUNDS = F.get("rosenbrock").bounds(6, np.float32)
 OBJ = F.objective("rosenbrock")
 SOLVERS = {

@@ -18,8 +18,6 @@ from jaxfric import functions as F
 
 
 # One PSO problem for every test that runs a PSO, so its 'auto' program compiles once.
-# The problem, PSO and hybrid are also tests/test_checkpoint.py's (its uninterrupted runs
-# are these 'auto' programs, shared through the session's compilation cache).
 PSO = jf.PSO(num_particles=16, num_generations=40)
 ROSENBROCK_6 = F.get("rosenbrock").bounds(6, np.float32)
 
