@@ -50,7 +50,7 @@ def test_rollout_shapes_batching_and_dtype(name):
     model = make(name)
     lower, upper = model.bounds()
     rng = np.random.default_rng(0)
-    # the shapes of test_simulate_transformations_agree, which reuses these programs
+    # the shapes of test_simulate_transformations_agree, whose references reuse these programs
     thetas = rng.uniform(lower, upper, (4, model.num_params))
     v = 0.8 * np.sin(np.linspace(0, 9, 40)) * (1.0 if model.needs_scaling else 0.01)
     with jax.enable_x64(True):
