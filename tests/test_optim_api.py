@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import jaxfric as jf
-from conftest import CallCounter
 
 SMALL = {
     "pso": jf.PSO(num_particles=9, num_generations=15),
@@ -24,7 +23,9 @@ BOUNDS = (np.array([-2.0, -1.0, 0.5]), np.array([3.0, 1.0, 4.0]))
 def quad(y, args):
     """Squared distance to ``target``, NaN where ``|y[0]| < nan_halfwidth``: one family
     (its parameters in ``args``), so the smooth, the spiky and the all-NaN objectives
-    below are one compiled program per solver."""
+    below are one compiled program per solver, shared by the tests (and, having no host
+    callback, read back from the session's compilation cache on disk when JAX's
+    in-memory programs were dropped between tests)."""
     target, nan_halfwidth = args
     return jnp.where(jnp.abs(y[0]) < nan_halfwidth, jnp.nan, jnp.sum((y - target) ** 2))
 
@@ -34,32 +35,27 @@ TARGET = (jnp.array([0.3, -0.2, 1.0]), jnp.float32(0.0))  # smooth: NaN nowhere
 SPIKY = (jnp.zeros(3), jnp.float32(0.5))
 ALL_NAN = (jnp.zeros(3), jnp.float32(np.inf))
 
-# Every test minimises this one function object, which reports each evaluated point to
-# COUNTER: the tests share one compiled run per solver instead of compiling their own.
-COUNTER = CallCounter()
-OBJ = COUNTER.wrap(quad)
 
 
 @pytest.mark.parametrize("name", sorted(SMALL))
 def test_same_key_same_result_different_key_different_run(name):
     solver = SMALL[name]
-    a = jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
-    b = jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
-    c = jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=jax.random.key(4))
+    a = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
+    b = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
+    c = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(4))
     assert bool(eqx.tree_equal(a, b))
     assert not np.array_equal(np.asarray(a.value), np.asarray(c.value))
 
 
 @pytest.mark.parametrize("name", sorted(SMALL))
-def test_exact_evaluation_count_and_bounds(name):
+def test_exact_evaluation_count_and_bounds(name, counter):
     solver = SMALL[name]
-    COUNTER.points.clear()
-    sol = jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=jax.random.key(0))
+    sol = jf.minimise(counter.wrap(quad), solver, BOUNDS, args=TARGET, key=jax.random.key(0))
     jax.block_until_ready(sol)
-    assert int(sol.stats["num_evals"]) == COUNTER.count
+    assert int(sol.stats["num_evals"]) == counter.count
     if hasattr(solver, "evaluations"):
-        assert solver.evaluations() == COUNTER.count
-    pts = COUNTER.all_points()
+        assert solver.evaluations() == counter.count
+    pts = counter.all_points()
     assert np.all(pts >= BOUNDS[0] - 1e-6) and np.all(pts <= BOUNDS[1] + 1e-6)
     # the reported best is the objective at the reported value
     at_value = np.sum((np.asarray(sol.value, np.float64) - np.asarray(TARGET[0])) ** 2)
@@ -68,7 +64,7 @@ def test_exact_evaluation_count_and_bounds(name):
 
 @pytest.mark.parametrize("name", sorted(SMALL))
 def test_history_is_monotone_and_ends_at_best(name):
-    sol = jf.minimise(OBJ, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(1))
+    sol = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(1))
     n = int(sol.history.length)
     f = np.asarray(sol.history.f)[:n]
     ev = np.asarray(sol.history.evals)[:n]
@@ -81,11 +77,9 @@ def test_history_is_monotone_and_ends_at_best(name):
 
 @pytest.mark.parametrize("name", ["pso", "mapso", "nm"])
 def test_float32_and_float64(name):
-    sol = jf.minimise(OBJ, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(0), dtype=jnp.float32)
+    sol = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(0), dtype=jnp.float32)
     assert sol.value.dtype == jnp.float32 and sol.f.dtype == jnp.float32
     with jax.enable_x64(True):
-        # quad itself: a host callback's float64 result may come back on a thread where
-        # x64 is off (see jaxfric.optim.asktell), and this is a program of its own anyway
         sol64 = jf.minimise(quad, SMALL[name], BOUNDS, args=TARGET, key=jax.random.key(0))
         assert sol64.value.dtype == jnp.float64 and sol64.f.dtype == jnp.float64
         assert bool(jnp.isfinite(sol64.f))
@@ -94,12 +88,12 @@ def test_float32_and_float64(name):
 def test_minimise_many_matches_single_runs():
     keys = jax.random.split(jax.random.key(5), 3)
     solver = SMALL["mapso"]
-    many = jf.minimise_many(OBJ, solver, BOUNDS, args=TARGET, keys=keys)
+    many = jf.minimise_many(quad, solver, BOUNDS, args=TARGET, keys=keys)
     assert many.value.shape == (3, 3) and many.f.shape == (3,)
     for i in range(3):
-        one = jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=keys[i])
-        np.testing.assert_allclose(many.value[i], one.value, rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose(many.f[i], one.f, rtol=1e-4, atol=1e-7)
+        one = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=keys[i])
+        np.testing.assert_allclose(np.asarray(many.value)[i], one.value, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(many.f)[i], one.f, rtol=1e-4, atol=1e-7)
 
 
 def test_pytree_bounds_round_trip():
@@ -116,24 +110,24 @@ def test_pytree_bounds_round_trip():
 
 def test_nan_is_never_best():
     for solver in SMALL.values():
-        sol = jf.minimise(OBJ, solver, BOUNDS, args=SPIKY, key=jax.random.key(2))
+        sol = jf.minimise(quad, solver, BOUNDS, args=SPIKY, key=jax.random.key(2))
         assert bool(jnp.isfinite(sol.f))
         assert abs(float(sol.value[0])) >= 0.5
 
 
 def test_all_nan_objective_reports_nonfinite():
-    sol = jf.minimise(OBJ, SMALL["pso"], BOUNDS, args=ALL_NAN, key=jax.random.key(0))
+    sol = jf.minimise(quad, SMALL["pso"], BOUNDS, args=ALL_NAN, key=jax.random.key(0))
     assert sol.result == jf.RESULTS.nonfinite
     assert not bool(sol.success)
 
 
 def test_data_change_does_not_recompile(run_cache_size):
     solver = SMALL["pso"]
-    jf.minimise(OBJ, solver, BOUNDS, args=TARGET, key=jax.random.key(0))
+    jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(0))
     before = run_cache_size()
     assert before >= 1
-    jf.minimise(OBJ, solver, BOUNDS, args=(TARGET[0] + 1.0, TARGET[1]), key=jax.random.key(1))
-    jf.minimise(OBJ, solver, (BOUNDS[0] - 1, BOUNDS[1] + 1), args=TARGET, key=jax.random.key(1))
+    jf.minimise(quad, solver, BOUNDS, args=(TARGET[0] + 1.0, TARGET[1]), key=jax.random.key(1))
+    jf.minimise(quad, solver, (BOUNDS[0] - 1, BOUNDS[1] + 1), args=TARGET, key=jax.random.key(1))
     assert run_cache_size() == before
 
 
@@ -215,20 +209,20 @@ def test_minimise_many_batching_map_equals_single_runs():
     nm = SMALL["nm"]
     keys = jax.random.split(jax.random.key(5), 3)
     run = dict(args=TARGET, keys=keys)
-    mapped = jf.minimise_many(OBJ, nm, BOUNDS, **run, batching="map")
-    auto = jf.minimise_many(OBJ, nm, BOUNDS, **run)
-    vmapped = jf.minimise_many(OBJ, nm, BOUNDS, **run, batching="vmap")
+    mapped = jf.minimise_many(quad, nm, BOUNDS, **run, batching="map")
+    auto = jf.minimise_many(quad, nm, BOUNDS, **run)
+    vmapped = jf.minimise_many(quad, nm, BOUNDS, **run, batching="vmap")
     for i, k in enumerate(keys):
-        single = jf.minimise(OBJ, nm, BOUNDS, args=TARGET, key=k)
-        np.testing.assert_array_equal(np.asarray(mapped.value[i]), np.asarray(single.value))
-        assert int(mapped.stats["num_evals"][i]) == int(single.stats["num_evals"])
+        single = jf.minimise(quad, nm, BOUNDS, args=TARGET, key=k)
+        np.testing.assert_array_equal(np.asarray(mapped.value)[i], np.asarray(single.value))
+        assert int(np.asarray(mapped.stats["num_evals"])[i]) == int(single.stats["num_evals"])
     np.testing.assert_array_equal(np.asarray(auto.value), np.asarray(mapped.value))
     assert mapped.f.shape == vmapped.f.shape == (3,)
     np.testing.assert_allclose(vmapped.f, mapped.f, atol=1e-4)  # all reach the minimum 0
     # Swarms keep vmap under 'auto' and work mapped too.
     swarm = SMALL["mapso"]  # vmapped as in test_minimise_many_matches_single_runs
-    a = jf.minimise_many(OBJ, swarm, BOUNDS, **run)
-    b = jf.minimise_many(OBJ, swarm, BOUNDS, **run, batching="map")
+    a = jf.minimise_many(quad, swarm, BOUNDS, **run)
+    b = jf.minimise_many(quad, swarm, BOUNDS, **run, batching="map")
     np.testing.assert_allclose(a.f, b.f, rtol=1e-6)
     with pytest.raises(ValueError, match="batching must be one of"):
-        jf.minimise_many(OBJ, nm, BOUNDS, **run, batching="serial")
+        jf.minimise_many(quad, nm, BOUNDS, **run, batching="serial")
