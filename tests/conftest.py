@@ -22,7 +22,7 @@ import tempfile
 # later run reused programs of earlier ones) and shares what repeats across processes
 # (measured: few programs, about 15 s of compilation). Every program is cached, however
 # quick to compile: the many small eager operations (jnp on concrete arrays) are compiled
-# again in every module after `jax.clear_caches()` below, and reading them back is
+# again after a worker drops its programs (`jax.clear_caches()` below), and reading them back is
 # cheaper (measured on six model modules run serially: 5 % less wall time than caching only
 # programs of 0.1 s or more). A cached program is the executable XLA would build again, so
 # results do not change. A folder the user set (JAX_COMPILATION_CACHE_DIR) is used as it
@@ -167,15 +167,16 @@ SLOW_TESTS = {
 # subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol,
 # which starts no subprocess, instead of stalling that worker's subprocess tests.
 LONGEST_FIRST = [
-    "test_notebooks.py", "test_optim_protocol.py", "test_cli.py", "test_readme.py", "test_reproducibility.py",
-    "test_multihost.py", "test_sharding.py", "test_evosax_adapter.py", "test_records.py", "test_parallel_scan.py",
-    "test_motion_api.py", "test_sweep.py", "test_uncertainty.py",
-    "test_identify_stages.py", "test_uncertainty_motion.py", "test_uncertainty_report.py",
-    "test_optim_properties.py", "test_optim_api.py",
-    "test_compiler_options.py", "test_models_scan.py", "test_nelder_mead_optimistix.py",
-    "test_rig_simulator.py", "test_identify.py", "test_reliability.py", "test_motion.py",
-    "test_checkpoint.py", "test_identify_pipeline.py", "test_rng.py",
-    "test_functions.py", "test_bad_input_catalogue.py", "test_nelder_mead.py",
+    "test_notebooks.py", "test_cli.py", "test_optim_protocol.py", "test_reproducibility.py",
+    "test_parallel_scan.py", "test_motion_api.py", "test_evosax_adapter.py",
+    "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
+    "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
+    "test_identify.py", "test_sharding.py", "test_reliability.py", "test_motion.py",
+    "test_records.py", "test_rig_simulator.py", "test_identify_pipeline.py", "test_uncertainty.py",
+    "test_checkpoint.py", "test_models_scan.py", "test_sweep.py", "test_bad_input_catalogue.py",
+    "test_ensembles.py", "test_rng.py", "test_nelder_mead.py", "test_models_lugre.py",
+    "test_models_base.py", "test_models_realdrive.py", "test_asktell_many.py",
+    "test_uncertainty_report.py",
 ]
 
 
@@ -195,8 +196,8 @@ def pytest_collection_modifyitems(config, items):
 
 
 #: A test that leaves its worker above this resident size (MB) drops JAX's compiled
-#: programs at once, not only at the end of its module (issue 20.14; see below).
-RESIDENT_LIMIT_MB = 600
+#: programs (see :func:`_bounded_memory`); ``JAXFRIC_TEST_RESIDENT_MB`` sets another limit.
+RESIDENT_LIMIT_MB = int(os.environ.get("JAXFRIC_TEST_RESIDENT_MB", "1200"))
 
 
 @pytest.fixture(autouse=True)
@@ -212,26 +213,20 @@ def _x64_as_it_was():
         jax.config.update("jax_enable_x64", before)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _fresh_compilation_caches():
-    """Every test module ends by dropping JAX's compiled programs, so that what one module
-    compiled is not kept alive through the rest of the suite (issue 20.14: the suite's
-    peak memory grew with every module to 6.6 GB; the tests of one module still share
-    their programs)."""
-    yield
-    _drop_compiled_programs()
-
-
 @pytest.fixture(autouse=True)
 def _bounded_memory():
-    """A module that compiles many programs (test_optim_protocol: 235) grows its worker
-    by 0.9 GB before it ends; past :data:`RESIDENT_LIMIT_MB` the programs are dropped
-    after each test. Those the module's later tests need again come back from the
-    session's compilation cache on disk: measured on test_optim_protocol alone, dropping
-    after every test took its peak from 1.36 to 0.62 GB for 5 % more time. Whole suite
-    (two workers): the larger worker's peak 1.42 GB without this, 0.84 GB with a limit of
-    700 MB, 0.76 GB with 600; all processes together 2.60, 2.15 and 2.11 GB; the suite's
-    time 12 min 28 s, 12 min 08 s and 12 min 22 s (within this machine's noise)."""
+    """Compiled programs stay in memory from test to test and module to module, so a
+    program that several test files build (the same identify stage, solver or rollout on
+    the same shapes) compiles once per worker; a test that leaves its worker above
+    :data:`RESIDENT_LIMIT_MB` drops them all (``jax.clear_caches()``), and those needed
+    again come back from the session's compilation cache on disk (programs with a host
+    callback are never written there, and compile again).
+
+    Measured on the whole suite (two workers, 2 cores, 1 123 tests): dropping every
+    module's programs at its end and after any test above 600 MB took 628 s; a limit of
+    2000 MB with the drops at module ends 538 s (largest process 1.20 GB); this rule at
+    1200 MB 495 s (1.27 GB). Without any limit the suite's memory grows with
+    every module (6.6 GB once, over all processes)."""
     yield
     resident = _resident_mb()
     if resident is not None and resident > RESIDENT_LIMIT_MB:
