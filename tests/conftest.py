@@ -164,11 +164,12 @@ SLOW_TESTS = {
 # out first and the short ones fill in at the end, so the two workers finish together (the
 # longest-first rule). Files not listed follow in their usual order; a stale list only
 # costs balance, never a test. test_notebooks goes first: its kernels hold the exclusive
-# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol,
-# which starts no subprocess, instead of stalling that worker's subprocess tests.
+# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol and
+# test_parallel_scan, which start no subprocess, instead of stalling that worker's
+# subprocess tests (test_cli's waited 10-20 s for the lock when it came second).
 LONGEST_FIRST = [
-    "test_notebooks.py", "test_cli.py", "test_optim_protocol.py", "test_reproducibility.py",
-    "test_parallel_scan.py", "test_motion_api.py", "test_evosax_adapter.py",
+    "test_notebooks.py", "test_optim_protocol.py", "test_parallel_scan.py", "test_cli.py",
+    "test_reproducibility.py", "test_motion_api.py", "test_evosax_adapter.py",
     "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
     "test_identify.py", "test_sharding.py", "test_reliability.py", "test_motion.py",
