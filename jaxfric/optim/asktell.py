@@ -92,10 +92,9 @@ def _answer(token, X, wide):
     asked as ``(S, k, n)`` (``wide``: float64 sent as pairs of uint32, see
     :func:`_objective`)."""
     channel = _CHANNELS[int(np.asarray(token).flat[0])]
-    X = np.ascontiguousarray(X)
+    X = np.array(X)  # a copy of its own: asked and kept after the callback returns
     if wide:
         X = X.view(np.float64)[..., 0]
-    X = np.array(X)  # a copy of its own: asked and kept after the callback returns
     asked = (np.atleast_2d(X) if channel.seeds is None
              else X.reshape(channel.seeds, -1, X.shape[-1]))
     f = channel.evaluate(asked).reshape(X.shape[:-1]).astype(X.dtype)
