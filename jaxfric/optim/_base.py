@@ -70,19 +70,18 @@ class History(eqx.Module):
         idx = jnp.minimum(self.length, size - 1)
         # Counters arrive as int32 or int64 (count_dtype) and f in the solver's dtype:
         # cast to the buffer's, so strict dtype promotion (optimistix's tests) holds.
-        evals = jnp.where(take, self.evals.at[idx].set(jnp.asarray(num_evals).astype(self.evals.dtype)),
-                          self.evals)
-        f = jnp.where(take, self.f.at[idx].set(jnp.asarray(f_best).astype(self.f.dtype)), self.f)
+        # One element is written (its old value where the step is not kept): a select
+        # over the whole buffer cost a pass over 4096 entries at every step.
+        ev_k = jnp.where(take, jnp.asarray(num_evals).astype(self.evals.dtype), self.evals[idx])
+        f_k = jnp.where(take, jnp.asarray(f_best).astype(self.f.dtype), self.f[idx])
+        evals, f = self.evals.at[idx].set(ev_k), self.f.at[idx].set(f_k)
         length = self.length + take.astype(jnp.int32)
 
         def compress(ev, fv):
             # Keep every other entry, so the buffer is half full again.
-            half_idx = jnp.minimum(jnp.arange(size) * 2, size - 1)
-            half_ok = jnp.arange(size) * 2 < size
-            return (
-                jnp.where(half_ok, ev[half_idx], 0),
-                jnp.where(half_ok, fv[half_idx], jnp.inf).astype(fv.dtype),
-            )
+            half = (size + 1) // 2
+            return (jnp.concatenate([ev[::2], jnp.zeros((size - half,), ev.dtype)]),
+                    jnp.concatenate([fv[::2], jnp.full((size - half,), jnp.inf, fv.dtype)]))
 
         full = length >= size
         evals, f = jax.lax.cond(full, compress, lambda ev, fv: (ev, fv), evals, f)

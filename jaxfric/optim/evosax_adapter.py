@@ -135,6 +135,26 @@ def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
                    solution=jnp.zeros((num_dims,), dtype), **dict(kwargs))
 
 
+@functools.lru_cache(maxsize=64)
+def _check_strategy(cls, population_size: int, kwargs: tuple, names: tuple) -> None:
+    """Build the strategy on a 2-parameter problem, so a wrong keyword or parameter
+    name fails in ``check`` and not inside a traced run. Cached per configuration:
+    evosax computes its default parameters op by op, and ``minimise`` checks its
+    solver on every call."""
+    try:
+        es = _build(cls, population_size, 2, "float32", kwargs)
+    except (TypeError, AssertionError) as err:
+        raise ValueError(f"{cls.__name__} refused its settings: {err}") from None
+    _check_names(cls, es.default_params, names)
+
+
+def _check_names(cls, params, over) -> None:
+    unknown = sorted(set(over) - set(vars(params)))
+    if unknown:
+        raise ValueError(f"{cls.__name__} has no parameter(s) {unknown}; "
+                         f"its parameters: {sorted(vars(params))}")
+
+
 class EvosaxState(eqx.Module):
     """The strategy's own state, the best projected point and its value, the exact
     evaluation count, generations done, the run's key, and how often the strategy
@@ -225,13 +245,7 @@ class Evosax(AbstractGenerational):
         except TypeError:
             raise ValueError("params and strategy keyword values must be hashable "
                              "(numbers, strings, functions)") from None
-        # Build the strategy once on a 2-parameter problem, so a wrong keyword or
-        # parameter name fails here and not inside a traced run.
-        try:
-            es = _build(self.strategy, self.population(2), 2, "float32", self.strategy_kwargs)
-        except (TypeError, AssertionError) as err:
-            raise ValueError(f"{self.strategy.__name__} refused its settings: {err}") from None
-        self._es_params(es)
+        _check_strategy(self.strategy, self.population(2), self.strategy_kwargs, tuple(dict(self.params)))
 
     def _es(self, lower):
         n = lower.shape[0]
@@ -243,10 +257,7 @@ class Evosax(AbstractGenerational):
         over = dict(self.params)
         if self.std_init is not None and hasattr(params, "std_init") and "std_init" not in over:
             over["std_init"] = self.std_init
-        unknown = sorted(set(over) - set(vars(params)))
-        if unknown:
-            raise ValueError(f"{self.strategy.__name__} has no parameter(s) {unknown}; "
-                             f"its parameters: {sorted(vars(params))}")
+        _check_names(self.strategy, params, over)
         return params.replace(**{k: jnp.asarray(v) if k == "std_init" else v
                                  for k, v in over.items()})
 
