@@ -126,7 +126,7 @@ def track(rig: Rig, ref: Reference, friction_ff=None, *, gains: Gains = Gains(),
     rig = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64), rig)
     gains = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64), gains)
     out = _track(rig, gains, jnp.asarray(ref.x), jnp.asarray(ref.v), jnp.asarray(ref.a), jnp.asarray(ff),
-                 float(ref.fs), int(substeps), bool(ideal), float(velocity_cutoff))
+                 float(ref.fs), int(substeps), jnp.asarray(bool(ideal)), float(velocity_cutoff))
     res = {k: np.asarray(v, np.float64) for k, v in out.items()}
     res["t"] = np.arange(n) / ref.fs
     res["error"] = ref.x - res["x"]
@@ -135,6 +135,8 @@ def track(rig: Rig, ref: Reference, friction_ff=None, *, gains: Gains = Gains(),
 
 @eqx.filter_jit
 def _track(rig, gains, x_ref, v_ref, a_ref, ff, fs, substeps, ideal, cutoff):
+    # ``ideal`` is a traced boolean, not a static flag: every controller of a study
+    # (none, each fit's feed-forward, the true friction) runs one compiled program
     dt = 1.0 / fs
     h = jnp.asarray(dt / substeps)
     cyl = rig.cylinder
@@ -150,7 +152,7 @@ def _track(rig, gains, x_ref, v_ref, a_ref, ff, fs, substeps, ideal, cutoff):
         e = xr - x
         de = de + lp * ((e - e_prev) / dt - de)
         f_true = _fr.friction_force(rig.friction, fe, y[1])
-        f_comp = f_true if ideal else f_ff
+        f_comp = jnp.where(ideal, f_true, f_ff)
         f_load = load_force(rig, t, x, y[1])
         f_d = cyl.mass * (ar + cyl.gravity) + gains.kp * e + gains.kd * de + gains.ki * integ + f_load + f_comp
         u = jnp.clip(gains.ff * vr + gains.kf * (f_d - (p1 * a1 - p2 * a2)), -1.0, 1.0)
