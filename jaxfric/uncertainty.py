@@ -13,6 +13,13 @@ above this module (``jaxfric.identification.RecordSet``) registers how to read i
 training records with :func:`register_training_records`. Both are looked up along the
 class's MRO, and registered by the module that defines the class, so the registration
 has run whenever an instance exists; this module imports nothing above it.
+
+The linearisation (r, J, the physical values and their Jacobian) is one compiled XLA
+program (:func:`_linearise`), not some thirty small ones run op by op. Its residual
+function is a pytree (:class:`_ForceBalance`, an ``eqx.Module``): the records are its
+array leaves, traced inputs of the program, and only the model's configuration, the
+training lengths and the dtypes are static, so a second fit of the same model on
+records of the same lengths reuses the compiled program.
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -32,7 +40,7 @@ from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_
                          MAX_REPORT_CORRELATION, ParameterUncertainty, _check_level, _check_methods,
                          andrews_bandwidth, block_bootstrap_covariance, hac_covariance,
                          jacobian_covariance)
-from .fit import Fit, predict
+from .fit import Fit, _check_dt, _velocity_np
 from .plausibility import check_plausibility, warn_implausible
 from .records import FrictionData, as_channel
 
@@ -56,7 +64,13 @@ class Residuals:
     """A fit's training residuals r(y) (``fn``: ``(p,) -> (n,)``) in its search
     coordinates ``y`` (linearised at ``y``), the lengths of the independent ``segments``
     r is made of (no Newey–West lag crosses one), the ``unit`` of r, and per coordinate
-    its physical ``names``, ``kinds`` (``"log10"``, ``"linear"``, ...) and search box."""
+    its physical ``names``, ``kinds`` (``"log10"``, ``"linear"``, ...) and search box.
+
+    ``fn`` is best a pytree callable (an ``eqx.Module`` or ``jax.tree_util.Partial``)
+    holding the records as array leaves: its compiled linearisation is then shared by
+    every fit with equal static parts (model configuration, lengths) and array shapes.
+    A plain closure works too, compiled afresh on each call (its captured arrays are
+    constants of the program, and the closure is not kept alive by a cache)."""
 
     fn: Callable
     y: Any
@@ -123,27 +137,53 @@ def _training_windows(fit, data) -> tuple:
 
 def _friction_residuals(fit, data) -> Residuals:
     """Prediction minus measured friction over the training samples the fit was made on,
-    each record run from its own initial state."""
+    each record run from its own initial state (:class:`_ForceBalance`)."""
     if "motion" in fit.settings:
         raise ValueError("a motion fit read as a force-balance Fit (load_fit): read it with "
                          "jaxfric.motion.load_motion_fit for its uncertainty")
     model = fit.model
-    parts = []
+    records = []
     for r in _training_windows(fit, data):
         x = model.inputs_from(r, r.velocity.shape[0])
-        parts.append((np.asarray(r.velocity), np.asarray(r.friction)[: r.n_train], r.n_train,
-                      None if x is None else np.asarray(x)))
-    scalers = (fit.velocity_scaler, fit.friction_scaler)
-
-    def resid(theta):
-        out = [predict(model, theta, scalers, v, fit.dt, x)[:n] - jnp.asarray(f, theta.dtype)
-               for v, f, n, x in parts]
-        return jnp.concatenate(out)
-
+        records.append((_velocity_np(r.velocity), np.asarray(r.friction)[: r.n_train],
+                        None if x is None else np.asarray(x)))
+    resid = _ForceBalance(model=model, scalers=(fit.velocity_scaler, fit.friction_scaler),
+                          dt=np.asarray(_check_dt(fit.dt), np.float64), records=tuple(records),
+                          n_train=tuple(int(r[1].shape[0]) for r in records))
     lower, upper = (np.asarray(b, np.float64) for b in model.bounds(fit.box))
-    return Residuals(fn=resid, y=fit.theta, segments=tuple(p[2] for p in parts), unit="friction [N]",
+    return Residuals(fn=resid, y=fit.theta, segments=resid.n_train, unit="friction [N]",
                      names=tuple(c[1] for c in _coords(model)), kinds=tuple(c[2] for c in _coords(model)),
                      lower=lower, upper=upper)
+
+
+class _ForceBalance(eqx.Module):
+    """r(θ) of a force-balance fit: :func:`jaxfric.fit.predict` of each record minus its
+    measured friction over the first ``n_train`` samples, concatenated. The records
+    (velocity, friction, input channels), the scalers and ``dt`` are array leaves, so
+    traced inputs of the compiled linearisation; the model (its static configuration)
+    and the lengths are its static part."""
+
+    model: Any
+    scalers: tuple
+    dt: np.ndarray
+    records: tuple  # ((velocity, training friction, inputs or None), ...)
+    n_train: tuple[int, ...] = eqx.field(static=True)
+
+    def __call__(self, theta):
+        dtype = theta.dtype
+        dt = jnp.asarray(self.dt, dtype)
+        out = []
+        for (v, f, x), n in zip(self.records, self.n_train):
+            v = jnp.asarray(v, dtype)
+            if x is not None and self.model.input_names:
+                x = jnp.asarray(x, dtype)
+            if self.model.needs_scaling:  # as predict: scale, roll out, unscale
+                sv, sf = self.scalers
+                y = sf.unscale(self.model.simulate(theta, sv.scale(v), dt, x))
+            else:
+                y = self.model.simulate(theta, v, dt, x)
+            out.append(y[:n] - jnp.asarray(f, dtype))
+        return jnp.concatenate(out)
 
 
 def _friction_train_velocity(fit, data) -> np.ndarray:
@@ -195,9 +235,8 @@ register_fit_kind(Fit, FitKind(residuals=_friction_residuals, train_velocity=_fr
 
 
 # ----------------------------------------------------------------------- uncertainty
-def _physical(fit, y, kinds):
+def _physical(model, y, kinds):
     """Physical value of every coordinate of ``y`` (a motion fit's mechanics appended)."""
-    model = fit.model
     k = model.num_params
     vals = model._coord_values(y[:k])
     out = [vals[c[1]] for c in _coords(model)]
@@ -206,9 +245,31 @@ def _physical(fit, y, kinds):
     return jnp.stack(out)
 
 
-def _jacobian(resid, theta):
-    """∂r/∂θ by forward mode: p ≤ a dozen columns, one JVP each."""
-    return jax.jacfwd(resid)(theta)
+def _linearisation(resid, model, kinds, theta):
+    """``(r, J, b, D)``: the residuals r(θ), J = ∂r/∂θ, the physical values b(θ) and
+    D = ∂b/∂θ, by forward mode (p ≤ a dozen columns, one JVP each; the primal of the
+    JVPs gives r and b)."""
+    def both(f):  # (value, value): jacfwd's aux gives the primal of the same trace
+        return lambda t: (lambda y: (y, y))(f(t))
+
+    jac, r = jax.jacfwd(both(resid), has_aux=True)(theta)
+    d, b = jax.jacfwd(both(lambda y: _physical(model, y, kinds)), has_aux=True)(theta)
+    return r, jac, b, d
+
+
+#: The compiled linearisation of a pytree residual function: its arrays (records, dt,
+#: θ) are traced, its other leaves, the model and ``kinds`` are static and hashed, so
+#: one program serves every fit with the same configuration and record shapes.
+_linearise = eqx.filter_jit(_linearisation)
+
+
+def _linearise_once(resid, model, kinds, theta):
+    """:func:`_linearise` for a pytree ``resid``; a plain closure (hashed by identity, so
+    never reused) is compiled by a ``jax.jit`` that dies with this call, so that no
+    cache keeps the closure and the arrays it captured alive."""
+    if isinstance(resid, (eqx.Module, jax.tree_util.Partial)):
+        return _linearise(resid, model, kinds, theta)
+    return jax.jit(lambda t: _linearisation(resid, model, kinds, t))(theta)
 
 
 def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = DEFAULT_LEVEL,
@@ -227,7 +288,10 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
         bandwidth: Newey–West lag L; default :func:`andrews_bandwidth`.
         rcond: relative singular-value floor (module docstring).
 
-    Computed in ``fit.theta``'s dtype (enable x64 for long records). Raises
+    Computed in ``fit.theta``'s dtype (enable x64 for long records). The residuals,
+    their Jacobian and the physical values' Jacobian are one compiled program
+    (:func:`_linearise`), reused by later calls on fits of the same model configuration
+    and record lengths (the first call pays its compilation, about a second). Raises
     ``ValueError`` for a network fit (its weights have no physical meaning), an unknown
     method, or a bootstrap without a key.
     """
@@ -242,8 +306,7 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
     res = kind.residuals(fit, data)
     resid, segs, kinds = res.fn, res.segments, res.kinds
     theta = jnp.asarray(res.y, jnp.asarray(fit.theta).dtype)
-    r = np.asarray(resid(theta), np.float64)
-    jac = np.asarray(_jacobian(resid, theta), np.float64)
+    r, jac, estimate, d = (np.asarray(a, np.float64) for a in _linearise_once(resid, fit.model, kinds, theta))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):
         raise ValueError("the fit's residuals or their Jacobian are not finite: no uncertainty "
                          "(a diverged fit, or float32 overflow: enable x64)")
@@ -259,10 +322,9 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
             covs[m] = hac_covariance(jac, r, L, rcond, segs)
         else:
             covs[m] = block_bootstrap_covariance(jac, r, key, int(round(L)) + 1, replicates, rcond)
-    d = np.asarray(jax.jacfwd(lambda y: _physical(fit, y, kinds))(theta), np.float64)
     lag1 = float(np.dot(r[1:], r[:-1]) / max(np.dot(r, r), 1e-300))
     return ParameterUncertainty(
-        names=res.names, kinds=kinds, estimate=np.asarray(_physical(fit, theta, kinds), np.float64),
+        names=res.names, kinds=kinds, estimate=estimate,
         theta=np.asarray(theta, np.float64), lower=res.lower, upper=res.upper,
         cov_theta={m: np.asarray(c, np.float64) for m, c in covs.items()},
         cov={m: np.asarray(d @ c @ d.T, np.float64) for m, c in covs.items()},

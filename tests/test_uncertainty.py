@@ -397,3 +397,34 @@ def test_several_training_records_pool_their_residuals():
     x = np.stack([np.tanh(v / model.v_eps), v], axis=1)
     r = f - x @ np.linalg.lstsq(x, f, rcond=None)[0]
     np.testing.assert_allclose(u.cov["jacobian"], r @ r / 1998 * np.linalg.inv(x.T @ x), rtol=1e-6)
+
+
+def test_a_same_shaped_fit_reuses_the_compiled_linearisation():
+    """The residuals, Jacobian and physical values are one compiled program whose records
+    are traced inputs: a second fit of the same model on another record of the same
+    length compiles nothing; a new record length compiles that one program, not one
+    per operation."""
+    rng = np.random.default_rng(3)
+    compiles = []
+
+    def listen(event, *args, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(event)
+
+    def one(model, n, shift):
+        v = np.sin(np.linspace(0.0, 12.0, n)) * 0.05
+        theta = model.from_physical(Fc=20.0 + shift, sigma2=300.0)
+        f = 20.0 * np.tanh(v / model.v_eps) + 300.0 * v + rng.standard_normal(n)
+        before = len(compiles)
+        u = parameter_uncertainty(_fit(model, theta, v, 1e-3), (v, f, 1e-3))
+        return u, len(compiles) - before
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        first, _ = one(models.Coulomb(), 703, 0.0)
+        second, n_second = one(models.Coulomb(), 703, 1.0)
+        _, n_new = one(models.Coulomb(v_eps=2e-3), 701, 0.0)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert n_second == 0 and 1 <= n_new <= 2
+    assert first.estimate[0] != second.estimate[0]  # the new record and theta were used

@@ -1,10 +1,17 @@
 """The training residuals of an :func:`jaxfric.identify_motion` fit, for its parameter
 uncertainty (:mod:`jaxfric.uncertainty`, docs/uncertainty.md): the fit's own cost's
 residuals as a function of its search coordinates (the model's, then the mechanics it
-identified), so that their Jacobian is that of what the search minimised."""
+identified), so that their Jacobian is that of what the search minimised.
+
+The residual function is an ``eqx.Module`` (:class:`MotionResiduals`) whose arrays are
+the record and the constants, so the uncertainty code's one compiled linearisation is
+reused by every motion fit of the same model, cost and record length."""
 
 from __future__ import annotations
 
+from typing import Any
+
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -34,47 +41,15 @@ def motion_residuals(fit, data) -> Residuals:
     error, horizon = mech.get("error", "position"), mech.get("horizon")
     if records is not None and (sum(records) != n or error != "position" or horizon is not None):
         raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
-    force = np.asarray(data.net_force[:n])
     x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
-    step = friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler))
-    sx, sv = float(np.std(x)), float(max(np.std(v), 1e-300))
-    m_fixed = float(mech["mass"])
-
-    def split(y):
-        theta = y[: fit.model.num_params]
-        i = fit.model.num_params
-        mass, off, dv0 = jnp.asarray(m_fixed, y.dtype), jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
-        for name in extra:
-            if name == "log10_mass":
-                mass = 10.0 ** y[i]
-            elif name == "offset":
-                off = y[i]
-            elif name == "v0":
-                dv0 = y[i]
-            i += 1
-        return theta, mass, off, dv0
-
-    def resid(y):
-        theta, mass, off, dv0 = split(y)
-        dt = jnp.asarray(fit.dt, y.dtype)
-        u = jnp.asarray(force, y.dtype) - off
-        xs, vs = jnp.asarray(x, y.dtype), jnp.asarray(v, y.dtype)
-        if horizon is not None:
-            states = track_states(step, theta, vs, dt)
-            xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, int(horizon))
-            return xh - xs[int(horizon):]
-        if records is not None:  # whole training records, each run from its own start
-            cuts = np.cumsum((0,) + tuple(records))
-            return jnp.concatenate([
-                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
-                for a, b in zip(cuts[:-1], cuts[1:])])
-        out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
-        if error == "position":
-            return out["x"] - xs
-        if error == "velocity":
-            return out["v"] - vs
-        return jnp.concatenate([(out["x"] - xs) / sx, (out["v"] - vs) / sv])
-
+    resid = MotionResiduals(
+        step=friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler)),
+        num_params=fit.model.num_params, extra=tuple(extra), error=error,
+        horizon=None if horizon is None else int(horizon),
+        records=None if records is None else tuple(int(r) for r in records),
+        mass=np.asarray(float(mech["mass"]), np.float64), dt=np.asarray(float(fit.dt), np.float64),
+        force=np.asarray(data.net_force[:n]), x=x, v=v,
+        scale=np.asarray([np.std(x), max(np.std(v), 1e-300)], np.float64))
     unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
     if horizon is not None:
         unit = f"{int(horizon)}-step position [m]"
@@ -95,6 +70,63 @@ def motion_residuals(fit, data) -> Residuals:
                      names=tuple(c[1] for c in coords) + tuple(MECHANICS[e][0] for e in extra),
                      kinds=tuple(c[2] for c in coords) + tuple(MECHANICS[e][1] for e in extra),
                      lower=lower, upper=upper)
+
+
+class MotionResiduals(eqx.Module):
+    """r(y) of a motion fit (:func:`motion_residuals`) for search coordinates ``y`` (the
+    model's, then the mechanics in ``extra``). The record (net force, position,
+    velocity), the fixed mass and ``dt`` are array leaves, traced inputs of the compiled
+    linearisation; the friction step's model, the cost (``error``, ``horizon``,
+    ``records``) and the coordinates are its static part."""
+
+    step: Any
+    mass: np.ndarray  # used unless "log10_mass" is searched
+    dt: np.ndarray
+    force: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    scale: np.ndarray  # std of x and of v: error="both" divides by them, as the fit's cost
+    num_params: int = eqx.field(static=True)
+    extra: tuple[str, ...] = eqx.field(static=True)
+    error: str = eqx.field(static=True)
+    horizon: int | None = eqx.field(static=True)
+    records: tuple[int, ...] | None = eqx.field(static=True)
+
+    def _split(self, y):
+        theta = y[: self.num_params]
+        i = self.num_params
+        mass, off, dv0 = jnp.asarray(self.mass, y.dtype), jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
+        for name in self.extra:
+            if name == "log10_mass":
+                mass = 10.0 ** y[i]
+            elif name == "offset":
+                off = y[i]
+            elif name == "v0":
+                dv0 = y[i]
+            i += 1
+        return theta, mass, off, dv0
+
+    def __call__(self, y):
+        theta, mass, off, dv0 = self._split(y)
+        step, dt = self.step, jnp.asarray(self.dt, y.dtype)
+        u = jnp.asarray(self.force, y.dtype) - off
+        xs, vs = jnp.asarray(self.x, y.dtype), jnp.asarray(self.v, y.dtype)
+        if self.horizon is not None:
+            states = track_states(step, theta, vs, dt)
+            xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, self.horizon)
+            return xh - xs[self.horizon:]
+        if self.records is not None:  # whole training records, each run from its own start
+            cuts = np.cumsum((0,) + self.records)
+            return jnp.concatenate([
+                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
+                for a, b in zip(cuts[:-1], cuts[1:])])
+        out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
+        if self.error == "position":
+            return out["x"] - xs
+        if self.error == "velocity":
+            return out["v"] - vs
+        sx, sv = jnp.asarray(self.scale[0], y.dtype), jnp.asarray(self.scale[1], y.dtype)
+        return jnp.concatenate([(out["x"] - xs) / sx, (out["v"] - vs) / sv])
 
 
 def motion_train_velocity(fit, data) -> np.ndarray:
