@@ -217,9 +217,10 @@ def _initial_state(rig: Rig, x_start, dtype):
     return y, fe
 
 
-def _add_noise(key, clean, level, step, relative):
+def _add_noise(normal, clean, level, step, relative):
+    """``clean`` plus ``level`` times the standard normal draws ``normal``, quantised to ``step``."""
     std = level * jnp.std(clean) if relative else level
-    noisy = clean + std * jax.random.normal(key, clean.shape, clean.dtype)
+    noisy = clean + std * normal
     safe = jnp.where(step > 0, step, 1.0)
     return jnp.where(step > 0, jnp.round(noisy / safe) * safe, noisy)
 
@@ -292,7 +293,8 @@ def simulate(
         the controller is bypassed.
     sensors: noise and quantisation (:class:`Sensors`).
     settle_time: seconds of holding still before ``t = 0`` so that pressures,
-        controller and friction elements start from a consistent rest state.
+        controller and friction elements start from a consistent rest state
+        (run through the same scan as the samples, so the sub-step is compiled once).
 
     The arithmetic follows the dtype of ``rig``'s leaves (Python floats give
     float32, or float64 when x64 is enabled). Jit-compatible; ``n_samples``,
@@ -336,20 +338,29 @@ def _simulate(rig, key, velocity_reference, command, sensors, n_samples, fs, sub
             raise ValueError(f"command must have shape ({n_samples},), got {cs.shape}")
         u_in = jnp.interp(ts, t_samples, cs)
         x_start, u_start = x0, cs[0]
-    shape = (n_samples, substeps)
-    inputs = (ts.reshape(shape), x_ref.reshape(shape), v_ref.reshape(shape), u_in.reshape(shape))
-    inputs = (t_samples, inputs)
+    # settle: hold the start position (or the first command) with time frozen at 0.
+    # It runs through the same nested scan as the samples, as leading "samples" whose
+    # observations are dropped, so that the program holds one compiled copy of the
+    # sub-step (jacfwd + 6x6 solve) instead of two. When n_settle is not a multiple of
+    # substeps, the first sub-steps of the first settle sample are masked out (they
+    # leave the state unchanged), so exactly n_settle sub-steps run.
+    n_settle = int(round(settle_time * fs * substeps))
+    n_hold = -(-n_settle // substeps)
+    n_pad = n_hold * substeps - n_settle
+    zero = jnp.zeros((), dtype)
+    hold = tuple(jnp.full((n_hold * substeps,), val, dtype) for val in (zero, x_start, zero, u_start))
+    sub_inputs = tuple(jnp.concatenate([a, b]).reshape(n_hold + n_samples, substeps)
+                       for a, b in zip(hold, (ts, x_ref, v_ref, u_in)))
+    active = (jnp.arange((n_hold + n_samples) * substeps) >= n_pad).reshape(n_hold + n_samples, substeps)
+    inputs = (jnp.concatenate([jnp.zeros((n_hold,), dtype), t_samples]), (active, sub_inputs))
 
-    step = lambda c, i: _substep(rig, h, closed_loop, c, i)  # noqa: E731
+    def step(carry, inp):
+        on, sub_inp = inp
+        new, _ = _substep(rig, h, closed_loop, carry, sub_inp)
+        return jax.tree.map(lambda a, b: jnp.where(on, a, b), new, carry), None
+
     y, fe = _initial_state(rig, x_start, dtype)
     y = y.at[4].set(u_start)
-
-    # settle: hold the start position (or the first command) with time frozen at 0
-    n_settle = int(round(settle_time * fs * substeps))
-    if n_settle > 0:
-        hold = tuple(jnp.full((n_settle,), val, dtype) for val in
-                     (jnp.zeros((), dtype), x_start, jnp.zeros((), dtype), u_start))
-        (y, fe), _ = jax.lax.scan(step, (y, fe), hold)
 
     def sample(carry, inp):
         t_k, sub_inputs = inp
@@ -358,13 +369,16 @@ def _simulate(rig, key, velocity_reference, command, sensors, n_samples, fs, sub
         return carry, obs
 
     _, obs = jax.lax.scan(sample, (y, fe), inputs)
+    obs = {k: v[n_hold:] for k, v in obs.items()}
 
-    k_x, k_p1, k_p2, k_l = jax.random.split(key, 4)
-    rel = sensors.relative
-    x_m = _add_noise(k_x, obs["x"], sensors.noise_position, sensors.quant_position, rel)
-    p1_m = _add_noise(k_p1, obs["p1"], sensors.noise_pressure, sensors.quant_pressure, rel)
-    p2_m = _add_noise(k_p2, obs["p2"], sensors.noise_pressure, sensors.quant_pressure, rel)
-    l_m = _add_noise(k_l, obs["load"], sensors.noise_force, sensors.quant_force, rel)
+    # one key per channel, as four separate calls would draw; the normals are drawn under
+    # one vmap so that the program holds one copy of the sampler instead of four
+    channels = (obs["x"], obs["p1"], obs["p2"], obs["load"])
+    levels = (sensors.noise_position, sensors.noise_pressure, sensors.noise_pressure, sensors.noise_force)
+    quants = (sensors.quant_position, sensors.quant_pressure, sensors.quant_pressure, sensors.quant_force)
+    normals = jax.vmap(lambda k: jax.random.normal(k, (n_samples,), dtype))(jax.random.split(key, 4))
+    x_m, p1_m, p2_m, l_m = (_add_noise(z, c, lv, q, sensors.relative)
+                            for z, c, lv, q in zip(normals, channels, levels, quants))
     return RigRecord(
         t=t_samples, x=x_m, p1=p1_m, p2=p2_m, load=l_m,
         velocity=obs["v"], acceleration=obs["a"], friction=obs["friction"],
