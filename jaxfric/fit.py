@@ -158,9 +158,15 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     ``theta``'s dtype. ``inputs``: the ``(C, T)`` measured channels of a model with
     ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others."""
     theta = jnp.asarray(theta)
+    return rollout(model, theta, scalers, _check_velocity(velocity, theta.dtype), _check_dt(dt), inputs)
+
+
+def rollout(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
+    """:func:`predict` without its checks of the velocity and ``dt``, so that both may be
+    traced (the parameter uncertainty's compiled linearisation calls it)."""
     dtype = theta.dtype
-    v = _check_velocity(velocity, dtype)
-    dt = jnp.asarray(_check_dt(dt), dtype)
+    v = jnp.asarray(velocity, dtype)
+    dt = jnp.asarray(dt, dtype)
     if inputs is not None and model.input_names:
         inputs = jnp.asarray(inputs, dtype)
     if model.needs_scaling:

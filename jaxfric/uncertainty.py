@@ -40,7 +40,7 @@ from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_
                          MAX_REPORT_CORRELATION, ParameterUncertainty, _check_level, _check_methods,
                          andrews_bandwidth, block_bootstrap_covariance, hac_covariance,
                          jacobian_covariance)
-from .fit import Fit, _check_dt, _velocity_np
+from .fit import Fit, _check_dt, _velocity_np, rollout
 from .plausibility import check_plausibility, warn_implausible
 from .records import FrictionData, as_channel
 
@@ -170,19 +170,8 @@ class _ForceBalance(eqx.Module):
     n_train: tuple[int, ...] = eqx.field(static=True)
 
     def __call__(self, theta):
-        dtype = theta.dtype
-        dt = jnp.asarray(self.dt, dtype)
-        out = []
-        for (v, f, x), n in zip(self.records, self.n_train):
-            v = jnp.asarray(v, dtype)
-            if x is not None and self.model.input_names:
-                x = jnp.asarray(x, dtype)
-            if self.model.needs_scaling:  # as predict: scale, roll out, unscale
-                sv, sf = self.scalers
-                y = sf.unscale(self.model.simulate(theta, sv.scale(v), dt, x))
-            else:
-                y = self.model.simulate(theta, v, dt, x)
-            out.append(y[:n] - jnp.asarray(f, dtype))
+        out = [rollout(self.model, theta, self.scalers, v, self.dt, x)[:n] - jnp.asarray(f, theta.dtype)
+               for (v, f, x), n in zip(self.records, self.n_train)]
         return jnp.concatenate(out)
 
 
