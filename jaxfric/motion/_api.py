@@ -36,6 +36,7 @@ from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, spl
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import FitKind, assess_fit, register_fit_kind
 from ._forward import k_step_positions, simulate_motion, track_states
+from ._layout import Layout
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search
 from ._residuals import motion_residuals, motion_train_velocity
@@ -146,31 +147,6 @@ def _split(n: int, train) -> int:
         raise ValueError(f"train must be a fraction, a sample count in [2, {n - 2}] (two samples held "
                          f"back at least) or {n} / 1.0 (the whole record), got {train!r}")
     return count
-
-
-class Layout(eqx.Module):
-    """Where the mechanics' unknowns sit after the friction parameters in the search vector."""
-
-    n_friction: int = eqx.field(static=True)
-    fit_mass: bool = eqx.field(static=True)
-    fit_offset: bool = eqx.field(static=True)
-    fit_v0: bool = eqx.field(static=True)
-
-    def unpack(self, y, args):
-        i = self.n_friction
-        theta = y[:i]
-        mass, offset, dv0 = args["mass"], jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
-        if self.fit_mass:
-            mass, i = 10.0 ** y[i], i + 1
-        if self.fit_offset:
-            offset, i = y[i], i + 1
-        if self.fit_v0:
-            dv0 = y[i]
-        return theta, mass, offset, dv0
-
-    def names(self):
-        return (("log10_mass",) if self.fit_mass else ()) + (("offset",) if self.fit_offset else ()) \
-            + (("v0",) if self.fit_v0 else ())
 
 
 class MotionCost(eqx.Module):

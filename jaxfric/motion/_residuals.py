@@ -17,6 +17,7 @@ import numpy as np
 
 from ..uncertainty import Residuals
 from ._forward import k_step_positions, simulate_motion, track_states
+from ._layout import Layout
 from ._step import friction_step
 
 #: A motion fit's mechanics coordinates: search name -> (physical name, kind).
@@ -32,8 +33,8 @@ def motion_residuals(fit, data) -> Residuals:
     n = fit.n_train
     names = list(mech.get("search_names") or [])
     extra = names[fit.model.num_params:]
-    unknown = [e for e in extra if e not in MECHANICS]
-    if unknown or "y" not in mech or len(mech["y"]) != len(names):
+    layout = Layout(fit.model.num_params, "log10_mass" in extra, "offset" in extra, "v0" in extra)
+    if layout.names() != tuple(extra) or "y" not in mech or len(mech["y"]) != len(names):
         raise ValueError(f"motion fit with search coordinates {names} not understood by the "
                          f"uncertainty code (mechanics it knows: {sorted(MECHANICS)})")
     # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
@@ -44,7 +45,7 @@ def motion_residuals(fit, data) -> Residuals:
     x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
     resid = MotionResiduals(
         step=friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler)),
-        num_params=fit.model.num_params, extra=tuple(extra), error=error,
+        layout=layout, error=error,
         horizon=None if horizon is None else int(horizon),
         records=None if records is None else tuple(int(r) for r in records),
         mass=np.asarray(float(mech["mass"]), np.float64), dt=np.asarray(float(fit.dt), np.float64),
@@ -74,10 +75,10 @@ def motion_residuals(fit, data) -> Residuals:
 
 class MotionResiduals(eqx.Module):
     """r(y) of a motion fit (:func:`motion_residuals`) for search coordinates ``y`` (the
-    model's, then the mechanics in ``extra``). The record (net force, position,
-    velocity), the fixed mass and ``dt`` are array leaves, traced inputs of the compiled
-    linearisation; the friction step's model, the cost (``error``, ``horizon``,
-    ``records``) and the coordinates are its static part."""
+    model's, then the mechanics where ``layout`` puts them, as in the fit's own cost).
+    The record (net force, position, velocity), the fixed mass and ``dt`` are array
+    leaves, traced inputs of the compiled linearisation; the friction step's model, the
+    cost (``error``, ``horizon``, ``records``) and the layout are its static part."""
 
     step: Any
     mass: np.ndarray  # used unless "log10_mass" is searched
@@ -86,28 +87,13 @@ class MotionResiduals(eqx.Module):
     x: np.ndarray
     v: np.ndarray
     scale: np.ndarray  # std of x and of v: error="both" divides by them, as the fit's cost
-    num_params: int = eqx.field(static=True)
-    extra: tuple[str, ...] = eqx.field(static=True)
+    layout: Layout
     error: str = eqx.field(static=True)
     horizon: int | None = eqx.field(static=True)
     records: tuple[int, ...] | None = eqx.field(static=True)
 
-    def _split(self, y):
-        theta = y[: self.num_params]
-        i = self.num_params
-        mass, off, dv0 = jnp.asarray(self.mass, y.dtype), jnp.zeros((), y.dtype), jnp.zeros((), y.dtype)
-        for name in self.extra:
-            if name == "log10_mass":
-                mass = 10.0 ** y[i]
-            elif name == "offset":
-                off = y[i]
-            elif name == "v0":
-                dv0 = y[i]
-            i += 1
-        return theta, mass, off, dv0
-
     def __call__(self, y):
-        theta, mass, off, dv0 = self._split(y)
+        theta, mass, off, dv0 = self.layout.unpack(y, {"mass": jnp.asarray(self.mass, y.dtype)})
         step, dt = self.step, jnp.asarray(self.dt, y.dtype)
         u = jnp.asarray(self.force, y.dtype) - off
         xs, vs = jnp.asarray(self.x, y.dtype), jnp.asarray(self.v, y.dtype)
