@@ -239,7 +239,10 @@ def _linearisation(resid, model, kinds, theta):
     D = ∂b/∂θ, by forward mode (p ≤ a dozen columns, one JVP each; the primal of the
     JVPs gives r and b)."""
     def both(f):  # (value, value): jacfwd's aux gives the primal of the same trace
-        return lambda t: (lambda y: (y, y))(f(t))
+        def value_twice(t):
+            y = f(t)
+            return y, y
+        return value_twice
 
     jac, r = jax.jacfwd(both(resid), has_aux=True)(theta)
     d, b = jax.jacfwd(both(lambda y: _physical(model, y, kinds)), has_aux=True)(theta)
