@@ -138,14 +138,15 @@ def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
 @functools.lru_cache(maxsize=64)
 def _check_strategy(cls, population_size: int, kwargs: tuple, names: tuple) -> None:
     """Build the strategy on a 2-parameter problem, so a wrong keyword or parameter
-    name fails in ``check`` and not inside a traced run. Cached per configuration:
-    evosax computes its default parameters op by op, and ``minimise`` checks its
-    solver on every call."""
+    name fails in ``check`` and not inside a traced run. Only the parameters' names are
+    needed, so their values are traced abstractly: evosax computes them op by op, which
+    for CMA-ES took 1.0 s eagerly (each new small operation compiled) and 16 ms as shapes.
+    Cached per configuration, since ``minimise`` checks its solver on every call."""
     try:
         es = _build(cls, population_size, 2, "float32", kwargs)
     except (TypeError, AssertionError) as err:
         raise ValueError(f"{cls.__name__} refused its settings: {err}") from None
-    _check_names(cls, es.default_params, names)
+    _check_names(cls, jax.eval_shape(lambda: es.default_params), names)
 
 
 def _check_names(cls, params, over) -> None:
