@@ -194,9 +194,9 @@ def pytest_configure(config):
 #: objects, and every 100th young collection walked the whole heap, which grows with the
 #: worker's cached programs: measured over the whole suite (two workers, ``gc.callbacks``
 #: timing), 15.7 s and 18.2 s of collection per worker, 44 and 57 full collections of about
-#: 0.3 s each; on two heavy modules run serially these thresholds took the collector from
-#: 3.3 s to 0.5 s, at the same peak memory (1.34 GB). Reference counting frees everything
-#: without cycles at once, so only cyclic garbage waits longer.
+#: 0.3 s each; with these thresholds 3.2 s and 2.8 s, and the suite's memory peaked where it
+#: did (2.74 GB summed over its processes, 1.20 GB the largest). Reference counting frees
+#: everything without cycles at once, so only cyclic garbage waits longer.
 GC_THRESHOLDS = (50_000, 10, 10)
 
 
