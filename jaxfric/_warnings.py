@@ -8,7 +8,7 @@ rebuilding a warning a worker recorded) does not import JAX with it.
 
 
 class ResamplingWarning(UserWarning):
-    """:meth:`jaxfric.Fit.predict` resampled a record whose sample time differs from the fit's."""
+    """[`jaxfric.Fit.predict`][jaxfric.fit.Fit.predict] resampled a record whose sample time differs from the fit's."""
 
 
 class ExtrapolationWarning(UserWarning):
@@ -22,7 +22,7 @@ class BoundWarning(UserWarning):
 
 
 class FrictionSignWarning(UserWarning):
-    """The friction given to :func:`jaxfric.identify` mostly pushes along the motion instead
+    """The friction given to [`jaxfric.identify`][jaxfric.identification.identify] mostly pushes along the motion instead
     of against it: most likely a sign convention was crossed (friction > 0 while x increases)."""
 
 

@@ -1,8 +1,8 @@
 """Per-computation XLA compiler options for jaxfric's own jitted entry points.
 
 jaxfric never touches JAX's global configuration or ``XLA_FLAGS``. What it does
-instead is compile its *own* jitted calls (:func:`jaxfric.minimise`,
-:func:`jaxfric.minimise_many`, :func:`jaxfric.identify`'s stages, the models' eager
+instead is compile its *own* jitted calls ([`jaxfric.minimise`][jaxfric.optim.minimise],
+[`jaxfric.minimise_many`][jaxfric.optim.minimise_many], [`jaxfric.identify`][jaxfric.identification.identify]'s stages, the models' eager
 ``simulate_batch``) with ``jax.jit(..., compiler_options=...)``: options that hold
 for that one executable and nothing else. On CPU two options are used, chosen by
 measurement on the development machine (2-core AMD EPYC with AVX-512; the
@@ -50,7 +50,7 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
     """The XLA options jaxfric compiles ``kind`` (``"solver"`` or ``"rollout"``) with.
 
     ``platform`` defaults to JAX's default backend; off the CPU the answer is ``{}``.
-    Options the installed XLA does not know are left out (:func:`supported`).
+    Options the installed XLA does not know are left out (`supported`).
     Use it to compile your own code the way jaxfric does, e.g.
     ``jax.jit(f, compiler_options=jaxfric.compiler_options("rollout"))``.
     """
@@ -66,10 +66,10 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
 def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, Any], ...]:
     """Validate a user's ``compiler_options=`` and freeze it into a hashable tuple.
 
-    ``"auto"`` → :func:`compiler_options` (which leaves out options this XLA does not
+    ``"auto"`` → [`compiler_options`][jaxfric._xla.compiler_options] (which leaves out options this XLA does not
     know); ``None`` or ``False`` →
     no options; a mapping of option names (str) to bool/int/float/str values → those, as
-    given (checked by XLA on a trivial program first, see :func:`check_known`). Raises
+    given (checked by XLA on a trivial program first, see `check_known`). Raises
     ``ValueError`` for anything else, before the real computation is traced.
     """
     if isinstance(value, str) and value == AUTO:
@@ -129,13 +129,13 @@ def _compiled(fn, options, filtered):
 
 
 def filter_jit(fn: Callable, options: tuple[tuple[str, Any], ...]) -> Callable:
-    """``eqx.filter_jit(fn)`` compiled with ``options`` (a :func:`resolve` tuple); one
+    """``eqx.filter_jit(fn)`` compiled with ``options`` (a `resolve` tuple); one
     wrapper per (function, options), so each keeps its own compilation cache."""
     return _compiled(fn, options, True)
 
 
 def jit(fn: Callable, options: tuple[tuple[str, Any], ...]) -> Callable:
-    """As :func:`filter_jit` with ``jax.jit``: for functions of arrays and static-only
+    """As `filter_jit` with ``jax.jit``: for functions of arrays and static-only
     modules, where equinox's per-call filtering is not needed."""
     return _compiled(fn, options, False)
 

@@ -10,7 +10,7 @@ demand, an inner loop turns the force error into a valve command::
     u   = clip(ff v_ref + kf (F_d - (p1 A1 - p2 A2)), -1, 1),      e = x_ref - x
 
 ``F_ff`` is the friction feed-forward: ``0`` (no compensation), an identified fit's
-friction driven by the *reference* velocity (:func:`feedforward`: computed from the fit
+friction driven by the *reference* velocity ([`feedforward`][jaxfric.compensation.feedforward]: computed from the fit
 and the reference alone, before the loop runs, so the rig's true friction cannot leak
 into it), or, as the unattainable ideal, the rig's true friction at the current state
 (``ideal=True``, read from the simulator's internal state). ``de/dt`` is the backward
@@ -40,7 +40,7 @@ __all__ = ["Gains", "Reference", "compensation_study", "compensation_table", "fe
 class Gains(eqx.Module):
     """Cascade gains: outer ``kp`` [N/m], ``kd`` [N s/m], ``ki`` [N/(m s)]; inner ``kf``
     [1/N] (valve opening per newton of force error); ``ff`` [s/m] velocity feed-forward
-    of the valve (~ 1 / valve-limited speed). Defaults tuned on the default :class:`Rig`."""
+    of the valve (~ 1 / valve-limited speed). Defaults tuned on the default [`Rig`][jaxfric.rig.Rig]."""
 
     kp: float = 1.0e6
     kd: float = 2.0e4
@@ -91,7 +91,7 @@ def feedforward(fit, ref: Reference) -> np.ndarray:
     """Friction feed-forward [N] of ``fit`` along the reference velocity (§13.3).
 
     Only the fit and the reference enter: ``fit.predict`` of the reference velocity (a
-    :class:`jaxfric.motion.MotionFit` includes its fitted offset). A fit
+    [`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit] includes its fitted offset). A fit
     made at another sample time (the Elman network is a discrete map at its data's rate)
     is evaluated on its own time grid and interpolated linearly. ``None`` means no
     compensation (zeros).
@@ -112,7 +112,7 @@ def track(rig: Rig, ref: Reference, friction_ff=None, *, gains: Gains = Gains(),
           ideal: bool = False, velocity_cutoff: float = 100.0) -> dict:
     """Run the cascade of the module docstring on ``rig`` (float64 NumPy results).
 
-    ``friction_ff``: feed-forward [N] per reference sample (:func:`feedforward`), or
+    ``friction_ff``: feed-forward [N] per reference sample ([`feedforward`][jaxfric.compensation.feedforward]), or
     ``None``; ``ideal=True`` instead feeds the rig's true friction at the current state.
     Returns ``t``, ``x``, ``error`` (x_ref - x), ``command``, ``friction`` (true) and
     ``feedforward`` (what the controller added).
@@ -191,9 +191,9 @@ def compensation_study(fits: dict, rig: Rig | None = None, *, ref: Reference | N
     """Tracking with no compensation, each fit's feed-forward and the ideal (true friction).
 
     ``fits``: ``{label: fit}`` (any object with ``predict(velocity, dt)``, e.g. a
-    :class:`jaxfric.Fit`). Returns ``(rows, runs)``: one row per controller with
+    [`jaxfric.Fit`][jaxfric.fit.Fit]). Returns ``(rows, runs)``: one row per controller with
     ``rms_mm``, ``max_mm``, ``stick_slip_um`` (see the module docstring), and the
-    ``track`` results by label (for :func:`plot_tracking`).
+    ``track`` results by label (for [`plot_tracking`][jaxfric.compensation.plot_tracking]).
     """
     rig = Rig() if rig is None else rig
     ref = reference() if ref is None else ref
@@ -206,7 +206,7 @@ def compensation_study(fits: dict, rig: Rig | None = None, *, ref: Reference | N
 
 
 def compensation_table(rows: list[dict]) -> str:
-    """Markdown table of :func:`compensation_study` rows (for ``jaxfric demo``'s report)."""
+    """Markdown table of [`compensation_study`][jaxfric.compensation.compensation_study] rows (for ``jaxfric demo``'s report)."""
     lines = ["| compensation | tracking RMS [mm] | max error [mm] | stick-slip on slow ramp [um p-p] |",
              "|---|---|---|---|"]
     for r in rows:

@@ -1,12 +1,12 @@
 """Covariance estimators of a least-squares fit and their result (docs/uncertainty.md).
 
-NumPy and SciPy (JAX only for the bootstrap's key): no fit, record or model is imported here, so :mod:`jaxfric.fit` can
-read a saved :class:`ParameterUncertainty` and :mod:`jaxfric.uncertainty` (which builds
+NumPy and SciPy (JAX only for the bootstrap's key): no fit, record or model is imported here, so [`jaxfric.fit`][jaxfric.fit] can
+read a saved [`ParameterUncertainty`][jaxfric.uncertainty.ParameterUncertainty] and [`jaxfric.uncertainty`][jaxfric.uncertainty] (which builds
 the residuals of each kind of fit) sits above it.
 
 For a least-squares fit θ̂ of a residual vector r(θ) (friction prediction minus
-measured friction for :func:`jaxfric.identify`, simulated minus measured position for
-:func:`jaxfric.identify_motion`), with J = ∂r/∂θ at θ̂ (``jax.jacfwd``):
+measured friction for [`jaxfric.identify`][jaxfric.identification.identify], simulated minus measured position for
+[`jaxfric.identify_motion`][jaxfric.motion.identify_motion]), with J = ∂r/∂θ at θ̂ (``jax.jacfwd``):
 
 * ``"jacobian"`` — the classical nonlinear least-squares covariance (Seber & Wild 1989,
   §2.1): Σ = s² (JᵀJ)⁻¹, s² = Σ r² / (n − p). It assumes independent residuals.
@@ -31,7 +31,7 @@ confident zero variance a pseudo-inverse would give.
 Intervals at level 1 − α use Student's t with n − p degrees of freedom: θ̂ ± t se
 in search coordinates, mapped to physical units (so a log10 coordinate gives a
 positive, asymmetric interval); an interval that covers the search box means the data
-do not determine that parameter (:meth:`ParameterUncertainty.covers_box`).
+do not determine that parameter ([`ParameterUncertainty.covers_box`][jaxfric.uncertainty.ParameterUncertainty.covers_box]).
 """
 
 from __future__ import annotations
@@ -54,9 +54,9 @@ __all__ = [
 
 #: Covariance estimators (see the module docstring); the first is the default shown.
 METHODS = ("hac", "jacobian", "block_bootstrap")
-#: What :func:`parameter_uncertainty` computes unless told (the bootstrap needs a key).
+#: What `parameter_uncertainty` computes unless told (the bootstrap needs a key).
 DEFAULT_METHODS = ("hac", "jacobian")
-#: Default level of :meth:`ParameterUncertainty.intervals`.
+#: Default level of `ParameterUncertainty.intervals`.
 DEFAULT_LEVEL = 0.95
 #: report.md prints the whole correlation matrix up to this many parameters.
 MAX_REPORT_CORRELATION = 12
@@ -200,7 +200,7 @@ class ParameterUncertainty:
         rank: numerical rank of J at ``rcond``; p when every direction is determined.
         bandwidth: the Newey–West lag L (and the bootstrap block length L + 1).
         residual: what r is (``"friction [N]"``, ``"position [m]"``, ...).
-        default: the method :meth:`stderr`/:meth:`intervals` use without one.
+        default: the method [`stderr`][jaxfric.uncertainty.ParameterUncertainty.stderr]/[`intervals`][jaxfric.uncertainty.ParameterUncertainty.intervals] use without one.
         lag1: lag-1 autocorrelation of the residuals (0 for independent ones).
     """
 
@@ -234,7 +234,7 @@ class ParameterUncertainty:
         return {k: float(np.sqrt(max(c[i, i], 0.0))) for i, k in enumerate(self.names)}
 
     def correlation(self, method=None) -> np.ndarray:
-        """``(p, p)`` correlation matrix (order :attr:`names`), in search coordinates
+        """``(p, p)`` correlation matrix (order [`names`][jaxfric.uncertainty.ParameterUncertainty.names]), in search coordinates
         (for log10 and linear coordinates the same as in physical units, to first order)."""
         c = self.cov_theta[self._method(method)]
         d = np.sqrt(np.clip(np.diag(c), 1e-300, None))
@@ -313,7 +313,7 @@ class ParameterUncertainty:
                 for i, k in enumerate(self.names)]
 
     def format(self, level: float = DEFAULT_LEVEL) -> list[str]:
-        """Lines for :meth:`jaxfric.Fit.summary`."""
+        """Lines for [`jaxfric.Fit.summary`][jaxfric.fit.Fit.summary]."""
         methods = [m for m in METHODS if m in self.cov]
         head = (f"uncertainty ({self.default}, {level:.0%} t-intervals, n={self.n}, dof={self.dof}, "
                 f"residual lag-1 corr {self.lag1:.2f}, Newey-West lag {self.bandwidth:.0f}"

@@ -9,7 +9,7 @@ Each file is looked up, in this order,
 and, when it is in none of them, downloaded once from its public source into the cache
 folder (or into ``$JAXFRIC_DATA`` when set). Every file is checked against its SHA-256
 checksum before it is used, downloaded or not. Offline, a missing file is one
-:class:`DatasetUnavailable` line that says what to download and where to put it.
+[`DatasetUnavailable`][jaxfric.datasets.DatasetUnavailable] line that says what to download and where to put it.
 
 The folder layout (the same as a checkout's ``../shared/data``)::
 
@@ -25,9 +25,9 @@ Sources and licences:
   (GitHub), CC0 1.0; seals ``O-ring``, ``NAPN``, ``PK`` (25 mm bore) and ``O-ring257``,
   ``X-ring257`` (25.7 mm bore) at 1, 3, 5 and 7 bar.
 
-The loaders return the library's records: :func:`emps` an
-:class:`jaxfric.rig.EMPSRecording`, :func:`pneumatic` the record's measurements and its
-friction (:class:`jaxfric.rig.FrictionData`) by the pipeline of docs/algorithms.md §7.
+The loaders return the library's records: [`emps`][jaxfric.datasets.emps] an
+[`jaxfric.rig.EMPSRecording`][jaxfric.rig.EMPSRecording], [`pneumatic`][jaxfric.datasets.pneumatic] the record's measurements and its
+friction ([`jaxfric.rig.FrictionData`][jaxfric.rig.FrictionData]) by the pipeline of docs/algorithms.md §7.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def _download(url: str, dest: Path) -> None:
 def fetch(relpath: str, local=None, *, download: bool = True) -> Path:
     """The checked path of one data file, ``relpath`` in the layout of this module's
     docstring (e.g. ``"emps/DATA_EMPS.mat"``): from ``local``, ``$JAXFRIC_DATA`` or the
-    cache, else downloaded into :func:`cache_dir` (unless ``download=False``).
+    cache, else downloaded into [`cache_dir`][jaxfric.datasets.cache_dir] (unless ``download=False``).
 
     Raises:
         KeyError: ``relpath`` is not one of the known files.
@@ -173,7 +173,7 @@ def emps_path(local=None, *, download: bool = True) -> Path:
 
 def emps(local=None, *, download: bool = True):
     """The EMPS estimation recording (24 841 samples at 1 kHz) as a
-    :class:`jaxfric.rig.EMPSRecording`; :func:`jaxfric.rig.emps_friction_data` turns it
+    [`jaxfric.rig.EMPSRecording`][jaxfric.rig.EMPSRecording]; [`jaxfric.rig.emps_friction_data`][jaxfric.rig.emps_friction_data] turns it
     into friction by the benchmark's recipe."""
     from . import rig
 
@@ -203,8 +203,8 @@ def pneumatic(seal: str = "O-ring", bar: int = 3, local=None, *, download: bool 
     step, low-pass filtered (zero-phase Butterworth, ``cutoff`` Hz) and turned into
     friction by the force balance of docs/algorithms.md §7 with one pressurised chamber
     of the seal's bore (25 mm, 25.7 mm for the ``257`` seals), no rod and no inertia
-    term, as the authors compute it. Returns :class:`jaxfric.rig.Measurements` and
-    :class:`jaxfric.rig.FrictionData` (the first ``train_fraction`` for estimation).
+    term, as the authors compute it. Returns [`jaxfric.rig.Measurements`][jaxfric.rig.Measurements] and
+    [`jaxfric.rig.FrictionData`][jaxfric.rig.FrictionData] (the first ``train_fraction`` for estimation).
     """
     import warnings
 

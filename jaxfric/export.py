@@ -1,6 +1,6 @@
 """A fitted friction model outside JAX: a pure-NumPy step function and a C header.
 
-For a controller's real-time loop the free-run rollout of :meth:`jaxfric.Fit.predict`
+For a controller's real-time loop the free-run rollout of [`jaxfric.Fit.predict`][jaxfric.fit.Fit.predict]
 is split into one call per sample (the per-sample form of ``jaxfric.motion``):
 
     f, state = step(v, state)        F_k = output(s_k, v_k),  s_{k+1} = update(s_k, v_k)
@@ -10,9 +10,9 @@ does: LuGre/Dahl from the steady state at the first velocity, docs/algorithms.md
 the Elman networks from their learned context ``c0``, §2.2). Velocity in m/s,
 friction in N; the §2.4 scalers of the Elman networks are applied inside.
 
-* :func:`numpy_step` (``Fit.to_numpy()``): a :class:`NumpyStep` holding the weights as
+* [`numpy_step`][jaxfric.export.numpy_step] (``Fit.to_numpy()``): a [`NumpyStep`][jaxfric.export.NumpyStep] holding the weights as
   float64 NumPy arrays;
-* :func:`c_header` (``Fit.to_c_header(path)``): C99 source of the same step with the
+* [`c_header`][jaxfric.export.c_header] (``Fit.to_c_header(path)``): C99 source of the same step with the
   weights as ``static const double`` arrays, for ``#include`` in a controller::
 
       jaxfric_state s;  jaxfric_init(&s, v0);
@@ -202,7 +202,7 @@ class NumpyStep:
         return float(f), (new_force, new_direction)
 
     def run(self, velocity) -> np.ndarray:
-        """Friction [N] for a whole velocity record, one :meth:`step` per sample."""
+        """Friction [N] for a whole velocity record, one [`step`][jaxfric.export.NumpyStep.step] per sample."""
         state, out = None, []
         for v in np.asarray(velocity, np.float64).ravel():
             f, state = self.step(v, state)
@@ -211,7 +211,7 @@ class NumpyStep:
 
 
 def numpy_step(fit) -> NumpyStep:
-    """:class:`NumpyStep` of ``fit`` (a :class:`jaxfric.Fit`; module docstring)."""
+    """[`NumpyStep`][jaxfric.export.NumpyStep] of ``fit`` (a [`jaxfric.Fit`][jaxfric.fit.Fit]; module docstring)."""
     return NumpyStep(_weights(fit), float(fit.dt))
 
 

@@ -1,17 +1,17 @@
 """Files, once for the whole package: atomic writes, JSON values, delimited text rows.
 
-* :func:`atomic_write` and friends write to a temporary file in the target folder and
+* [`atomic_write`][jaxfric.files.atomic_write] and friends write to a temporary file in the target folder and
   move it into place with ``os.replace``: a crash or Ctrl-C leaves either the old file or
   the new one, never half of one, and the temporary is removed on failure. The file gets
   the user's usual permissions (``0o666`` less the umask), as ``open`` would give it;
   ``tempfile.mkstemp`` alone would leave it ``0600``.
-* :func:`jsonable` turns NumPy/JAX values, tuples and mappings into JSON types (one rule
-  for fits, checkpoints and reports); :func:`write_json` writes it atomically.
-* :func:`read_rows` reads a delimited text file through the :mod:`csv` module (quoted
+* [`jsonable`][jaxfric.files.jsonable] turns NumPy/JAX values, tuples and mappings into JSON types (one rule
+  for fits, checkpoints and reports); [`write_json`][jaxfric.files.write_json] writes it atomically.
+* [`read_rows`][jaxfric.files.read_rows] reads a delimited text file through the `csv` module (quoted
   cells, delimiters inside quotes) with comment lines and blank lines dropped, and every
-  problem a :class:`ValueError` that names the file and line; :func:`column_index` maps a
+  problem a `ValueError` that names the file and line; [`column_index`][jaxfric.files.column_index] maps a
   header name or index to a column and refuses a name the header holds twice;
-  :func:`csv_text` / :func:`write_csv` write named columns back (full precision).
+  [`csv_text`][jaxfric.files.csv_text] / [`write_csv`][jaxfric.files.write_csv] write named columns back (full precision).
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def atomic_write(path, write: Callable[[Path], None]) -> Path:
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (see :func:`atomic_write`)."""
+    """Write ``data`` to ``path`` atomically (see [`atomic_write`][jaxfric.files.atomic_write])."""
     return atomic_write(path, lambda tmp: tmp.write_bytes(data))
 
 
@@ -119,7 +119,7 @@ def jsonable(x, *, finite: bool = False) -> Any:
 
 
 def write_json(path, obj, *, indent: int = 2) -> Path:
-    """``obj`` (through :func:`jsonable`, standard JSON) to ``path`` atomically."""
+    """``obj`` (through [`jsonable`][jaxfric.files.jsonable], standard JSON) to ``path`` atomically."""
     text = json.dumps(jsonable(obj, finite=True), indent=indent, allow_nan=False)
     return atomic_write_text(path, text + "\n")
 
@@ -127,11 +127,11 @@ def write_json(path, obj, *, indent: int = 2) -> Path:
 def read_rows(path, *, delimiter: str | None = ",", comments: str | None = "#") -> list[tuple[int, list[str]]]:
     """The non-blank, non-comment rows of a delimited text file as ``(line number, cells)``.
 
-    ``delimiter=None`` splits on runs of whitespace; otherwise the :mod:`csv` module reads
+    ``delimiter=None`` splits on runs of whitespace; otherwise the `csv` module reads
     the file (so ``"a,b"`` in quotes is one cell). Cells are stripped of spaces (and of
     quotes in whitespace mode). A line whose first non-blank character starts
     ``comments`` is dropped, and a ``comments`` character ends a row's data. A UTF-8 byte
-    order mark is ignored. Raises :class:`ValueError` naming the file for a missing file,
+    order mark is ignored. Raises `ValueError` naming the file for a missing file,
     a folder, a binary file or an unreadable one.
     """
     path = os.fspath(path)
@@ -183,7 +183,7 @@ def column_index(header: Sequence[str], name: str, *, path, what: str) -> int:
 
 def csv_text(columns: Mapping[str, Any]) -> str:
     """Named columns as CSV text with a header row, every value with 17 significant
-    digits so that :func:`read_rows` reads back the same float64 numbers."""
+    digits so that [`read_rows`][jaxfric.files.read_rows] reads back the same float64 numbers."""
     buf = io.StringIO()
     buf.write(",".join(columns) + "\n")
     np.savetxt(buf, np.column_stack([np.asarray(c, dtype=np.float64) for c in columns.values()]),
@@ -192,5 +192,5 @@ def csv_text(columns: Mapping[str, Any]) -> str:
 
 
 def write_csv(path, columns: Mapping[str, Any]) -> Path:
-    """:func:`csv_text` of ``columns``, written atomically to ``path``."""
+    """[`csv_text`][jaxfric.files.csv_text] of ``columns``, written atomically to ``path``."""
     return atomic_write_text(path, csv_text(columns))

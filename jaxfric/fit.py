@@ -1,6 +1,6 @@
-"""The result of :func:`jaxfric.identify`, and saving/loading it (docs/algorithms.md §6, §11 step 8).
+"""The result of [`jaxfric.identify`][jaxfric.identification.identify], and saving/loading it (docs/algorithms.md §6, §11 step 8).
 
-A :class:`Fit` holds everything needed to *use* an identified model — the model
+A [`Fit`][jaxfric.fit.Fit] holds everything needed to *use* an identified model — the model
 configuration, θ in search coordinates, the training-window scalers of §2.4 and
 the sample time — plus everything needed to *judge* it: metrics on the training
 window, the validation window and the whole record (§6), the optimiser's
@@ -11,14 +11,14 @@ File format (one ``.npz`` file, no pickles): member ``header`` holds UTF-8 JSON
 the search box, metrics, settings, ...); members ``theta``, ``velocity_scaler``, ``friction_scaler``
 (``[lo, hi]``, float64) and ``history_evals``/``history_f`` hold the arrays with
 their exact dtypes, so save → load → predict is bit-identical; a fit from
-``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). :func:`load_fit` refuses
+``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). [`load_fit`][jaxfric.fit.load_fit] refuses
 non-finite weights, scalers or sample time (they would predict NaN).
 
-Prediction is honest about its data (:meth:`Fit.predict`, :meth:`Fit.predict_at`): one
+Prediction is honest about its data ([`Fit.predict`][jaxfric.fit.Fit.predict], [`Fit.predict_at`][jaxfric.fit.Fit.predict_at]): one
 output sample per input sample; a sample time other than the fit's is resampled onto
-the fit's grid for every model whose output depends on it (:class:`ResamplingWarning`);
-velocities outside the training range give an :class:`ExtrapolationWarning`. Writes go through
-:func:`jaxfric.files.atomic_write` (a temporary file in the target directory, then
+the fit's grid for every model whose output depends on it ([`ResamplingWarning`][jaxfric.fit.ResamplingWarning]);
+velocities outside the training range give an [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning]. Writes go through
+[`jaxfric.files.atomic_write`][jaxfric.files.atomic_write] (a temporary file in the target directory, then
 ``os.replace``, with the user's usual permissions): a crash never leaves a half-written
 fit under the final name.
 """
@@ -47,13 +47,13 @@ from .models import AbstractFrictionModel, Scaler
 __all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit"]
 
 FORMAT_NAME = "jaxfric.fit"
-#: Version of the file layout written by :meth:`Fit.save`; :func:`load_fit` reads
+#: Version of the file layout written by `Fit.save`; `load_fit` reads
 #: this version and older ones and refuses newer ones.
 FORMAT_VERSION = 1
 
 _WINDOWS = ("train", "valid", "all")
 
-#: Longest record :meth:`Fit.predict_at` builds on the fit's time grid (a record at
+#: Longest record `Fit.predict_at` builds on the fit's time grid (a record at
 #: a much coarser sample time than the fit's would otherwise allocate without bound).
 MAX_RESAMPLED_SAMPLES = 50_000_000
 
@@ -81,8 +81,8 @@ def model_config(model: AbstractFrictionModel) -> dict[str, Any]:
 
 
 def model_from_config(class_name: str, config: dict[str, Any]) -> AbstractFrictionModel:
-    """Rebuild a model saved by :func:`model_config`; only jaxfric's own model classes.
-    The ``*_range`` keys of a 0.6/0.7 file are left out (:func:`old_box_entries`)."""
+    """Rebuild a model saved by [`model_config`][jaxfric.fit.model_config]; only jaxfric's own model classes.
+    The ``*_range`` keys of a 0.6/0.7 file are left out ([`old_box_entries`][jaxfric.fit.old_box_entries])."""
     cls = getattr(_models, class_name, None)
     if not (isinstance(cls, type) and issubclass(cls, AbstractFrictionModel)):
         raise ValueError(f"unknown friction model class {class_name!r} in the fit file")
@@ -102,7 +102,7 @@ def old_box_entries(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def model_name(model: AbstractFrictionModel) -> str | None:
-    """The :func:`jaxfric.models.get` name of ``model``'s class, if it has one."""
+    """The [`jaxfric.models.get`][jaxfric.models.get] name of ``model``'s class, if it has one."""
     for name in _models.available():
         if type(_models.get(name)) is type(model):
             return name
@@ -137,7 +137,7 @@ def _same_step(a: float, b: float) -> bool:
 
 def unidentifiable_names(texts) -> set[str]:
     """Parameter names of ``Fit.diagnostics["unidentifiable"]`` entries, which are
-    ``"name: reason"`` strings (:func:`jaxfric.identification.unidentifiable`)."""
+    ``"name: reason"`` strings ([`jaxfric.identification.unidentifiable`][jaxfric.identification.unidentifiable])."""
     return {str(t).split(": ", 1)[0] for t in texts}
 
 
@@ -154,7 +154,7 @@ def uncertainty_lines(fit) -> list[str]:
 def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
     """Free-run friction [N] of ``model`` at ``theta`` for ``velocity`` [m/s] (§2.4):
     scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
-    :class:`Scaler` pair, or ``(None, None)`` for SI-unit models). Computed in
+    [`Scaler`][jaxfric.models.Scaler] pair, or ``(None, None)`` for SI-unit models). Computed in
     ``theta``'s dtype. ``inputs``: the ``(C, T)`` measured channels of a model with
     ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others."""
     theta = jnp.asarray(theta)
@@ -162,7 +162,7 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
 
 
 def rollout(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
-    """:func:`predict` without its checks of the velocity and ``dt``, so that both may be
+    """[`predict`][jaxfric.fit.predict] without its checks of the velocity and ``dt``, so that both may be
     traced (the parameter uncertainty's compiled linearisation calls it)."""
     dtype = theta.dtype
     v = jnp.asarray(velocity, dtype)
@@ -176,40 +176,40 @@ def rollout(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
 
 
 class Fit:
-    """An identified friction model and its report (returned by :func:`jaxfric.identify`).
+    """An identified friction model and its report (returned by [`jaxfric.identify`][jaxfric.identification.identify]).
 
     Attributes:
         model: the friction model.
-        box: the :class:`jaxfric.models.SearchBox` the fit searched (complete: defaults,
+        box: the [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox] the fit searched (complete: defaults,
             data-centred entries and the user's), ``None`` for the Elman networks,
             whose box is part of their configuration.
         theta: parameters in search coordinates (NumPy, the search dtype).
-        velocity_scaler, friction_scaler: the §2.4 training-window :class:`Scaler`
+        velocity_scaler, friction_scaler: the §2.4 training-window [`Scaler`][jaxfric.models.Scaler]
             of a model with ``needs_scaling``, else ``None``.
         dt: sample time [s] of the identification record.
         n_train, n_samples: training-window length and record length.
-        metrics: ``{"train", "valid", "all"}`` → :func:`jaxfric.metrics.friction_metrics`
+        metrics: ``{"train", "valid", "all"}`` → [`jaxfric.metrics.friction_metrics`][jaxfric.metrics.friction_metrics]
             dicts (newtons), plus ``"num_params"`` and ``"cost"`` (the final J).
         stages: one dict per optimiser stage (``stage``, ``J``, ``num_evals``/``num_steps``,
             ...), in order: e.g. MAPSO, Nelder–Mead, BFGS.
         history: ``{"evals": ..., "f": ...}`` best J against evaluations (NumPy).
-        solution: the optimiser's :class:`jaxfric.Solution` (``None`` after loading).
+        solution: the optimiser's [`jaxfric.Solution`][jaxfric.optim.Solution] (``None`` after loading).
         timings: seconds: ``compile_s``, ``run_s`` (optimiser), ``refine_compile_s``,
             ``refine_run_s``, ``total_s`` (wall, everything including checks and metrics).
-        key_data, key_impl, seed: the PRNG key used (see :attr:`key`).
+        key_data, key_impl, seed: the PRNG key used (see [`key`][jaxfric.fit.Fit.key]).
         settings: solver, refinement, dtype, data-bounds and split settings (JSON values).
         version: jaxfric version that produced the fit.
         velocity_range: ``(min, max)`` [m/s] of the training velocity (``None`` if
             unknown: fits saved before 0.7); prediction beyond it warns.
-        uncertainty: the :class:`jaxfric.uncertainty.ParameterUncertainty` of a physical
-            fit (:attr:`stderr`, :meth:`intervals`, :attr:`correlation`,
-            :meth:`prediction_interval`; docs/uncertainty.md), computed on first use.
+        uncertainty: the [`jaxfric.uncertainty.ParameterUncertainty`][jaxfric.uncertainty.ParameterUncertainty] of a physical
+            fit ([`stderr`][jaxfric.fit.Fit.stderr], [`intervals`][jaxfric.fit.Fit.intervals], [`correlation`][jaxfric.fit.Fit.correlation],
+            [`prediction_interval`][jaxfric.fit.Fit.prediction_interval]; docs/uncertainty.md), computed on first use.
         diagnostics: ``{"on_bound": [...], "unidentifiable": [...]}``: parameters
             that ended on a bound of the search box (name, side, value, range, what
             to widen) and parameters the model says the data cannot determine, as
-            ``"name: reason"`` strings (:func:`unidentifiable_names` takes the names);
-            :meth:`summary` and the report mark both kinds. ``"implausible"``: the
-            :mod:`jaxfric.plausibility` rules a physical fit breaks (name, rule, message,
+            ``"name: reason"`` strings ([`unidentifiable_names`][jaxfric.fit.unidentifiable_names] takes the names);
+            [`summary`][jaxfric.fit.Fit.summary] and the report mark both kinds. ``"implausible"``: the
+            [`jaxfric.plausibility`][jaxfric.plausibility] rules a physical fit breaks (name, rule, message,
             evidence).
         ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
             final costs ``J``, keys, per-member validation MSE %, the index of the
@@ -255,10 +255,10 @@ class Fit:
     # ---------------------------------------------------------- uncertainty
     @property
     def uncertainty(self):
-        """The :class:`jaxfric.uncertainty.ParameterUncertainty` of a physical model's
+        """The [`jaxfric.uncertainty.ParameterUncertainty`][jaxfric.uncertainty.ParameterUncertainty] of a physical model's
         parameters (Newey–West and Jacobian covariances, docs/uncertainty.md), or
         ``None`` (a network; a fit loaded from a file without it). Computed on first
-        use from the training data :func:`jaxfric.identify` attached."""
+        use from the training data [`jaxfric.identify`][jaxfric.identification.identify] attached."""
         if self._uncertainty is None and self._uncertainty_source is not None:
             compute, self._uncertainty_source = self._uncertainty_source, None
             try:
@@ -300,7 +300,7 @@ class Fit:
         """``(prediction, low, high)`` [N] for a velocity record: ŷ ± t sqrt(j Σ jᵀ + s²),
         j = ∂ŷ/∂θ at the fit (``jax.jacfwd``), Σ the fit's covariance (``method``, default
         the fit's) with each parameter's interval capped at its search box
-        (:meth:`jaxfric.covariance.ParameterUncertainty.box_capped`: an undetermined
+        ([`jaxfric.covariance.ParameterUncertainty.box_capped`][jaxfric.uncertainty.ParameterUncertainty.box_capped]: an undetermined
         parameter moves inside its box, not by its linearised ±10⁹), s² its residual
         variance (left out with ``noise=False``: then the band is the confidence band of
         the mean prediction only). The band of a new *measurement* assumes the training
@@ -339,7 +339,7 @@ class Fit:
 
     @property
     def key(self):
-        """The PRNG key the fit was made with (re-wrapped from :attr:`key_data`)."""
+        """The PRNG key the fit was made with (re-wrapped from [`key_data`][jaxfric.fit.Fit.key_data])."""
         if self.key_data is None:
             return None
         data = np.asarray(self.key_data, np.uint32)
@@ -355,13 +355,13 @@ class Fit:
         velocity is scaled with the training-window scaler and the output mapped
         back to newtons. ``dt`` [s] defaults to the identification record's. ``inputs``:
         the ``(C, T)`` channels named by ``model.input_names`` (e.g. ``[p1, p2]`` in
-        Pa for :class:`jaxfric.models.Cylinder`); ignored by the other models.
+        Pa for [`jaxfric.models.Cylinder`][jaxfric.models.Cylinder]); ignored by the other models.
 
         One output sample per input sample, always. A ``dt`` other than the fit's
-        is handled by :meth:`predict_at` (resampling onto the fit's grid, with a
-        :class:`ResamplingWarning`) for every model whose output depends on the
+        is handled by [`predict_at`][jaxfric.fit.Fit.predict_at] (resampling onto the fit's grid, with a
+        [`ResamplingWarning`][jaxfric.fit.ResamplingWarning]) for every model whose output depends on the
         sample time; static maps ignore it. Velocities outside the training range
-        give an :class:`ExtrapolationWarning`.
+        give an [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning].
         """
         v = _velocity_np(velocity)
         if dt is None:
@@ -382,18 +382,18 @@ class Fit:
         """Friction [N] at the time stamps ``t`` [s] (any increasing grid, uniform or
         not) for the velocity samples ``velocity`` [m/s] taken there.
 
-        The model was identified at the sample time :attr:`dt`, and a recurrent model
+        The model was identified at the sample time [`dt`][jaxfric.fit.Fit.dt], and a recurrent model
         (the Elman network, LuGre, Dahl) is a function of it: when ``t`` is not a
-        uniform grid of step :attr:`dt`, the velocity is interpolated linearly onto
+        uniform grid of step [`dt`][jaxfric.fit.Fit.dt], the velocity is interpolated linearly onto
         one (from ``t[0]``, one step past ``t[-1]``), rolled out, and the prediction
-        interpolated back to ``t``, with a :class:`ResamplingWarning`. The result has
+        interpolated back to ``t``, with a [`ResamplingWarning`][jaxfric.fit.ResamplingWarning]. The result has
         one sample per input sample. Linear interpolation does not low-pass: a record
         sampled much finer than the fit should be filtered to the fit's bandwidth first.
 
         Raises:
             ValueError: ``t`` and ``velocity`` of different lengths, ``t`` not
                 strictly increasing or not finite, or a grid longer than
-                :data:`MAX_RESAMPLED_SAMPLES` samples.
+                [`MAX_RESAMPLED_SAMPLES`][jaxfric.fit.MAX_RESAMPLED_SAMPLES] samples.
         """
         v = _velocity_np(velocity)
         t = np.asarray(t, np.float64) if np.ndim(t) else np.asarray([t], np.float64)
@@ -429,14 +429,14 @@ class Fit:
 
     def predict_band(self, velocity, dt=None) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)`` [N]: the elementwise min and max of the ensemble members'
-        predictions (:attr:`ensemble`, from ``identify(..., keys=K)``), so the band
-        always holds the best member's :meth:`predict`. Raises ``ValueError`` for a
+        predictions ([`ensemble`][jaxfric.fit.Fit.ensemble], from ``identify(..., keys=K)``), so the band
+        always holds the best member's [`predict`][jaxfric.fit.Fit.predict]. Raises ``ValueError`` for a
         fit without an ensemble."""
         members = self.ensemble_predictions(velocity, dt)
         return members.min(axis=0), members.max(axis=0)
 
     def ensemble_predictions(self, velocity, dt=None) -> np.ndarray:
-        """``(K, T)`` predictions [N] of the ensemble members (see :meth:`predict_band`)."""
+        """``(K, T)`` predictions [N] of the ensemble members (see [`predict_band`][jaxfric.fit.Fit.predict_band])."""
         if not self.ensemble or "theta" not in self.ensemble:
             raise ValueError("this fit has no ensemble: identify(..., keys=K) makes one")
         out = []
@@ -466,12 +466,12 @@ class Fit:
     # --------------------------------------------------------------- export
     def to_numpy(self):
         """A pure-NumPy per-sample step ``f, state = step(v, state)`` of this fit
-        (:func:`jaxfric.export.numpy_step`), for controllers outside JAX."""
+        ([`jaxfric.export.numpy_step`][jaxfric.export.numpy_step]), for controllers outside JAX."""
         return numpy_step(self)
 
     def to_c_header(self, path=None, *, prefix: str = "jaxfric") -> str:
         """C99 header with this fit's per-sample step and weights
-        (:func:`jaxfric.export.c_header`); written to ``path`` if given."""
+        ([`jaxfric.export.c_header`][jaxfric.export.c_header]); written to ``path`` if given."""
         return c_header(self, path, prefix=prefix)
 
     # --------------------------------------------------------------- report
@@ -643,10 +643,10 @@ def _finite_array(path, name: str, a: np.ndarray) -> np.ndarray:
 
 
 def load_fit(path) -> Fit:
-    """Read a fit written by :meth:`Fit.save`.
+    """Read a fit written by [`Fit.save`][jaxfric.fit.Fit.save].
 
     A file written by jaxfric 0.6/0.7 kept the search box in the model configuration
-    (``Fc_range``, ``sigma0_range``, ...): those entries become :attr:`Fit.box` (the
+    (``Fc_range``, ``sigma0_range``, ...): those entries become [`Fit.box`][jaxfric.fit.Fit.box] (the
     unset ones its defaults, as they were then).
 
     Raises:

@@ -2,7 +2,7 @@
 
 Every function takes a 1-D array ``x`` of any length ``D`` and returns a scalar; all
 are jit-, vmap- and grad-safe (where the function is differentiable) and keep the
-dtype of ``x``. The registry :data:`REGISTRY` maps a name to a :class:`TestFunction`
+dtype of ``x``. The registry [`REGISTRY`][jaxfric.functions.REGISTRY] maps a name to a [`TestFunction`][jaxfric.functions.TestFunction]
 record holding the function, its default box and its known minimiser.
 
 Which Schwefel?  The paper says every function except Rosenbrock has its minimum 0
@@ -162,7 +162,7 @@ _OBJECTIVES = {name: _as_objective(t.fn) for name, t in REGISTRY.items()}
 
 
 def objective(name: str) -> Callable:
-    """``fn(y, args)`` form of a test function, ready for :func:`jaxfric.minimise`.
+    """``fn(y, args)`` form of a test function, ready for [`jaxfric.minimise`][jaxfric.optim.minimise].
 
     The same function object is returned on every call, so jit caches are reused.
     """

@@ -47,7 +47,7 @@ METRIC_FORMULAS: dict[str, str] = {
     "rrse": "||e||/||y - mean(y)|| [-]",
     "r2": "1 - sum(e^2)/sum((y - mean(y))^2) [-]",
 }
-"""Formula of each key returned by :func:`friction_metrics`, for reports."""
+"""Formula of each key returned by [`friction_metrics`][jaxfric.metrics.friction_metrics], for reports."""
 
 
 def _as_checked_pair(y, y_hat) -> tuple[np.ndarray, np.ndarray]:

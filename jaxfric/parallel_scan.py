@@ -25,7 +25,7 @@ update then leaves an error of order ``rtol²`` (quadratic convergence). If that
 not happened after ``max_iterations``, or an iterate is not finite (an unstable
 linearisation can overflow), the sequential ``lax.scan`` computes the answer instead
 (``fallback=True``, the default), so the result is always the sequential one to the
-tolerance. :class:`DeerResult` says which happened.
+tolerance. [`DeerResult`][jaxfric.parallel_scan.DeerResult] says which happened.
 
 Two Jacobian forms:
 
@@ -220,11 +220,11 @@ def deer_scan(step: Callable, init, xs, *, jacobian: str = "dense", rtol: float 
 def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
                   max_iterations: int | None = None, fallback: bool = True,
                   chunk: int | None = None, return_info: bool = False):
-    """:meth:`jaxfric.models.Elman.simulate_batch` (docs/algorithms.md §2.2) with the
+    """[`jaxfric.models.Elman.simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] (docs/algorithms.md §2.2) with the
     context recurrence ``c_{k+1} = α c_k + tanh(w u_k + r c_k + b)`` solved by
-    :func:`deer_scan` (elementwise: each neuron's context of each candidate is its own
+    [`deer_scan`][jaxfric.parallel_scan.deer_scan] (elementwise: each neuron's context of each candidate is its own
     scalar recurrence, Jacobian ``α + r (1 - h²)``). Returns ``(P, T)`` outputs (and the
-    :class:`DeerResult` with ``return_info``)."""
+    [`DeerResult`][jaxfric.parallel_scan.DeerResult] with ``return_info``)."""
     from .models import Elman
 
     if type(model) is not Elman:
@@ -251,9 +251,9 @@ def simulate_motion_parallel(step, theta, mass, force, dt, x0, v0, state0=None, 
                              rtol: float | None = None, max_iterations: int | None = None,
                              fallback: bool = True, chunk: int | None = None,
                              return_info: bool = False):
-    """:func:`jaxfric.motion.simulate_motion` (docs/algorithms.md §13.2) with the state
+    """[`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion] (docs/algorithms.md §13.2) with the state
     ``(x, v, friction state)`` -- 2 states for static maps, 3 for LuGre and Dahl --
-    solved by :func:`deer_scan` with dense Jacobians. Same arguments and outputs
+    solved by [`deer_scan`][jaxfric.parallel_scan.deer_scan] with dense Jacobians. Same arguments and outputs
     (``{"x", "v", "friction"}``, sample k before the step driven by ``force[k]``)."""
     from .motion._forward import _advance, _start
 

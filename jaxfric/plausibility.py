@@ -5,24 +5,24 @@ times the Coulomb level that acts only inside the handful of samples near zero
 velocity, a constant force offset that the data cannot tell from asymmetric Coulomb
 levels, a pre-sliding stiffness whose elastic range the record barely visits. Each
 rule below states where a parameter means something and, when the fit lies outside,
-returns a :class:`Implausible` with the reason and the evidence from the data. The
+returns a [`Implausible`][jaxfric.plausibility.Implausible] with the reason and the evidence from the data. The
 rules look at the fitted physical values and the training record only (NumPy, no
 model rollout), so they run on every fit.
 
 Rules (thresholds are module constants):
 
-* ``stribeck_spike`` — Fs/Fc > :data:`STRIBECK_RATIO` while fewer than
-  :data:`MIN_SUPPORT_FRACTION` of the samples (of that direction) lie where the peak
+* ``stribeck_spike`` — Fs/Fc > [`STRIBECK_RATIO`][jaxfric.plausibility.STRIBECK_RATIO] while fewer than
+  [`MIN_SUPPORT_FRACTION`][jaxfric.plausibility.MIN_SUPPORT_FRACTION] of the samples (of that direction) lie where the peak
   acts, 0 < |v| < vs (ln 20)^{1/δ} (the excess Fs − Fc has decayed to 5 % beyond).
   LuGre, Stribeck, GMS; Cylinder's breakaway ratio ``K_brk`` likewise.
 * ``offset_asymmetric`` — an offset F_off with direction-dependent Coulomb levels,
-  |F_off| > :data:`OFFSET_FRACTION` of their mean, while fewer than
-  :data:`MIN_STANDSTILL_FRACTION` of the samples are at standstill (|v| below 2 % of
+  |F_off| > [`OFFSET_FRACTION`][jaxfric.plausibility.OFFSET_FRACTION] of their mean, while fewer than
+  [`MIN_STANDSTILL_FRACTION`][jaxfric.plausibility.MIN_STANDSTILL_FRACTION] of the samples are at standstill (|v| below 2 % of
   max |v|), the only samples that separate an offset from the two levels.
 * ``presliding_unvisited`` — a pre-sliding stiffness (LuGre and Dahl σ0, GMS k_i)
   whose elastic range z = Fc/σ0 (GMS: α_i Fc / k_i) holds fewer than
-  :data:`MIN_SUPPORT_FRACTION` of the samples and fewer than
-  :data:`MIN_SUPPORT_SAMPLES` samples, counting the travel since the last velocity
+  [`MIN_SUPPORT_FRACTION`][jaxfric.plausibility.MIN_SUPPORT_FRACTION] of the samples and fewer than
+  [`MIN_SUPPORT_SAMPLES`][jaxfric.plausibility.MIN_SUPPORT_SAMPLES] samples, counting the travel since the last velocity
   reversal (needs the sample time).
 """
 
@@ -44,7 +44,7 @@ MIN_SUPPORT_FRACTION = 0.01
 MIN_SUPPORT_SAMPLES = 20
 #: |F_off| above this fraction of the mean Coulomb level is a real shift of the levels [D].
 OFFSET_FRACTION = 0.1
-#: Standstill: |v| below this fraction of max |v| (as :data:`jaxfric.models` LOW_SPEED).
+#: Standstill: |v| below this fraction of max |v| (as `jaxfric.models` LOW_SPEED).
 STANDSTILL = 0.02
 #: Fewer standstill samples than this fraction, and an offset is not separated from
 #: asymmetric Coulomb levels [D]: EMPS holds 1.5 % such samples and its fits moved
@@ -54,7 +54,7 @@ MIN_STANDSTILL_FRACTION = 0.05
 
 class PlausibilityWarning(UserWarning):
     """A fitted parameter lies outside the range where it means something physically
-    (:mod:`jaxfric.plausibility`): the message gives the reason and the evidence."""
+    ([`jaxfric.plausibility`][jaxfric.plausibility]): the message gives the reason and the evidence."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -188,7 +188,7 @@ def _presliding(model, params, v, dt) -> list[Implausible]:
 
 def check_plausibility(model, params: dict, velocity, dt: float | None = None) -> list[Implausible]:
     """The rules of the module docstring for ``model`` at its physical ``params``
-    (``{name: value}``, :meth:`jaxfric.Fit.params`) on the training ``velocity`` [m/s]
+    (``{name: value}``, [`jaxfric.Fit.params`][jaxfric.fit.Fit.params]) on the training ``velocity`` [m/s]
     sampled every ``dt`` [s] (``None``: the pre-sliding rule is skipped).
 
     Returns the broken rules (empty for a plausible fit). Network models (whose
@@ -203,6 +203,6 @@ def check_plausibility(model, params: dict, velocity, dt: float | None = None) -
 
 
 def warn_implausible(model, found: list[Implausible], stacklevel: int = 3) -> None:
-    """One :class:`PlausibilityWarning` per broken rule."""
+    """One [`PlausibilityWarning`][jaxfric.plausibility.PlausibilityWarning] per broken rule."""
     for f in found:
         warnings.warn(f"{type(model).__name__}: {f.message}", PlausibilityWarning, stacklevel=stacklevel)

@@ -1,8 +1,8 @@
 """The velocity/friction record every entry point uses, and its checks (docs/algorithms.md §1, §11 step 2).
 
-:class:`FrictionData` is the one record type: the rig loaders and pipeline
-(:mod:`jaxfric.rig`), the EMPS loader, the synthetic data set, the command line
-and :func:`jaxfric.identify` all produce or accept it. Its channels are checked
+[`FrictionData`][jaxfric.rig.FrictionData] is the one record type: the rig loaders and pipeline
+([`jaxfric.rig`][jaxfric.rig]), the EMPS loader, the synthetic data set, the command line
+and [`jaxfric.identify`][jaxfric.identification.identify] all produce or accept it. Its channels are checked
 float64 NumPy arrays, so the user's data are never rounded to float32 however JAX
 is configured; it is still a pytree (``eqx.Module``), so it can travel in the
 ``args`` of a jitted function and be stacked over records of equal length.
@@ -22,7 +22,7 @@ import numpy as np
 
 #: The paper's split: the first 1600 of 2000 samples for estimation (§1).
 DEFAULT_TRAIN_FRACTION = 0.8
-#: Shortest validation window :func:`jaxfric.identify` accepts. A window of one or two
+#: Shortest validation window `jaxfric.identify` accepts. A window of one or two
 #: samples has (almost) no variance, so its normalised MSE (§6, divided by the window's
 #: variance) reads 1e5 % and means nothing; ten samples also cover the start-up
 #: transient of the §7 pipeline's order-4 Butterworth filter at its edge.
@@ -100,7 +100,7 @@ _STAMPS_HINT = "for time stamps build the record with jaxfric.rig.FrictionData.f
 
 def check_sample_time(dt, *, stamps_hint: str = _STAMPS_HINT) -> float:
     """A scalar, positive, finite sample time [s]; ``stamps_hint`` says what to do with
-    time stamps instead (default: :meth:`FrictionData.from_arrays` takes them)."""
+    time stamps instead (default: [`FrictionData.from_arrays`][jaxfric.rig.FrictionData.from_arrays] takes them)."""
     arr = np.asarray(dt)
     if arr.ndim != 0:
         raise ValueError(f"dt must be a scalar sample time in seconds, got shape {arr.shape}; {stamps_hint}")
@@ -147,7 +147,7 @@ def split_count(n: int, train, *, whole: bool = True, name: str = "train",
 
 
 def _given_split(n: int, train_fraction, n_train) -> int:
-    """:func:`split_count` for the ``train_fraction`` / ``n_train`` pair of :class:`FrictionData`."""
+    """[`split_count`][jaxfric.records.split_count] for the ``train_fraction`` / ``n_train`` pair of [`FrictionData`][jaxfric.rig.FrictionData]."""
     if n_train is not None:
         return split_count(n, int(n_train), name="n_train")
     if isinstance(train_fraction, bool) or not isinstance(train_fraction, numbers.Real):
@@ -189,9 +189,9 @@ class FrictionData(eqx.Module):
 
         ``dt_or_t``: the sample interval [s] (scalar) or the time stamps [s]
         (must be uniform within ``rtol``; resample irregular stamps with
-        :func:`jaxfric.rig.io.resample_uniform` first). The split is
+        [`jaxfric.rig.io.resample_uniform`][jaxfric.rig.resample_uniform] first). The split is
         ``round(train_fraction * n)`` training samples unless ``n_train`` is given
-        (:func:`split_count`).
+        ([`split_count`][jaxfric.records.split_count]).
         """
         velocity = as_channel("velocity", velocity)
         n = velocity.shape[0]
@@ -257,5 +257,5 @@ class FrictionData(eqx.Module):
 
     def with_split(self, train_fraction: float | None = DEFAULT_TRAIN_FRACTION, *,
                    n_train: int | None = None) -> "FrictionData":
-        """Same record, another split (fraction of samples, or a count; :func:`split_count`)."""
+        """Same record, another split (fraction of samples, or a count; [`split_count`][jaxfric.records.split_count])."""
         return self._view(slice(None), _given_split(self.n_samples, train_fraction, n_train))

@@ -1,6 +1,6 @@
 """The report folder written by ``jaxfric demo`` and ``jaxfric identify``.
 
-One call, :func:`write_report`, writes into a folder::
+One call, [`write_report`][jaxfric.report.write_report], writes into a folder::
 
     report.md            the comparison table, per-model details, figures, how to reproduce
     results.json         the same numbers, machine-readable
@@ -15,11 +15,11 @@ One call, :func:`write_report`, writes into a folder::
 
 Every file is written to a temporary name in the same folder and moved into place
 with ``os.replace``, so an interrupted run never leaves a half-written file under a
-final name (temporaries match :data:`TEMP_PATTERNS`; :func:`remove_temporaries`
+final name (temporaries match [`TEMP_PATTERNS`][jaxfric.report.TEMP_PATTERNS]; [`remove_temporaries`][jaxfric.report.remove_temporaries]
 clears them).
 
-The writer takes jaxfric's own types: :class:`jaxfric.Fit` objects and a
-:class:`jaxfric.FrictionData`; anything else is a ``TypeError`` before a file is written.
+The writer takes jaxfric's own types: [`jaxfric.Fit`][jaxfric.fit.Fit] objects and a
+[`jaxfric.FrictionData`][jaxfric.rig.FrictionData]; anything else is a ``TypeError`` before a file is written.
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def _windows(data):
 
 
 def fit_metrics(fit, data) -> dict[str, dict[str, float]]:
-    """Metrics per window (``train``, ``valid``, ``all``) of :func:`jaxfric.metrics.friction_metrics`.
+    """Metrics per window (``train``, ``valid``, ``all``) of [`jaxfric.metrics.friction_metrics`][jaxfric.metrics.friction_metrics].
 
     Taken from ``fit.metrics`` when the fit carries them for these windows (the library is
     the authority), otherwise computed from the prediction on ``data``.
@@ -253,8 +253,8 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
 
     Args:
         out: folder (created if needed; existing report files are replaced).
-        data: the :class:`jaxfric.FrictionData` the fits were made on.
-        fits: mapping model name (used in file names) -> :class:`jaxfric.Fit` (anything
+        data: the [`jaxfric.FrictionData`][jaxfric.rig.FrictionData] the fits were made on.
+        fits: mapping model name (used in file names) -> [`jaxfric.Fit`][jaxfric.fit.Fit] (anything
             else is a ``TypeError``).
         title: report title.
         command: the command line that produced it (shown under "Reproduce").
@@ -269,7 +269,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
             besides ``data`` (``identify(train=..., valid=...)``): one figure per model
             and record; the per-record metrics come from each fit's ``metrics["records"]``.
         sections: heading -> Markdown body of further sections the caller computed (e.g.
-            ``jaxfric demo``'s friction-compensation table, :func:`jaxfric.compensation.compensation_table`),
+            ``jaxfric demo``'s friction-compensation table, [`jaxfric.compensation.compensation_table`][jaxfric.compensation.compensation_table]),
             placed after the model sections and kept in ``results.json`` under ``sections``.
 
     Returns:

@@ -1,17 +1,17 @@
 """Sweeps: every (model, record, key) identification as one resumable call.
 
-``jaxfric.sweep(models, records, keys, out_dir)`` runs :func:`jaxfric.identify` (or
-:func:`jaxfric.identify_motion` for :class:`jaxfric.MotionData` records) once per
+``jaxfric.sweep(models, records, keys, out_dir)`` runs [`jaxfric.identify`][jaxfric.identification.identify] (or
+[`jaxfric.identify_motion`][jaxfric.motion.identify_motion] for [`jaxfric.MotionData`][jaxfric.motion.MotionData] records) once per
 combination and writes, under ``out_dir``:
 
-* ``fits/<model>/<record>/seed<k>.npz`` -- one :meth:`jaxfric.Fit.save` file per run;
+* ``fits/<model>/<record>/seed<k>.npz`` -- one [`jaxfric.Fit.save`][jaxfric.fit.Fit.save] file per run;
 * ``results.csv`` -- one row per finished run (model, record, seed, cost, the metrics of
   every window, the run's wall time and its fit file), in the sweep's order;
 * ``sweep.json`` -- what each model and record label stands for (the model
   configuration with the identify options, a SHA-256 of each record's arrays).
 
 Resuming: a run whose fit file exists is not recomputed; its row is read back from the
-file. Every file is written atomically (:func:`jaxfric.files.atomic_write`), so an
+file. Every file is written atomically ([`jaxfric.files.atomic_write`][jaxfric.files.atomic_write]), so an
 interrupted sweep (Ctrl-C, a killed job, an exception) leaves only whole files, and
 calling the same sweep again finishes the rest. A label that already stands for other
 settings or other data in ``out_dir`` is refused before any run.
@@ -21,7 +21,7 @@ Where the runs go: run ``i`` of the sweep's order belongs to process
 ``jax.process_index()`` / ``jax.process_count()`` after ``jax.distributed.initialize``,
 or given, for a job array without JAX's runtime). Within a process the runs go one
 after another, and each one spreads its population over that process's devices as
-:func:`jaxfric.identify` does. Runs of one (model, record) pair share one compiled
+[`jaxfric.identify`][jaxfric.identification.identify] does. Runs of one (model, record) pair share one compiled
 program (the key is data), so only the first run of a pair compiles. Under JAX's
 distributed runtime the processes meet at a barrier at the end and process 0 writes
 the table of every run; the fit files must then lie on a file system all processes
@@ -72,9 +72,9 @@ class Run:
 
 @dataclasses.dataclass
 class SweepResult:
-    """What :func:`sweep` did: ``rows`` (one dict per finished run, the table's rows in
+    """What [`sweep`][jaxfric.sweeps.sweep] did: ``rows`` (one dict per finished run, the table's rows in
     the sweep's order), the runs this call ``computed`` and those it found ``done``
-    already, and the ``out_dir``. :meth:`fit` loads one run's fit."""
+    already, and the ``out_dir``. [`fit`][jaxfric.sweeps.SweepResult.fit] loads one run's fit."""
 
     out_dir: Path
     runs: list[Run]
@@ -331,13 +331,13 @@ def sweep(
 
     Args:
         models: a model name or instance, a list of them (labelled by their
-            :func:`jaxfric.models.get` name) or a mapping label -> model, or label ->
+            [`jaxfric.models.get`][jaxfric.models.get] name) or a mapping label -> model, or label ->
             ``(model, options)`` for identify options of that model alone (they win over
             ``**options``; e.g. a solver sized for the model).
         records: a mapping label -> record or a list of records (labelled ``record0``,
-            ``record1``, ...): :class:`jaxfric.FrictionData` or ``(velocity, friction,
-            dt)`` for :func:`jaxfric.identify`; :class:`jaxfric.MotionData` (all of them)
-            for :func:`jaxfric.identify_motion`.
+            ``record1``, ...): [`jaxfric.FrictionData`][jaxfric.rig.FrictionData] or ``(velocity, friction,
+            dt)`` for [`jaxfric.identify`][jaxfric.identification.identify]; [`jaxfric.MotionData`][jaxfric.motion.MotionData] (all of them)
+            for [`jaxfric.identify_motion`][jaxfric.motion.identify_motion].
         keys: a number of seeds ``K`` (seeds ``0 .. K-1``) or a list of int seeds; each
             run's key is ``jax.random.key(seed)``, so run ``(m, r, k)`` equals
             ``identify(m, records[r], key=k, **options)``.
@@ -350,7 +350,7 @@ def sweep(
             ``method=``, ``refine=``, ``dtype=``, ``box=``, ``mass=``, model options...).
 
     Returns:
-        a :class:`SweepResult`; ``out_dir/results.csv`` holds its rows.
+        a [`SweepResult`][jaxfric.sweeps.SweepResult]; ``out_dir/results.csv`` holds its rows.
 
     Raises:
         ValueError: before any run, for empty or badly labelled models or records,

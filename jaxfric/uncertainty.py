@@ -1,22 +1,22 @@
 """Parameter uncertainty of a physical friction fit (docs/uncertainty.md).
 
 The residual vector r(θ) of each kind of fit, its Jacobian J = ∂r/∂θ at θ̂
-(``jax.jacfwd``), and the covariance estimators of :mod:`jaxfric.covariance` (Jacobian,
+(``jax.jacfwd``), and the covariance estimators of [`jaxfric.covariance`][jaxfric.covariance] (Jacobian,
 Newey–West, block bootstrap) applied to them; the plausibility rules; what the report
 and CLI show.
 
-Each kind of fit says how its residuals are built (:class:`FitKind`): a force-balance
-:class:`jaxfric.Fit` here (friction prediction minus measured friction), a
-:class:`jaxfric.motion.MotionFit` in :mod:`jaxfric.motion` (simulated minus measured
-position), which registers it with :func:`register_fit_kind`. A record type defined
+Each kind of fit says how its residuals are built ([`FitKind`][jaxfric.uncertainty.FitKind]): a force-balance
+[`jaxfric.Fit`][jaxfric.fit.Fit] here (friction prediction minus measured friction), a
+[`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit] in [`jaxfric.motion`][jaxfric.motion] (simulated minus measured
+position), which registers it with [`register_fit_kind`][jaxfric.uncertainty.register_fit_kind]. A record type defined
 above this module (``jaxfric.identification.RecordSet``) registers how to read its
-training records with :func:`register_training_records`. Both are looked up along the
+training records with [`register_training_records`][jaxfric.uncertainty.register_training_records]. Both are looked up along the
 class's MRO, and registered by the module that defines the class, so the registration
 has run whenever an instance exists; this module imports nothing above it.
 
 The linearisation (r, J, the physical values and their Jacobian) is one compiled XLA
-program (:func:`_linearise`), not some thirty small ones run op by op. Its residual
-function is a pytree (:class:`_ForceBalance`, an ``eqx.Module``): the records are its
+program (`_linearise`), not some thirty small ones run op by op. Its residual
+function is a pytree (`_ForceBalance`, an ``eqx.Module``): the records are its
 array leaves, traced inputs of the program, and only the model's configuration, the
 training lengths and the dtypes are static, so a second fit of the same model on
 records of the same lengths reuses the compiled program.
@@ -85,7 +85,7 @@ class Residuals:
 @dataclasses.dataclass(frozen=True)
 class FitKind:
     """How the uncertainty code reads one class of fit: ``residuals(fit, data)`` gives its
-    :class:`Residuals` over the training data, ``train_velocity(fit, data)`` the
+    [`Residuals`][jaxfric.uncertainty.Residuals] over the training data, ``train_velocity(fit, data)`` the
     training velocity the plausibility rules look at."""
 
     residuals: Callable[[Any, Any], Residuals]
@@ -104,7 +104,7 @@ def register_fit_kind(fit_type: type, kind: FitKind) -> None:
 
 def register_training_records(data_type: type, records: Callable[[Any], tuple]) -> None:
     """Read the training records of a force-balance fit's data of ``data_type`` with
-    ``records(data)``: records (:class:`jaxfric.FrictionData`) whose first ``n_train``
+    ``records(data)``: records ([`jaxfric.FrictionData`][jaxfric.rig.FrictionData]) whose first ``n_train``
     samples trained the fit."""
     _TRAINING_RECORDS[data_type] = records
 
@@ -137,7 +137,7 @@ def _training_windows(fit, data) -> tuple:
 
 def _friction_residuals(fit, data) -> Residuals:
     """Prediction minus measured friction over the training samples the fit was made on,
-    each record run from its own initial state (:class:`_ForceBalance`)."""
+    each record run from its own initial state (`_ForceBalance`)."""
     if "motion" in fit.settings:
         raise ValueError("a motion fit read as a force-balance Fit (load_fit): read it with "
                          "jaxfric.motion.load_motion_fit for its uncertainty")
@@ -157,7 +157,7 @@ def _friction_residuals(fit, data) -> Residuals:
 
 
 class _ForceBalance(eqx.Module):
-    """r(θ) of a force-balance fit: :func:`jaxfric.fit.predict` of each record minus its
+    """r(θ) of a force-balance fit: [`jaxfric.fit.predict`][jaxfric.fit.predict] of each record minus its
     measured friction over the first ``n_train`` samples, concatenated. The records
     (velocity, friction, input channels), the scalers and ``dt`` are array leaves, so
     traced inputs of the compiled linearisation; the model (its static configuration)
@@ -256,7 +256,7 @@ _linearise = eqx.filter_jit(_linearisation)
 
 
 def _linearise_once(resid, model, kinds, theta):
-    """:func:`_linearise` for a pytree ``resid``; a plain closure (hashed by identity, so
+    """`_linearise` for a pytree ``resid``; a plain closure (hashed by identity, so
     never reused) is compiled by a ``jax.jit`` that dies with this call, so that no
     cache keeps the closure and the arrays it captured alive."""
     if isinstance(resid, (eqx.Module, jax.tree_util.Partial)):
@@ -270,19 +270,19 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
     """Covariances, standard errors and intervals of a physical fit's parameters.
 
     Args:
-        fit: a :class:`jaxfric.Fit` of a physical model (from :func:`jaxfric.identify`),
-            or a :class:`jaxfric.motion.MotionFit`.
+        fit: a [`jaxfric.Fit`][jaxfric.fit.Fit] of a physical model (from [`jaxfric.identify`][jaxfric.identification.identify]),
+            or a [`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit].
         data: what the fit was trained on: the record given to ``identify`` (its first
             ``fit.n_train`` samples are used), a list of training records, or the
-            :class:`jaxfric.motion.MotionData` of a motion fit.
-        method: one or more of :data:`METHODS` (default :data:`DEFAULT_METHODS`); the
+            [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData] of a motion fit.
+        method: one or more of [`METHODS`][jaxfric.uncertainty.METHODS] (default [`DEFAULT_METHODS`][jaxfric.covariance.DEFAULT_METHODS]); the
             first is the default the result shows. ``"block_bootstrap"`` needs ``key``.
-        bandwidth: Newey–West lag L; default :func:`andrews_bandwidth`.
+        bandwidth: Newey–West lag L; default [`andrews_bandwidth`][jaxfric.uncertainty.andrews_bandwidth].
         rcond: relative singular-value floor (module docstring).
 
     Computed in ``fit.theta``'s dtype (enable x64 for long records). The residuals,
     their Jacobian and the physical values' Jacobian are one compiled program
-    (:func:`_linearise`), reused by later calls on fits of the same model configuration
+    (`_linearise`), reused by later calls on fits of the same model configuration
     and record lengths (the first call pays its compilation, about a second). Raises
     ``ValueError`` for a network fit (its weights have no physical meaning), an unknown
     method, or a bootstrap without a key.
@@ -326,7 +326,7 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
 
 def prediction_interval(fit, velocity, level: float = DEFAULT_LEVEL, *, dt=None, inputs=None,
                         method=None, noise: bool = True):
-    """``(prediction, low, high)`` [N] for a velocity record: :meth:`jaxfric.Fit.prediction_interval`
+    """``(prediction, low, high)`` [N] for a velocity record: [`jaxfric.Fit.prediction_interval`][jaxfric.fit.Fit.prediction_interval]
     (ŷ ± t sqrt(j Σ jᵀ + s²) with the box-capped covariance); a ``ValueError`` names why a
     fit has none (a network, a motion fit, a file saved without it)."""
     if fit.uncertainty is None:
@@ -342,11 +342,11 @@ def coverage(y, low, high) -> float:
 
 
 def assess_fit(fit, data) -> None:
-    """What :func:`jaxfric.identify` and :func:`jaxfric.identify_motion` run on every
-    physical fit: the plausibility rules (:func:`jaxfric.plausibility.check_plausibility`,
+    """What [`jaxfric.identify`][jaxfric.identification.identify] and [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] run on every
+    physical fit: the plausibility rules ([`jaxfric.plausibility.check_plausibility`][jaxfric.plausibility.check_plausibility],
     into ``fit.diagnostics["implausible"]``, each with a
-    :class:`~jaxfric.plausibility.PlausibilityWarning`), and the training ``data``
-    attached so that :attr:`jaxfric.Fit.uncertainty` is computed on first use (the
+    [`PlausibilityWarning`][jaxfric.plausibility.PlausibilityWarning]), and the training ``data``
+    attached so that [`jaxfric.Fit.uncertainty`][jaxfric.fit.Fit.uncertainty] is computed on first use (the
     Jacobian's compilation costs seconds that a fit nobody inspects should not pay)."""
     if fit.model.needs_scaling:
         return
@@ -417,7 +417,7 @@ def _ensemble_band(fit, data) -> dict | None:
 
 
 def report_markdown(summary: dict | None) -> list[str]:
-    """Markdown lines of :func:`report_summary` for a model's section of report.md."""
+    """Markdown lines of [`report_summary`][jaxfric.uncertainty.report_summary] for a model's section of report.md."""
     if not summary:
         return []
     L: list[str] = []

@@ -8,7 +8,7 @@ one ``jaxfric: error:`` line a fraction of a second after the command starts, in
 after JAX's import (several seconds on a loaded machine). What needs the models (the
 parameters each model searches, the ranges a parameter accepts, the memory a model's
 solver needs) is checked right after the import, still before any stage starts
-(:func:`jaxfric.cli.fitting.check_models`, :func:`jaxfric.cli.fitting.check_memory`).
+([`jaxfric.cli.fitting.check_models`][jaxfric.cli.fitting.check_models], [`jaxfric.cli.fitting.check_memory`][jaxfric.cli.fitting.check_memory]).
 
 The columns read here are kept on ``args`` (``args.columns``), so the data are read once.
 """
@@ -45,7 +45,7 @@ def check_out_folder(path: str) -> None:
 
 
 def precheck(args) -> None:
-    """Run the JAX-free checks of ``args.command`` (raises :class:`UserError`)."""
+    """Run the JAX-free checks of ``args.command`` (raises [`UserError`][jaxfric.cli.UserError])."""
     command = args.command
     if command in ("demo", "identify"):
         check_model_names(args.models)

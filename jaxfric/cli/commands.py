@@ -1,8 +1,8 @@
 """The four sub-commands: ``demo``, ``identify``, ``predict`` and ``bench``.
 
 Each takes the parsed arguments and returns an exit status. They run in the CLI's
-worker thread (see :mod:`jaxfric.cli.errors`); files go through the atomic writers of
-:mod:`jaxfric.report`, and every finished file is recorded in :data:`KEPT` so that
+worker thread (see [`jaxfric.cli.errors`][jaxfric.cli.errors]); files go through the atomic writers of
+[`jaxfric.report`][jaxfric.report], and every finished file is recorded in [`KEPT`][jaxfric.cli.errors.KEPT] so that
 Ctrl-C can say what stayed on disk.
 """
 
@@ -72,7 +72,7 @@ def _settings(args, fits) -> dict:
 
 
 def _choose_form(args, data, say) -> None:
-    """``--form``: set ``args.asymmetric`` (read by :meth:`FitSpec.from_args`) and the
+    """``--form``: set ``args.asymmetric`` (read by [`FitSpec.from_args`][jaxfric.cli.spec.FitSpec.from_args]) and the
     sentence the report gives for it (``args.form_reason``)."""
     from .fitting import physical_form
 
@@ -88,7 +88,7 @@ def _choose_form(args, data, say) -> None:
 
 def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
     """Python that repeats the command's fits (shown under "Reproduce" in report.md): each
-    fit is its :class:`~jaxfric.cli.spec.FitSpec`'s repr, run on the same data and key."""
+    fit is its [`FitSpec`][jaxfric.cli.spec.FitSpec]'s repr, run on the same data and key."""
     lines = ["import jax", "from jaxfric import rig", "from jaxfric.cli.spec import FitSpec", "",
              *data_lines]
     for name in names:
@@ -162,7 +162,7 @@ def cmd_demo(args, argv) -> int:
 
 def _compensation_section(out: Path, rig, fits, *, quick: bool, data=None) -> str:
     """docs/algorithms.md §13.3 on the demo's rig: the position loop of
-    :mod:`jaxfric.compensation` with no, each fit's (ENN, LuGre, static: whichever the
+    [`jaxfric.compensation`][jaxfric.compensation] with no, each fit's (ENN, LuGre, static: whichever the
     demo fitted) and the ideal friction feed-forward; the table and ``compensation.png``.
     ``quick`` shortens the reference (one 4 s, 5 mm sinusoid, whose speed stays inside the
     demo's training range, and 1 s ramps) to keep ``jaxfric demo --quick`` a smoke test.

@@ -2,8 +2,8 @@
 
 CSV files are read here into named NumPy columns (with one-line errors naming the
 file, the column and what the header holds), then handed to the library loaders
-(:func:`jaxfric.rig.load_friction_pairs`, :func:`jaxfric.rig.load_measurements`,
-:func:`jaxfric.rig.estimate_friction`), which apply the unit factors, check the
+([`jaxfric.rig.load_friction_pairs`][jaxfric.rig.load_friction_pairs], [`jaxfric.rig.load_measurements`][jaxfric.rig.load_measurements],
+[`jaxfric.rig.estimate_friction`][jaxfric.rig.estimate_friction]), which apply the unit factors, check the
 signals and resample irregular time stamps.
 """
 
@@ -64,7 +64,7 @@ def _delimiter(text: str | None):
 
 def read_table(path: str, *, delimiter: str | None = ",", skip_rows: int = 0) -> Table:
     """Read a delimited text file with an optional header row (detected: a first line that is
-    not all numbers). ``#`` starts a comment line. Raises :class:`UserError` for a missing or
+    not all numbers). ``#`` starts a comment line. Raises [`UserError`][jaxfric.cli.UserError] for a missing or
     unreadable file, no data rows, ragged rows or non-numeric values."""
     if skip_rows < 0:
         raise UserError(f"--skip-rows must be >= 0, got {skip_rows}")
@@ -164,8 +164,8 @@ class Columns:
 
 def identification_columns(args, path: str) -> Columns:
     """Read ``jaxfric identify``'s columns of ``path`` (FILE or a ``--valid`` file) and
-    check the options that choose them; one-line :class:`UserError` otherwise. NumPy only:
-    this runs before JAX is imported (:mod:`jaxfric.cli.checks`)."""
+    check the options that choose them; one-line [`UserError`][jaxfric.cli.UserError] otherwise. NumPy only:
+    this runs before JAX is imported ([`jaxfric.cli.checks`][jaxfric.cli.checks])."""
     pairs = args.velocity_col is not None or args.friction_col is not None
     raw_cols = {"x": args.x_col, "p1": args.p1_col, "p2": args.p2_col, "load": args.load_col}
     raw = any(v is not None for v in raw_cols.values())
@@ -225,12 +225,12 @@ def identification_columns(args, path: str) -> Columns:
 
 
 def identification_data(args, path: str | None = None):
-    """:class:`jaxfric.rig.FrictionData` from ``jaxfric identify``'s file and options.
+    """[`jaxfric.rig.FrictionData`][jaxfric.rig.FrictionData] from ``jaxfric identify``'s file and options.
 
     Returns ``(data, description, notes)``: the description says which mode and columns were
     used (for the report), the notes carry the loaders' warnings (e.g. resampled time stamps). Velocity/friction columns select the pairs mode; position and
     pressure/load columns the raw-channel mode through the §7 pipeline. The columns come
-    from :func:`identification_columns` (read before JAX was imported, kept in ``args.columns``).
+    from [`identification_columns`][jaxfric.cli.data.identification_columns] (read before JAX was imported, kept in ``args.columns``).
     """
     from jaxfric import rig
 
@@ -266,7 +266,7 @@ def velocity_filter(args) -> dict | None:
 
 
 def prediction_columns(args) -> Columns:
-    """``jaxfric predict``'s columns (no JAX; see :func:`identification_columns`)."""
+    """``jaxfric predict``'s columns (no JAX; see [`identification_columns`][jaxfric.cli.data.identification_columns])."""
     table = read_table(args.data, delimiter=args.delimiter, skip_rows=args.skip_rows)
     t = _time_column(table, args)
     cols = {"t": t, "velocity": table.column(args.velocity_col, "--velocity-col")}
@@ -297,9 +297,9 @@ def prediction_input(args):
 def simulated_rig(key):
     """The demo's data: simulate the default rig with ``key`` and run the §7 pipeline.
 
-    Returns ``(rig, record, data)``: the :class:`jaxfric.rig.Rig`, its
-    :class:`~jaxfric.rig.RigRecord` (measured channels + ground truth) and the
-    :class:`~jaxfric.rig.FrictionData` (1600/400 split).
+    Returns ``(rig, record, data)``: the [`jaxfric.rig.Rig`][jaxfric.rig.Rig], its
+    [`RigRecord`][jaxfric.rig.RigRecord] (measured channels + ground truth) and the
+    [`FrictionData`][jaxfric.rig.FrictionData] (1600/400 split).
     """
     from jaxfric import rig
 

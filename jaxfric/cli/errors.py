@@ -9,7 +9,7 @@ Ctrl-C: a jitted XLA computation does not return to the Python interpreter until
 has finished, so a ``KeyboardInterrupt`` raised in the thread that runs it would wait
 for the whole optimisation. The work therefore runs in a worker thread while the main
 thread waits in short slices; Ctrl-C reaches the main thread at once, which says what
-was kept (:class:`Kept`), removes temporaries of unfinished writes and exits with 130.
+was kept ([`Kept`][jaxfric.cli.errors.Kept]), removes temporaries of unfinished writes and exits with 130.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ class UserError(Exception):
 class Kept:
     """What a command has written so far (for the Ctrl-C message), thread-safe.
 
-    Writers call :meth:`add` once a file is complete (atomically moved into place)
-    and :meth:`watch` on the folders they write to, so that an interrupt can remove
-    the temporaries of a write that was cut short (see :func:`jaxfric.report.remove_temporaries`).
+    Writers call [`add`][jaxfric.cli.errors.Kept.add] once a file is complete (atomically moved into place)
+    and [`watch`][jaxfric.cli.errors.Kept.watch] on the folders they write to, so that an interrupt can remove
+    the temporaries of a write that was cut short (see [`jaxfric.report.remove_temporaries`][jaxfric.report.remove_temporaries]).
     """
 
     def __init__(self):
@@ -91,7 +91,7 @@ def print_error(message: str) -> None:
 def run_interruptible(work: Callable[[], int], *, debug: bool = False) -> int:
     """Run ``work()`` in a worker thread; map errors and Ctrl-C to exit statuses.
 
-    Returns ``work``'s status, :data:`EXIT_USER_ERROR` after a :class:`UserError`
+    Returns ``work``'s status, [`EXIT_USER_ERROR`][jaxfric.cli.errors.EXIT_USER_ERROR] after a [`UserError`][jaxfric.cli.UserError]
     (or a ``ValueError``/``OSError`` from the library's input checks), and does not
     return on Ctrl-C: it prints what was kept and ends the process with 130 (the
     worker may be inside XLA and cannot be stopped politely).

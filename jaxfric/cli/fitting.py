@@ -1,9 +1,9 @@
 """Models, solvers and budgets for the command line, and the calls to ``jaxfric.identify``.
 
-Each model's fit is one :class:`jaxfric.cli.spec.FitSpec` (arguments -> specification ->
+Each model's fit is one [`jaxfric.cli.spec.FitSpec`][jaxfric.cli.spec.FitSpec] (arguments -> specification ->
 ``jaxfric.identify``). Models are passed by *name* (with ``model_options``), so the command
 line gets the library's named-model defaults; without ``--generations`` / ``--nm-evals``
-the library's :func:`jaxfric.identification.default_solver` is used unchanged, and a budget the
+the library's [`jaxfric.identification.default_solver`][jaxfric.identification.default_solver] is used unchanged, and a budget the
 user gives replaces only that field of it. ``--quick`` shrinks the budget to a smoke test
 (3 generations, 200 Nelder–Mead evaluations), which compiles exactly the same programs, so
 it also warms the compilation cache.
@@ -26,8 +26,8 @@ LABELS = {"elman": "ENN", "elman_full": "ENN (full context)", "lugre": "LuGre", 
 
 def check_models(names, box=None) -> list[str]:
     """Validate model names, and that every ``--box`` entry is searched by one of them
-    and is a range :class:`jaxfric.models.SearchBox` accepts (one-line errors). The names
-    were checked before JAX was imported (:func:`jaxfric.cli.checks.check_model_names`);
+    and is a range [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox] accepts (one-line errors). The names
+    were checked before JAX was imported ([`jaxfric.cli.checks.check_model_names`][jaxfric.cli.checks.check_model_names]);
     the box needs the models."""
     from jaxfric import models
 
@@ -99,7 +99,7 @@ def memory_need(spec, model, *, x64: bool) -> tuple[int, str]:
 
 
 def check_memory(spec, model, *, x64: bool, available: int | None = None, say=None) -> None:
-    """Refuse a fit whose largest matrix (:func:`memory_need`) exceeds the memory
+    """Refuse a fit whose largest matrix ([`memory_need`][jaxfric.cli.fitting.memory_need]) exceeds the memory
     available, and warn (through ``say``) past a quarter of it, with the figures."""
     need, what = memory_need(spec, model, x64=x64)
     available = available_memory() if available is None else available
@@ -144,7 +144,7 @@ def describe_solver(solver, model, paper: bool = False, refine: str = "default")
 def physical_form(data, *, threshold: float = 0.05) -> tuple[bool, str]:
     """Whether the physical models need direction-dependent levels and an offset, and why:
     the direction-wise mean friction while sliding (``|v|`` above a tenth of its maximum;
-    :func:`jaxfric.rig.coulomb_levels`) differs between the directions by more than
+    [`jaxfric.rig.coulomb_levels`][jaxfric.rig.coulomb_levels]) differs between the directions by more than
     ``threshold`` of its half-range. Returns ``(asymmetric, sentence for the report)``."""
     import numpy as np
 
@@ -207,7 +207,7 @@ class LazyBar:
 
 
 def progress_bar(solver, model, desc: str, paper: bool = False, refine=None):
-    """A lazily drawn tqdm bar named after the model (see :class:`LazyBar`), or ``None``
+    """A lazily drawn tqdm bar named after the model (see [`LazyBar`][jaxfric.cli.fitting.LazyBar]), or ``None``
     when tqdm is not installed (it is not a declared dependency of jaxfric: the bar is
     then left out rather than failing inside the compiled run's callback). The gradient
     stage's bar knows its step cap when ``identify`` chooses the stage itself

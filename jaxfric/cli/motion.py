@@ -2,10 +2,10 @@
 
 Reads a CSV with a force column (or a drive voltage and ``--force-gain``) and a position
 column, identifies each ``--model`` inside the mechanics with
-:func:`jaxfric.identify_motion`, and writes a report folder: ``motion.md`` (position
+[`jaxfric.identify_motion`][jaxfric.motion.identify_motion], and writes a report folder: ``motion.md`` (position
 RMSE [mm] and FIT %, free run and k-step, per model, ranked by the held-back block's
-free-run RMSE, :func:`jaxfric.motion.compare_motion`'s rule), ``models/<model>.npz`` (load
-with :func:`jaxfric.motion.load_motion_fit`) and ``motion_free_run.png``. Progress bars
+free-run RMSE, [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s rule), ``models/<model>.npz`` (load
+with [`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``. Progress bars
 are shown unless ``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
 """
 
@@ -77,7 +77,7 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
 
 
 def _data(args):
-    """:class:`jaxfric.motion.MotionData` from the file and options; irregular time stamps
+    """[`jaxfric.motion.MotionData`][jaxfric.motion.MotionData] from the file and options; irregular time stamps
     are resampled onto a uniform grid and said on stderr (also under ``--quiet``)."""
     from jaxfric.motion import MotionData
     from jaxfric.rig.io import _uniformise

@@ -87,7 +87,7 @@ def positive_int(text: str) -> int:
 
 def box_entry(text: str) -> tuple[str, tuple[float, float]]:
     """``NAME=LO,HI`` -> ``(NAME, (LO, HI))``: two finite numbers, low < high (no JAX here;
-    the parameter's name and the range rules of :class:`jaxfric.models.SearchBox` are
+    the parameter's name and the range rules of [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox] are
     checked once the models are imported, before any stage)."""
     name, sep, pair = text.partition("=")
     parts = pair.split(",")

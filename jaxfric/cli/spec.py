@@ -1,10 +1,10 @@
-"""One specification object per fit: command-line arguments -> :class:`FitSpec` -> the library.
+"""One specification object per fit: command-line arguments -> [`FitSpec`][jaxfric.cli.spec.FitSpec] -> the library.
 
 The command line holds no copy of a library default. Every field left ``None`` means
-"what the library chooses": the solver starts from :func:`jaxfric.identification.default_solver`
+"what the library chooses": the solver starts from [`jaxfric.identification.default_solver`][jaxfric.identification.default_solver]
 for the model (lattice size, generations, Nelder–Mead budget) and a budget the user gave
 replaces only that field. ``repr(spec)`` is the report's "Reproduce" line: evaluating it
-with ``from jaxfric.cli.spec import FitSpec`` and calling :meth:`FitSpec.identify` repeats
+with ``from jaxfric.cli.spec import FitSpec`` and calling [`FitSpec.identify`][jaxfric.cli.spec.FitSpec.identify] repeats
 the fit.
 """
 
@@ -25,10 +25,10 @@ ASYMMETRIC_MODELS = ("coulomb", "stribeck", "lugre", "dahl", "gms")
 
 @dataclass(frozen=True)
 class FitSpec:
-    """What one fit asks of :func:`jaxfric.identify`.
+    """What one fit asks of [`jaxfric.identify`][jaxfric.identification.identify].
 
     Args:
-        model: a :func:`jaxfric.models.get` name (``"elman"``, ``"lugre"``, ...).
+        model: a [`jaxfric.models.get`][jaxfric.models.get] name (``"elman"``, ``"lugre"``, ...).
         neurons: hidden neurons of the Elman networks (``None``: the model's default).
         solver: ``"mapso-nmds"`` (the library's default solver), ``"mapso"``, ``"pso"``
             or ``"nelder-mead"``.
@@ -41,11 +41,11 @@ class FitSpec:
             ``jaxfric.identify(refine=...)`` name (``"bfgs"``, ``"lm"``, ...).
         paper: the paper's method exactly (``identify(method="paper")``: MAPSO–NMDS, no
             gradient stage) instead of the library's default pipeline.
-        seed: the key is ``jax.random.key(seed)`` unless a key is passed to :meth:`identify`.
+        seed: the key is ``jax.random.key(seed)`` unless a key is passed to [`identify`][jaxfric.cli.spec.FitSpec.identify].
         box: search-box entries ``((name, (low, high)), ...)`` (``--box``) handed to
             ``identify(box=...)``; the rest of the box is the library's (data-centred).
         asymmetric: fit a physical model with direction-dependent levels and a force
-            offset (``asymmetric=True, offset=True``; :data:`ASYMMETRIC_MODELS`), the form
+            offset (``asymmetric=True, offset=True``; [`ASYMMETRIC_MODELS`][jaxfric.cli.spec.ASYMMETRIC_MODELS]), the form
             asymmetric data need; ignored by the networks and the cylinder model.
     """
 

@@ -1,4 +1,4 @@
-"""``jaxfric sweep DIR``: every (model, record, seed) identification, resumable (:func:`jaxfric.sweep`).
+"""``jaxfric sweep DIR``: every (model, record, seed) identification, resumable ([`jaxfric.sweep`][jaxfric.sweeps.sweep]).
 
 Each ``--data`` file is read with the columns and options of ``jaxfric identify``; each
 ``--model`` gets the solver ``jaxfric identify`` would give it (the same budget
@@ -106,7 +106,7 @@ def _record_labels(paths: list[str]) -> list[str]:
 
 
 def cmd_sweep(args, argv) -> int:
-    """Build the records and per-model options from the arguments and run :func:`jaxfric.sweep`."""
+    """Build the records and per-model options from the arguments and run [`jaxfric.sweep`][jaxfric.sweeps.sweep]."""
     del argv
     from jaxfric.identification import as_record
     from jaxfric.sweeps import sweep

@@ -1,7 +1,7 @@
-"""Friction identification: model + data + optimiser → :class:`jaxfric.Fit` (docs/algorithms.md §11).
+"""Friction identification: model + data + optimiser → [`jaxfric.Fit`][jaxfric.fit.Fit] (docs/algorithms.md §11).
 
 ``from jaxfric.identification import identify`` (re-exported as ``jaxfric.identify``);
-its stages, each usable alone, are in :mod:`jaxfric.identification.stages`.
+its stages, each usable alone, are in [`jaxfric.identification.stages`][jaxfric.identification.stages].
 """
 
 from ._api import (

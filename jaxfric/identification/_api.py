@@ -1,4 +1,4 @@
-"""``jaxfric.identify``: model + data + optimiser → :class:`jaxfric.Fit` (docs/algorithms.md §11).
+"""``jaxfric.identify``: model + data + optimiser → [`jaxfric.Fit`][jaxfric.fit.Fit] (docs/algorithms.md §11).
 
 The end-to-end algorithm of §11: split and scale the record (steps 2–3), build the
 cost J (step 4), run the optimiser (steps 5–7), then report metrics on the
@@ -6,26 +6,26 @@ training, validation and whole record (step 8).
 
 Two pipelines (``method=``): ``"paper"`` is MAPSO–NMDS as the paper describes
 (steps 5–6). ``"jaxfric"`` (default) is the best measured: for the networks a short
-MAPSO on the first :data:`GLOBAL_STAGE_SAMPLES` training samples (coarse-to-fine),
+MAPSO on the first [`GLOBAL_STAGE_SAMPLES`][jaxfric.identification.GLOBAL_STAGE_SAMPLES] training samples (coarse-to-fine),
 then BFGS on the whole training window (step 7, not in the paper) with the exact
 gradient of the network's hand-written adjoint; physical models keep MAPSO–NMDS.
 On EMPS at 1 kHz the paper's pipeline spent 172–374 s, 70 % of it in Nelder–Mead
 evaluating one 20 000-step rollout at a time; ``benchmarks/pipelines.py`` measures both.
 
 Beyond the paper: several records (``train=[...]``, ``valid=...``; the cost pools
-them, each rolled out from its own initial state, :mod:`._pooled`), an ensemble of K
-keys (``keys=K``), and the flags of :mod:`._diagnostics` (parameters on a bound,
+them, each rolled out from its own initial state, `._pooled`), an ensemble of K
+keys (``keys=K``), and the flags of `._diagnostics` (parameters on a bound,
 unidentifiable parameters).
 
 ``identify`` is a sequence of named stages, each a function of
-:mod:`jaxfric.identification.stages` (records → box → objective → global stage →
+[`jaxfric.identification.stages`][jaxfric.identification.stages] (records → box → objective → global stage →
 gradient stage → Fit; docs/identify.md).
 
-Everything the user passed is checked first (:mod:`._data`, the model's own
+Everything the user passed is checked first (`._data`, the model's own
 checks, the solver's ``check``), so bad input fails in milliseconds with a
 ``ValueError`` instead of after a long run.
 
-``progress=`` goes to :func:`jaxfric.minimise`, which reports from inside the
+``progress=`` goes to [`jaxfric.minimise`][jaxfric.optim.minimise], which reports from inside the
 compiled run, and to the gradient stage, which reports between compiled chunks.
 """
 
@@ -114,10 +114,10 @@ FAST_REFINE_STEPS = 500
 def paper_solver(model: AbstractFrictionModel) -> MAPSONMDS:
     """The paper's MAPSO–NMDS (§5.1) sized for ``model`` (``identify(method="paper")``).
 
-    * more than :data:`LARGE_MODEL_PARAMS` parameters (the Elman networks): an 8×8
-      lattice (64 agents, §3.5) for :data:`DEFAULT_GENERATIONS_BLACK_BOX` generations;
+    * more than `LARGE_MODEL_PARAMS` parameters (the Elman networks): an 8×8
+      lattice (64 agents, §3.5) for [`DEFAULT_GENERATIONS_BLACK_BOX`][jaxfric.identification.DEFAULT_GENERATIONS_BLACK_BOX] generations;
     * otherwise (LuGre, Dahl, static maps): a 5×5 lattice for
-      :data:`DEFAULT_GENERATIONS_PHYSICAL` generations.
+      [`DEFAULT_GENERATIONS_PHYSICAL`][jaxfric.identification.DEFAULT_GENERATIONS_PHYSICAL] generations.
 
     Nelder–Mead gets fminsearch's budget, MaxIter = MaxFunEvals = 200·n (§5), and
     starts from a simplex sized by the swarm's final spread
@@ -141,11 +141,11 @@ def default_solver(model: AbstractFrictionModel, method: str = "jaxfric") -> Abs
     """The global (derivative-free) stage of ``identify``'s ``method`` for ``model``.
 
     ``method="jaxfric"`` (default): for models with more than
-    :data:`LARGE_MODEL_PARAMS` parameters (the networks) an 8×8 MAPSO for
-    :data:`FAST_GENERATIONS_BLACK_BOX` generations, on the first
-    :data:`GLOBAL_STAGE_SAMPLES` training samples, followed in ``identify`` by
-    :data:`FAST_REFINE_STEPS` BFGS steps on the whole training window; for the
-    physical models :func:`paper_solver`. ``method="paper"``: :func:`paper_solver`.
+    `LARGE_MODEL_PARAMS` parameters (the networks) an 8×8 MAPSO for
+    [`FAST_GENERATIONS_BLACK_BOX`][jaxfric.identification.FAST_GENERATIONS_BLACK_BOX] generations, on the first
+    [`GLOBAL_STAGE_SAMPLES`][jaxfric.identification.GLOBAL_STAGE_SAMPLES] training samples, followed in ``identify`` by
+    [`FAST_REFINE_STEPS`][jaxfric.identification.FAST_REFINE_STEPS] BFGS steps on the whole training window; for the
+    physical models [`paper_solver`][jaxfric.identification.paper_solver]. ``method="paper"``: [`paper_solver`][jaxfric.identification.paper_solver].
     """
     _check_method(method)
     if _fast_pipeline(model, method):
@@ -160,7 +160,7 @@ def _check_method(method) -> str:
 
 
 def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
-    """A model instance from an instance or a :func:`jaxfric.models.get` name.
+    """A model instance from an instance or a [`jaxfric.models.get`][jaxfric.models.get] name.
 
     ``options`` go to the constructor of a named model; an unknown one is a
     ``ValueError`` listing the options the model has.
@@ -220,23 +220,23 @@ def identify(
     """Identify a friction model from a velocity/friction record (docs/algorithms.md §11).
 
     Args:
-        model: a model instance (:class:`jaxfric.models.Elman`, :class:`~jaxfric.models.LuGre`,
+        model: a model instance ([`jaxfric.models.Elman`][jaxfric.models.Elman], [`LuGre`][jaxfric.models.LuGre],
             ...) or its name (``"elman"``, ``"lugre"``, ...; see
-            :func:`jaxfric.models.available`). Names get :data:`NAMED_MODEL_DEFAULTS`
+            [`jaxfric.models.available`][jaxfric.models.available]). Names get [`NAMED_MODEL_DEFAULTS`][jaxfric.identification.NAMED_MODEL_DEFAULTS]
             (Elman: ``context_weight_bound=1``) unless ``model_options`` override them.
-        data: a :class:`jaxfric.FrictionData` (the one record type, what every loader of
-            :mod:`jaxfric.rig` returns) or ``(velocity, friction, dt)`` [m/s, N, s],
+        data: a [`jaxfric.FrictionData`][jaxfric.rig.FrictionData] (the one record type, what every loader of
+            [`jaxfric.rig`][jaxfric.rig] returns) or ``(velocity, friction, dt)`` [m/s, N, s],
             split into a training and a validation window by ``train``. Leave it out to
             train on whole records (``train=[...]``, ``valid=...``).
             Its chamber pressures ``.p1``, ``.p2`` [Pa], when present, reach models that
-            name them in ``input_names`` (:class:`~jaxfric.models.Cylinder`), as do
+            name them in ``input_names`` ([`Cylinder`][jaxfric.models.Cylinder]), as do
             those of each record in ``train=[...]``/``valid=...``; such a model on data
             without them raises ``ValueError`` before any optimisation, naming the record.
-        solver: any jaxfric solver; default :func:`default_solver` for ``method``. ``MAPSONMDS(num_starts=k)`` refines the k best agents.
+        solver: any jaxfric solver; default [`default_solver`][jaxfric.identification.default_solver] for ``method``. ``MAPSONMDS(num_starts=k)`` refines the k best agents.
         key: a JAX PRNG key (or an int seed). Same key, same data, same fit.
         keys: an ensemble: ``K`` (an int; the members' keys are
             ``jax.random.split(key, K)``) or a batch of keys (then no ``key``). The
-            global stage runs the K members in one :func:`jaxfric.minimise_many` call
+            global stage runs the K members in one [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call
             and the gradient stage runs their iterations side by side (docs/identify.md);
             the returned fit is the member with the lowest finite training cost J, and
             ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
@@ -253,7 +253,7 @@ def identify(
             every stage runs the members side by side (equal up to reassociation).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
-            window and must hold at least :data:`~jaxfric.identification.MIN_VALID_SAMPLES`
+            window and must hold at least [`MIN_VALID_SAMPLES`][jaxfric.identification.MIN_VALID_SAMPLES]
             samples. Without ``data``: one record, a list of records or a mapping
             name -> record, each used whole for training; the cost pools the squared
             errors over the records, each rolled out from its own initial state.
@@ -262,46 +262,46 @@ def identify(
             per record are in ``fit.metrics["records"]``; ``train``/``valid``/``all``
             pool the samples. All records need the same sample time.
         refine: gradient stage after the solver — not in the paper. ``None`` (default):
-            ``method``'s choice (BFGS, :data:`FAST_REFINE_STEPS` steps, for the networks
+            ``method``'s choice (BFGS, [`FAST_REFINE_STEPS`][jaxfric.identification.FAST_REFINE_STEPS] steps, for the networks
             under ``"jaxfric"``; none otherwise); ``False``: none; ``"bfgs"``,
             ``"lbfgs"``, ``"lm"``, ``"gauss_newton"``, ``True``/``"auto"`` (LM for small
-            models, BFGS for the networks), or a :class:`GradientRefinement`.
+            models, BFGS for the networks), or a [`GradientRefinement`][jaxfric.identification.GradientRefinement].
         theta0: optional start in search coordinates (Nelder–Mead's start; one agent
             of a swarm). Must be finite and inside the box.
         dtype: floating dtype of the search; default JAX's default float (float32
             unless the caller enabled x64).
         box: the search box of a physical model, a mapping physical name -> (low, high)
-            in SI units (a :class:`jaxfric.models.SearchBox`; ``"Fs_ratio"`` for Fs/Fc,
+            in SI units (a [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox]; ``"Fs_ratio"`` for Fs/Fc,
             ``"k"`` for every GMS element stiffness), e.g. ``box={"vs": (1e-4, 1.0)}``.
             May be partial: its entries replace those of the data-centred (or default)
-            box, :meth:`~jaxfric.models.AbstractPhysicalModel.search_box`. The box is data,
+            box, [`search_box`][jaxfric.models.AbstractPhysicalModel.search_box]. The box is data,
             not part of the model, so fits with different boxes share one compiled cost.
             The Elman networks take none (their bounds are model options).
         data_bounds: centre the entries of the box the user left out on the training
-            data (:func:`jaxfric.models.data_ranges`); else they are the §8.5 defaults.
+            data ([`jaxfric.models.data_ranges`][jaxfric.models.data_ranges]); else they are the §8.5 defaults.
             No effect on the Elman networks.
         model_options: constructor options for a model given by name
             (e.g. ``{"neurons": 20}``).
         **options: the same, as keywords: ``identify("elman", data, key=0, neurons=20)``,
             ``identify("lugre", data, key=0, stribeck_exponent=1.0)``. Unknown ones are a
             ``ValueError`` listing the model's options.
-        progress: passed to :func:`jaxfric.minimise`: ``True`` for a progress bar of
+        progress: passed to [`jaxfric.minimise`][jaxfric.optim.minimise]: ``True`` for a progress bar of
             the optimiser run, a callable ``sink(phase, step, evals, f_best)``, or
             ``None`` (silent). A new display never recompiles. The gradient stage
             shows its own bar (or calls ``sink(1, step, step, J)``), which ends
             at 100 % also when the solver converges early.
         compiler_options: XLA options for the optimiser run and the gradient stage
             (their executables only): ``"auto"`` (default, see
-            :func:`jaxfric.compiler_options`), ``None`` (XLA's defaults) or a dict.
+            [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``None`` (XLA's defaults) or a dict.
 
         method: ``"jaxfric"`` (default, the best measured) or ``"paper"``. For the
-            networks (more than :data:`LARGE_MODEL_PARAMS` parameters) ``"jaxfric"``
-            runs a short MAPSO (:data:`FAST_GENERATIONS_BLACK_BOX` generations) on the
-            first :data:`GLOBAL_STAGE_SAMPLES` training samples, then BFGS on the
+            networks (more than `LARGE_MODEL_PARAMS` parameters) ``"jaxfric"``
+            runs a short MAPSO ([`FAST_GENERATIONS_BLACK_BOX`][jaxfric.identification.FAST_GENERATIONS_BLACK_BOX] generations) on the
+            first [`GLOBAL_STAGE_SAMPLES`][jaxfric.identification.GLOBAL_STAGE_SAMPLES] training samples, then BFGS on the
             whole training window (benchmarks/friction.py, benchmarks/emps.py);
             ``"paper"`` runs MAPSO–NMDS exactly as the paper describes
-            (:func:`paper_solver`, no gradient stage). For physical models both are
-            :func:`paper_solver`. An explicit ``solver`` or ``refine`` wins.
+            ([`paper_solver`][jaxfric.identification.paper_solver], no gradient stage). For physical models both are
+            [`paper_solver`][jaxfric.identification.paper_solver]. An explicit ``solver`` or ``refine`` wins.
 
     Cost (§2.4): J = mean squared training error of the free-run prediction, on
     [−1, 1]-scaled data for the networks, divided by the friction variance for
@@ -314,12 +314,12 @@ def identify(
     ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
 
     Parameters on a bound: for physical models every parameter that ends on an edge
-    of its search box is named with a :class:`BoundWarning` (which box entry to widen,
+    of its search box is named with a [`BoundWarning`][jaxfric.identification.BoundWarning] (which box entry to widen,
     e.g. ``box={"vs": ...}``) and in ``fit.diagnostics["on_bound"]``; parameters the model
     declares unidentifiable from these data go to ``fit.diagnostics["unidentifiable"]``.
 
     Returns:
-        a :class:`jaxfric.Fit`.
+        a [`jaxfric.Fit`][jaxfric.fit.Fit].
 
     Raises:
         ValueError: before any optimisation, for an unknown model name, invalid model

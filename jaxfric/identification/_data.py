@@ -1,19 +1,19 @@
 """Turn what the user passes as data into checked records (docs/algorithms.md §1, §11 step 2).
 
-:func:`as_record` (one record, split into a training and a validation window) and
-:func:`as_records` (several records, each wholly for training or for validation)
+[`as_record`][jaxfric.identification.as_record] (one record, split into a training and a validation window) and
+[`as_records`][jaxfric.identification.as_records] (several records, each wholly for training or for validation)
 accept
 
-* a :class:`~jaxfric.records.FrictionData` (``jaxfric.FrictionData``, what every
-  loader of :mod:`jaxfric.rig` returns), its split ``n_train`` used unless ``train=``
+* a [`FrictionData`][jaxfric.rig.FrictionData] (``jaxfric.FrictionData``, what every
+  loader of [`jaxfric.rig`][jaxfric.rig] returns), its split ``n_train`` used unless ``train=``
   overrides it;
 * a tuple ``(velocity, friction, dt)``.
 
-Both become the same checked :class:`~jaxfric.records.FrictionData` (``Record`` is
+Both become the same checked [`FrictionData`][jaxfric.rig.FrictionData] (``Record`` is
 that class under the name this module used to give it), split by the one rule
-:func:`jaxfric.records.split_count`.
+[`jaxfric.records.split_count`][jaxfric.records.split_count].
 
-A :class:`RecordSet` holds the checked records of one identification; the cost pools
+A [`RecordSet`][jaxfric.identification.RecordSet] holds the checked records of one identification; the cost pools
 the squared errors of every training sample over the training records, each rolled
 out from its own initial state (no model state is carried across a record boundary).
 
@@ -81,11 +81,11 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
     """Check ``data`` and split it (§1, §11 step 2); see the module docstring.
 
     Args:
-        data: a :class:`FrictionData` or ``(velocity, friction, dt)``.
+        data: a [`FrictionData`][jaxfric.rig.FrictionData] or ``(velocity, friction, dt)``.
         train: training samples (int) or fraction (float in (0, 1)); default the
             data's own ``n_train``, else 0.8 (the paper's 1600 of 2000).
-        min_valid: fewest validation samples accepted (:func:`jaxfric.identify` asks
-            for :data:`MIN_VALID_SAMPLES`).
+        min_valid: fewest validation samples accepted ([`jaxfric.identify`][jaxfric.identification.identify] asks
+            for [`MIN_VALID_SAMPLES`][jaxfric.identification.MIN_VALID_SAMPLES]).
 
     Raises:
         ValueError: mismatched lengths, NaN/inf, a non-positive ``dt``, a record
@@ -131,9 +131,9 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
 
 
 def _pressures(data) -> dict:
-    """A :class:`FrictionData`'s chamber pressures ``p1``, ``p2`` as float64 arrays (``None``
+    """A [`FrictionData`][jaxfric.rig.FrictionData]'s chamber pressures ``p1``, ``p2`` as float64 arrays (``None``
     where absent or for ``(v, F, dt)`` tuples). Checked by the model that uses them
-    (:meth:`~jaxfric.models.AbstractFrictionModel.inputs_from`), so a bad channel no model
+    ([`inputs_from`][jaxfric.models.AbstractFrictionModel.inputs_from]), so a bad channel no model
     needs does not stop the run."""
     given = (data.p1, data.p2) if isinstance(data, FrictionData) else (None, None)
     return {name: None if p is None else np.asarray(p, dtype=np.float64)
@@ -228,17 +228,17 @@ class RecordSet:
 
 
 def as_records(data=None, train=None, valid=None) -> RecordSet:
-    """Check the data of one :func:`jaxfric.identify` call.
+    """Check the data of one [`jaxfric.identify`][jaxfric.identification.identify] call.
 
     * ``data`` given: one record split by ``train`` (count or fraction, see
-      :func:`as_record`); ``valid`` must be ``None``.
+      [`as_record`][jaxfric.identification.as_record]); ``valid`` must be ``None``.
     * ``data`` ``None``: ``train`` is one record or a list of records, each used
       whole for training, and ``valid`` one record, a list or ``None``; a mapping
       name -> record names the records in the per-record metrics (then the
       fit has training metrics only).
 
     Raises:
-        ValueError: everything :func:`as_record` raises; training or validation
+        ValueError: everything [`as_record`][jaxfric.identification.as_record] raises; training or validation
             records with different sample times (resample them first); a training
             set whose friction has zero variance; ambiguous arguments.
     """

@@ -2,8 +2,8 @@
 
 A physical parameter that ends on the edge of its search box (docs/algorithms.md §8.5)
 was stopped by the box, not by the data: its value is an artefact of the range, and
-the optimum may lie outside. :func:`on_bound` finds those parameters and says which
-range to widen; :func:`jaxfric.identify` warns with :class:`BoundWarning` and
+the optimum may lie outside. [`on_bound`][jaxfric.identification.on_bound] finds those parameters and says which
+range to widen; [`jaxfric.identify`][jaxfric.identification.identify] warns with [`BoundWarning`][jaxfric.identification.BoundWarning] and
 records them in ``Fit.diagnostics`` (shown by ``Fit.summary()``, ``results.json`` and
 ``report.md``).
 
@@ -39,17 +39,17 @@ def _coordinates(model: AbstractFrictionModel):
 
 def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_TOLERANCE) -> list[dict]:
     """Parameters of ``theta`` (search coordinates) within ``tol`` box widths of a bound
-    of ``box`` (the fit's :class:`jaxfric.models.SearchBox`; ``None``: the defaults).
+    of ``box`` (the fit's [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox]; ``None``: the defaults).
 
     Returns one dict per such parameter: ``name`` (physical), ``search_name``,
     ``side`` (``"lower"``/``"upper"``), ``value`` and ``range`` in physical units
     (for LuGre's ``Fs`` the ratio Fs/Fc, whose box entry is ``Fs_ratio``),
     ``box_key`` (the box entry that sets the range, e.g. ``"vs"``), ``option`` (what
     to pass, e.g. ``"box['vs']"``), ``shown`` (the name the message uses: ``Fs/Fc``),
-    ``widen_to`` (a wider range the box accepts, :func:`jaxfric.models._box.widened`)
+    ``widen_to`` (a wider range the box accepts, `jaxfric.models._box.widened`)
     or, where the range already starts at the least value the model allows (Fs/Fc at
     1), ``None`` with ``at_limit`` true, and a one-line ``message`` naming all of it
-    (:func:`bound_message`). A coordinate whose range the model fixes
+    (`bound_message`). A coordinate whose range the model fixes
     (GMS's element splits, in [0, 1]) has no box entry to widen and is left out. Empty
     for models fitted on scaled data.
     """
@@ -76,9 +76,9 @@ def on_bound(model: AbstractFrictionModel, theta, box=None, tol: float = BOUND_T
 
 
 def bound_message(flag: dict, style: str = "python") -> str:
-    """The one-line message of an :func:`on_bound` flag; ``style="cli"`` gives the wider
+    """The one-line message of an [`on_bound`][jaxfric.identification.on_bound] flag; ``style="cli"`` gives the wider
     range as the command line takes it (``--box vs=1e-05,0.01``), ``"python"`` as
-    :func:`jaxfric.identify` does (``box={'vs': (1e-05, 0.01)}``)."""
+    [`jaxfric.identify`][jaxfric.identification.identify] does (``box={'vs': (1e-05, 0.01)}``)."""
     key, (lo, hi) = flag["box_key"], flag["range"]
     if flag.get("widen_to") is None:  # the range already starts where the model's rule allows
         advice = (f"the least the model allows ({key} range {RANGE_FLOORS[key][2]}): the data "
@@ -93,7 +93,7 @@ def bound_message(flag: dict, style: str = "python") -> str:
 
 
 #: Samples faster than this fraction of the largest speed count as moving for
-#: :func:`friction_sign`.
+#: `friction_sign`.
 MOVING_FRACTION = 0.1
 
 
@@ -101,7 +101,7 @@ def friction_sign(velocity, friction) -> str | None:
     """A one-line warning when ``friction`` mostly pushes along ``velocity``, else ``None``.
 
     Friction dissipates: with jaxfric's convention (friction > 0 while x increases) the
-    mean of ``F·sign(v)`` over the moving samples (``|v|`` above :data:`MOVING_FRACTION`
+    mean of ``F·sign(v)`` over the moving samples (``|v|`` above `MOVING_FRACTION`
     of its largest value) is the mean friction level, positive even with an offset when
     the record moves both ways. A negative mean means a crossed sign convention, which no
     friction model can fit (a Coulomb level then ends on the lower bound of its box).

@@ -11,7 +11,7 @@ models see SI units and ``c = 1 / var(F_train)``: J is then the training MSE % o
 optimisers' absolute tolerances mean the same thing for every rig.
 
 The cost is a hashable ``eqx.Module`` whose only field (the model) is static, and
-all data travel in :class:`CostData` through ``args``. ``jit`` therefore caches one
+all data travel in [`CostData`][jaxfric.identification.CostData] through ``args``. ``jit`` therefore caches one
 executable per (model configuration, solver, shapes, dtype): a new record of the
 same length never recompiles.
 """
@@ -72,7 +72,7 @@ def _plain_cost(model, theta, data: CostData) -> Array:
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _elman_cost(model, theta, data: CostData) -> Array:
     """J of the Elman network, whose derivative uses the network's hand-written adjoint
-    (:meth:`jaxfric.models.Elman.simulate_vjp`, 2–3× faster than JAX's reverse mode
+    ([`jaxfric.models.Elman.simulate_vjp`][jaxfric.models.Elman.simulate_vjp], 2–3× faster than JAX's reverse mode
     of the scan). Values (and ``vmap`` over candidates) take the ordinary path."""
     return _plain_cost(model, theta, data)
 
@@ -90,10 +90,10 @@ def _elman_cost_jvp(model, primals, tangents):
 
 @functools.lru_cache(maxsize=None)
 def _elman_value_and_grad(model):
-    """``(J, ∇_θJ, ∂J/∂y)`` of one network by :meth:`~jaxfric.models.Elman.simulate_vjp`.
+    """``(J, ∇_θJ, ∂J/∂y)`` of one network by [`simulate_vjp`][jaxfric.models.Elman.simulate_vjp].
 
     Under ``vmap`` over θ (an ensemble's gradient stage runs its members' BFGS side by
-    side) the batching rule runs :func:`_elman_value_and_grad_batch` on the CPU, one loop
+    side) the batching rule runs `_elman_value_and_grad_batch` on the CPU, one loop
     for all members, instead of JAX's default batching of the single-network loops, which
     was 60× slower than one network for 8 members on EMPS's 19 800 samples there; other
     platforms take JAX's batching (the comment in the rule says why).
@@ -134,7 +134,7 @@ def _elman_value_and_grad(model):
     return value_and_grad
 
 
-#: Time samples per block of :func:`_elman_value_and_grad_batch`: a block's
+#: Time samples per block of `_elman_value_and_grad_batch`: a block's
 #: ``(TIME_BLOCK, K·N)`` arrays stay in the CPU's cache (30 neurons, 8 networks: 120 kB
 #: each in float32), where whole-record arrays (19 MB each on EMPS) made the
 #: vectorised parts bound by memory traffic.
@@ -144,7 +144,7 @@ TIME_BLOCK = 128
 def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int = TIME_BLOCK):
     """``(J, ∇_θJ, ∂J/∂y)`` of ``K`` networks on one record, each with a leading ``K`` axis.
 
-    The equations of :meth:`jaxfric.models.Elman.simulate_vjp` (docs/algorithms.md
+    The equations of [`jaxfric.models.Elman.simulate_vjp`][jaxfric.models.Elman.simulate_vjp] (docs/algorithms.md
     §2.2) for K networks at once, their contexts carried as one flat ``(K·N,)`` vector:
 
         forward  c_{k+1} = α c_k + h_k,   h_k = tanh(w u_k + r c_k + b),   ŷ_k = v·h_k
@@ -217,7 +217,7 @@ def _time_loop(model, step, init, xs, reverse=False):
     """``lax.scan(step, init, xs, reverse=reverse)`` over time: ``(final carry, outputs)``.
 
     Unrolled as the model says, else not on the CPU and
-    :data:`~jaxfric.models._scan.ACCELERATOR_UNROLL` times elsewhere. Not unrolled on
+    `ACCELERATOR_UNROLL` times elsewhere. Not unrolled on
     the CPU because, with ``(T, N·K)`` arrays scanned over, an unroll of 2 made the
     reverse loop 20× slower for 8 networks.
     """
@@ -250,7 +250,7 @@ def fit_scalers(model: AbstractFrictionModel, record: Record):
 
 
 def cost_data(model, record: Record, scalers, dtype) -> CostData:
-    """Build :class:`CostData` for the training window in the search ``dtype``."""
+    """Build [`CostData`][jaxfric.identification.CostData] for the training window in the search ``dtype``."""
     sv, sf = scalers
     v, f = record.train_velocity, record.train_friction
     if model.needs_scaling:

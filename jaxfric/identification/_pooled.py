@@ -6,9 +6,9 @@
 state at the record's first sample: no state crosses a record boundary, since the
 records were not measured back to back. J pools the squared errors of every training
 sample, so a long record weighs more than a short one, exactly as if the samples
-came from one record; with one record J equals :class:`OutputErrorCost`'s.
+came from one record; with one record J equals [`OutputErrorCost`][jaxfric.identification.OutputErrorCost]'s.
 
-Records keep their own lengths (a tuple of arrays in :class:`PooledCostData`, one
+Records keep their own lengths (a tuple of arrays in `PooledCostData`, one
 rollout each), so nothing is padded and ``vmap`` over θ still reaches each model's
 batched rollout. Scaling and ``c`` are those of §2.4 on the training samples of all
 records together.
@@ -60,7 +60,7 @@ class PooledOutputErrorCost(eqx.Module):
 
 
 def pooled_cost_data(model: AbstractFrictionModel, records: RecordSet, scalers, dtype) -> PooledCostData:
-    """:class:`PooledCostData` for the training windows of ``records`` in ``dtype``."""
+    """`PooledCostData` for the training windows of ``records`` in ``dtype``."""
     sv, sf = scalers
     us, ys, xs = [], [], []
     for r in records.train_records:

@@ -32,7 +32,7 @@ import optimistix as optx
 from ._objective import CostData, OutputErrorCost
 
 METHODS = ("bfgs", "lbfgs", "lm", "gauss_newton")
-#: How :func:`refine_many` lays out an ensemble's members (``GradientRefinement.batching``;
+#: How `refine_many` lays out an ensemble's members (``GradientRefinement.batching``;
 #: ``"auto"`` is resolved by ``identify``'s gradient stage, ``stages.refine_batching``).
 BATCHING = ("auto", "vmap", "map")
 _LEAST_SQUARES = ("lm", "gauss_newton")
@@ -51,7 +51,7 @@ class GradientRefinement(eqx.Module):
         max_steps: iteration cap of the optimistix solver.
         rtol, atol: the solver's relative/absolute tolerances (on θ-steps and J).
         edge: fraction of the box a start on a bound is pulled inside (0 < edge < 0.5).
-        batching: how an ensemble's members run (:func:`refine_many`): ``"vmap"``
+        batching: how an ensemble's members run (`refine_many`): ``"vmap"``
             side by side, every step one batched evaluation of all members (for the
             Elman networks one time loop over all of them: 8 members' J and gradient
             cost about 3 times one member's on a CPU); ``"map"`` one after another
@@ -98,11 +98,11 @@ class GradientRefinement(eqx.Module):
 
 
 def as_refinement(refine, num_params: int) -> GradientRefinement | None:
-    """Resolve the ``refine=`` argument of :func:`jaxfric.identify`.
+    """Resolve the ``refine=`` argument of [`jaxfric.identify`][jaxfric.identification.identify].
 
     ``None``/``False``: no gradient stage (the paper). ``True``/``"auto"``: LM for
-    at most :data:`AUTO_LM_MAX_PARAMS` parameters, else BFGS. A method name, or a
-    :class:`GradientRefinement` for full control.
+    at most `AUTO_LM_MAX_PARAMS` parameters, else BFGS. A method name, or a
+    [`GradientRefinement`][jaxfric.identification.GradientRefinement] for full control.
     """
     if refine is None or refine is False:
         return None
@@ -129,7 +129,7 @@ def to_box(z, lower, upper):
 
 
 def from_box(theta, lower, upper, edge):
-    """Inverse of :func:`to_box` on [−π/2, π/2], after pulling θ ``edge`` inside the box."""
+    """Inverse of `to_box` on [−π/2, π/2], after pulling θ ``edge`` inside the box."""
     frac = jnp.clip((theta - lower) / (upper - lower), edge, 1.0 - edge)
     return jnp.arcsin(2.0 * frac - 1.0)
 
@@ -147,7 +147,7 @@ def _residuals_z(z, args):
 
 
 class RefineOutcome(eqx.Module):
-    """Result of :func:`refine_impl`: the kept θ and its J, the solver's J, result code and steps."""
+    """Result of `refine_impl`: the kept θ and its J, the solver's J, result code and steps."""
 
     theta: jax.Array
     f: jax.Array
@@ -187,7 +187,7 @@ def _start(settings: GradientRefinement, cost, theta0, lower, upper, data):
 
 
 def _advance(settings: GradientRefinement, cost, z, state, steps, done, result, lower, upper, data):
-    """Up to :data:`REFINE_CHUNK` more solver steps (never past ``max_steps``), as
+    """Up to `REFINE_CHUNK` more solver steps (never past ``max_steps``), as
     ``optimistix``'s own loop runs them (``step``, then ``terminate`` on the new state)."""
     args = (cost, lower, upper, data)
     fn = _fn(settings)
@@ -265,9 +265,9 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
     """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]``.
 
     The optimistix solver (``init``/``step``/``terminate``) runs in compiled chunks of
-    :data:`REFINE_CHUNK` steps; ``progress`` (``True`` for a tqdm bar, or a callable
+    `REFINE_CHUNK` steps; ``progress`` (``True`` for a tqdm bar, or a callable
     ``sink(GRADIENT_PHASE, step, step, J)``) is told after each chunk. ``compiler_options``:
-    a :func:`jaxfric._xla.resolve` tuple for the compiled chunks.
+    a `jaxfric._xla.resolve` tuple for the compiled chunks.
 
     ``cost(theta, data)`` is J; the start's own J is evaluated too, so the
     returned θ is never worse than ``theta0`` (a non-finite refined J counts as worse).
@@ -331,7 +331,7 @@ def _finish_many(settings, cost, thetas, f_old, z, steps, done, result, lower, u
 
 def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, lower, upper,
                 data: CostData, *, progress=None, compiler_options=()) -> RefineOutcome:
-    """:func:`refine_impl` for a batch of starts ``thetas`` (``(K, n)``), side by side.
+    """`refine_impl` for a batch of starts ``thetas`` (``(K, n)``), side by side.
 
     One compiled program advances every member. With ``settings.batching == "vmap"``
     (``"auto"`` here) each step rolls out all K members in one batched evaluation, which for
@@ -344,7 +344,7 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
     With ``"map"`` each member runs the single run's program, one after another in the
     same compiled call: member ``i`` is that run, to the bit, at K times its cost.
     ``progress`` is told the furthest member's step count after each chunk.
-    Returns a :class:`RefineOutcome` whose fields have a leading axis of length K.
+    Returns a `RefineOutcome` whose fields have a leading axis of length K.
     """
     from .. import _xla
 

@@ -1,7 +1,7 @@
 """Split a call's wall time into compilation and run time, without running anything twice.
 
 JAX reports every trace, lowering and XLA compile as a time span through
-``jax.monitoring``. :class:`Stopwatch` listens only while it is active (the
+``jax.monitoring``. `Stopwatch` listens only while it is active (the
 listener is removed on exit, and no configuration is touched), merges the spans
 (nested ``jit`` traces overlap) and reports ``compile_s`` = their union and
 ``run_s`` = wall − compile. A call served from the jit cache has ``compile_s ≈ 0``.

@@ -1,4 +1,4 @@
-"""The stages of :func:`jaxfric.identify`, each a function of what the stage before it made.
+"""The stages of [`jaxfric.identify`][jaxfric.identification.identify], each a function of what the stage before it made.
 
 docs/algorithms.md §11. ``identify`` is this sequence::
 
@@ -9,15 +9,15 @@ docs/algorithms.md §11. ``identify`` is this sequence::
     polished  = gradient_stage(refine, objective, found, bounds, ...) # optional (step 7)
     fit       = fit_stage(...)                                       # metrics, diagnostics (step 8)
 
-Every stage takes and returns plain values (a :class:`RecordSet`, a :class:`Bounds`,
-an :class:`Objective`, a :class:`jaxfric.Solution`, a :class:`RefineOutcome`), so each
+Every stage takes and returns plain values (a [`RecordSet`][jaxfric.identification.RecordSet], a [`Bounds`][jaxfric.identification.stages.Bounds],
+an [`Objective`][jaxfric.identification.stages.Objective], a [`jaxfric.Solution`][jaxfric.optim.Solution], a `RefineOutcome`), so each
 can be run and tested alone, and another pipeline (``identify_motion``) can use the
 ones it shares.
 
 Ensembles (``keys=K``): the global stage runs the K members in one
-:func:`jaxfric.minimise_many` call (on a CPU mostly one after another, member i then
-being the run with key i to the bit; :func:`ensemble_batching`) and the gradient stage
-runs their quasi-Newton iterations side by side (:func:`refine_many`), so the Elman
+[`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call (on a CPU mostly one after another, member i then
+being the run with key i to the bit; [`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]) and the gradient stage
+runs their quasi-Newton iterations side by side (`refine_many`), so the Elman
 networks' K rollouts share each time loop; there member ``i`` equals the run with key
 ``i`` up to floating-point reassociation in the batched sums, or to the bit with
 ``GradientRefinement(batching="map")``.
@@ -65,8 +65,8 @@ __all__ = [
 
 # ------------------------------------------------------------------ records
 def records_stage(data=None, train=None, valid=None, *, stacklevel: int = 2) -> RecordSet:
-    """The records of a call (:func:`~jaxfric.identification.as_records`), checked, with a
-    :class:`FrictionSignWarning` when the training friction mostly pushes along the
+    """The records of a call ([`as_records`][jaxfric.identification.as_records]), checked, with a
+    [`FrictionSignWarning`][jaxfric.identification.FrictionSignWarning] when the training friction mostly pushes along the
     motion (a crossed sign convention)."""
     records = as_records(data, train, valid)
     crossed = friction_sign(records.train_velocity, records.train_friction)
@@ -80,7 +80,7 @@ def records_stage(data=None, train=None, valid=None, *, stacklevel: int = 2) -> 
 class Bounds:
     """The search box of one identification.
 
-    ``box``: the model's :class:`~jaxfric.models.SearchBox` (``None`` for the networks,
+    ``box``: the model's [`SearchBox`][jaxfric.models.SearchBox] (``None`` for the networks,
     whose box is part of the model); ``lower``, ``upper``: its bounds in search
     coordinates; ``inputs``: each record's ``(C, T)`` measured channels for the model
     (``None`` per record for a model without ``input_names``)."""
@@ -116,7 +116,7 @@ def _train_inputs(records: RecordSet, inputs: list):
 def box_stage(model: AbstractFrictionModel, records: RecordSet, box=None,
               data_bounds: bool = True) -> Bounds:
     """The search box: the user's ``box`` entries over the data-centred ones
-    (``data_bounds``) or the §8.5 defaults (:meth:`~jaxfric.models.AbstractPhysicalModel.search_box`)."""
+    (``data_bounds``) or the §8.5 defaults ([`search_box`][jaxfric.models.AbstractPhysicalModel.search_box])."""
     inputs = record_inputs(model, records)  # fails early, naming the record
     box = model.search_box(box, *(
         (records.train_velocity, records.train_friction, _train_inputs(records, inputs))
@@ -195,7 +195,7 @@ def as_member_keys(key, keys):
 
 
 def resolve_keys(key, keys=None) -> Keys:
-    """:class:`Keys` from ``identify``'s ``key=`` and ``keys=`` (checked)."""
+    """[`Keys`][jaxfric.identification.stages.Keys] from ``identify``'s ``key=`` and ``keys=`` (checked)."""
     if keys is None:
         key, seed = as_key(key)
         return Keys(key=key, seed=seed)
@@ -258,12 +258,12 @@ CPU_BATCH_SATURATION = 32
 
 
 def ensemble_batching(model: AbstractFrictionModel, solver: AbstractSolver) -> str:
-    """How :func:`global_stage` lays out an ensemble's members (``minimise_many``'s
+    """How [`global_stage`][jaxfric.identification.stages.global_stage] lays out an ensemble's members (``minimise_many``'s
     ``batching``).
 
     ``"vmap"`` (side by side) where that is cheaper than one member after another:
     off the CPU, and on the CPU for a one-stage population solver on a network whose
-    population is smaller than :data:`CPU_BATCH_SATURATION` agents. ``"map"``
+    population is smaller than [`CPU_BATCH_SATURATION`][jaxfric.identification.stages.CPU_BATCH_SATURATION] agents. ``"map"``
     otherwise on the CPU, which runs member i as the single run with key i, to the
     bit: a physical model's rollout costs the same per candidate at any batch size
     (LuGre on EMPS's 19 800 training samples: 126–136 µs per candidate for batches of
@@ -285,8 +285,8 @@ def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, k
                  theta0=None, dtype=None, progress=None, compiler_options="auto",
                  batching: str | None = None) -> tuple[Solution, dict]:
     """The derivative-free search on ``objective.data_global``: one
-    :func:`jaxfric.minimise` run, or one :func:`jaxfric.minimise_many` call for an
-    ensemble (``batching`` as there; default :func:`ensemble_batching`). Returns the
+    [`jaxfric.minimise`][jaxfric.optim.minimise] run, or one [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call for an
+    ensemble (``batching`` as there; default [`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]). Returns the
     solution (fields with a leading member axis for an ensemble) and its
     ``{"compile_s", "run_s"}``."""
     lower, upper = bounds.lower, bounds.upper
@@ -313,7 +313,7 @@ def refine_batching(model: AbstractFrictionModel, settings: GradientRefinement) 
     """``settings`` with ``batching="auto"`` resolved for ``model``: ``"vmap"`` for the
     networks, whose batched adjoint runs K members' J and gradient in one time loop, and
     off the CPU; ``"map"`` for physical models on the CPU (the same per-candidate cost
-    at any batch size, :func:`ensemble_batching`), which makes member i the single run
+    at any batch size, [`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]), which makes member i the single run
     to the bit."""
     if settings.batching != "auto":
         return settings
@@ -328,9 +328,9 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
     (docs/algorithms.md §11 step 7), or nothing when ``settings`` is ``None``.
 
     ``thetas``: ``(n,)`` for one run, ``(K, n)`` for an ensemble (``ensemble=True``),
-    whose members run side by side or one after another (:func:`refine_many`,
-    :func:`refine_batching`). Returns the
-    :class:`RefineOutcome` (with a leading member axis for an ensemble) and its
+    whose members run side by side or one after another (`refine_many`,
+    [`refine_batching`][jaxfric.identification.stages.refine_batching]). Returns the
+    `RefineOutcome` (with a leading member axis for an ensemble) and its
     ``{"refine_compile_s", "refine_run_s"}``."""
     if settings is None:
         return None, {}
@@ -454,11 +454,11 @@ def warn_if_divergent(metrics: dict, stacklevel: int = 3) -> None:
 
 def members_valid_mse(member_predictions, records: RecordSet) -> list:
     """Every member's validation MSE % (§6: 100·Σe²/Σ(F − F̄)², pooled over the records'
-    validation windows, as :func:`record_metrics`' ``valid``), ``None`` for a member
+    validation windows, as [`record_metrics`][jaxfric.identification.stages.record_metrics]' ``valid``), ``None`` for a member
     whose free run is not finite or where there is no validation window.
 
     ``member_predictions``: per record, the ``(K, T)`` free runs. One vectorised pass for
-    all members: the full metrics table (:func:`record_metrics`) costs about 7 ms a window
+    all members: the full metrics table ([`record_metrics`][jaxfric.identification.stages.record_metrics]) costs about 7 ms a window
     on EMPS on the 2-core CPU, three windows a member, about 1.3 s for K = 64, where a
     whole K = 64 LuGre ensemble took 1.9 s on an H100."""
     k = int(np.shape(member_predictions[0])[0])
@@ -499,9 +499,9 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
               refined: RefineOutcome | None, keys: Keys, settings: dict,
               refine: GradientRefinement | None = None, theta0_given: bool = False,
               stacklevel: int = 3) -> Fit:
-    """The :class:`jaxfric.Fit`: the best member (lowest finite J), its stages, §6
+    """The [`jaxfric.Fit`][jaxfric.fit.Fit]: the best member (lowest finite J), its stages, §6
     metrics per window and record, diagnostics (parameters on a bound, with a
-    :class:`BoundWarning` each; unidentifiable parameters), the ensemble's members."""
+    [`BoundWarning`][jaxfric.identification.BoundWarning] each; unidentifiable parameters), the ensemble's members."""
     scalers = objective.scalers
     ensemble = keys.members is not None
 

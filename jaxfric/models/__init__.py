@@ -1,17 +1,17 @@
 """Friction models for jaxfric (docs/algorithms.md §2, §8 and §13.1).
 
-Every model implements :class:`AbstractFrictionModel`: a flat search vector
-``theta`` with :meth:`~AbstractFrictionModel.bounds` (of a :class:`SearchBox`, for
+Every model implements [`AbstractFrictionModel`][jaxfric.models.AbstractFrictionModel]: a flat search vector
+``theta`` with [`bounds`][jaxfric.models.AbstractFrictionModel.bounds] (of a [`SearchBox`][jaxfric.models.SearchBox], for
 the physical models: data given to ``identify``, not a model field), named physical
 parameters via ``to_physical`` / ``from_physical``, and a pure-JAX free-run
 rollout ``simulate(theta, velocity, dt)`` / ``simulate_batch(thetas, velocity, dt)``.
 
-Black-box models (``needs_scaling = True``: :class:`Elman`, :class:`ElmanFull`)
-are fitted on data scaled with :class:`Scaler`; physical models (:class:`LuGre`,
-:class:`Dahl`, :class:`Coulomb`, :class:`Stribeck`, :class:`GMS`,
-:class:`Cylinder`) work in SI units. ``asymmetric=True`` / ``offset=True`` give
+Black-box models (``needs_scaling = True``: [`Elman`][jaxfric.models.Elman], [`ElmanFull`][jaxfric.models.ElmanFull])
+are fitted on data scaled with [`Scaler`][jaxfric.models.Scaler]; physical models ([`LuGre`][jaxfric.models.LuGre],
+[`Dahl`][jaxfric.models.Dahl], [`Coulomb`][jaxfric.models.Coulomb], [`Stribeck`][jaxfric.models.Stribeck], [`GMS`][jaxfric.models.GMS],
+[`Cylinder`][jaxfric.models.Cylinder]) work in SI units. ``asymmetric=True`` / ``offset=True`` give
 Coulomb, Stribeck, LuGre and Dahl direction-dependent levels and an output offset
-(§13.1); :class:`Cylinder` needs the chamber pressures as ``inputs``
+(§13.1); [`Cylinder`][jaxfric.models.Cylinder] needs the chamber pressures as ``inputs``
 (``model.input_names``). ``model.unidentifiable(record)`` names the parameters a
 record may not determine.
 """
@@ -64,7 +64,7 @@ _REGISTRY: dict[str, type[AbstractFrictionModel]] = {
 
 
 def available() -> tuple[str, ...]:
-    """Names accepted by :func:`get`."""
+    """Names accepted by [`get`][jaxfric.models.get]."""
     return tuple(_REGISTRY)
 
 

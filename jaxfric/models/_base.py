@@ -2,8 +2,8 @@
 
 A friction model is a small immutable ``eqx.Module`` that holds only *static
 hyperparameters* (number of neurons, which parameters are free). A physical
-model's search box is data (:class:`jaxfric.models.SearchBox`), passed to
-:meth:`~AbstractFrictionModel.bounds` and :func:`jaxfric.identify`.
+model's search box is data ([`jaxfric.models.SearchBox`][jaxfric.models.SearchBox]), passed to
+[`bounds`][jaxfric.models.AbstractFrictionModel.bounds] and [`jaxfric.identify`][jaxfric.identification.identify].
 Measured data -- velocity, friction, sample time -- always arrive as function
 arguments, so a new data set never triggers recompilation and data sets can be
 vmapped (DESIGN.md, "Conventions").
@@ -22,10 +22,10 @@ Every model maps a flat search vector ``theta`` (what the optimisers see, in
 
 A model that needs measured signals besides the velocity (the cylinder friction
 of docs/algorithms.md §13.1 needs the chamber pressures) names them in
-:attr:`~AbstractFrictionModel.input_names` and takes them as ``inputs``, a
+[`input_names`][jaxfric.models.AbstractFrictionModel.input_names] and takes them as ``inputs``, a
 ``(C, T)`` array in that order: ``model.simulate(theta, v, dt, inputs)``. Every
 other model has ``input_names == ()`` and ignores ``inputs``.
-:meth:`~AbstractFrictionModel.inputs_from` reads them from a record.
+[`inputs_from`][jaxfric.models.AbstractFrictionModel.inputs_from] reads them from a record.
 """
 
 from __future__ import annotations
@@ -137,8 +137,8 @@ class AbstractFrictionModel(eqx.Module):
     """Base class of all friction models (Elman, LuGre, Dahl, static maps).
 
     Subclasses are immutable and hold only static hyperparameters. They must
-    provide :attr:`param_names`, :meth:`bounds`, :meth:`to_physical`,
-    :meth:`from_physical` and ``_simulate_batch``; the rest has defaults.
+    provide [`param_names`][jaxfric.models.AbstractFrictionModel.param_names], [`bounds`][jaxfric.models.AbstractFrictionModel.bounds], [`to_physical`][jaxfric.models.AbstractFrictionModel.to_physical],
+    [`from_physical`][jaxfric.models.AbstractFrictionModel.from_physical] and ``_simulate_batch``; the rest has defaults.
 
     Class attributes:
 
@@ -161,8 +161,8 @@ class AbstractFrictionModel(eqx.Module):
 
     def inputs_from(self, data, length: int | None = None) -> np.ndarray | None:
         """The ``(C, T)`` ``inputs`` array read from ``data``'s attributes named in
-        :attr:`input_names` (a :class:`jaxfric.FrictionData`, the record type of the
-        loaders and of :func:`jaxfric.identify`), or ``None`` for a model that needs none.
+        [`input_names`][jaxfric.models.AbstractFrictionModel.input_names] (a [`jaxfric.FrictionData`][jaxfric.rig.FrictionData], the record type of the
+        loaders and of [`jaxfric.identify`][jaxfric.identification.identify]), or ``None`` for a model that needs none.
 
         Raises ``ValueError`` naming the missing channels when ``data`` lacks them,
         and when a channel is not ``length`` samples long.
@@ -186,13 +186,13 @@ class AbstractFrictionModel(eqx.Module):
 
     def unidentifiable(self, data) -> tuple[Unidentifiable, ...]:
         """Parameters that ``data`` (a record or a velocity array) may not determine,
-        each with its reason (:class:`Unidentifiable`); ``()`` by default."""
+        each with its reason ([`Unidentifiable`][jaxfric.models.Unidentifiable]); ``()`` by default."""
         del data
         return ()
 
     @property
     def box_keys(self) -> tuple[str, ...]:
-        """The :class:`~jaxfric.models.SearchBox` entries this model searches; ``()`` for
+        """The [`SearchBox`][jaxfric.models.SearchBox] entries this model searches; ``()`` for
         the networks, whose box is a model option (docs/algorithms.md §8.5)."""
         return ()
 
@@ -217,14 +217,14 @@ class AbstractFrictionModel(eqx.Module):
 
     @abc.abstractmethod
     def from_physical(self, **params) -> Array:
-        """Inverse of :meth:`to_physical`: named physical parameters -> ``theta``."""
+        """Inverse of [`to_physical`][jaxfric.models.AbstractFrictionModel.to_physical]: named physical parameters -> ``theta``."""
 
     # -------------------------------------------------------------- rollouts
     @abc.abstractmethod
     def _simulate_batch(self, thetas: Array, velocity: Array, dt) -> Array:
-        """Model-specific rollout; called traced, through :meth:`simulate_batch`.
+        """Model-specific rollout; called traced, through [`simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch].
 
-        Models with :attr:`input_names` take a fourth argument, the ``(C, T)``
+        Models with [`input_names`][jaxfric.models.AbstractFrictionModel.input_names] take a fourth argument, the ``(C, T)``
         ``inputs``; the others are called with three."""
 
     def _check_inputs(self, inputs):
@@ -254,7 +254,7 @@ class AbstractFrictionModel(eqx.Module):
         The rollout is wrapped in ``jax.jit`` (a no-op inside a caller's own
         jit), so eager calls compile once per model configuration and input
         shape; ``dt`` is traced, so a new sample time does not recompile. On CPU
-        it compiles with :func:`jaxfric.compiler_options` ``("rollout")``
+        it compiles with [`jaxfric.compiler_options`][jaxfric._xla.compiler_options] ``("rollout")``
         (512-bit vectors where the CPU has them).
         """
         self._check_dt(dt)
@@ -270,14 +270,14 @@ class AbstractFrictionModel(eqx.Module):
 
         Pure JAX: jittable, differentiable (any order, forward and reverse), and
         vmappable. ``vmap`` over ``theta`` alone is routed to
-        :meth:`simulate_batch` by a custom batching rule, so an optimiser that
+        [`simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] by a custom batching rule, so an optimiser that
         vmaps a per-candidate objective gets the fast batched rollout (2.3x
         faster for the Elman network than JAX's default batching of the
         single-candidate scan); other vmaps (over data, or nested) fall back to
         ordinary batching. ``velocity`` and the returned friction are in the
         model's working units (see ``needs_scaling``); ``dt`` is the sample time
         in s (ignored by static maps and the Elman networks). ``inputs``: the
-        ``(C, T)`` measured channels named by :attr:`input_names` (ignored by
+        ``(C, T)`` measured channels named by [`input_names`][jaxfric.models.AbstractFrictionModel.input_names] (ignored by
         models that need none).
         """
         theta = jnp.asarray(theta)
@@ -302,21 +302,21 @@ class AbstractFrictionModel(eqx.Module):
                 raise ValueError(f"dt must be a positive, finite sample time in seconds, got {value!r}")
 
     def check_theta(self, theta: ArrayLike) -> np.ndarray:
-        """Eager validation of ``theta`` (shape, length, finiteness); see :func:`check_theta`."""
+        """Eager validation of ``theta`` (shape, length, finiteness); see [`check_theta`][jaxfric.models.AbstractFrictionModel.check_theta]."""
         return check_theta(theta, self.num_params)
 
     def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
-        """A starting point inside :meth:`bounds`; the default is the box centre."""
+        """A starting point inside [`bounds`][jaxfric.models.AbstractFrictionModel.bounds]; the default is the box centre."""
         lower, upper = self.bounds(box)
         return 0.5 * (lower + upper)
 
     def search_box(self, box=None, velocity: ArrayLike | None = None, friction: ArrayLike | None = None,
                    inputs: ArrayLike | None = None):
-        """The search box to give :meth:`bounds`: ``None`` for a model whose box is
+        """The search box to give [`bounds`][jaxfric.models.AbstractFrictionModel.bounds]: ``None`` for a model whose box is
         part of its configuration (the Elman networks' weight bounds, fitted on
         scaled data); a given non-empty ``box`` is then refused (``ValueError``).
         Physical models complete ``box`` from their defaults and the data
-        (:meth:`jaxfric.models.AbstractPhysicalModel.search_box`)."""
+        ([`jaxfric.models.AbstractPhysicalModel.search_box`][jaxfric.models.AbstractPhysicalModel.search_box])."""
         del velocity, friction, inputs
         if box:
             raise ValueError(

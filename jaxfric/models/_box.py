@@ -1,12 +1,12 @@
-"""The search box of a physical model as data: :class:`SearchBox` (docs/algorithms.md §8.5).
+"""The search box of a physical model as data: [`SearchBox`][jaxfric.models.SearchBox] (docs/algorithms.md §8.5).
 
 A box maps a physical parameter's name (``"Fc"``, ``"sigma0"``, ``"Fs_ratio"`` for
 Fs/Fc, ``"k"`` for every GMS element stiffness, ...) to its ``(low, high)`` search
-range in SI units. It is an argument of :func:`jaxfric.identify`, not a field of
+range in SI units. It is an argument of [`jaxfric.identify`][jaxfric.identification.identify], not a field of
 the model, so the model (the static configuration every jitted cost is keyed on)
 is the same whatever box a fit searches: a new record's data-centred box never
-recompiles. Per-model defaults (:data:`DEFAULT_RANGES`), data-centred entries
-(:func:`data_ranges`) and the user's partial box are merged by
+recompiles. Per-model defaults ([`DEFAULT_RANGES`][jaxfric.models.DEFAULT_RANGES]), data-centred entries
+([`data_ranges`][jaxfric.models.data_ranges]) and the user's partial box are merged by
 ``AbstractPhysicalModel.search_box``.
 """
 
@@ -81,8 +81,8 @@ def _check_entry(key: str, lo: float, hi: float) -> None:
 
 def widened(key: str, lo: float, hi: float, side: str) -> tuple[float, float] | None:
     """``key``'s range ``(lo, hi)`` widened on ``side`` (``"lower"``/``"upper"``) to a
-    range :class:`SearchBox` accepts: ten times wider for a log10 entry, one width more
-    otherwise, a start never below the entry's least (:data:`RANGE_FLOORS`). ``None``
+    range [`SearchBox`][jaxfric.models.SearchBox] accepts: ten times wider for a log10 entry, one width more
+    otherwise, a start never below the entry's least (`RANGE_FLOORS`). ``None``
     when ``lo`` already is that least value (Fs/Fc at 1: the model allows no lower)."""
     log = key in LOG_RANGED
     if side == "upper":
@@ -103,7 +103,7 @@ class SearchBox(Mapping):
     """An immutable, validated mapping physical-parameter name -> ``(low, high)`` [SI].
 
     ``SearchBox({"Fc": (5, 100), "vs": (1e-4, 1e-2)})`` or ``SearchBox(Fc=(5, 100))``.
-    Names are those of :data:`DEFAULT_RANGES`: ``sigma0`` [N/m], ``sigma1``, ``sigma2``
+    Names are those of [`DEFAULT_RANGES`][jaxfric.models.DEFAULT_RANGES]: ``sigma0`` [N/m], ``sigma1``, ``sigma2``
     [N s/m], ``Fc`` [N], ``Fs_ratio`` (Fs/Fc) [-], ``vs`` [m/s], ``delta`` [-],
     ``F_off`` [N], ``k`` [N/m] (every GMS element), ``C`` [N/s], ``F_pr`` [N],
     ``f_cfr`` [N/Pa], ``K_brk`` [-]. A direction-dependent parameter (``Fc_pos``,
@@ -166,7 +166,7 @@ def data_ranges(velocity: ArrayLike, friction: ArrayLike) -> dict[str, tuple[flo
     """Search ranges centred on a record's friction level ``F`` and speed ``V``.
 
     With ``F`` = 95th percentile of |friction| and ``V`` = max |velocity|
-    (:func:`friction_scales`), the rules are [D]:
+    ([`friction_scales`][jaxfric.models.friction_scales]), the rules are [D]:
 
     - Fc in [0.05, 1.2] F (Coulomb level cannot much exceed the observed force);
     - sigma0 in [F / 1e-2, F / 1e-7] N/m (bristle deflection at Fc between

@@ -1,5 +1,5 @@
 """Shared machinery of the physical (SI-unit) friction models: search coordinates,
-the search box they span (defaults and data-centred boxes, :mod:`._box`), and a
+the search box they span (defaults and data-centred boxes, `._box`), and a
 least-squares initial guess.
 
 Search coordinates (docs/algorithms.md §8.5): stiffnesses, damping and the Stribeck
@@ -104,7 +104,7 @@ def coulomb_viscous_ls(velocity: ArrayLike, friction: ArrayLike, *, viscous: boo
 
 
 #: Below this fraction of max |v| a sample counts as low speed (pre-sliding or the
-#: Stribeck dip) for :meth:`AbstractPhysicalModel.unidentifiable` [D]. A sine sweeps
+#: Stribeck dip) for `AbstractPhysicalModel.unidentifiable` [D]. A sine sweeps
 #: through it in 1.3 % of its samples and the EMPS recording in 1.5 %: both are
 #: flagged, as the EMPS data description says its pre-sliding is weakly excited;
 #: records with slow reversals or small-amplitude (pre-sliding) segments pass.
@@ -124,9 +124,9 @@ class AbstractPhysicalModel(AbstractFrictionModel):
     Subclasses list ``_coords``: ``(search_name, physical_name, kind)`` with
     kind ``"log10"`` (theta = log10 p), ``"linear"`` (theta = p) or
     ``"ratio"`` (theta = Fs / Fc, physical_name ``"Fs"``). The search box is not
-    part of the model: it is a :class:`SearchBox` (physical name -> (low, high) in
-    physical units; the ratio's entry is ``Fs_ratio``) given to :meth:`bounds` and
-    :func:`jaxfric.identify`, completed by :meth:`search_box` from the defaults of
+    part of the model: it is a [`SearchBox`][jaxfric.models.SearchBox] (physical name -> (low, high) in
+    physical units; the ratio's entry is ``Fs_ratio``) given to [`bounds`][jaxfric.models.AbstractPhysicalModel.bounds] and
+    [`jaxfric.identify`][jaxfric.identification.identify], completed by [`search_box`][jaxfric.models.AbstractPhysicalModel.search_box] from the defaults of
     docs/algorithms.md §8.5 and, for a record, the data-centred ranges. Units: see
     the module docstring.
     """
@@ -148,7 +148,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
 
     @property
     def physical_names(self) -> tuple[str, ...]:
-        """Keys of :meth:`to_physical` (and arguments of :meth:`from_physical`)."""
+        """Keys of [`to_physical`][jaxfric.models.AbstractPhysicalModel.to_physical] (and arguments of [`from_physical`][jaxfric.models.AbstractPhysicalModel.from_physical])."""
         return tuple(c[1] for c in self._coords)
 
     #: Search coordinates whose range is fixed by the model, not by the box (GMS's
@@ -160,17 +160,17 @@ class AbstractPhysicalModel(AbstractFrictionModel):
 
     @property
     def box_keys(self) -> tuple[str, ...]:
-        """The :class:`SearchBox` entries this model's search coordinates use, in order."""
+        """The [`SearchBox`][jaxfric.models.SearchBox] entries this model's search coordinates use, in order."""
         keys = (self._range_key(phys, kind) for _, phys, kind in self._coords)
         return tuple(dict.fromkeys(k for k in keys if k not in self._fixed_ranges))
 
     def search_box(self, box=None, velocity: ArrayLike | None = None, friction: ArrayLike | None = None,
                    inputs: ArrayLike | None = None) -> SearchBox:
-        """The complete box of this model: :data:`DEFAULT_RANGES` (docs/algorithms.md §8.5),
+        """The complete box of this model: [`DEFAULT_RANGES`][jaxfric.models.DEFAULT_RANGES] (docs/algorithms.md §8.5),
         then, when a record's ``velocity`` [m/s] and ``friction`` [N] are given, the
-        data-centred entries (:func:`data_ranges`; with ``inputs``, the entries that
+        data-centred entries ([`data_ranges`][jaxfric.models.data_ranges]; with ``inputs``, the entries that
         scale with the measured channels), then the entries of the user's partial
-        ``box`` (a mapping name -> (low, high) or a :class:`SearchBox`).
+        ``box`` (a mapping name -> (low, high) or a [`SearchBox`][jaxfric.models.SearchBox]).
 
         Raises ``ValueError`` naming the entry for an invalid range or a name this
         model does not search (listing the ones it does), before any computation.
@@ -191,7 +191,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         return SearchBox(ranges)
 
     def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
-        """Search-coordinate bounds of ``box`` (completed by :meth:`search_box`; log10
+        """Search-coordinate bounds of ``box`` (completed by [`search_box`][jaxfric.models.AbstractPhysicalModel.search_box]; log10
         for the ``log10`` coordinates)."""
         box = self.search_box(box)
         lower, upper = [], []
@@ -238,7 +238,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
             )
 
     def from_physical(self, **params) -> Array:
-        """Physical parameters (keywords :attr:`physical_names`) -> ``theta``."""
+        """Physical parameters (keywords [`physical_names`][jaxfric.models.AbstractPhysicalModel.physical_names]) -> ``theta``."""
         self._check_physical_names(params)
         return self._theta_from(params)
 
@@ -332,7 +332,7 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         return out
 
     def _group(self, phys: str) -> str:
-        """The family of a physical parameter for :meth:`unidentifiable` (``Fc_pos`` -> ``Fc``)."""
+        """The family of a physical parameter for [`unidentifiable`][jaxfric.models.AbstractPhysicalModel.unidentifiable] (``Fc_pos`` -> ``Fc``)."""
         return base_name(phys)
 
     def _input_ranges(self, friction_level: float, inputs) -> dict[str, tuple[float, float]]:
@@ -341,8 +341,8 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         return {}
 
     def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
-        """Centre of ``box`` (:meth:`bounds`), with Fc and sigma2 from
-        :func:`coulomb_viscous_ls` (clipped to the box)."""
+        """Centre of ``box`` ([`bounds`][jaxfric.models.AbstractPhysicalModel.bounds]), with Fc and sigma2 from
+        `coulomb_viscous_ls` (clipped to the box)."""
         lower, upper = self.bounds(box)
         theta = 0.5 * (lower + upper)
         viscous = any(base_name(p) == "sigma2" for p in self.physical_names)

@@ -1,7 +1,7 @@
 """Min/max scaling to [-1, 1] (MATLAB ``mapminmax`` convention, docs/algorithms.md §2.4).
 
 The Elman network is fitted on velocity and friction scaled with the minimum
-and maximum of the *training* segment; the same :class:`Scaler` is then applied
+and maximum of the *training* segment; the same [`Scaler`][jaxfric.models.Scaler] is then applied
 to validation data (which may therefore fall slightly outside [-1, 1]) and its
 inverse maps predictions back to newtons.
 """
@@ -60,7 +60,7 @@ class Scaler(eqx.Module):
         return 2.0 * (x - lo) / (hi - lo) - 1.0
 
     def unscale(self, y: ArrayLike) -> Array:
-        """Scaled -> physical (inverse of :meth:`scale`)."""
+        """Scaled -> physical (inverse of [`scale`][jaxfric.models.Scaler.scale])."""
         y, lo, hi = self._cast(y)
         return (y + 1.0) * (0.5 * (hi - lo)) + lo
 

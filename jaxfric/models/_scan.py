@@ -9,16 +9,16 @@ form is chosen when it is lowered for a platform, through
 covers ``jax.default_device``, arrays committed to a CPU on a GPU machine, and
 ahead-of-time lowering. The branch for the other platform is folded away by XLA.
 
-* :func:`time_scan` (nonlinear recurrences: the Elman networks). Off the CPU it
-  unrolls :data:`ACCELERATOR_UNROLL` steps per loop iteration. On the H100 that took
+* `time_scan` (nonlinear recurrences: the Elman networks). Off the CPU it
+  unrolls `ACCELERATOR_UNROLL` steps per loop iteration. On the H100 that took
   the rollout above to 1.1 ms (1 candidate), 1.5 ms (64) and 2.3 ms (4096). On the
   CPU it keeps the model's own choice.
-* :func:`linear_recurrence` (``z_{k+1} = d_k z_k + g_k``: LuGre and Dahl's exact
+* `linear_recurrence` (``z_{k+1} = d_k z_k + g_k``: LuGre and Dahl's exact
   update). Off the CPU it runs as an associative (parallel-prefix) scan of ``log2 T``
   levels: 0.15 ms against 23 ms for the sequential scan on the H100, equal to 5e-15
   relative in float64 and 4e-6 in float32. On the CPU the sequential scan stays:
   the prefix scan does twice the arithmetic there and ran 2x slower.
-* :func:`reverse_affine_scan` (a loop run backwards whose carry is affine: the Elman
+* `reverse_affine_scan` (a loop run backwards whose carry is affine: the Elman
   network's adjoint). Off the CPU the same prefix scan; on the H100 it took the EMPS
   default fit from 9.1 to 6.45 s (``benchmarks/results/gpu_check_gpu.md``). On the CPU
   the model's own loop, unchanged to the bit.
@@ -39,7 +39,7 @@ ACCELERATOR_UNROLL = 32
 
 def time_scan(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = None):
     """``lax.scan(step, init, xs)`` over time: unrolled ``unroll`` times if given,
-    else ``cpu_unroll`` on the CPU and :data:`ACCELERATOR_UNROLL` elsewhere.
+    else ``cpu_unroll`` on the CPU and `ACCELERATOR_UNROLL` elsewhere.
     Returns the stacked outputs only."""
 
     def scan_with(k):
@@ -66,7 +66,7 @@ def linear_recurrence_sequential(decay, gain, z0):
 
 
 def linear_recurrence_parallel(decay, gain, z0):
-    """:func:`linear_recurrence_sequential` as an associative scan over time.
+    """`linear_recurrence_sequential` as an associative scan over time.
 
     Step k is the affine map ``z ↦ d_k z + g_k``. Composing step i and then step j gives
     ``(d_i d_j, d_j g_i + g_j)``, so ``lax.associative_scan`` yields the maps from z_0 to
@@ -98,8 +98,8 @@ def reverse_affine_scan(step: Callable, init, xs, affine: Callable, outputs: Cal
         λ_k, out_k = step(λ_{k+1}, x_k),      λ_k = d_k λ_{k+1} + g_k
 
     On the CPU ``step`` runs one sample after another (the reversed record through
-    :func:`time_scan`). Elsewhere ``affine(xs)`` gives ``(d, g)`` (time first, then the
-    carry's shape), :func:`linear_recurrence_parallel` composes the steps in ``log2 T``
+    `time_scan`). Elsewhere ``affine(xs)`` gives ``(d, g)`` (time first, then the
+    carry's shape), `linear_recurrence_parallel` composes the steps in ``log2 T``
     levels and ``outputs(λ_next, xs)`` computes every ``out_k`` from ``λ_{k+1}`` at once;
     that equals the loop up to floating-point reassociation. ``parallel``: ``True`` or
     ``False`` picks one form everywhere (``None``: by platform, as above). Returns the

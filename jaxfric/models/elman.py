@@ -2,7 +2,7 @@
 
 Both networks map (scaled) piston velocity u(k) to (scaled) friction y(k) in
 free run: the measured friction is never fed back (§2.4). They are fitted on
-data scaled to [-1, 1] with :class:`jaxfric.models.Scaler`, so
+data scaled to [-1, 1] with [`jaxfric.models.Scaler`][jaxfric.models.Scaler], so
 ``needs_scaling = True``.
 
 Parameter layout of ``theta`` (blocks of N, one block per kind, so the bounds
@@ -19,10 +19,10 @@ made 9-25 candidates 1.4-3x faster and 64 no slower -- takes about 2 ms in float
 than half of it), against 5 ms / 6.8 ms for a ``(P, N)`` state and 7 ms for
 ``vmap`` of a single-candidate scan. Hoisting ``w u + b`` out of the loop was
 slower (it materialises a (T, N, P) array), and exp/expm1-based tanh variants
-were slower than ``jnp.tanh``. Hence :meth:`Elman.simulate_batch` is the
-primitive; :meth:`simulate` calls it with P = 1, and ``vmap(simulate)`` over
+were slower than ``jnp.tanh``. Hence [`Elman.simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] is the
+primitive; [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] calls it with P = 1, and ``vmap(simulate)`` over
 theta is routed back to it by a custom batching rule (see
-:meth:`AbstractFrictionModel.simulate`).
+[`AbstractFrictionModel.simulate`][jaxfric.models.AbstractFrictionModel.simulate]).
 
 Dynamics note: with |r| up to 5 (the §2.4 box) about 98 % of random networks
 are chaotic over 1600 samples -- a 1e-15 relative change of theta changes the
@@ -89,7 +89,7 @@ class Elman(AbstractFrictionModel):
             picks the fastest measured: on the CPU 2 for float32 and 1 for float64,
             on a GPU or other accelerator 32 (``jaxfric.models._scan``).
 
-    All quantities are dimensionless (scaled data, see :class:`Scaler`).
+    All quantities are dimensionless (scaled data, see [`Scaler`][jaxfric.models.Scaler]).
     """
 
     neurons: int = eqx.field(default=30, static=True)
@@ -125,7 +125,7 @@ class Elman(AbstractFrictionModel):
 
     def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
         """Search box of §2.4: w, r, b in ±5; v in ±2; alpha in [0, 0.99]; c0, b_o in ±1
-        (set by the options; a ``box`` is refused, :meth:`search_box`)."""
+        (set by the options; a ``box`` is refused, [`search_box`][jaxfric.models.AbstractFrictionModel.search_box])."""
         self.search_box(box)
         n = self.neurons
         half = np.concatenate(
@@ -206,7 +206,7 @@ class Elman(AbstractFrictionModel):
     def simulate_vjp(self, theta: Float[ArrayLike, " n"], velocity: Float[ArrayLike, " T"]):
         """Free run of one network and its hand-written adjoint (BPTT, docs/algorithms.md §2.2).
 
-        Returns ``(y, pullback)`` with ``y`` as :meth:`simulate` and
+        Returns ``(y, pullback)`` with ``y`` as [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] and
         ``pullback(g_y) = (∂y/∂θ)ᵀ g_y``. With ``a_k = w u_k + r c_k + b``,
         ``h_k = tanh a_k``, ``c_{k+1} = α c_k + h_k`` and ``λ_k = ∂L/∂c_k``
         (``λ_T = 0``), one reverse loop runs
@@ -220,7 +220,7 @@ class Elman(AbstractFrictionModel):
         31 ms for a 19 800-sample record against 3.3 ms for the rollout; this loop
         carries only λ and leaves the sums to vectorised reductions. The λ recurrence is
         affine, ``λ_k = (α + r s_k) λ_{k+1} + r v g_k s_k`` with ``s_k = 1 − h_k²``, so off
-        the CPU it runs as a parallel prefix scan (:func:`~jaxfric.models._scan.reverse_affine_scan`).
+        the CPU it runs as a parallel prefix scan (`reverse_affine_scan`).
         """
         theta, u = self._prepare(jnp.asarray(theta)[None, :], velocity)
         p = {k: x[0] for k, x in self.to_physical(theta).items()}
@@ -281,7 +281,7 @@ class ElmanFull(AbstractFrictionModel):
     (default 1: each hidden unit sums N context terms, so a smaller box keeps
     the pre-activations in the same range); ``output_weight_bound`` for |v|
     (default 2); ``c0_bound`` for |c0| and |b_o| (default 1); ``unroll`` of the
-    time loop (default ``None``: 1 on the CPU, 32 on a GPU, as for :class:`Elman`).
+    time loop (default ``None``: 1 on the CPU, 32 on a GPU, as for [`Elman`][jaxfric.models.Elman]).
     Dimensionless.
     """
 
@@ -359,7 +359,7 @@ class ElmanFull(AbstractFrictionModel):
         return out
 
     def from_physical(self, *, w, W_c, b, v, c0=None, b_o=None) -> Array:
-        """Inverse of :meth:`to_physical`."""
+        """Inverse of [`to_physical`][jaxfric.models.ElmanFull.to_physical]."""
         given = {"w": w, "W_c": W_c, "b": b, "v": v, "c0": c0, "b_o": b_o}
         parts = []
         for name, size in self._sizes():

@@ -64,7 +64,7 @@ def _splits_to_weights(u: Array) -> Array:
 
 
 def _weights_to_splits(alpha: Array) -> Array:
-    """Inverse of :func:`_splits_to_weights` (``(..., N)`` -> ``(..., N-1)``)."""
+    """Inverse of `_splits_to_weights` (``(..., N)`` -> ``(..., N-1)``)."""
     used = jnp.cumsum(alpha, axis=-1)[..., :-1]
     remain = jnp.concatenate([jnp.ones_like(used[..., :1]), 1.0 - used[..., :-1]], axis=-1)
     return alpha[..., :-1] / remain
@@ -75,13 +75,13 @@ class GMS(AbstractPhysicalModel):
 
     Search coordinates: ``log10_k1 .. log10_kN`` (element stiffness [N/m],
     box entry ``k``), ``split1 .. split{N-1}`` (stick-breaking fractions in
-    [0, 1] that give the weights alpha_i, see :func:`_splits_to_weights`),
+    [0, 1] that give the weights alpha_i, see `_splits_to_weights`),
     ``log10_C`` (attraction rate [N/s]), ``Fc``, ``Fs_over_Fc``, ``log10_vs``,
-    ``log10_sigma2``: 2N + 4 in all. Physical parameters (:meth:`to_physical`):
+    ``log10_sigma2``: 2N + 4 in all. Physical parameters ([`to_physical`][jaxfric.models.GMS.to_physical]):
     ``k1 .. kN``, ``alpha1 .. alphaN`` (sum 1), ``C``, ``Fc``, ``Fs``, ``vs``,
     ``sigma2``. Hyperparameters: ``num_elements`` N (default 3),
     ``stribeck_exponent`` delta (default 2); the search box is data (as
-    :class:`LuGre`; ``k`` and ``C`` are data-centred by :meth:`search_box`).
+    [`LuGre`][jaxfric.models.LuGre]; ``k`` and ``C`` are data-centred by [`search_box`][jaxfric.models.AbstractPhysicalModel.search_box]).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): the slip
     level is s_pos(v) (``Fc_pos``, ``Fs_pos``) for v > 0 and s_neg(v) for v <= 0,
@@ -143,7 +143,7 @@ class GMS(AbstractPhysicalModel):
         return {name: out[name] for name in self.physical_names}
 
     def from_physical(self, **params) -> Array:
-        """Physical parameters (:attr:`physical_names`; the alphas must sum to 1) -> ``theta``."""
+        """Physical parameters ([`physical_names`][jaxfric.models.GMS.physical_names]; the alphas must sum to 1) -> ``theta``."""
         self._check_physical_names(params)
         n = self.num_elements
         alpha = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(params[f"alpha{i}"])

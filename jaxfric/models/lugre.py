@@ -114,15 +114,15 @@ class LuGre(AbstractPhysicalModel):
 
     Six search coordinates (§8.5): ``log10_sigma0``, ``log10_sigma1``,
     ``log10_sigma2``, ``Fc``, ``Fs_over_Fc`` (so Fs >= Fc), ``log10_vs``.
-    Physical parameters (:meth:`to_physical`): ``sigma0`` [N/m], ``sigma1``
+    Physical parameters ([`to_physical`][jaxfric.models.AbstractPhysicalModel.to_physical]): ``sigma0`` [N/m], ``sigma1``
     [N s/m], ``sigma2`` [N s/m], ``Fc`` [N], ``Fs`` [N], ``vs`` [m/s].
 
     Hyperparameters (static): ``stribeck_exponent`` delta (default 2, the
-    original model). The search box is not a field: :func:`jaxfric.identify`
+    original model). The search box is not a field: [`jaxfric.identify`][jaxfric.identification.identify]
     takes it as data, ``box={"Fc": (5, 100), "Fs_ratio": (1, 2)}`` ((low, high) in
-    physical units, ``Fs_ratio`` for Fs/Fc, a :class:`~jaxfric.models.SearchBox`);
+    physical units, ``Fs_ratio`` for Fs/Fc, a [`SearchBox`][jaxfric.models.SearchBox]);
     entries left out are the §8.5 defaults or the data-centred ranges
-    (:meth:`search_box`). ``dt`` in :meth:`simulate` is the sample time in s.
+    ([`search_box`][jaxfric.models.AbstractPhysicalModel.search_box]). ``dt`` in [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] is the sample time in s.
 
     ``asymmetric=True`` (docs/algorithms.md §13.1, module docstring) replaces
     ``log10_sigma2``, ``Fc``, ``Fs_over_Fc`` by their ``_pos`` / ``_neg`` pairs

@@ -13,7 +13,7 @@ Real drives (docs/algorithms.md §13.1): ``asymmetric=True`` gives every level
 (``Fc``, ``Fs``, ``sigma2``) a ``_pos`` value for v > 0 and a ``_neg`` value for
 v < 0, ``offset=True`` adds a constant ``F_off`` to the output. Both default to
 ``False``, the paper's symmetric form with its unchanged ``theta`` layout.
-:class:`Cylinder` is the Simscape cylinder friction whose Coulomb level grows
+[`Cylinder`][jaxfric.models.Cylinder] is the Simscape cylinder friction whose Coulomb level grows
 with the chamber pressures.
 """
 
@@ -58,8 +58,8 @@ class Coulomb(AbstractPhysicalModel):
     Search coordinates ``Fc`` (+ ``log10_sigma2`` when ``viscous=True``, the
     default). Physical parameters: ``Fc`` [N], ``sigma2`` [N s/m].
     Hyperparameters: ``v_eps`` [m/s] (default 1e-4) and ``viscous``; the search box
-    (entries ``Fc``, ``sigma2``) is data given to :func:`jaxfric.identify` (see
-    :class:`LuGre`).
+    (entries ``Fc``, ``sigma2``) is data given to [`jaxfric.identify`][jaxfric.identification.identify] (see
+    [`LuGre`][jaxfric.models.LuGre]).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1, the EMPS
     reference model of Janot et al. 2019 with a smoothed sign t = tanh(v / v_eps))::
@@ -68,7 +68,7 @@ class Coulomb(AbstractPhysicalModel):
 
     with search coordinates ``Fc_pos``, ``Fc_neg``, ``log10_sigma2_pos``,
     ``log10_sigma2_neg``, ``F_off`` (box entry ``F_off``, default data-centred
-    +-0.5 F). Linear in its physical parameters: :meth:`fit_least_squares`
+    +-0.5 F). Linear in its physical parameters: [`fit_least_squares`][jaxfric.models.Coulomb.fit_least_squares]
     solves it exactly.
     """
 
@@ -104,7 +104,7 @@ class Coulomb(AbstractPhysicalModel):
 
     def fit_least_squares(self, velocity: ArrayLike, friction: ArrayLike) -> dict[str, float]:
         """Exact least-squares fit of the physical parameters (the model is linear in
-        them, docs/algorithms.md §13.1): ``{name: value}`` for :meth:`from_physical`.
+        them, docs/algorithms.md §13.1): ``{name: value}`` for [`from_physical`][jaxfric.models.AbstractPhysicalModel.from_physical].
 
         Solved unconstrained on every sample with the model's own smoothed sign; a
         negative viscous coefficient (which the log10 search coordinate cannot
@@ -147,7 +147,7 @@ class Stribeck(AbstractPhysicalModel):
     default [0.5, 3]). Physical parameters: ``Fc`` [N], ``Fs`` [N], ``vs``
     [m/s], ``sigma2`` [N s/m] (+ ``delta`` [-]). Hyperparameters: ``v_eps``
     [m/s] (default 1e-4), ``exponent`` (the fixed delta, default 2),
-    ``fit_exponent``; the search box is data (see :class:`LuGre`).
+    ``fit_exponent``; the search box is data (see [`LuGre`][jaxfric.models.LuGre]).
 
     ``asymmetric=True`` / ``offset=True`` (docs/algorithms.md §13.1): with
     ``g_pos``, ``g_neg`` the Stribeck curves of (``Fc_pos``, ``Fs_pos``) and
@@ -255,7 +255,7 @@ class Cylinder(AbstractPhysicalModel):
         return {"f_cfr": (0.0, 1.2 * friction_level / level)}
 
     def unidentifiable(self, data, **kwargs) -> tuple[Unidentifiable, ...]:
-        """As :meth:`AbstractPhysicalModel.unidentifiable`, plus ``F_pr`` and ``f_cfr``
+        """As [`AbstractPhysicalModel.unidentifiable`][jaxfric.models.AbstractPhysicalModel.unidentifiable], plus ``F_pr`` and ``f_cfr``
         when the record's pressure sum varies by less than 5 % of its level (the
         two then only determine their sum ``F_C``)."""
         out = list(super().unidentifiable(data, **kwargs))

@@ -1,14 +1,14 @@
 """Friction inside the mechanics: simulation-error identification (docs/algorithms.md §13.2).
 
-* :func:`friction_step` — any jaxfric friction model one sample at a time;
-* :func:`simulate_motion` — ``m dv/dt = F_act - F_f - F_load``, ``dx/dt = v`` in one ``lax.scan``;
-* :func:`k_step_positions`, :func:`track_states` — k-step-ahead prediction from measured states;
-* :func:`identify_motion` → :class:`MotionFit` (``simulate``, ``simulate(record, init_window=N)``,
-  metrics in mm and FIT %, save / :func:`load_motion_fit`), from :class:`MotionData` (force and
+* [`friction_step`][jaxfric.motion.friction_step] — any jaxfric friction model one sample at a time;
+* [`simulate_motion`][jaxfric.motion.simulate_motion] — ``m dv/dt = F_act - F_f - F_load``, ``dx/dt = v`` in one ``lax.scan``;
+* [`k_step_positions`][jaxfric.motion.k_step_positions], [`track_states`][jaxfric.motion.track_states] — k-step-ahead prediction from measured states;
+* [`identify_motion`][jaxfric.motion.identify_motion] → [`MotionFit`][jaxfric.motion.MotionFit] (``simulate``, ``simulate(record, init_window=N)``,
+  metrics in mm and FIT %, save / [`load_motion_fit`][jaxfric.motion.load_motion_fit]), from [`MotionData`][jaxfric.motion.MotionData] (force and
   position, no friction signal), one record split or several (``train=[...]``, ``valid=[...]``);
-  the default search (:class:`MotionSearch`) with a budget (``max_evals``, ``max_time``);
-* :func:`compare_motion` → :class:`MotionComparison`: several models ranked by validation error,
-  with an :class:`OverfitWarning` when a richer model validates worse than a simpler one.
+  the default search ([`MotionSearch`][jaxfric.motion.MotionSearch]) with a budget (``max_evals``, ``max_time``);
+* [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
+  with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one.
 """
 
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,

@@ -1,10 +1,10 @@
 """``jaxfric.identify_motion``: friction from actuator force and position alone (§13.2).
 
 No friction signal and no acceleration: the friction model sits inside the mechanics
-(:func:`jaxfric.motion.simulate_motion`) and its parameters (optionally the mass, a
+([`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion]) and its parameters (optionally the mass, a
 constant force offset and the initial velocity) are chosen so that the *simulated*
 position (and/or velocity) matches the measured one, by the same optimisers as
-:func:`jaxfric.identify`.
+[`jaxfric.identify`][jaxfric.identification.identify].
 
 Closed-loop records drift in open-loop simulation (a double integrator with an
 uncertain force balance): the validation metrics therefore start the free run from
@@ -140,7 +140,7 @@ def _as_motion_data(data) -> MotionData:
 
 
 def _split(n: int, train) -> int:
-    """The records' split rule (:func:`jaxfric.records.split_count`); the mechanics need
+    """The records' split rule ([`jaxfric.records.split_count`][jaxfric.records.split_count]); the mechanics need
     two samples on each side of it to start a free run from."""
     count = split_count(n, DEFAULT_TRAIN_FRACTION if train is None else train, whole=False)
     if not 2 <= count <= n - 2:
@@ -194,10 +194,10 @@ class MotionCost(eqx.Module):
 
 
 class ShootingResiduals(eqx.Module):
-    """Weighted position errors of :func:`jaxfric.motion._shooting.shoot` over the
+    """Weighted position errors of `jaxfric.motion._shooting.shoot` over the
     concatenated training records: ``r_k = sqrt(w_k) (x̂_k - x̃_k)``. With the
     per-record weights ``1 / (var(x_r) N)`` (``N`` all training samples) the sum of
-    squares is the pooled ``1 - R^2`` of :class:`MotionCost`."""
+    squares is the pooled ``1 - R^2`` of `MotionCost`."""
 
     model: object = eqx.field(static=True)
     layout: Layout
@@ -223,7 +223,7 @@ class SumOfSquares(eqx.Module):
 
 def motion_metrics(x, x_hat) -> dict:
     """Position metrics: ``rmse_mm`` (RMSE in mm), ``fit_percent`` (MATLAB FIT %),
-    ``max_abs_mm``, plus the rest of :func:`jaxfric.metrics.friction_metrics` in metres."""
+    ``max_abs_mm``, plus the rest of [`jaxfric.metrics.friction_metrics`][jaxfric.metrics.friction_metrics] in metres."""
     x_hat = np.asarray(x_hat, np.float64)
     if not np.all(np.isfinite(x_hat)):
         return {"rmse_mm": float("inf"), "fit_percent": float("-inf"), "max_abs_mm": float("inf"),
@@ -234,14 +234,14 @@ def motion_metrics(x, x_hat) -> dict:
 
 
 class MotionFit(Fit):
-    """A friction model identified inside the mechanics (:func:`identify_motion`).
+    """A friction model identified inside the mechanics ([`identify_motion`][jaxfric.motion.identify_motion]).
 
-    Everything of :class:`jaxfric.Fit` (``predict`` gives the friction [N] for a
+    Everything of [`jaxfric.Fit`][jaxfric.fit.Fit] (``predict`` gives the friction [N] for a
     velocity record, offset included; ``params``; ``save``; ``to_numpy``), plus the mechanics: ``mass`` [kg],
     ``offset`` [N] (a constant force added to the friction, 0 unless fitted),
-    ``v0`` correction [m/s], the velocity filter ``cutoff`` [Hz], and :meth:`simulate`.
+    ``v0`` correction [m/s], the velocity filter ``cutoff`` [Hz], and [`simulate`][jaxfric.motion.MotionFit.simulate].
     ``metrics`` holds position metrics per window (``"train"``, ``"valid"``: free run;
-    ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see :func:`motion_metrics`.
+    ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see [`motion_metrics`][jaxfric.motion.motion_metrics].
     """
 
     @property
@@ -261,7 +261,7 @@ class MotionFit(Fit):
         return super().predict(velocity, dt) + self.offset
 
     def friction_step(self):
-        """The per-sample :class:`jaxfric.motion.FrictionStep` of this fit's model."""
+        """The per-sample [`jaxfric.motion.FrictionStep`][jaxfric.motion.FrictionStep] of this fit's model."""
         return friction_step(self.model, (self.velocity_scaler, self.friction_scaler))
 
     def simulate(self, force, x0=None, v0=None, dt=None, *, load=None, state0=None,
@@ -274,9 +274,9 @@ class MotionFit(Fit):
         * ``simulate(force, x0, v0)``: actuator force [N] (``load`` opposing +x
           subtracted) from position ``x0`` [m], velocity ``v0`` [m/s] and friction state
           ``state0`` (default ``step.init(v0)``);
-        * ``simulate(record, init_window=N)``: a :class:`MotionData` record whose initial
+        * ``simulate(record, init_window=N)``: a [`MotionData`][jaxfric.motion.MotionData] record whose initial
           state is estimated from its first ``N`` samples only, by the rule of
-          :meth:`initial_state`; the outputs cover the whole record (samples before
+          [`initial_state`][jaxfric.motion.MotionFit.initial_state]; the outputs cover the whole record (samples before
           ``N - 1`` are the rule's smoothed estimates, the free run starts at ``N - 1``).
           The record's positions after sample ``N - 1`` and its filtered ``velocity``
           are never read; its force is (it is the input).
@@ -308,7 +308,7 @@ class MotionFit(Fit):
         A polynomial of degree ``min(2, N - 1)`` is fitted by least squares to the first
         ``N`` positions; its value and slope at sample ``N - 1`` are ``x0`` and ``v0``,
         and the friction state is tracked along its slope over samples ``0 .. N - 1``
-        (:func:`jaxfric.motion.track_states`), giving ``state0`` at sample ``N - 1``.
+        ([`jaxfric.motion.track_states`][jaxfric.motion.track_states]), giving ``state0`` at sample ``N - 1``.
         Returns ``{"x0", "v0", "state0", "x_window", "v_window"}`` (the polynomial's
         values and slopes on the window). Reads nothing past ``position[N - 1]``.
         """
@@ -369,7 +369,7 @@ class MotionFit(Fit):
         return self.simulate(data.net_force[start:stop], data.position[start], v0, state0=s0)
 
     def score(self, data: MotionData, init_window: int = 20) -> dict:
-        """:func:`motion_metrics` of ``simulate(data, init_window=N)`` on samples ``N`` onward
+        """[`motion_metrics`][jaxfric.motion.motion_metrics] of ``simulate(data, init_window=N)`` on samples ``N`` onward
         (a benchmark's protocol: the first ``N`` samples only set the initial state)."""
         data = _as_motion_data(data)
         n = _init_window(init_window)
@@ -407,8 +407,8 @@ class MotionFit(Fit):
 
     def evaluate_records(self, train_records, valid_records=(), init_window: int = DEFAULT_INIT_WINDOW) -> dict:
         """Free-run metrics per record: each training record from its first sample
-        (:meth:`simulate_from`, as the training cost), each validation record from its
-        first ``init_window`` samples (:meth:`simulate` with ``init_window``), scored on
+        ([`simulate_from`][jaxfric.motion.MotionFit.simulate_from], as the training cost), each validation record from its
+        first ``init_window`` samples ([`simulate`][jaxfric.motion.MotionFit.simulate] with ``init_window``), scored on
         the rest. ``"train"``/``"valid"`` pool the errors of all records of a kind;
         ``"records"`` lists each record's metrics."""
         out = {"records": {"train": [], "valid": []}, "init_window": int(init_window)}
@@ -463,7 +463,7 @@ def _kstep_jit(step, theta, mass, force, dt, x, v, horizon):
 
 @eqx.filter_jit
 def _evaluate_jit(step, theta, mass, force, dt, x, v, v0_train, n_train, horizon):
-    """:meth:`MotionFit.evaluate`'s three simulations (``n_train``, ``horizon``: Python ints)."""
+    """[`MotionFit.evaluate`][jaxfric.motion.MotionFit.evaluate]'s three simulations (``n_train``, ``horizon``: Python ints)."""
     states = track_states(step, theta, v, dt)
     train = simulate_motion(step, theta, mass, force[:n_train], dt, x[0], v0_train)["x"]
     s0 = jax.tree_util.tree_map(lambda a: a[n_train], states)
@@ -472,7 +472,7 @@ def _evaluate_jit(step, theta, mass, force, dt, x, v, v0_train, n_train, horizon
 
 
 def load_motion_fit(path) -> MotionFit:
-    """Read a :class:`MotionFit` written by ``MotionFit.save``."""
+    """Read a [`MotionFit`][jaxfric.motion.MotionFit] written by ``MotionFit.save``."""
     fit = load_fit(path)
     if "motion" not in fit.settings:
         raise ValueError(f"{path} holds a force-balance fit, not a motion fit: use jaxfric.load_fit")
@@ -536,7 +536,7 @@ def _records(data, train, valid):
 
 
 def _pooled(records, dtype, scalers, mass0, *, segment=None, lead=0, windows=None):
-    """The shooting cost's data for ``records`` concatenated (see :class:`ShootingResiduals`).
+    """The shooting cost's data for ``records`` concatenated (see `ShootingResiduals`).
     ``windows=(length, total)``: short windows spread over the records instead (global stage)."""
     total = sum(r.n_samples for r in records)
     parts, starts, weights, at = [], [], [], 0
@@ -592,8 +592,8 @@ def identify_motion(
     """Identify friction inside ``m dv/dt = F_act - F_f - F_load`` from force and position (§13.2).
 
     Args:
-        model: a jaxfric friction model or its name (as :func:`jaxfric.identify`).
-        data: one record, :class:`MotionData` or ``(force [N], position [m], dt [s])``,
+        model: a jaxfric friction model or its name (as [`jaxfric.identify`][jaxfric.identification.identify]).
+        data: one record, [`MotionData`][jaxfric.motion.MotionData] or ``(force [N], position [m], dt [s])``,
             split by ``train`` into a training and a held-back block. Leave it out to
             train on whole records (``train=[...]``).
         key: PRNG key or int seed. Same key, same fit.
@@ -604,13 +604,13 @@ def identify_motion(
             (the cost pools them, each simulated from its own first sample).
         valid: with ``train=[...]``: a record or a list of records, each used whole for
             validation; its state is estimated from its first ``init_window`` samples
-            (:meth:`MotionFit.initial_state`) and the rest is scored.
-        search: the default pipeline's settings (:class:`MotionSearch`: a short PSO on
+            ([`MotionFit.initial_state`][jaxfric.motion.MotionFit.initial_state]) and the rest is scored.
+        search: the default pipeline's settings ([`MotionSearch`][jaxfric.motion.MotionSearch]: a short PSO on
             windows, then Levenberg–Marquardt on multiple-shooting segments; default
-            :func:`jaxfric.motion.default_search` of the model; docs/motion.md). Ignored
+            [`jaxfric.motion.default_search`][jaxfric.motion.default_search] of the model; docs/motion.md). Ignored
             when ``solver`` is given.
         solver: a jaxfric solver to run instead, on the final cost (the pre-0.9 behaviour
-            with :func:`jaxfric.identification.default_solver`; slow on long records).
+            with [`jaxfric.identification.default_solver`][jaxfric.identification.default_solver]; slow on long records).
         error: ``"position"`` (default), ``"velocity"`` (against the filtered velocity)
             or ``"both"``; each term is a mean squared error / variance (1 - R^2).
             Velocity errors and ``horizon`` take one record (``data``).
@@ -621,20 +621,20 @@ def identify_motion(
             95th percentile of |force|).
         fit_v0: identify a correction of each record's initial velocity (range +-0.05 max|v|).
         box: the friction model's search box, a partial mapping physical name ->
-            (low, high) (a :class:`jaxfric.models.SearchBox`, as in :func:`jaxfric.identify`).
+            (low, high) (a [`jaxfric.models.SearchBox`][jaxfric.models.SearchBox], as in [`jaxfric.identify`][jaxfric.identification.identify]).
         data_bounds: centre the box entries left out on the training data, using the
             filtered velocity and the net force as the friction scale.
         metric_horizon: k of the k-step metrics reported beside the free run (``data`` form).
         init_window: leading samples of each validation record that set its state.
         max_evals, max_time: a budget (cost evaluations, wall seconds) checked between
             stages and after every gradient step; the run then ends with the best point
-            so far and ``fit.settings["motion"]["stopped"]`` says why (:class:`MotionBudget`).
+            so far and ``fit.settings["motion"]["stopped"]`` says why ([`MotionBudget`][jaxfric.motion.MotionBudget]).
         progress: ``True`` for progress bars (the global stage's, then one per
-            Levenberg–Marquardt stage), or a callable sink (as :func:`jaxfric.minimise`).
+            Levenberg–Marquardt stage), or a callable sink (as [`jaxfric.minimise`][jaxfric.optim.minimise]).
 
-    Metrics (:func:`motion_metrics`, position in mm and FIT %): ``data`` form:
+    Metrics ([`motion_metrics`][jaxfric.motion.motion_metrics], position in mm and FIT %): ``data`` form:
     ``"train"``, ``"valid"`` (free run of the held-back block from the state at its
-    start, :meth:`MotionFit.simulate_from`), ``"train_kstep"``, ``"valid_kstep"``;
+    start, [`MotionFit.simulate_from`][jaxfric.motion.MotionFit.simulate_from]), ``"train_kstep"``, ``"valid_kstep"``;
     records form: ``"train"`` and ``"valid"`` pooled over the records and
     ``metrics["records"]`` per record.
 

@@ -4,8 +4,8 @@ A richer friction model always fits its training data at least as well as a simp
 one it contains; what decides between them is the error on motion they were not
 fitted on: the held-back block of a single record, or validation records. On EMPS,
 LuGre fitted the training file better than GMS and predicted a new recording worse.
-:func:`compare_motion` fits every model with the same data, key and options, ranks
-them by validation free-run RMSE, and warns (:class:`OverfitWarning`) when a model
+[`compare_motion`][jaxfric.motion.compare_motion] fits every model with the same data, key and options, ranks
+them by validation free-run RMSE, and warns ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model
 with more search parameters predicts the validation data worse than one with fewer.
 """
 
@@ -25,7 +25,7 @@ class OverfitWarning(UserWarning):
 
 @dataclasses.dataclass
 class MotionComparison:
-    """Fits of :func:`compare_motion`. ``fits``: name -> :class:`MotionFit` in the order
+    """Fits of [`compare_motion`][jaxfric.motion.compare_motion]. ``fits``: name -> [`MotionFit`][jaxfric.motion.MotionFit] in the order
     given; ``ranking``: names from the lowest validation RMSE; ``overfit``: ``(richer,
     simpler)`` pairs where the richer model validates worse."""
 
@@ -66,7 +66,7 @@ OVERFIT_MARGIN = 1e-3
 def rank_fits(fits: dict, *, stacklevel: int = 2) -> MotionComparison:
     """Rank named motion fits by validation RMSE and warn about overfitting (module docstring):
     a model with more search parameters (``metrics["num_params"]``) whose validation RMSE
-    exceeds a simpler one's by more than :data:`OVERFIT_MARGIN`."""
+    exceeds a simpler one's by more than `OVERFIT_MARGIN`."""
     scores = {name: _valid_rmse(fit) for name, fit in fits.items()}
     ranking = sorted(fits, key=lambda k: (scores[k], k))
     overfit = []
@@ -86,11 +86,11 @@ def rank_fits(fits: dict, *, stacklevel: int = 2) -> MotionComparison:
 
 def compare_motion(models, data=None, *, key, mass, **kwargs) -> MotionComparison:
     """Fit each of ``models`` (names or instances, or a mapping label -> model) with
-    :func:`identify_motion` on the same data, key and options, rank them by validation
-    free-run RMSE and warn (:class:`OverfitWarning`) when a model with more search
+    [`identify_motion`][jaxfric.motion.identify_motion] on the same data, key and options, rank them by validation
+    free-run RMSE and warn ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model with more search
     parameters is worse on validation than one with fewer.
 
-    ``data``/``train``/``valid`` and every other keyword are :func:`identify_motion`'s;
+    ``data``/``train``/``valid`` and every other keyword are [`identify_motion`][jaxfric.motion.identify_motion]'s;
     a validation part is required (a held-back block or ``valid=[...]``).
     """
     if isinstance(models, str):

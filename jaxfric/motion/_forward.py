@@ -73,7 +73,7 @@ def _start(step, theta, mass, force, dt, x0, v0, state0):
 def simulate_motion(step: FrictionStep, theta, mass, force, dt, x0, v0, state0=None) -> dict:
     """Free-run position, velocity and friction for the net force ``force`` [N], §13.2.
 
-    ``step``: :func:`jaxfric.motion.friction_step` of the model; ``theta``: its search
+    ``step``: [`jaxfric.motion.friction_step`][jaxfric.motion.friction_step] of the model; ``theta``: its search
     vector; ``mass`` [kg]; ``force``: ``(T,)`` net force u_k = F_act - F_load held over
     each sample; ``dt`` [s]; ``x0`` [m], ``v0`` [m/s]: state at sample 0; ``state0``:
     friction state (default ``step.init(theta, v0)``). Returns ``{"x", "v", "friction"}``,
@@ -93,7 +93,7 @@ def simulate_motion(step: FrictionStep, theta, mass, force, dt, x0, v0, state0=N
 
 def track_states(step: FrictionStep, theta, velocity, dt):
     """Friction states s_0..s_{T-1} along a measured velocity record, advanced as
-    :func:`simulate_motion` advances them (so a simulation started at sample j from
+    [`simulate_motion`][jaxfric.motion.simulate_motion] advances them (so a simulation started at sample j from
     ``states[j]`` continues consistently). Returns a pytree with a leading ``T`` axis."""
     velocity = jnp.asarray(velocity)
     s0 = step.init(theta, velocity[0], dt)

@@ -1,5 +1,5 @@
 """Where a motion fit's mechanics sit in its search vector: shared by the fit's cost
-(:mod:`jaxfric.motion._api`) and its uncertainty's residuals (:mod:`jaxfric.motion._residuals`)."""
+(`jaxfric.motion._api`) and its uncertainty's residuals (`jaxfric.motion._residuals`)."""
 
 from __future__ import annotations
 

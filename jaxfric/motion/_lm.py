@@ -1,7 +1,7 @@
 """Levenberg–Marquardt on the simulated positions, with exact forward-mode Jacobians, §13.2.
 
 The residuals of a motion fit are the ``T`` weighted position errors of one
-``lax.scan`` (:func:`jaxfric.motion._shooting.shoot`); its Jacobian with respect to the
+``lax.scan`` (`jaxfric.motion._shooting.shoot`); its Jacobian with respect to the
 ``n`` search parameters costs about ``n`` forward passes by forward mode (``jax.jacfwd``)
 and, unlike reverse mode through a 20 000-step scan, stores no tape: on the EMPS
 estimation record one LuGre Jacobian took 0.09 s against 0.42 s for one reverse-mode
@@ -11,7 +11,7 @@ in NumPy and adapts μ by Nielsen's rule (gain ratio ρ: accept if ρ > 0, then
 ``μ ← μ·max(1/3, 1 − (2ρ − 1)³)``; else ``μ ← μ·ν``, ``ν ← 2ν``).
 
 The search runs on ``z`` with θ = lo + (hi − lo)(1 + sin z)/2
-(:func:`jaxfric.identification._refine.to_box`), so every iterate is inside the box.
+(`jaxfric.identification._refine.to_box`), so every iterate is inside the box.
 Each step is one compiled call; between steps the loop checks the budget (steps,
 evaluations, wall time) and reports progress, so a run can end at any step with the best
 point so far (the accepted iterate never gets worse).

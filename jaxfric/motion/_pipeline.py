@@ -1,16 +1,16 @@
-"""The default search of :func:`jaxfric.identify_motion`: global, then shooting, then free run (§13.2).
+"""The default search of [`jaxfric.identify_motion`][jaxfric.motion.identify_motion]: global, then shooting, then free run (§13.2).
 
 A free-run position error over a long closed-loop record is a hard cost to search: the
 plant integrates twice, so a small force error early moves every later sample, and
 the cost is flat in some directions and steep and many-valleyed in others. The
 default pipeline therefore grows the simulation horizon:
 
-1. **global** — a small :class:`jaxfric.optim.PSO` swarm on short windows spread over
-   the training records (:data:`GLOBAL_SAMPLES` samples in all, windows of
+1. **global** — a small [`jaxfric.optim.PSO`][jaxfric.optim.PSO] swarm on short windows spread over
+   the training records (`GLOBAL_SAMPLES` samples in all, windows of
    ``lead + global_window`` samples, each started from the measurement and with its
    friction state carried along the measured velocity over the ``lead`` samples,
-   :mod:`._shooting`). It only has to find the basin;
-2. **shooting** — Levenberg–Marquardt (:mod:`._lm`) on the whole training data cut
+   `._shooting`). It only has to find the basin;
+2. **shooting** — Levenberg–Marquardt (`._lm`) on the whole training data cut
    into segments, each started from the measurement (multiple shooting). ``horizons``
    lists the segment lengths of successive stages (default one stage of 5 000 samples,
    5 s at 1 kHz); a list of growing lengths gives a coarse-to-fine schedule, ``None`` is
@@ -25,7 +25,7 @@ per model, compilation included, on a busier machine
 (``benchmarks/results/motion_timing.md``), with a lower held-back error for every
 physical model (``benchmarks/results/motion.md``).
 
-The budget (:class:`MotionBudget`) is checked between the stages and after every
+The budget ([`MotionBudget`][jaxfric.motion.MotionBudget]) is checked between the stages and after every
 Levenberg–Marquardt step, so a run stops with the best point so far.
 """
 
@@ -52,7 +52,7 @@ GLOBAL_SAMPLES = 4000
 
 
 class MotionSearch(eqx.Module):
-    """Settings of :func:`jaxfric.identify_motion`'s default search (module docstring).
+    """Settings of [`jaxfric.identify_motion`][jaxfric.motion.identify_motion]'s default search (module docstring).
 
     Args:
         particles, generations: the global PSO stage (``particles·(generations + 1)``
@@ -96,16 +96,16 @@ class MotionSearch(eqx.Module):
             raise ValueError(f"MotionSearch.rtol must be >= 0, got {self.rtol!r}")
 
 
-#: Above this many search parameters (the networks) :func:`default_search` grows the
+#: Above this many search parameters (the networks) `default_search` grows the
 #: horizon: 60 steps on 1 000-sample segments, then 150 on 5 000.
 NETWORK_PARAMS = 20
 
 
 def default_search(model) -> MotionSearch:
-    """The default :class:`MotionSearch` for ``model``.
+    """The default [`MotionSearch`][jaxfric.motion.MotionSearch] for ``model``.
 
     Physical models (a dozen parameters at most): one Levenberg–Marquardt stage on
-    5 000-sample segments, at most 60 steps. Networks (more than :data:`NETWORK_PARAMS`
+    5 000-sample segments, at most 60 steps. Networks (more than `NETWORK_PARAMS`
     parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
     gradient stages do the work, coarse to fine: 60 steps on 1 000-sample segments, then 150
     on 5 000. On the EMPS estimation split this took the Elman(10) network's held-back error

@@ -1,9 +1,9 @@
-"""The training residuals of an :func:`jaxfric.identify_motion` fit, for its parameter
-uncertainty (:mod:`jaxfric.uncertainty`, docs/uncertainty.md): the fit's own cost's
+"""The training residuals of an [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] fit, for its parameter
+uncertainty ([`jaxfric.uncertainty`][jaxfric.uncertainty], docs/uncertainty.md): the fit's own cost's
 residuals as a function of its search coordinates (the model's, then the mechanics it
 identified), so that their Jacobian is that of what the search minimised.
 
-The residual function is an ``eqx.Module`` (:class:`MotionResiduals`) whose arrays are
+The residual function is an ``eqx.Module`` (`MotionResiduals`) whose arrays are
 the record and the constants, so the uncertainty code's one compiled linearisation is
 reused by every motion fit of the same model, cost and record length."""
 
@@ -26,7 +26,7 @@ MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v
 
 def motion_residuals(fit, data) -> Residuals:
     """Simulation residuals of a motion fit over its training window of ``data`` (a
-    :class:`jaxfric.motion.MotionData`): free-run position and/or velocity, each divided
+    [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData]): free-run position and/or velocity, each divided
     by its standard deviation for ``error="both"``; k-step positions for a k-step fit;
     each training record run from its own start for a fit on whole records."""
     mech = fit.settings["motion"]
@@ -74,7 +74,7 @@ def motion_residuals(fit, data) -> Residuals:
 
 
 class MotionResiduals(eqx.Module):
-    """r(y) of a motion fit (:func:`motion_residuals`) for search coordinates ``y`` (the
+    """r(y) of a motion fit (`motion_residuals`) for search coordinates ``y`` (the
     model's, then the mechanics where ``layout`` puts them, as in the fit's own cost).
     The record (net force, position, velocity), the fixed mass and ``dt`` are array
     leaves, traced inputs of the compiled linearisation; the friction step's model, the
@@ -116,5 +116,5 @@ class MotionResiduals(eqx.Module):
 
 
 def motion_train_velocity(fit, data) -> np.ndarray:
-    """The training window's velocity of ``data`` (a :class:`jaxfric.motion.MotionData`)."""
+    """The training window's velocity of ``data`` (a [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData])."""
     return np.asarray(data.velocity)[: fit.n_train]

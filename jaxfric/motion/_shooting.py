@@ -1,6 +1,6 @@
 """Multiple shooting: the forward model with the state re-set from measurements, §13.2.
 
-One ``lax.scan`` serves every cost of :func:`jaxfric.identify_motion`:
+One ``lax.scan`` serves every cost of [`jaxfric.identify_motion`][jaxfric.motion.identify_motion]:
 
 * **free run** of a record: the state is set from the measurements at the record's first
   sample only;
@@ -14,11 +14,11 @@ A *forced* sample ``k`` takes position and velocity from the record
 (``x_k = x̃_k``, ``v_k = ṽ_k``); its friction state keeps what the scan carried, except at
 a *reset* sample where it is ``step.init(theta, ṽ_k)``. Forcing ``m`` consecutive samples
 before a segment start therefore *tracks* the friction state along the measured velocity
-for ``m`` samples (a lead-in), as :func:`jaxfric.motion.track_states` does. Which samples
+for ``m`` samples (a lead-in), as [`jaxfric.motion.track_states`][jaxfric.motion.track_states] does. Which samples
 are forced and reset, and the weight of each sample's squared error, are data (arrays),
 so one compiled scan serves every segment length.
 
-The step itself is :func:`jaxfric.motion.simulate_motion`'s (``_forward._advance``).
+The step itself is [`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion]'s (``_forward._advance``).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ class Schedule(eqx.Module):
 
 def schedule(starts, total: int, *, segment: int | None = None, lead: int = 0, weights=None,
              dtype=np.float64) -> Schedule:
-    """The :class:`Schedule` of records that begin at ``starts`` in a concatenation of
+    """The `Schedule` of records that begin at ``starts`` in a concatenation of
     ``total`` samples.
 
     Each record's first ``lead + 1`` samples are forced (its friction state starts from

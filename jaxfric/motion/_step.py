@@ -3,7 +3,7 @@
 ``model.simulate(theta, velocity, dt)`` needs the whole velocity record in advance.
 Inside the mechanics (``docs/algorithms.md §13.2``) the velocity of the next sample
 depends on the friction of this one, so the friction has to advance one sample at a
-time. A :class:`FrictionStep` splits a model's recursion into
+time. A [`FrictionStep`][jaxfric.motion.FrictionStep] splits a model's recursion into
 
     F_k     = output(theta, s_k, v_k)          friction [N] at sample k
     s_{k+1} = update(theta, s_k, v_k)          zero-order hold of v_k over one sample
@@ -13,7 +13,7 @@ which reproduces ``model.simulate`` (and, with the §2.4 scalers, ``Fit.predict`
 sample for sample; ``tests/test_motion.py`` checks this for every model. The state
 ``s`` is a pytree of arrays (``()`` for static maps).
 
-:func:`friction_step` picks the implementation by the model's type (a
+[`friction_step`][jaxfric.motion.friction_step] picks the implementation by the model's type (a
 ``functools.singledispatch`` on the class, so nominal types, no attribute guessing):
 
 * LuGre, Dahl: the bristle state z and its exact zero-order-hold update (§8.2),
@@ -214,8 +214,8 @@ class ElmanFullStep(_ScaledStep):
 
 @functools.singledispatch
 def friction_step(model: AbstractFrictionModel, scalers=(None, None)) -> FrictionStep:
-    """The :class:`FrictionStep` of ``model`` (module docstring). ``scalers`` =
-    ``(velocity, friction)`` :class:`Scaler` pair for models with ``needs_scaling``.
+    """The [`FrictionStep`][jaxfric.motion.FrictionStep] of ``model`` (module docstring). ``scalers`` =
+    ``(velocity, friction)`` [`Scaler`][jaxfric.models.Scaler] pair for models with ``needs_scaling``.
 
     Raises ``ValueError`` for a model with internal state that has no registered step.
     """

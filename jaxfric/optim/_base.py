@@ -119,7 +119,7 @@ class History(eqx.Module):
 
 # -------------------------------------------------------------------------- solution
 class Solution(eqx.Module):
-    """Result of :func:`jaxfric.minimise` (a pytree: works under ``jit``/``vmap``).
+    """Result of [`jaxfric.minimise`][jaxfric.optim.minimise] (a pytree: works under ``jit``/``vmap``).
 
     Attributes:
         value: the best parameters found, with the structure of the bounds.
@@ -127,7 +127,7 @@ class Solution(eqx.Module):
         result: an ``optimistix.RESULTS`` code.
         stats: ``{"num_steps": generations or NM steps, "num_evals": exact number
             of objective evaluations}``.
-        history: :class:`History` of best ``f`` against evaluations.
+        history: [`History`][jaxfric.optim.History] of best ``f`` against evaluations.
         state: the solver's final state (``None`` for solutions built elsewhere):
             pass the solution back as ``minimise(..., warm_start=solution)`` to
             continue the run with a larger budget.
@@ -171,7 +171,7 @@ def safe_value(f):
 def batch_objective(fn: Callable, args) -> Callable:
     """``X (P, D) -> f (P,)``: vmapped, NaN-safe version of ``fn(x, args)``.
 
-    If ``fn`` carries a device ``layout`` (set by :func:`jaxfric.minimise` when there
+    If ``fn`` carries a device ``layout`` (set by [`jaxfric.minimise`][jaxfric.optim.minimise] when there
     are several devices) the population is split by agents across them.
     """
     layout = getattr(fn, "layout", None)
@@ -220,7 +220,7 @@ def uniform_flat_each(keys, shape, dtype):
 
 
 def uniform_in_box(key, shape, lower, upper):
-    """``U(lower, upper)`` of ``shape`` (:func:`uniform_flat`)."""
+    """``U(lower, upper)`` of ``shape`` (`uniform_flat`)."""
     return lower + uniform_flat(key, shape, lower.dtype) * (upper - lower)
 
 

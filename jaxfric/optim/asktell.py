@@ -1,9 +1,9 @@
 """ask / tell: a run driven from Python, for an objective outside JAX (a simulator, a
 NumPy model, a lab rig).
 
-The run *is* the compiled run of :func:`jaxfric.minimise` (:func:`jaxfric.optim.loop._run`),
+The run *is* the compiled run of [`jaxfric.minimise`][jaxfric.optim.minimise] (`jaxfric.optim.loop._run`),
 started in a worker thread with an objective that answers from Python: every batch the
-solver evaluates goes out through ``jax.pure_callback`` and waits until :func:`tell`
+solver evaluates goes out through ``jax.pure_callback`` and waits until [`tell`][jaxfric.optim.asktell.tell]
 brings its values. So ask/tell visits the points ``minimise`` visits for the same key,
 with the same evaluation counts and stage switches, for every solver that evaluates in
 batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
@@ -18,19 +18,19 @@ batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
 Several seeds in one run: ``ask_init(lower, upper, keys=keys)`` with a batch of ``S``
 keys runs the keys side by side as ``minimise_many(..., keys=keys, batching="vmap")``
 does (``vmap`` of the same run, on one device). Every ask then carries every seed's
-batch, ``X`` of shape ``(S, k, n)`` (block ``s`` is seed ``s``), :func:`tell` takes
-values of shape ``(S, k)``, and :func:`result` is ``minimise_many``'s batched
-:class:`Solution`. Under ``vmap`` every seed is asked on every step: a seed that has
+batch, ``X`` of shape ``(S, k, n)`` (block ``s`` is seed ``s``), [`tell`][jaxfric.optim.asktell.tell] takes
+values of shape ``(S, k)``, and [`result`][jaxfric.optim.asktell.result] is ``minimise_many``'s batched
+[`Solution`][jaxfric.optim.Solution]. Under ``vmap`` every seed is asked on every step: a seed that has
 finished, and the branch of a Nelder–Mead step a seed does not take (``vmap`` computes
 both sides of a conditional), still has its rows asked, and their values are
 discarded. Swarms (PSO, MAPSO, Evosax) batch cleanly: while no seed has finished, every
 row asked is one the algorithm uses.
 
 The same recipe without ask/tell: wrap the outside objective in ``jax.pure_callback``
-and call :func:`jaxfric.minimise` (docs/solvers.md, "Objectives outside JAX").
+and call [`jaxfric.minimise`][jaxfric.optim.minimise] (docs/solvers.md, "Objectives outside JAX").
 
 A run left unfinished is stopped when its last state is garbage-collected. Several runs
-may be open at once, but each waits for :func:`tell` inside XLA: a run large enough for
+may be open at once, but each waits for [`tell`][jaxfric.optim.asktell.tell] inside XLA: a run large enough for
 XLA:CPU to run it on its thread pool holds a pool thread while it waits, and with more
 such runs open than the pool has threads (about one per core) the next one never gets
 its first batch out (a 25-agent PSO on 5 parameters, 4 runs, 2 cores). For several seeds
@@ -90,7 +90,7 @@ def _answer(token, X, wide):
     """Host side of the objective: ``X`` is one point ``(n,)`` or a batch ``(k, n)``; in
     a run of ``S`` seeds, with the seeds' axis in front: ``(S, n)`` or ``(S, k, n)``,
     asked as ``(S, k, n)`` (``wide``: float64 sent as pairs of uint32, see
-    :func:`_objective`)."""
+    `_objective`)."""
     channel = _CHANNELS[int(np.asarray(token).flat[0])]
     X = np.array(X)  # a copy of its own: asked and kept after the callback returns
     if wide:
@@ -102,7 +102,7 @@ def _answer(token, X, wide):
 
 
 def _objective(x, token):
-    """``fn(x, args)`` of an ask/tell run: the value comes from :func:`tell`. Batched by
+    """``fn(x, args)`` of an ask/tell run: the value comes from [`tell`][jaxfric.optim.asktell.tell]. Batched by
     ``vmap`` it is one callback per batch (``vmap_method="broadcast_all"``).
 
     A float64 run sends its points and receives its values as uint32 pairs: XLA may run
@@ -121,7 +121,7 @@ class AskTellState:
     """Where a run driven by ask/tell stands: the batch waiting for values (``pending``,
     ``None`` once the run has finished) and the number of values told so far
     (``num_told``; in a run of several seeds, per seed: ``S * num_told`` values in all,
-    discarded ones included). Every :func:`tell` returns a new state; the older ones are
+    discarded ones included). Every [`tell`][jaxfric.optim.asktell.tell] returns a new state; the older ones are
     spent."""
 
     def __init__(self, run: "_Run", event, num_told: int):
@@ -249,7 +249,7 @@ def _abandon_all():
 def start(solver, lower, upper, key=None, x0=None, keys=None) -> AskTellState:
     """Start a run of ``solver`` (already checked) on the 1-D box ``[lower, upper]``: one
     seed (``key``), or one run of several seeds side by side (``keys``, a batch of
-    keys as :func:`jaxfric.minimise_many` takes them); exactly one of the two."""
+    keys as [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] takes them); exactly one of the two."""
     if key is not None and keys is not None:
         raise ValueError("ask_init takes key= (one seed) or keys= (a batch of keys, "
                          "several seeds in one run), not both")
@@ -275,7 +275,7 @@ def start(solver, lower, upper, key=None, x0=None, keys=None) -> AskTellState:
 
 
 def ask(st: AskTellState):
-    """``(X, st)``: the points (rows) whose values :func:`tell` needs next: ``(k, n)``,
+    """``(X, st)``: the points (rows) whose values [`tell`][jaxfric.optim.asktell.tell] needs next: ``(k, n)``,
     or ``(S, k, n)`` in a run of ``S`` seeds (block ``s`` is seed ``s``'s)."""
     if st.pending is None:
         raise ValueError("the run has finished (ask_done is True): read ask_result")
@@ -283,7 +283,7 @@ def ask(st: AskTellState):
 
 
 def tell(st: AskTellState, X, f) -> AskTellState:
-    """Give the values ``f`` of the rows ``X`` that :func:`ask` returned (NaN and inf count
+    """Give the values ``f`` of the rows ``X`` that [`ask`][jaxfric.optim.asktell.ask] returned (NaN and inf count
     as the worst value): shape ``(k,)``, or ``(S, k)`` in a run of ``S`` seeds. Returns
     the state asking for the next batch."""
     if st.pending is None:
@@ -329,8 +329,8 @@ def done(st: AskTellState) -> bool:
 
 
 def result(st: AskTellState) -> Solution:
-    """The run's :class:`Solution` (flat ``value``) once it has finished, as
-    :func:`jaxfric.minimise` gives it (a run of several seeds: as
+    """The run's [`Solution`][jaxfric.optim.Solution] (flat ``value``) once it has finished, as
+    [`jaxfric.minimise`][jaxfric.optim.minimise] gives it (a run of several seeds: as
     ``minimise_many(..., batching="vmap")`` gives it, every field with a leading axis
     of the seeds). Before, the best row told so far, per seed in a run of several seeds;
     there, rows whose values the run later discards count too, so it may be better than

@@ -1,9 +1,9 @@
 """Two-stage solvers: a global search, then a local one from its best point(s)
 (docs/algorithms.md §5.1: ``θ_G = global(J, bounds)``, ``θ* = local(J, start=θ_G)``).
 
-:func:`chain` builds one from any global solver (PSO, MAPSO, ...) and any local one
-(:class:`~jaxfric.NelderMead` or another ``optimistix`` minimiser);
-:class:`~jaxfric.MAPSONMDS` is the paper's instance. The run's key is split once,
+[`chain`][jaxfric.optim.chain] builds one from any global solver (PSO, MAPSO, ...) and any local one
+([`NelderMead`][jaxfric.optim.NelderMead] or another ``optimistix`` minimiser);
+[`MAPSONMDS`][jaxfric.optim.MAPSONMDS] is the paper's instance. The run's key is split once,
 ``k_global, k_local = jax.random.split(key)``.
 
 The chain is two *stages* of the step protocol: the driver runs stage 0 (global steps)
@@ -12,7 +12,7 @@ stage's step while in the other. With ``num_starts = k`` the local solver is res
 from the ``k`` best personal bests of a swarm, one run after another, and the best
 refined point wins (multi-start local stage).
 
-Every chain has ``ask``/``tell`` (:mod:`jaxfric.optim.rounds`), for an objective outside
+Every chain has ``ask``/``tell`` ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]), for an objective outside
 JAX: during the global stage ``ask`` returns the population (and a swarm's further
 batches), then Nelder–Mead's first simplex (``n + 1`` points, one per start), then the
 trial points of each step, one at a time (a shrink: ``n``) under the sequential rule or
@@ -122,7 +122,7 @@ class AbstractChain(AbstractSolver):
     def _local_options(self, lower, upper, g):
         """The local stage's first step sized from the spread of the global stage's
         personal bests (``simplex_from_swarm``; see the local solver's
-        :meth:`~jaxfric.optim.AbstractSolver.start_options`)."""
+        [`start_options`][jaxfric.optim.AbstractSolver.start_options])."""
         bests = self._global.personal_bests(g) if self.simplex_from_swarm else None
         if bests is None:
             return None
@@ -271,8 +271,8 @@ class Chain(AbstractChain):
     """``chain(global_solver, local_solver)``: see the module docstring.
 
     Args:
-        global_solver: e.g. :class:`~jaxfric.MAPSO` or :class:`~jaxfric.PSO`.
-        local_solver: e.g. :class:`~jaxfric.NelderMead` (any ``optx.AbstractMinimiser``
+        global_solver: e.g. [`MAPSO`][jaxfric.optim.MAPSO] or [`PSO`][jaxfric.optim.PSO].
+        local_solver: e.g. [`NelderMead`][jaxfric.optim.NelderMead] (any ``optx.AbstractMinimiser``
             or jaxfric solver).
         num_starts: local runs from the ``num_starts`` best personal bests (swarms).
         simplex_from_swarm: size Nelder–Mead's first simplex from the swarm's spread.

@@ -1,10 +1,10 @@
 """Checkpoint files: a pytree (the driver's loop carry) written after a JSON header.
 
 The pytree is written with equinox's serialisation (``eqx.tree_serialise_leaves``)
-after a one-line JSON header, through :func:`jaxfric.files.atomic_write` (a temporary
+after a one-line JSON header, through [`jaxfric.files.atomic_write`][jaxfric.files.atomic_write] (a temporary
 file that then replaces the checkpoint with ``os.replace``), so an interrupt never
 leaves a half-written file. Files get the user's usual permissions (``0o666 & ~umask``).
-The driver (:mod:`jaxfric.optim.driver`) runs in chunks and calls :func:`save` after
+The driver ([`jaxfric.optim.driver`][jaxfric.optim.driver]) runs in chunks and calls [`save`][jaxfric.optim.checkpoint.save] after
 each; this module knows nothing of solvers or runs.
 
 The header records a fingerprint of the problem, checked on resume, each part with its
@@ -160,7 +160,7 @@ def header(fp: dict, key) -> dict:
 
 def save(path: Path, meta: dict, carry) -> None:
     """Write ``carry`` after a JSON header, atomically, with the user's permissions
-    (:func:`jaxfric.files.atomic_write`)."""
+    ([`jaxfric.files.atomic_write`][jaxfric.files.atomic_write])."""
 
     def write(tmp: Path):
         with open(tmp, "wb") as fh:

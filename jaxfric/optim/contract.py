@@ -1,6 +1,6 @@
-"""The one solver contract (docs/solvers.md): :class:`AbstractSolver`, whose start and
-steps are evaluation rounds (:mod:`jaxfric.optim.rounds`), and
-:class:`AbstractGenerational` for population solvers that run a number of generations."""
+"""The one solver contract (docs/solvers.md): [`AbstractSolver`][jaxfric.optim.AbstractSolver], whose start and
+steps are evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]), and
+[`AbstractGenerational`][jaxfric.optim.AbstractGenerational] for population solvers that run a number of generations."""
 
 from __future__ import annotations
 
@@ -20,21 +20,21 @@ class AbstractSolver(eqx.Module):
     """The one contract of a jaxfric solver on a box (docs/solvers.md): its evaluations
     come in rounds (see the module docstring). Required:
 
-    * :meth:`init_rounds` and :meth:`step_rounds`: the start and one step, as rounds;
-    * :meth:`finished`: ``(done, result)``, a boolean scalar and an ``optimistix.RESULTS``;
-    * :meth:`best`: ``(x, f)``, the best point so far and its (NaN-safe) value;
-    * :meth:`num_evals`: the objective evaluations spent so far.
+    * [`init_rounds`][jaxfric.optim.AbstractSolver.init_rounds] and [`step_rounds`][jaxfric.optim.AbstractSolver.step_rounds]: the start and one step, as rounds;
+    * [`finished`][jaxfric.optim.AbstractSolver.finished]: ``(done, result)``, a boolean scalar and an ``optimistix.RESULTS``;
+    * [`best`][jaxfric.optim.AbstractSolver.best]: ``(x, f)``, the best point so far and its (NaN-safe) value;
+    * [`num_evals`][jaxfric.optim.AbstractSolver.num_evals]: the objective evaluations spent so far.
 
     Everything else is an optional capability with a default: the driver, the loop and
     the chains ask these, never the solver's type. ``ask``/``tell`` (from Python) come
     from the required methods. Every method is pure and traceable; ``lower`` and
     ``upper`` are 1-D arrays of one floating dtype (the driver flattens pytree bounds)
     and the state is a pytree of arrays (what a checkpoint stores). The loop
-    (:mod:`jaxfric.optim.loop`) records ``best(state)[1]`` against ``num_evals(state)``
-    after every step and reports :meth:`progress`.
+    ([`jaxfric.optim.loop`][jaxfric.optim.loop]) records ``best(state)[1]`` against ``num_evals(state)``
+    after every step and reports [`progress`][jaxfric.optim.AbstractSolver.progress].
 
     The names differ from optimistix's ``init / step / terminate / postprocess`` on
-    purpose: :class:`~jaxfric.NelderMead` is both a jaxfric solver and an
+    purpose: [`NelderMead`][jaxfric.optim.NelderMead] is both a jaxfric solver and an
     ``optx.AbstractMinimiser``, each protocol under its own names.
 
     ``objective`` is ``(fn, args)`` inside the compiled run: with it inner loops may
@@ -73,10 +73,10 @@ class AbstractSolver(eqx.Module):
     # ---------------------------------------------------------- optional capabilities
     def check(self) -> None:
         """Raise ``ValueError`` on invalid hyperparameters. Run on construction
-        (``__check_init__``) and again by :func:`jaxfric.minimise` before any tracing."""
+        (``__check_init__``) and again by [`jaxfric.minimise`][jaxfric.optim.minimise] before any tracing."""
 
     def solution(self, fn: Callable, lower, upper, args, state, result) -> Solution:
-        """The :class:`Solution` (flat ``value``; the loop adds the history)."""
+        """The [`Solution`][jaxfric.optim.Solution] (flat ``value``; the loop adds the history)."""
         x, f = self.best(state)
         return Solution(value=x, f=f, result=result, stats={"num_evals": self.num_evals(state)},
                         history=History.empty(1, f.dtype), state=state)
@@ -93,7 +93,7 @@ class AbstractSolver(eqx.Module):
 
     def start_options(self, spread, lower, upper) -> dict | None:
         """Options for a local run started where a population of per-coordinate
-        standard deviation ``spread`` converged, passed to :meth:`init_rounds` as
+        standard deviation ``spread`` converged, passed to [`init_rounds`][jaxfric.optim.AbstractSolver.init_rounds] as
         ``options=`` (``None``: this solver takes none)."""
         return None
 
@@ -108,7 +108,7 @@ class AbstractSolver(eqx.Module):
         return None
 
     def num_stages(self) -> int:
-        """Stages run one after another (a two-stage :func:`~jaxfric.optim.chained.chain`
+        """Stages run one after another (a two-stage [`chain`][jaxfric.optim.chain]
         has 2). The loop runs each in a loop of its own, so batched runs never pay for
         one stage's step while in another."""
         return 1
@@ -118,7 +118,7 @@ class AbstractSolver(eqx.Module):
         return jnp.array(0, jnp.int32)
 
     def batches_runs(self) -> bool:
-        """Whether :func:`jaxfric.minimise_many` should, on one CPU, run several keys side
+        """Whether [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] should, on one CPU, run several keys side
         by side (``vmap``: ``True``, for solvers whose steps are batches of the same size)
         rather than one after another (``lax.map``: ``False``, for a solver with
         conditional batches, whose branches ``vmap`` turns into selects that compute
@@ -144,13 +144,13 @@ class AbstractSolver(eqx.Module):
 
     # ------------------------------------------------------------------- ask / tell
     def ask_init(self, lower, upper, key=None, x0=None, *, keys=None) -> asktell.AskTellState:
-        """Start a run driven from Python (:mod:`jaxfric.optim.asktell`). ``lower`` /
+        """Start a run driven from Python ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]). ``lower`` /
         ``upper``: 1-D bounds (their dtype is the search dtype, as in
-        :func:`jaxfric.minimise`); ``key``: a PRNG key or an int seed; ``x0``: an
+        [`jaxfric.minimise`][jaxfric.optim.minimise]); ``key``: a PRNG key or an int seed; ``x0``: an
         optional start (swarms: or an initial population).
 
         ``keys`` instead of ``key``: a batch of ``S`` PRNG keys, as
-        :func:`jaxfric.minimise_many` takes them. The seeds then run side by side in one
+        [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] takes them. The seeds then run side by side in one
         run (``minimise_many``'s ``batching="vmap"``): every ask carries every seed's
         batch, so one host call evaluates them all. Exactly one of ``key`` and ``keys``."""
         self.check()
@@ -158,12 +158,12 @@ class AbstractSolver(eqx.Module):
         return asktell.start(self, lower, upper, key, x0, keys=keys)
 
     def ask(self, st: asktell.AskTellState):
-        """``(X, st)``: the points (rows) whose values :meth:`tell` needs next, ``(k, n)``;
+        """``(X, st)``: the points (rows) whose values [`tell`][jaxfric.optim.AbstractSolver.tell] needs next, ``(k, n)``;
         with ``keys``, ``(S, k, n)``, block ``s`` for seed ``s``."""
         return asktell.ask(st)
 
     def tell(self, st: asktell.AskTellState, X, f) -> asktell.AskTellState:
-        """Give the values ``f`` of the rows ``X`` returned by :meth:`ask` (NaN and inf
+        """Give the values ``f`` of the rows ``X`` returned by [`ask`][jaxfric.optim.AbstractSolver.ask] (NaN and inf
         count as the worst value), of shape ``(k,)``, or ``(S, k)`` with ``keys``; returns
         the state asking for the next batch."""
         return asktell.tell(st, X, f)
@@ -173,17 +173,17 @@ class AbstractSolver(eqx.Module):
         return asktell.done(st)
 
     def ask_result(self, st: asktell.AskTellState) -> Solution:
-        """The :class:`Solution` (flat ``value``): what :func:`jaxfric.minimise` returns
+        """The [`Solution`][jaxfric.optim.Solution] (flat ``value``): what [`jaxfric.minimise`][jaxfric.optim.minimise] returns
         for the same key once the run has finished (with ``keys``: what
         ``minimise_many(..., batching="vmap")`` returns); before, the best point told so
-        far (per seed, see :func:`jaxfric.optim.asktell.result`)."""
+        far (per seed, see [`jaxfric.optim.asktell.result`][jaxfric.optim.asktell.result])."""
         return asktell.result(st)
 
 
 class AbstractGenerational(AbstractSolver):
     """A population solver that runs ``num_generations`` generations (swarms, evosax
-    strategies). Its state has ``generation`` and ``num_evals``; :meth:`best` gives the
-    best point; :meth:`stopped` an optional earlier end."""
+    strategies). Its state has ``generation`` and ``num_evals``; [`best`][jaxfric.optim.AbstractSolver.best] gives the
+    best point; [`stopped`][jaxfric.optim.AbstractGenerational.stopped] an optional earlier end."""
 
     num_generations: eqx.AbstractVar[int]
 

@@ -1,13 +1,13 @@
-"""The one driver: :func:`minimise` and :func:`minimise_many` own the loop for every
+"""The one driver: [`minimise`][jaxfric.optim.minimise] and [`minimise_many`][jaxfric.optim.minimise_many] own the loop for every
 solver (docs/algorithms.md §5.1 for the two-stage case).
 
 They validate what the user gave *before* tracing, flatten pytree bounds to one vector,
 and run the solver (a foreign ``optimistix`` minimiser through
-:mod:`~jaxfric.optim.optx_adapter`) in the loop of :mod:`~jaxfric.optim.loop` as one
+[`optx_adapter`][jaxfric.optim.optx_adapter]) in the loop of [`loop`][jaxfric.optim.loop] as one
 jitted computation.
 
 In this one place, for every solver: the history of the best value against
-evaluations, progress reports, checkpoint/resume (:mod:`~jaxfric.optim.checkpoint`),
+evaluations, progress reports, checkpoint/resume ([`checkpoint`][jaxfric.optim.checkpoint]),
 warm starts, the population split over devices, and ``vmap`` over seeds. Data travel
 in ``args`` (never closures), so new data of the same shapes do not recompile.
 """
@@ -93,7 +93,7 @@ BATCHING = ("auto", "vmap", "map")
 
 
 def _batching(batching, proto, layout: Layout | None) -> str:
-    """``"vmap"`` or ``"map"`` for :func:`minimise_many` (see its docstring)."""
+    """``"vmap"`` or ``"map"`` for [`minimise_many`][jaxfric.optim.minimise_many] (see its docstring)."""
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {BATCHING}, got {batching!r}")
     proto = as_protocol(proto)
@@ -138,7 +138,7 @@ def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
 
 def _run_checkpointed(run, proto, flat, lower, upper, args, key, x0, hook, warm,
                       path: Path, every: int):
-    """Drive ``run`` (the compiled :func:`_run`) in chunks of ``every`` steps, saving the
+    """Drive ``run`` (the compiled `_run`) in chunks of ``every`` steps, saving the
     carry to ``path`` after each; resume from ``path`` when it exists. A chunked run
     takes the same steps, in the same order, with the same compiled loop, so it returns
     exactly what the uninterrupted run returns."""
@@ -185,8 +185,8 @@ def minimise(
     Args:
         fn: objective ``fn(y, args) -> scalar``; ``y`` has the structure of the bounds.
             NaN or inf values count as the worst possible value.
-        solver: a jaxfric solver (:class:`PSO`, :class:`MAPSO`, :class:`NelderMead`,
-            :class:`MAPSONMDS`, :func:`chain`) or any ``optimistix`` minimiser.
+        solver: a jaxfric solver ([`PSO`][jaxfric.optim.PSO], [`MAPSO`][jaxfric.optim.MAPSO], [`NelderMead`][jaxfric.optim.NelderMead],
+            [`MAPSONMDS`][jaxfric.optim.MAPSONMDS], [`chain`][jaxfric.optim.chain]) or any ``optimistix`` minimiser.
         bounds: a list or tuple of ``(lo, hi)`` pairs of numbers, read as SciPy reads
             it: one pair per parameter, however many (``[(-5, 10), (0, 15)]`` is two
             parameters); ``(lower, upper)`` with each side an array or a matching
@@ -212,17 +212,17 @@ def minimise(
             with the same path resumes from the last chunk and returns exactly the
             uninterrupted run's result. Works for every solver. The file records the
             problem (objective, bounds, args, solver, key, dtype); resuming it for a
-            different problem is refused (see :mod:`jaxfric.optim.checkpoint`).
+            different problem is refused (see [`jaxfric.optim.checkpoint`][jaxfric.optim.checkpoint]).
         checkpoint_every: steps (generations, simplex steps) per chunk.
         compiler_options: XLA options for this run's executable only (never global):
-            ``"auto"`` (see :func:`jaxfric.compiler_options`), ``None`` (XLA's
+            ``"auto"`` (see [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``None`` (XLA's
             defaults) or a dict of XLA option names to values.
-        warm_start: a :class:`Solution` of an earlier run with the same kind of solver:
+        warm_start: a [`Solution`][jaxfric.optim.Solution] of an earlier run with the same kind of solver:
             continue it (``solver`` with a larger ``num_generations``, say) instead of
             starting afresh.
 
     Returns:
-        A :class:`Solution` (``print`` shows value, f, evaluations and result).
+        A [`Solution`][jaxfric.optim.Solution] (``print`` shows value, f, evaluations and result).
 
     Raises:
         ValueError: before any tracing, for invalid bounds, hyperparameters, keys, or an
@@ -271,24 +271,24 @@ def minimise_many(
     compiler_options="auto",
     batching="auto",
 ) -> Solution:
-    """Independent runs of :func:`minimise`, one per key, in one jitted call.
+    """Independent runs of [`minimise`][jaxfric.optim.minimise], one per key, in one jitted call.
 
     ``keys`` is a batch of PRNG keys (``jax.random.split(key, n)``). Every field of
-    the returned :class:`Solution` gains a leading axis of length ``n``; run ``i``
+    the returned [`Solution`][jaxfric.optim.Solution] gains a leading axis of length ``n``; run ``i``
     equals ``minimise(..., key=keys[i])`` up to floating-point reassociation (bit for
     bit with ``batching="map"``). Stages run in loops of their own, so a batch of
     two-stage runs never computes a global step while refining, or the reverse.
-    ``progress`` as in :func:`minimise` (reports arrive once per run and step).
+    ``progress`` as in [`minimise`][jaxfric.optim.minimise] (reports arrive once per run and step).
     ``devices``: ``None`` (default) lays the runs out over every device when there
     are several (the batch is padded to a multiple of the device count and the
     padding dropped); ``False`` keeps them on one device; or a sequence of devices.
-    ``compiler_options`` as in :func:`minimise`.
+    ``compiler_options`` as in [`minimise`][jaxfric.optim.minimise].
 
     ``batching``: ``"vmap"`` runs the keys side by side (one batched evaluation of
     every run's candidates per step; runs can be laid out over devices);
     ``"map"`` runs them one after another inside the same compiled call (``lax.map``;
     one device); ``"auto"`` (default) picks ``"map"`` for an optimistix minimiser
-    (:class:`NelderMead`) on a single CPU device and ``"vmap"`` otherwise. Under
+    ([`NelderMead`][jaxfric.optim.NelderMead]) on a single CPU device and ``"vmap"`` otherwise. Under
     ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]`` still
     counts the evaluations the algorithm asked for, but XLA computes both branches,
     which made 8 vmapped runs on 30-D Rosenbrock about 1.5× slower than the same runs

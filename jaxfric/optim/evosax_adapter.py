@@ -1,12 +1,12 @@
 """Any evosax (≥ 0.3) evolution strategy as a jaxfric solver.
 
-:class:`Evosax` runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
+[`Evosax`][jaxfric.optim.Evosax] runs an evosax population strategy — CMA-ES, SNES, DE, evosax's PSO, …
 (``evosax.algorithms.algorithms``) — through jaxfric's step protocol
-(:class:`~jaxfric.optim.AbstractSolver`), so :func:`jaxfric.minimise` gives it
+([`AbstractSolver`][jaxfric.optim.AbstractSolver]), so [`jaxfric.minimise`][jaxfric.optim.minimise] gives it
 what it gives every solver: bounds, history, progress, checkpoints, warm starts and
 ``minimise_many``'s batched seeds; it is also a valid global stage of
-:func:`~jaxfric.optim.chain` (``cmaes_nm()`` = ``chain(Evosax("CMA_ES"), NelderMead())``)
-and a ``solver=`` of :func:`jaxfric.identify`.
+[`chain`][jaxfric.optim.chain] (``cmaes_nm()`` = ``chain(Evosax("CMA_ES"), NelderMead())``)
+and a ``solver=`` of [`jaxfric.identify`][jaxfric.identification.identify].
 
 **Bounds** (one rule for every strategy). The strategy searches the unit box: a point
 ``u ∈ [0, 1]^D`` stands for ``x = lower + u ⊙ (upper − lower)``, so parameters of very
@@ -27,7 +27,7 @@ uniform random population (row 0 = ``y0`` when given), all evaluated.
 
 **Counts.** Evaluations of a run are exact: ``1 + P·G`` (distribution-based) or
 ``P·(G + 1)`` (population-based) for population size ``P`` and ``G`` generations
-(:meth:`Evosax.evaluations`). NaN and inf fitness become ``+inf`` before the strategy
+([`Evosax.evaluations`][jaxfric.optim.Evosax.evaluations]). NaN and inf fitness become ``+inf`` before the strategy
 sees them, so they rank last and never become the best.
 
 **Restarts.** When the strategy's own state turns non-finite (CMA-ES's step size
@@ -48,7 +48,7 @@ use ``Evosax("Sep_CMA_ES")`` (or another diagonal strategy such as ``"SNES"``).
 ``tell``), so the same key gives the same run, chunked (checkpoints) or not.
 
 evosax is an optional dependency: ``pip install -e ".[evosax]"``. Without it,
-constructing :class:`Evosax` raises ``ImportError`` naming that extra.
+constructing [`Evosax`][jaxfric.optim.Evosax] raises ``ImportError`` naming that extra.
 """
 
 from __future__ import annotations
@@ -159,7 +159,7 @@ def _check_names(cls, params, over) -> None:
 class EvosaxState(eqx.Module):
     """The strategy's own state, the best projected point and its value, the exact
     evaluation count, generations done, the run's key, and how often the strategy
-    restarted after its state turned non-finite (see :class:`Evosax`)."""
+    restarted after its state turned non-finite (see [`Evosax`][jaxfric.optim.Evosax])."""
 
     inner: Any
     x_best: Any
@@ -340,7 +340,7 @@ def cmaes_nm(*, population_size: int | None = None, num_generations: int = 1000,
              nm_max_evals: int | None = None, **nm_kwargs) -> Chain:
     """``chain(Evosax("CMA_ES"), NelderMead())``: CMA-ES's global search, then
     Nelder–Mead from its best point (docs/algorithms.md §5.1 with CMA-ES as the global
-    stage). ``nm_*`` keywords and the rest go to :class:`~jaxfric.NelderMead`."""
+    stage). ``nm_*`` keywords and the rest go to [`NelderMead`][jaxfric.optim.NelderMead]."""
     cma = Evosax("CMA_ES", population_size=population_size, num_generations=num_generations,
                  std_init=std_init)
     nm = NelderMead(max_steps=nm_max_steps, max_evals=nm_max_evals, **nm_kwargs)

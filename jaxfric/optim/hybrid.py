@@ -1,20 +1,20 @@
 """MAPSO–NMDS (docs/algorithms.md §5.1): MAPSO's global search, then Nelder–Mead from
-gBest, the paper's instance of :func:`~jaxfric.optim.chained.chain`.
+gBest, the paper's instance of [`chain`][jaxfric.optim.chain].
 
 ``θ_MAPSO = MAPSO(J, bounds, G)`` and ``θ* = NM(J, start=θ_MAPSO)``. Optionally the
 ``num_starts`` best agents (by personal best) seed Nelder–Mead runs and the best
 refined point wins.
 
-One object, two spellings with different jobs: :class:`MAPSONMDS` is
+One object, two spellings with different jobs: [`MAPSONMDS`][jaxfric.optim.MAPSONMDS] is
 the solver, a chain whose stages are named ``mapso`` and ``nelder_mead`` and checked to
-be a :class:`MAPSO` and a :class:`NelderMead`; :func:`mapso_nmds` is its flat-keyword
+be a [`MAPSO`][jaxfric.optim.MAPSO] and a [`NelderMead`][jaxfric.optim.NelderMead]; [`mapso_nmds`][jaxfric.optim.mapso_nmds] is its flat-keyword
 factory (``nm_*`` keywords go to Nelder–Mead, the rest to MAPSO), for settings that
 arrive as one flat set of keywords (the CLI, ``identify``'s budgets), as
-:func:`~jaxfric.optim.cmaes_nm` is for CMA-ES → Nelder–Mead. It returns a
-:class:`MAPSONMDS`, never another type, so neither is deprecated.
+[`cmaes_nm`][jaxfric.optim.cmaes_nm] is for CMA-ES → Nelder–Mead. It returns a
+[`MAPSONMDS`][jaxfric.optim.MAPSONMDS], never another type, so neither is deprecated.
 
 Like every chain it can be driven from Python by ``ask``/``tell`` (an objective outside
-JAX, see :mod:`jaxfric.optim.rounds`)::
+JAX, see [`jaxfric.optim.rounds`][jaxfric.optim.rounds])::
 
     solver = mapso_nmds(num_generations=100)
     st = solver.ask_init(lower, upper, jax.random.key(0))
@@ -32,7 +32,7 @@ from .nelder_mead import NelderMead
 
 
 class MAPSONMDS(AbstractChain):
-    """The paper's two-phase optimiser: :class:`MAPSO` then :class:`NelderMead`.
+    """The paper's two-phase optimiser: [`MAPSO`][jaxfric.optim.MAPSO] then [`NelderMead`][jaxfric.optim.NelderMead].
 
     Same results as ``chain(mapso, nelder_mead, ...)`` for the same key.
 
@@ -69,11 +69,11 @@ class MAPSONMDS(AbstractChain):
 
 
 def mapso_nmds(**kwargs) -> MAPSONMDS:
-    """:class:`MAPSONMDS` from flat keywords: ``mapso_nmds(num_generations=300,
+    """[`MAPSONMDS`][jaxfric.optim.MAPSONMDS] from flat keywords: ``mapso_nmds(num_generations=300,
     nm_max_steps=5000)`` (see the module docstring for why both spellings exist).
 
-    Keywords prefixed ``nm_`` go to :class:`NelderMead`; ``num_starts`` and
-    ``simplex_from_swarm`` to :class:`MAPSONMDS`; the rest to :class:`MAPSO`.
+    Keywords prefixed ``nm_`` go to [`NelderMead`][jaxfric.optim.NelderMead]; ``num_starts`` and
+    ``simplex_from_swarm`` to [`MAPSONMDS`][jaxfric.optim.MAPSONMDS]; the rest to [`MAPSO`][jaxfric.optim.MAPSO].
     """
     nm = {k[3:]: kwargs.pop(k) for k in list(kwargs) if k.startswith("nm_")}
     top = {k: kwargs.pop(k) for k in ("num_starts", "simplex_from_swarm") if k in kwargs}

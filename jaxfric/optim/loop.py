@@ -7,7 +7,7 @@ two-stage case)::
             state = step(state, stage)         # step_rounds, evaluated in the program
             record history; report progress
 
-:func:`jaxfric.minimise` compiles :func:`_run`; ask/tell (:mod:`jaxfric.optim.asktell`)
+[`jaxfric.minimise`][jaxfric.optim.minimise] compiles `_run`; ask/tell ([`jaxfric.optim.asktell`][jaxfric.optim.asktell])
 compiles the same function with an objective answered from Python.
 """
 

@@ -120,7 +120,7 @@ class MAPSO(AbstractSwarm):
         sl_mode: ``"multiplicative"`` (the paper's ``g_k·U(1−sR, 1+sR)``) or
             ``"additive"`` (``g_k + U(−sR, sR)·(upper_k − lower_k)``, which can move a
             coordinate that is exactly zero).
-        w_max, w_min, c1, c2, vmax_fraction: PSO operator, as in :class:`PSO`.
+        w_max, w_min, c1, c2, vmax_fraction: PSO operator, as in [`PSO`][jaxfric.optim.PSO].
         social: ``"gbest"`` (Zhao et al.) or ``"lbest"`` (best personal best of the
             agent's von Neumann neighbourhood and itself).
         strict_maga_segment: MAGA's rule leaving the first and last coordinate out of
@@ -129,10 +129,10 @@ class MAPSO(AbstractSwarm):
         evaluate_replaced: evaluate a replaced agent before its PSO move so its
             personal best can improve (costs up to ``Lsize²`` more evaluations per
             generation; by default the PSO move follows at once and is evaluated).
-        stall_generations, function_tolerance: optional early stop, as in :class:`PSO`.
+        stall_generations, function_tolerance: optional early stop, as in [`PSO`][jaxfric.optim.PSO].
 
     Evaluations per generation: ``Lsize² + (sLsize² − 1) + sLsize²·sGen`` (123 with
-    the defaults), plus ``Lsize²`` if ``evaluate_replaced``; see :meth:`evaluations`.
+    the defaults), plus ``Lsize²`` if ``evaluate_replaced``; see [`evaluations`][jaxfric.optim.MAPSO.evaluations].
     """
 
     lattice_size: int = 5
@@ -180,9 +180,9 @@ class MAPSO(AbstractSwarm):
 
     def _lattice_generation(self, state: SwarmState, u, side, lower, upper, w, social_mode):
         """Competition then PSO move on one lattice (main lattice or self-learning), as
-        a generator of evaluation batches (see :mod:`jaxfric.optim.swarm`).
+        a generator of evaluation batches (see [`jaxfric.optim.swarm`][jaxfric.optim.swarm]).
 
-        ``u`` (agents × :meth:`random_width`) holds all of this generation's random
+        ``u`` (agents × [`random_width`][jaxfric.optim.MAPSO.random_width]) holds all of this generation's random
         numbers, drawn by the caller in one call.
         """
         dim = state.x.shape[1]
@@ -223,7 +223,7 @@ class MAPSO(AbstractSwarm):
     def _self_learning(self, u0, u_inner, g, g_f, lower, upper):
         """Self-learning around gBest (§3.4), a generator: returns (best position,
         fitness, evaluations). The ``sGen`` inner generations are one
-        :class:`~jaxfric.optim.rounds.Scan` (a ``lax.scan`` in a compiled run)."""
+        [`Scan`][jaxfric.optim.Scan] (a ``lax.scan`` in a compiled run)."""
         side = self.sl_size
         s = side * side
         if self.sl_mode == "multiplicative":
@@ -251,7 +251,7 @@ class MAPSO(AbstractSwarm):
 
     # ------------------------------------------------------------- solver protocol
     def draw(self, key, i, x):
-        """Generation ``i``'s numbers: the main lattice's (agents × :meth:`random_width`),
+        """Generation ``i``'s numbers: the main lattice's (agents × [`random_width`][jaxfric.optim.MAPSO.random_width]),
         self-learning's perturbation ``u0`` (sLsize² × D) and its inner lattice's
         (sGen × sLsize² × width)."""
         dim, dt = x.shape[1], x.dtype

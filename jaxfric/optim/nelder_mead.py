@@ -23,11 +23,11 @@ Bounds and an optional per-coordinate first step reach the solver through
 ``optx.minimise(..., options={"lower": lo, "upper": hi, "initial_step": step})``.
 
 One algorithm, two protocols under their own names: the start and the step are written
-once, as evaluation rounds (:mod:`jaxfric.optim.rounds`) that receive ``(f, aux)``;
+once, as evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]) that receive ``(f, aux)``;
 optimistix's ``init / step / terminate / postprocess`` drive them with the aux the
 objective returns, jaxfric's contract (``init_rounds / step_rounds / finished / best /
-num_evals``, :class:`~jaxfric.optim.contract.AbstractSolver`) with none. So
-:func:`jaxfric.minimise`, chains and ask/tell run it directly, without an adapter.
+num_evals``, [`AbstractSolver`][jaxfric.optim.AbstractSolver]) with none. So
+[`jaxfric.minimise`][jaxfric.optim.minimise], chains and ask/tell run it directly, without an adapter.
 """
 
 from __future__ import annotations
@@ -133,7 +133,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
             ``"fminsearch"`` — steps of ``initial_step·|x_i|`` (0.00025 where
             ``x_i = 0``). ``"bounds"`` falls back to ``"fminsearch"`` without bounds.
         initial_step: see above (0.05).
-        max_steps: iteration cap used by :func:`jaxfric.minimise` (``None``:
+        max_steps: iteration cap used by [`jaxfric.minimise`][jaxfric.optim.minimise] (``None``:
             ``200·n·(1 + restarts)``, SciPy's and fminsearch's default per (re)start).
         max_evals: optional evaluation budget; the run stops once it is spent.
         batched_trials: evaluate reflection, expansion and both contractions of a step
@@ -248,7 +248,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return drive(self._first_simplex(x0, options), self._evaluator(fn, unravel, args))
 
     def _first_simplex(self, x0, options):
-        """The start as evaluation rounds (:mod:`jaxfric.optim.rounds`) on the flat start
+        """The start as evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]) on the flat start
         ``x0``: yields the first simplex (``n + 1`` points), receives ``(f, aux)``."""
         lower, upper = _flat_bounds(options, x0)
         x0 = jnp.clip(x0, lower, upper)
@@ -285,7 +285,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return unravel(x), new_state, aux
 
     def _simplex_step(self, state, options):
-        """:meth:`step` as evaluation rounds (:mod:`jaxfric.optim.rounds`): yields the
+        """[`step`][jaxfric.optim.NelderMead.step] as evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]): yields the
         reflection (all four trial points with ``batched_trials``), then the second
         trial point (sequential rule) and a shrink's ``n`` points, each only where
         needed; receives ``(f, aux)``; returns ``(best vertex, state, its aux)``."""
@@ -410,7 +410,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     # ----------------------------------------------------------- jaxfric protocol
     def init_rounds(self, lower, upper, key, x0=None, objective=None, options=None):
         """The first simplex around ``x0`` (a uniform draw in the box without one);
-        ``options``: ``{"initial_step": ...}`` (see :meth:`start_options`)."""
+        ``options``: ``{"initial_step": ...}`` (see [`start_options`][jaxfric.optim.NelderMead.start_options])."""
         if x0 is None:
             x0 = uniform_in_box(key, lower.shape, lower, upper)
         elif x0.ndim != 1:
@@ -424,7 +424,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return state
 
     def finished(self, state):
-        """optimistix's rule: :meth:`terminate`'s test, or the step cap reached
+        """optimistix's rule: [`terminate`][jaxfric.optim.NelderMead.terminate]'s test, or the step cap reached
         (``nonlinear_max_steps_reached``)."""
         done, result = self.terminate(None, None, None, None, state, None)
         capped = state.num_steps >= self.steps_for(state.simplex.shape[-1])

@@ -1,10 +1,10 @@
 """A foreign ``optimistix.AbstractMinimiser`` (BFGS, optimistix's own Nelder–Mead, ...)
-seen through jaxfric's solver contract. jaxfric's :class:`~jaxfric.NelderMead` needs no
+seen through jaxfric's solver contract. jaxfric's [`NelderMead`][jaxfric.optim.NelderMead] needs no
 adapter: it is a jaxfric solver itself.
 
 The adapter runs the minimiser's own ``init / step / terminate / postprocess`` exactly
 as ``optimistix.minimise`` does (the same termination test, on the same iterate, and
-the same "max steps reached" rule), so a run under :func:`jaxfric.minimise` equals
+the same "max steps reached" rule), so a run under [`jaxfric.minimise`][jaxfric.optim.minimise] equals
 ``optx.minimise(..., throw=False)`` for the same start. Box bounds reach it as
 ``options={"lower": ..., "upper": ...}`` (solvers that ignore them search unbounded).
 """
@@ -153,7 +153,7 @@ class OptxMinimiser(AbstractSolver):
 
 def as_protocol(solver) -> AbstractSolver:
     """The jaxfric solver for ``solver`` (a jaxfric solver, or a foreign optimistix
-    minimiser wrapped in :class:`OptxMinimiser`)."""
+    minimiser wrapped in [`OptxMinimiser`][jaxfric.optim.OptxMinimiser])."""
     if isinstance(solver, AbstractSolver):
         return solver
     if isinstance(solver, optx.AbstractMinimiser):

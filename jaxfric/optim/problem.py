@@ -1,7 +1,7 @@
 """What a problem is made of, checked before anything is traced: bounds (pytrees, or
 scipy's sequence of ``(lo, hi)`` pairs / ``scipy.optimize.Bounds``), the objective's
 output, starts, keys and the evaluation budget. The one home of these checks: the
-driver (:mod:`jaxfric.optim.driver`) and ask/tell call them."""
+driver ([`jaxfric.optim.driver`][jaxfric.optim.driver]) and ask/tell call them."""
 
 from __future__ import annotations
 
@@ -172,7 +172,7 @@ def prepare_bounds(bounds, dtype=None):
 
 #: Signatures (objective, search vector, shapes and dtypes of ``args``) whose output
 #: was already checked: the check traces ``fn`` (about 2 ms), which would otherwise
-#: be paid by every call of :func:`minimise`.
+#: be paid by every call of `minimise`.
 _CHECKED: dict = {}
 _CHECKED_MAX = 256
 
@@ -277,7 +277,7 @@ def check_start(y0, treedef, shapes, lower, upper, agents: int | None):
 
 
 def check_key(key, name="key", batch=False):
-    """One key (an int seed is accepted, as :func:`jaxfric.identify` does) or, with
+    """One key (an int seed is accepted, as [`jaxfric.identify`][jaxfric.identification.identify] does) or, with
     ``batch``, a non-empty batch of keys; else ``ValueError`` naming the problem."""
     if key is None:
         raise ValueError(f"{name} is required: pass jax.random.key(seed) (or an int seed)")

@@ -22,7 +22,7 @@ from jaxtyping import Array
 
 PHASES = ("global", "local", "gradient")
 """Phase 0 is a swarm's generations, phase 1 Nelder–Mead's steps, phase 2 the steps of
-:func:`jaxfric.identify`'s gradient stage."""
+[`jaxfric.identify`][jaxfric.identification.identify]'s gradient stage."""
 
 _STAGE_LABEL = {1: (" (Nelder–Mead)", "step"), 2: (" (gradient)", "step")}
 

@@ -3,7 +3,7 @@
 Shi & Eberhart's linearly decreasing inertia PSO: per-dimension random coefficients,
 velocity clamp as a fraction of the box, bounds by clipping. One generation is one
 batch of evaluations; state, stopping, warm start and ``ask``/``tell`` come from
-:class:`~jaxfric.optim.swarm.AbstractSwarm`.
+[`AbstractSwarm`][jaxfric.optim.AbstractSwarm].
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_boun
     as ``r`` of shape ``(2,) + x.shape``. With ``zero_at_bounds`` the velocity of a
     clipped coordinate is set to zero so a particle does not keep pushing against the wall.
 
-    ``clip(x, lo, hi)`` bounds both; it gives the same numbers either way. :class:`PSO`
-    keeps ``jnp.clip``; :class:`~jaxfric.optim.MAPSO` passes the select form
-    (:func:`jaxfric.optim._base.clip`), with which its generation runs 1.2-2.2x faster,
+    ``clip(x, lo, hi)`` bounds both; it gives the same numbers either way. [`PSO`][jaxfric.optim.PSO]
+    keeps ``jnp.clip``; [`MAPSO`][jaxfric.optim.MAPSO] passes the select form
+    (`jaxfric.optim._base.clip`), with which its generation runs 1.2-2.2x faster,
     while the select form made PSO's vmapped Ackley runs 1.5x slower (docs/solvers.md,
     "What measurements decided").
     """

@@ -33,7 +33,7 @@ def counter_seed(key, *words):
     """Two 32-bit seed words from a PRNG key and integer ``words`` (generation, stream).
 
     No random-number generator runs: the key's raw words (themselves threefry output)
-    and the words are folded through :func:`_fmix32`. Different ``words`` give
+    and the words are folded through `_fmix32`. Different ``words`` give
     unrelated seeds, so a swarm draws generation ``i``'s numbers from
     ``counter_seed(key, i, stream)`` without splitting or advancing the key; a run
     resumed at generation ``i`` therefore draws what the uninterrupted run drew.
@@ -56,7 +56,7 @@ def _splitmix64(z):
 
 
 def counter_uniform(seed, shape, dtype):
-    """``U[0, 1)`` numbers from a counter-based hash keyed by ``seed`` (:func:`counter_seed`).
+    """``U[0, 1)`` numbers from a counter-based hash keyed by ``seed`` ([`counter_seed`][jaxfric.optim.rng.counter_seed]).
 
     float32: element ``c`` is ``fmix32(fmix32(c·φ ⊕ a) + b)`` (``φ`` the golden-ratio
     increment), its top 24 bits scaled to ``[0, 1)``. float64: ``splitmix64(s + c·φ64)``

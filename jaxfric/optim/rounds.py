@@ -10,12 +10,12 @@ is evaluated or counted and the generator receives ``+inf`` values. An inner loo
 ``carry = yield Scan(body, carry, xs, length)``, ``body(carry, x)`` being rounds
 (MAPSO's self-learning generations).
 
-* :func:`drive` runs rounds inside the compiled program: each batch is one call of the
-  objective on the whole batch (a conditional one under ``lax.cond``), a :class:`Scan`
+* [`drive`][jaxfric.optim.rounds.drive] runs rounds inside the compiled program: each batch is one call of the
+  objective on the whole batch (a conditional one under ``lax.cond``), a [`Scan`][jaxfric.optim.Scan]
   one ``lax.scan``;
-* :func:`compiled_start` / :func:`compiled_step` are a solver's start and step so run;
-* :meth:`~jaxfric.optim.contract.AbstractSolver.ask` / ``tell`` drive the same compiled
-  run from Python, one needed batch per call (:mod:`jaxfric.optim.asktell`).
+* [`compiled_start`][jaxfric.optim.rounds.compiled_start] / [`compiled_step`][jaxfric.optim.rounds.compiled_step] are a solver's start and step so run;
+* [`ask`][jaxfric.optim.AbstractSolver.ask] / ``tell`` drive the same compiled
+  run from Python, one needed batch per call ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]).
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def drive(rounds: Rounds, evaluate: Callable, skip: Callable = skipped,
 
 
 def _objectives(fn, args):
-    """``(evaluate, whole)`` for :func:`drive`: the batched objective, and the same
+    """``(evaluate, whole)`` for [`drive`][jaxfric.optim.rounds.drive]: the batched objective, and the same
     without the driver's device layout."""
     one = fn if getattr(fn, "layout", None) is None else eqx.tree_at(
         lambda f: f.layout, fn, None, is_leaf=lambda x: x is None)
@@ -105,7 +105,7 @@ def _objectives(fn, args):
 
 
 class relay:
-    """``rounds`` seen through ``request`` (applied to each :class:`Batch` it yields) and
+    """``rounds`` seen through ``request`` (applied to each [`Batch`][jaxfric.optim.Batch] it yields) and
     ``answer`` (applied to each value sent back); use as ``yield from relay(...)``."""
 
     def __init__(self, rounds: Rounds, request: Callable | None = None,

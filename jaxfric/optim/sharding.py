@@ -3,9 +3,9 @@
 Two kinds of parallelism, both expressed with ``jax.sharding`` so XLA inserts the
 communication:
 
-* **runs** — :func:`jaxfric.minimise_many` lays its batch of keys (and so every
+* **runs** — [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] lays its batch of keys (and so every
   independent run) along a one-axis device mesh;
-* **population** — inside one :func:`jaxfric.minimise` run, each generation's
+* **population** — inside one [`jaxfric.minimise`][jaxfric.optim.minimise] run, each generation's
   population ``(P, D)`` is constrained to be split by agents across the mesh, so the
   expensive objective evaluations (e.g. Elman rollouts) run on all devices.
 
@@ -16,7 +16,7 @@ reductions, which the population split does not introduce).
 Several hosts: under ``jax.distributed.initialize()`` each process lays its own runs
 over its own devices (``jax.local_devices()``): a run is never one program of several
 processes, whose keys would mix. Split the independent runs across processes with
-:func:`jaxfric.sweep` (``process_index``/``process_count``, or its ``distributed``
+[`jaxfric.sweep`][jaxfric.sweeps.sweep] (``process_index``/``process_count``, or its ``distributed``
 mode; docs/scale.md).
 """
 

@@ -1,14 +1,14 @@
 """What every swarm shares: the state, personal/global bests, stall-based stopping,
 warm starts and ``ask / tell`` (docs/algorithms.md §3, §10).
 
-A swarm writes one generation as evaluation *rounds* (:mod:`jaxfric.optim.rounds`): a
+A swarm writes one generation as evaluation *rounds* ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]): a
 Python generator that yields each batch of candidates it needs evaluated and receives
 their fitness back (``f = yield X``). The compiled run feeds it the objective,
 evaluated on the whole batch at once;
-:meth:`~jaxfric.optim.contract.AbstractSolver.ask` / ``tell`` feed it values
+[`ask`][jaxfric.optim.AbstractSolver.ask] / ``tell`` feed it values
 computed anywhere (a simulator outside JAX), one batch per call. The same code therefore
 defines both, and a run driven by ``ask``/``tell`` visits the points
-:func:`jaxfric.minimise` visits for the same key.
+[`jaxfric.minimise`][jaxfric.optim.minimise] visits for the same key.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ class SwarmState(eqx.Module):
 
     ``generation`` counts generations done; ``u`` holds the random numbers of the next
     generation (drawn one generation ahead, so they are stored once instead of
-    recomputed in every fused consumer, see :func:`jaxfric.optim.rng.counter_uniform`);
+    recomputed in every fused consumer, see [`jaxfric.optim.rng.counter_uniform`][jaxfric.optim.rng.counter_uniform]);
     ``stall`` counts generations without a relative improvement of more than the
     solver's ``function_tolerance`` since ``stall_f``.
     """
@@ -139,7 +139,7 @@ class AbstractSwarm(AbstractGenerational):
 
     def generation(self, state: SwarmState, lower, upper) -> Rounds:
         """Generation ``state.generation`` with its numbers ``state.u`` (inner loops
-        yield a :class:`~jaxfric.optim.rounds.Scan`)."""
+        yield a [`Scan`][jaxfric.optim.Scan])."""
         raise NotImplementedError
 
     def evaluations(self) -> int:

@@ -11,8 +11,8 @@ Typical use::
     data.train(), data.valid()
     data = rig.synthetic_friction_data(jax.random.key(0))          # the same two steps in one call
 
-Recorded data: :func:`load_measurements` (raw x, p1, p2, load) or
-:func:`load_friction_pairs` (velocity/friction) from CSV files or arrays.
+Recorded data: [`load_measurements`][jaxfric.rig.load_measurements] (raw x, p1, p2, load) or
+[`load_friction_pairs`][jaxfric.rig.load_friction_pairs] (velocity/friction) from CSV files or arrays.
 """
 
 from .data import FrictionData, Measurements

@@ -1,5 +1,5 @@
 """Input checks of the pipeline and the loaders: the record's checks (defined once, in
-:mod:`jaxfric.records`) and the edge padding of the zero-phase filter.
+[`jaxfric.records`][jaxfric.records]) and the edge padding of the zero-phase filter.
 
 They run on concrete NumPy data *before* any computation, so a bad record fails
 with a ValueError that names the channel and the problem, not deep inside

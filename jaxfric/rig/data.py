@@ -1,7 +1,7 @@
 """Data containers: raw rig measurements and the velocity/friction record models are fitted to.
 
 ``Measurements`` holds what a rig records (docs/algorithms.md §7: x, p1, p2, F_L
-against t). ``FrictionData`` (defined in :mod:`jaxfric.records`, the one record type
+against t). ``FrictionData`` (defined in [`jaxfric.records`][jaxfric.records], the one record type
 of the package) holds what identification needs (§1, §2.4, §11): velocity in,
 friction out, on a uniform grid, with the train/validation split of the paper
 (first 1600 of 2000 samples for estimation, last 400 for validation).

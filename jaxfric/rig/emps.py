@@ -6,11 +6,11 @@ ball-screw prismatic axis under a PD position loop. Its estimation file
 ``DATA_EMPS.mat`` holds ``t`` [s], ``qm`` (measured position) [m], ``qg`` (reference)
 [m], ``vir`` (drive voltage) [V] and the constants ``gtau`` [N/V], ``kp``, ``kv``.
 
-The benchmark's recipe (used by :func:`emps_states` and :func:`emps_friction_data`):
+The benchmark's recipe (used by [`emps_states`][jaxfric.rig.emps.emps_states] and [`emps_friction_data`][jaxfric.rig.emps_friction_data]):
 
 1. 4th-order Butterworth low-pass at 100 Hz on ``qm``, run forward–backward
-   (``scipy.signal.sosfiltfilt``, :func:`jaxfric.rig.lowpass`);
-2. velocity and acceleration by central differences (:func:`jaxfric.rig.differentiate`);
+   (``scipy.signal.sosfiltfilt``, [`jaxfric.rig.lowpass`][jaxfric.rig.lowpass]);
+2. velocity and acceleration by central differences ([`jaxfric.rig.differentiate`][jaxfric.rig.differentiate]);
 3. drop ``drop`` samples (default 50) at each end, where the filter's edge
    transients live;
 4. rigid-body inverse model (IDIM)::
@@ -18,7 +18,7 @@ The benchmark's recipe (used by :func:`emps_states` and :func:`emps_friction_dat
        gtau·vir = M·a + Fv·v + Fc·sign(v) + offset                    (symmetric)
        gtau·vir = M·a + Fv±·v + Fc+·[v > 0] − Fc−·[v < 0]              (asymmetric)
 
-   solved by linear least squares (:func:`idim_ls`, IDIM-LS), and the friction
+   solved by linear least squares ([`idim_ls`][jaxfric.rig.idim_ls], IDIM-LS), and the friction
    record ``friction = gtau·vir − M·a`` with a given or IDIM-LS-estimated ``M``
    (this signal also holds the constant offset).
 
@@ -80,7 +80,7 @@ class EMPSRecording:
 
 
 def load_emps(path) -> EMPSRecording:
-    """Read an EMPS ``.mat`` file (``scipy.io.loadmat``) into an :class:`EMPSRecording`.
+    """Read an EMPS ``.mat`` file (``scipy.io.loadmat``) into an [`EMPSRecording`][jaxfric.rig.EMPSRecording].
 
     Raises:
         FileNotFoundError: no file at ``path``.
@@ -192,8 +192,8 @@ def emps_friction_data(rec: EMPSRecording, *, mass: float | None = None, asymmet
                        train_fraction: float = 0.8) -> FrictionData:
     """The EMPS friction record: ``friction = gtau·vir − M·a`` against the filtered velocity.
 
-    ``M`` is ``mass`` [kg] when given, else the IDIM-LS estimate (:func:`idim_ls` with
-    ``asymmetric``) on the whole kept recording. Returns :class:`FrictionData` with
+    ``M`` is ``mass`` [kg] when given, else the IDIM-LS estimate ([`idim_ls`][jaxfric.rig.idim_ls] with
+    ``asymmetric``) on the whole kept recording. Returns [`FrictionData`][jaxfric.rig.FrictionData] with
     the acceleration, the first ``train_fraction`` of the samples for training and
     the rest (the last 20 % by default) for validation.
     """

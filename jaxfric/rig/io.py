@@ -24,7 +24,7 @@ from .data import FrictionData, Measurements
 
 RAW_CHANNELS = ("t", "x", "p1", "p2", "load")
 PAIR_CHANNELS = ("t", "velocity", "friction")
-#: Channels :func:`load_friction_pairs` reads when ``columns`` maps them.
+#: Channels `load_friction_pairs` reads when ``columns`` maps them.
 PAIR_EXTRA_CHANNELS = ("p1", "p2")
 
 
@@ -179,7 +179,7 @@ def load_measurements(source, columns: Mapping | None = None, *, scale: Mapping 
         channel the source lacks (e.g. ``{"p1": 0.0}`` for a single-chamber cylinder).
     delimiter: ``","`` for CSV, ``None`` for whitespace. skip_rows: data rows to drop
         at the start (after the header). on_irregular: ``"resample"`` (linear, with
-        an :class:`IrregularSamplingWarning`) or ``"raise"``; ``dt`` forces the grid step.
+        an [`IrregularSamplingWarning`][jaxfric.rig.IrregularSamplingWarning]) or ``"raise"``; ``dt`` forces the grid step.
     """
     sig = _gather(source, columns, RAW_CHANNELS, scale, fill, delimiter, skip_rows, comments)
     sig = _uniformise(sig, on_irregular, dt, rtol)
@@ -190,11 +190,11 @@ def load_friction_pairs(source, columns: Mapping | None = None, *, scale: Mappin
                         delimiter: str | None = ",", skip_rows: int = 0, comments: str = "#",
                         on_irregular: str = "resample", dt: float | None = None, rtol: float = 1e-3,
                         train_fraction: float = 0.8, n_train: int | None = None) -> FrictionData:
-    """Ready velocity [m/s] / friction [N] pairs against time [s] as :class:`FrictionData`.
+    """Ready velocity [m/s] / friction [N] pairs against time [s] as [`FrictionData`][jaxfric.rig.FrictionData].
 
-    Same conventions as :func:`load_measurements`, channels ``t, velocity, friction``,
+    Same conventions as [`load_measurements`][jaxfric.rig.load_measurements], channels ``t, velocity, friction``,
     and optionally the chamber pressures ``p1``, ``p2`` [Pa after ``scale``] for a model
-    that takes them (:class:`~jaxfric.models.Cylinder`).
+    that takes them ([`Cylinder`][jaxfric.models.Cylinder]).
     """
     sig = _gather(source, columns, PAIR_CHANNELS, scale, None, delimiter, skip_rows, comments,
                   optional=PAIR_EXTRA_CHANNELS)

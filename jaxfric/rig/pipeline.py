@@ -75,11 +75,11 @@ def estimate_friction(
     train_fraction: float = 0.8,
     n_train: int | None = None,
 ) -> FrictionData:
-    """Run the §7 pipeline on uniformly sampled measurements and return :class:`FrictionData`.
+    """Run the §7 pipeline on uniformly sampled measurements and return [`FrictionData`][jaxfric.rig.FrictionData].
 
     Geometry comes from ``cylinder`` (anything with ``bore``, ``rod``, ``mass``,
-    ``gravity`` attributes, e.g. :class:`~jaxfric.rig.params.Cylinder`, or a whole
-    :class:`~jaxfric.rig.params.Rig`) and/or the
+    ``gravity`` attributes, e.g. [`Cylinder`][jaxfric.rig.Cylinder], or a whole
+    [`Rig`][jaxfric.rig.Rig]) and/or the
     keywords, which take precedence: bore and rod diameters [m], moving mass
     [kg], gravity along -x [m/s^2] (default 0). ``cutoff`` [Hz] and ``order`` set
     the Butterworth filter; ``train_fraction`` / ``n_train`` the split (default

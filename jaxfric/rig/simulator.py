@@ -46,7 +46,7 @@ def default_velocity_profile(t):
 
 
 def _default_position_offset(t):
-    """Integral of :func:`default_velocity_profile` from 0 to ``t`` [m]."""
+    """Integral of [`default_velocity_profile`][jaxfric.rig.default_velocity_profile] from 0 to ``t`` [m]."""
     w1, w2 = 2 * jnp.pi * 0.2, 2 * jnp.pi * 0.53
     return 0.010 / w1 * (1 - jnp.cos(w1 * t)) + 0.004 / w2 * (1 - jnp.cos(w2 * t))
 
@@ -76,7 +76,7 @@ class Sensors(eqx.Module):
 
 
 class RigRecord(eqx.Module):
-    """Output of :func:`simulate`, all sampled at ``fs`` (SI units).
+    """Output of [`simulate`][jaxfric.rig.simulate], all sampled at ``fs`` (SI units).
 
     Measured (noisy, quantised): ``t, x, p1, p2, load``.
     Ground truth: ``velocity``, ``acceleration``, ``friction`` (positive when it
@@ -99,7 +99,7 @@ class RigRecord(eqx.Module):
     valve: jax.Array
 
     def measurements(self) -> Measurements:
-        """The measured channels as :class:`Measurements` (NumPy, float64) for the pipeline."""
+        """The measured channels as [`Measurements`][jaxfric.rig.Measurements] (NumPy, float64) for the pipeline."""
         return Measurements.from_arrays(self.t, self.x, self.p1, self.p2, self.load)
 
 
@@ -115,7 +115,7 @@ def _root(dp, dp_lam):
 
 
 def load_force(rig: Rig, t, x, v):
-    """External load [N] opposing +x (see :class:`~jaxfric.rig.params.Load`)."""
+    """External load [N] opposing +x (see [`Load`][jaxfric.rig.Load])."""
     ld = rig.load
     return (ld.offset + ld.amplitude * jnp.sin(2 * jnp.pi * ld.frequency * t + ld.phase)
             + ld.stiffness * (x - rig.cylinder.x0) + ld.damping * v)
@@ -240,7 +240,7 @@ def _whole(name: str, value, minimum: int) -> None:
 
 
 def _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_reference, command):
-    """Reject bad arguments of :func:`simulate` before tracing (a clear ValueError instead
+    """Reject bad arguments of [`simulate`][jaxfric.rig.simulate] before tracing (a clear ValueError instead
     of a ZeroDivisionError, a reshape error or a silently empty or NaN record)."""
     dtype = getattr(key, "dtype", None)
     typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
@@ -291,7 +291,7 @@ def simulate(
         integral from ``rig.cylinder.x0``. Tracked by the PI controller.
     command: open-loop valve command, ``n_samples`` values in [-1, 1]; when given,
         the controller is bypassed.
-    sensors: noise and quantisation (:class:`Sensors`).
+    sensors: noise and quantisation ([`Sensors`][jaxfric.rig.Sensors]).
     settle_time: seconds of holding still before ``t = 0`` so that pressures,
         controller and friction elements start from a consistent rest state
         (run through the same scan as the samples, so the sub-step is compiled once).

@@ -13,12 +13,12 @@ from .simulator import simulate
 def synthetic_friction_data(key: jax.Array, rig: Rig | None = None, *, cutoff: float = 5.0,
                             train_fraction: float = 0.8, n_train: int | None = None,
                             **simulate_kwargs) -> FrictionData:
-    """Simulate ``rig`` (default :class:`Rig`) with ``key`` and run the §7 pipeline on its measurements.
+    """Simulate ``rig`` (default [`Rig`][jaxfric.rig.Rig]) with ``key`` and run the §7 pipeline on its measurements.
 
     Defaults give the paper's layout: 2000 samples at 128 Hz, 5 Hz Butterworth,
     1600 training / 400 validation samples. ``simulate_kwargs`` go to
-    :func:`~jaxfric.rig.simulate` (``n_samples``, ``fs``, ``sensors``, ...). Use
-    :func:`~jaxfric.rig.simulate` directly when you also need the ground truth.
+    [`simulate`][jaxfric.rig.simulate] (``n_samples``, ``fs``, ``sensors``, ...). Use
+    [`simulate`][jaxfric.rig.simulate] directly when you also need the ground truth.
     """
     rig = Rig() if rig is None else rig
     record = simulate(rig, key, **simulate_kwargs)
