@@ -62,6 +62,10 @@ DEFAULT_LEVEL = 0.95
 MAX_REPORT_CORRELATION = 12
 #: Bootstrap replicates of ``"block_bootstrap"``.
 DEFAULT_REPLICATES = 400
+#: What every output shows instead of the interval of a parameter the data do not determine.
+NOT_IDENTIFIABLE = "not identifiable"
+#: The reason [`ParameterUncertainty.not_identifiable`][jaxfric.uncertainty.ParameterUncertainty.not_identifiable] gives for an interval covering the box.
+COVERS_BOX = "its {level:.0%} interval covers its whole search box: the data do not determine it"
 
 
 # ----------------------------------------------------------------------- estimators
@@ -301,39 +305,62 @@ class ParameterUncertainty:
         return [(self.names[a], self.names[b], float(r[a, b]))
                 for a in range(p) for b in range(a + 1, p) if abs(r[a, b]) > threshold]
 
-    def table(self, level: float = DEFAULT_LEVEL) -> list[dict[str, Any]]:
+    def not_identifiable(self, level: float = DEFAULT_LEVEL, flags=None, method=None) -> dict[str, list[str]]:
+        """``{name: reasons}`` of the parameters the data do not determine: those ``flags``
+        names (``{name: reasons}`` from the fit's other analyses, e.g. the model's
+        excitation rules and the plausibility rules: [`Fit.verdicts`][jaxfric.fit.Fit.verdicts])
+        and those whose interval covers their search box ([`covers_box`][jaxfric.uncertainty.ParameterUncertainty.covers_box], with
+        ``COVERS_BOX`` as the reason). Their intervals are never shown as numbers:
+        [`table`][jaxfric.uncertainty.ParameterUncertainty.table], [`format`][jaxfric.uncertainty.ParameterUncertainty.format] and [`to_json`][jaxfric.uncertainty.ParameterUncertainty.to_json] say "not identifiable" instead."""
+        out = {str(k): list(v) for k, v in dict(flags or {}).items()}
+        for name in self.covers_box(level, method):
+            out.setdefault(name, []).append(COVERS_BOX.format(level=level))
+        return out
+
+    def table(self, level: float = DEFAULT_LEVEL, flags=None) -> list[dict[str, Any]]:
         """One row per parameter: estimate, standard errors per method, interval
-        (default method), ``covers_box``."""
+        (default method), ``covers_box``, and the verdict in the same row: ``identifiable``
+        and its ``reasons`` ([`not_identifiable`][jaxfric.uncertainty.ParameterUncertainty.not_identifiable] with ``flags``). The ``low``, ``high``
+        of a row that is not identifiable are the linearisation's numbers, not an interval
+        of the parameter: every text output shows "not identifiable" instead."""
         ivs = self.intervals(level)
         ses = {m: self.stderr(m) for m in self.cov}
         loose = set(self.covers_box(level))
+        bad = self.not_identifiable(level, flags)
         return [{"name": k, "estimate": float(self.estimate[i]),
                  **{f"se_{m}": ses[m][k] for m in self.cov},
-                 "low": ivs[k][0], "high": ivs[k][1], "covers_box": k in loose}
+                 "low": ivs[k][0], "high": ivs[k][1], "covers_box": k in loose,
+                 "identifiable": k not in bad, "reasons": bad.get(k, [])}
                 for i, k in enumerate(self.names)]
 
-    def format(self, level: float = DEFAULT_LEVEL) -> list[str]:
-        """Lines for [`jaxfric.Fit.summary`][jaxfric.fit.Fit.summary]."""
+    def format(self, level: float = DEFAULT_LEVEL, flags=None) -> list[str]:
+        """Lines for [`jaxfric.Fit.summary`][jaxfric.fit.Fit.summary]: a parameter that is not identifiable
+        ([`not_identifiable`][jaxfric.uncertainty.ParameterUncertainty.not_identifiable] with ``flags``) shows "not identifiable" where its
+        interval would be."""
         methods = [m for m in METHODS if m in self.cov]
         head = (f"uncertainty ({self.default}, {level:.0%} t-intervals, n={self.n}, dof={self.dof}, "
                 f"residual lag-1 corr {self.lag1:.2f}, Newey-West lag {self.bandwidth:.0f}"
                 + (f", rank {self.rank} of {len(self.names)}" if self.rank < len(self.names) else "") + "):")
         lines = [head, f"  {'param':<10}{'estimate':>12}" + "".join(f"{'se ' + m:>18}" for m in methods)
                  + f"{'interval':>28}"]
-        for row in self.table(level):
+        for row in self.table(level, flags):
             lines.append(f"  {row['name']:<10}{row['estimate']:>12.4g}"
                          + "".join(f"{row['se_' + m]:>18.3g}" for m in methods)
-                         + f"   [{row['low']:.4g}, {row['high']:.4g}]"
-                         + ("  covers the box: not determined" if row["covers_box"] else ""))
+                         + (f"   [{row['low']:.4g}, {row['high']:.4g}]" if row["identifiable"]
+                            else f"   {NOT_IDENTIFIABLE}"))
         for a, b, r in self.strongly_correlated():
             lines.append(f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each")
         return lines
 
     # ------------------------------------------------------------------ json
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self, flags=None) -> dict[str, Any]:
+        """The JSON form [`from_json`][jaxfric.uncertainty.ParameterUncertainty.from_json] reads, with the 95 % intervals of the identifiable
+        parameters only (``intervals_95``) and the others under ``not_identifiable``
+        (``{name: reasons}``, [`not_identifiable`][jaxfric.uncertainty.ParameterUncertainty.not_identifiable] with ``flags``)."""
         def mat(m):
             return [[float(x) for x in row] for row in np.asarray(m)]
 
+        bad = self.not_identifiable(DEFAULT_LEVEL, flags)
         return {"names": list(self.names), "kinds": list(self.kinds),
                 "estimate": [float(x) for x in self.estimate], "theta": [float(x) for x in self.theta],
                 "lower": [float(x) for x in self.lower], "upper": [float(x) for x in self.upper],
@@ -342,8 +369,9 @@ class ParameterUncertainty:
                 "n": self.n, "dof": self.dof, "s2": float(self.s2), "rank": self.rank,
                 "bandwidth": float(self.bandwidth), "residual": self.residual, "default": self.default,
                 "lag1": float(self.lag1), "segments": list(self.segments),
-                "stderr": self.stderr(), "intervals_95": {k: list(v) for k, v in self.intervals().items()},
-                "covers_box": self.covers_box()}
+                "stderr": self.stderr(),
+                "intervals_95": {k: list(v) for k, v in self.intervals().items() if k not in bad},
+                "not_identifiable": bad, "covers_box": self.covers_box()}
 
     @classmethod
     def from_json(cls, d: dict) -> "ParameterUncertainty":

@@ -39,7 +39,7 @@ import numpy as np
 
 from . import models as _models
 from ._warnings import ExtrapolationWarning, ResamplingWarning
-from .covariance import ParameterUncertainty, _check_level
+from .covariance import DEFAULT_LEVEL, ParameterUncertainty, _check_level
 from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
@@ -141,13 +141,88 @@ def unidentifiable_names(texts) -> set[str]:
     return {str(t).split(": ", 1)[0] for t in texts}
 
 
-def uncertainty_lines(fit) -> list[str]:
-    """The summary lines of a fit's parameter uncertainty and plausibility warnings."""
-    lines = []
-    if not fit.model.needs_scaling and fit.uncertainty is not None:
-        lines += fit.uncertainty.format()
+def diagnostic_flags(fit) -> dict[str, list[str]]:
+    """``{name: reasons}`` of the parameters that the fit's analyses other than the
+    intervals judge not identifiable: the model's excitation rules
+    (``diagnostics["unidentifiable"]``) and the plausibility rules
+    (``diagnostics["implausible"]``, [`jaxfric.plausibility`][jaxfric.plausibility])."""
+    out: dict[str, list[str]] = {}
+    for text in fit.diagnostics.get("unidentifiable", []):
+        name, _, why = str(text).partition(": ")
+        out.setdefault(name, []).append(why or "the model says these data cannot determine it")
     for d in fit.diagnostics.get("implausible", []):
-        lines.append(f"! implausible {d['name']}: {d['message']}")
+        out.setdefault(str(d["name"]), []).append(f"{d['message']} (plausibility rule {d['rule']})")
+    return out
+
+
+def parameter_verdicts(fit, level: float = DEFAULT_LEVEL) -> dict[str, dict[str, Any]]:
+    """One verdict per physical parameter, from every analysis of the fit together.
+
+    A parameter is *not identifiable* when the model's excitation rules say the training
+    data cannot determine it (``diagnostics["unidentifiable"]``), when it breaks a
+    plausibility rule (``diagnostics["implausible"]``), or when its interval covers its
+    whole search box ([`ParameterUncertainty.covers_box`][jaxfric.uncertainty.ParameterUncertainty.covers_box]). Its
+    value was then set by the search box or by a handful of samples: it is not a
+    measured property, and no output shows an interval for it ([`Fit.summary`][jaxfric.fit.Fit.summary],
+    report.md, results.json, the fit file, the command line all say "not identifiable").
+
+    Returns ``{name: {"value", "identifiable", "reasons", "on_bound", "at_limit",
+    "interval"}}`` in the order of [`Fit.params`][jaxfric.fit.Fit.params] (a motion fit's
+    mechanics after them): ``on_bound`` marks a parameter the search box stopped (widen
+    its range; ``at_limit``: the range already starts at the least value the model
+    allows), ``interval`` is ``[low, high]`` at ``level`` for an identifiable parameter
+    of a fit with an uncertainty, else ``None``. ``{}`` for a network (its weights have no physical meaning).
+    """
+    if fit.model.needs_scaling:
+        return {}
+    flags = diagnostic_flags(fit)
+    u = fit.uncertainty
+    if u is not None:
+        flags = u.not_identifiable(level, flags)
+    values = {k: float(v) for k, v in fit.params.items() if np.ndim(v) == 0}
+    intervals = {}
+    if u is not None:
+        intervals = u.intervals(level)
+        for name, est in zip(u.names, u.estimate):
+            values.setdefault(name, float(est))
+    for name in flags:
+        values.setdefault(name, None)
+    bound = {d["name"]: bool(d.get("at_limit", False)) for d in fit.diagnostics.get("on_bound", [])}
+    return {k: {"value": v, "identifiable": k not in flags, "reasons": list(flags.get(k, [])),
+                "on_bound": k in bound, "at_limit": bound.get(k, False),
+                "interval": (list(intervals[k]) if k in intervals and k not in flags else None)}
+            for k, v in values.items()}
+
+
+#: What the summary, report and command line say about parameters that are not identifiable.
+NOT_IDENTIFIABLE_MEANING = ("not identifiable from these data: their values were set by the search box or a "
+                            "few samples, not measured; do not read them as physical properties (the fit still "
+                            "predicts records like its training data; where these parameters act, e.g. "
+                            "pre-sliding, the Stribeck dip or standstill, it extrapolates)")
+
+
+def grouped_reasons(verdicts: dict) -> list[tuple[list[str], str]]:
+    """``[(names, reason)]``: the reasons of the parameters that are not identifiable, each
+    reason once with every parameter it applies to (in order)."""
+    groups: dict[str, list[str]] = {}
+    for name, v in verdicts.items():
+        for why in v["reasons"]:
+            groups.setdefault(why, []).append(name)
+    return [(names, why) for why, names in groups.items()]
+
+
+def uncertainty_lines(fit) -> list[str]:
+    """The summary lines of a fit's parameter uncertainty and of the parameters that are
+    not identifiable (one verdict per parameter: ``parameter_verdicts``)."""
+    lines = []
+    if fit.model.needs_scaling:
+        return lines
+    if fit.uncertainty is not None:
+        lines += fit.uncertainty.format(flags=diagnostic_flags(fit))
+    groups = grouped_reasons(parameter_verdicts(fit))
+    if groups:
+        lines.append(f"! {NOT_IDENTIFIABLE_MEANING}:")
+        lines += [f"!   {', '.join(names)}: {why}" for names, why in groups]
     return lines
 
 
@@ -288,6 +363,13 @@ class Fit:
         ``method`` ``"hac"`` (default), ``"jacobian"`` (independent residuals) or
         another the fit holds. See docs/uncertainty.md for how to read them."""
         return self._need_uncertainty().intervals(level, method)
+
+    def verdicts(self, level: float = DEFAULT_LEVEL) -> dict[str, dict[str, Any]]:
+        """One verdict per physical parameter (``parameter_verdicts``): whether the data
+        determine it, why not, and its interval when they do. [`intervals`][jaxfric.fit.Fit.intervals] gives the
+        linearisation's numbers for every parameter; only those this marks identifiable
+        are intervals of the parameter."""
+        return parameter_verdicts(self, level)
 
     @property
     def correlation(self) -> np.ndarray:
@@ -506,7 +588,9 @@ class Fit:
             "diagnostics": jsonable(self.diagnostics),
         }
         if uncertainty is not None:
-            out["uncertainty"] = uncertainty.to_json()
+            out["uncertainty"] = uncertainty.to_json(diagnostic_flags(self))
+        if not self.model.needs_scaling:
+            out["verdicts"] = jsonable(self.verdicts())
         if self.ensemble:
             out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items()
                                          if include_theta or k != "theta"})
@@ -547,18 +631,15 @@ class Fit:
                 lines.append(f"{str(r['name'])[:15]:<16}{r['role']:<7}{r['n_samples']:>8}"
                              + (f"{mse:>10.4f}{mx:>11.3g}" if mse is not None else f"{'-':>10}{'-':>11}"))
         if not self.model.needs_scaling:
-            flagged = {d["name"] for d in self.diagnostics.get("on_bound", [])}
-            loose = unidentifiable_names(self.diagnostics.get("unidentifiable", []))
+            verdicts = self.verdicts()
             lines.append("params: " + ", ".join(
-                f"{k}={float(v):.4g}{' [on bound]' if k in flagged else ''}"
-                f"{' [not identifiable]' if k in loose else ''}"
+                f"{k}={float(v):.4g}" + (" [on bound]" if verdicts.get(k, {}).get("on_bound") else "")
+                + ("" if verdicts.get(k, {"identifiable": True})["identifiable"] else " [not identifiable]")
                 for k, v in self.params.items()))
         if self.box is not None:
             lines.append(f"box: {self.box}")
         for d in self.diagnostics.get("on_bound", []):
             lines.append(f"! {d['message']}")
-        for text in self.diagnostics.get("unidentifiable", []):
-            lines.append(f"! {text} (not identifiable from these data: the value is physically meaningless)")
         lines += uncertainty_lines(self)
         if self.ensemble:
             e = self.ensemble

@@ -52,6 +52,11 @@ STANDSTILL = 0.02
 MIN_STANDSTILL_FRACTION = 0.05
 
 
+#: What a [`PlausibilityWarning`][jaxfric.plausibility.PlausibilityWarning] means for the user, said at the end of each.
+WHAT_IT_MEANS = ("So {name} is not identifiable from these data: the fit still predicts records like these, but "
+                 "{name} is no physical property (fit.verdicts() gives every parameter's verdict)")
+
+
 class PlausibilityWarning(UserWarning):
     """A fitted parameter lies outside the range where it means something physically
     ([`jaxfric.plausibility`][jaxfric.plausibility]): the message gives the reason and the evidence."""
@@ -205,4 +210,5 @@ def check_plausibility(model, params: dict, velocity, dt: float | None = None) -
 def warn_implausible(model, found: list[Implausible], stacklevel: int = 3) -> None:
     """One [`PlausibilityWarning`][jaxfric.plausibility.PlausibilityWarning] per broken rule."""
     for f in found:
-        warnings.warn(f"{type(model).__name__}: {f.message}", PlausibilityWarning, stacklevel=stacklevel)
+        warnings.warn(f"{type(model).__name__}: {f.message}. {WHAT_IT_MEANS.format(name=f.name)}",
+                      PlausibilityWarning, stacklevel=stacklevel)

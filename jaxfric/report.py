@@ -9,8 +9,9 @@ One call, [`write_report`][jaxfric.report.write_report], writes into a folder::
     fit_<model>.png      measured against estimated friction, one per model
     fit_<model>_<record>.png  the same on each extra validation record (``records=``)
     band_<model>.png     an ensemble's prediction band (fits from ``identify(..., keys=K)``)
-    error.png            error curves of all models
+    error.png            error curves of all models, scaled to the part after the start-up transient
     convergence.png      best objective against evaluations, all models
+    (figures the caller drew, e.g. the demo's compensation.png, are listed with these)
     models/<model>.npz   each fit, saved with ``Fit.save`` (``jaxfric predict`` reads it)
 
 Every file is written to a temporary name in the same folder and moved into place
@@ -35,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from . import plot as _plot
-from .fit import Fit, unidentifiable_names
+from .fit import Fit
 from .files import TEMP_SUFFIX, atomic_write, atomic_write_bytes, atomic_write_text, jsonable, write_json
 from .metrics import METRIC_FORMULAS, friction_metrics
 from .records import FrictionData
@@ -229,26 +230,13 @@ def _environment() -> dict:
             "float64": bool(jax.config.jax_enable_x64)}
 
 
-def _fmt_params(d: Mapping, on_bound=(), unidentifiable=frozenset()) -> list[str]:
-    """Table rows of the parameters; ``on_bound``: the fit's ``diagnostics["on_bound"]``."""
-    at_limit = {b["name"]: b.get("at_limit", False) for b in on_bound}
-    lines = []
-    for k, v in d.items():
-        arr = np.asarray(v)
-        if arr.ndim == 0 and arr.dtype.kind in "fi":
-            mark = ("" if k not in at_limit else " **(at the least value the model allows)**"
-                    if at_limit[k] else " **(on a bound: widen its range)**")
-            mark += " **(not identifiable from these data)**" if k in unidentifiable else ""
-            lines.append(f"| {k} | {float(arr):.6g}{mark} |")
-    return lines
-
-
 def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str | None = None,
                  source: str = "", settings: Mapping | None = None, notes: list[str] | None = None,
                  python: str | None = None, extra_files: Mapping[str, str] | None = None,
                  save_models: bool = True, on_written: Callable[[Path], None] | None = None,
                  records: Mapping[str, Any] | None = None,
-                 sections: Mapping[str, str] | None = None) -> dict:
+                 sections: Mapping[str, str] | None = None,
+                 figures: Mapping[str, str] | None = None) -> dict:
     """Write the report folder ``out`` for ``fits`` (name -> fit) on ``data``.
 
     Args:
@@ -271,9 +259,12 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         sections: heading -> Markdown body of further sections the caller computed (e.g.
             ``jaxfric demo``'s friction-compensation table, [`jaxfric.compensation.compensation_table`][jaxfric.compensation.compensation_table]),
             placed after the model sections and kept in ``results.json`` under ``sections``.
+        figures: name -> caption of figures the caller drew into ``out`` (e.g. ``jaxfric
+            demo``'s ``compensation.png``): listed in ``results.json`` with the report's own.
 
     Returns:
-        ``{"files": [paths], "rows": comparison rows, "table": plain-text table}``.
+        ``{"files": [paths], "rows": comparison rows, "table": plain-text table,
+        "figures": {name: caption} of every figure of the report}``.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -328,6 +319,10 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
             conv, ylabel="best objective J (each model's own cost)"), "Optimiser convergence")
     except ValueError as e:  # a fit without an optimiser history (e.g. loaded from disk)
         notes = list(notes or []) + [f"no convergence figure: {e}"]
+    for name, caption in (figures or {}).items():
+        if not (out / name).is_file():
+            raise ValueError(f"figure {name} is not in {out}: draw it before write_report")
+        figs[name] = caption
 
     model_files = {}
     if save_models:
@@ -362,7 +357,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
     done(write_json(out / "results.json", results))
     text = _markdown(results, rows, fits, python=python, extra_files=extra_files or {})
     done(atomic_write_text(out / "report.md", text))
-    return {"files": written, "rows": rows, "table": format_table(rows)}
+    return {"files": written, "rows": rows, "table": format_table(rows), "figures": dict(figs)}
 
 
 def _fit_records(fit) -> list[dict]:
@@ -428,17 +423,12 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
                   "pools the samples of the training and of the validation records."]
             for rec_name, fig in m["record_figures"].items():
                 L += ["", f"![{r['label']} on {rec_name}]({fig})"]
-        if not fit.model.needs_scaling:
-            pl = _fmt_params(fit.params, m["on_bound"], unidentifiable_names(m["unidentifiable"]))
-            if pl:
-                L += ["", "| parameter | value (SI) |", "|---|---|", *pl]
-            if fit.box is not None:
-                L += ["", f"Search box (SI; `Fs_ratio` = Fs/Fc): {fit.box}."]
+        # the parameters, one verdict each (identifiable or not, and why), their intervals
+        L += report_markdown(m.get("uncertainty"))
+        if not fit.model.needs_scaling and fit.box is not None:
+            L += ["", f"Search box (SI; `Fs_ratio` = Fs/Fc): {fit.box}."]
         for d in m["on_bound"]:
             L += ["", f"**On a bound:** {d['message']}."]
-        for text in m["unidentifiable"]:
-            L += ["", f"**Not identifiable from these data (its value is physically meaningless):** {text}"]
-        L += report_markdown(m.get("uncertainty"))
         e = m["ensemble"]
         if e:
             vm = [x for x in e.get("valid_mse_percent", []) if x is not None]

@@ -37,10 +37,11 @@ import numpy as np
 
 from ._warnings import ExtrapolationWarning
 from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_REPLICATES, METHODS,
-                         MAX_REPORT_CORRELATION, ParameterUncertainty, _check_level, _check_methods,
+                         MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level, _check_methods,
                          andrews_bandwidth, block_bootstrap_covariance, hac_covariance,
                          jacobian_covariance)
-from .fit import Fit, _check_dt, _velocity_np, rollout
+from .fit import (NOT_IDENTIFIABLE_MEANING, Fit, _check_dt, _velocity_np, diagnostic_flags, grouped_reasons,
+                  parameter_verdicts, rollout)
 from .plausibility import check_plausibility, warn_implausible
 from .records import FrictionData, as_channel
 
@@ -359,21 +360,26 @@ def assess_fit(fit, data) -> None:
 
 # ----------------------------------------------------------------------- report
 def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
-    """What report.md and results.json show of a fit's uncertainty: the parameter table,
-    strongly correlated pairs, the plausibility warnings and, for a force-balance fit on
-    one split record ``data``, the prediction band's measured coverage on the training
-    and validation windows. ``None`` for a fit without uncertainty or warnings."""
+    """What report.md and results.json show of a physical fit's parameters: one verdict
+    per parameter (``verdicts``, [`Fit.verdicts`][jaxfric.fit.Fit.verdicts]: value,
+    identifiable or not and why, interval), the uncertainty table (each row carrying the
+    same verdict), strongly correlated pairs, the plausibility rules broken (evidence
+    for the verdicts) and, for a force-balance fit on one split record ``data``, the
+    prediction band's measured coverage on the training and validation windows. ``None``
+    for a fit with none of these (a network without an ensemble)."""
     u = None if fit.model.needs_scaling else fit.uncertainty
     implausible = list(fit.diagnostics.get("implausible", []))
+    verdicts = parameter_verdicts(fit, level)
     one_record = (getattr(data, "velocity", None) is not None and len(data.velocity) == fit.n_samples
                   and "motion" not in fit.settings)
     ensemble = _ensemble_band(fit, data) if one_record and fit.ensemble else None
-    if u is None and not implausible and ensemble is None:
+    if u is None and not implausible and not verdicts and ensemble is None:
         return None
-    out: dict[str, Any] = {"level": level, "implausible": implausible, "ensemble_band": ensemble}
+    out: dict[str, Any] = {"level": level, "verdicts": verdicts, "implausible": implausible,
+                           "ensemble_band": ensemble}
     if u is not None:
         out.update(method=u.default, residual=u.residual, n=u.n, lag1=u.lag1, bandwidth=u.bandwidth,
-                   rank=u.rank, table=u.table(level), correlated=[list(x) for x in u.strongly_correlated()],
+                   rank=u.rank, table=u.table(level, diagnostic_flags(fit)), correlated=[list(x) for x in u.strongly_correlated()],
                    correlation={"names": list(u.names),
                                 "matrix": np.round(u.correlation(), 3).tolist()},
                    error=fit.diagnostics.get("uncertainty_error"))
@@ -417,22 +423,44 @@ def _ensemble_band(fit, data) -> dict | None:
 
 
 def report_markdown(summary: dict | None) -> list[str]:
-    """Markdown lines of [`report_summary`][jaxfric.uncertainty.report_summary] for a model's section of report.md."""
+    """Markdown lines of [`report_summary`][jaxfric.uncertainty.report_summary] for a model's section of report.md: one
+    table of the parameters (value, standard errors, interval and verdict), the reasons
+    of every parameter that is not identifiable (each reason once), correlations and
+    the prediction bands."""
     if not summary:
         return []
     L: list[str] = []
-    if summary.get("table"):
-        lvl = f"{summary['level']:.0%}"
-        L += ["", f"Parameter uncertainty ({lvl} intervals, Newey–West covariance of the {summary['n']} "
-              f"training residuals in {summary['residual']}, lag-1 autocorrelation {summary['lag1']:.2f}; "
-              "see docs/uncertainty.md):", "",
-              f"| parameter | estimate | se (Newey–West) | se (independent residuals) | {lvl} interval | |",
-              "|---|---|---|---|---|---|"]
-        for row in summary["table"]:
-            L.append(f"| {row['name']} | {_g(row['estimate'], '.5g')} | {_g(row.get('se_hac'))} | "
-                     f"{_g(row.get('se_jacobian'))} | [{_g(row['low'], '.4g')}, {_g(row['high'], '.4g')}] | "
-                     + ("covers the search box: **not determined by the data**" if row["covers_box"] else "")
-                     + " |")
+    lvl = f"{summary['level']:.0%}"
+    verdicts = summary.get("verdicts") or {}
+    rows = {row["name"]: row for row in summary.get("table") or []}
+    if verdicts:
+        if rows:
+            L += ["", f"Parameter uncertainty ({lvl} intervals, Newey–West covariance of the {summary['n']} "
+                  f"training residuals in {summary['residual']}, lag-1 autocorrelation {summary['lag1']:.2f}; "
+                  "see docs/uncertainty.md), one verdict per parameter:", "",
+                  f"| parameter | value (SI) | se (Newey–West) | se (independent residuals) | {lvl} interval | verdict |",
+                  "|---|---|---|---|---|---|"]
+        else:
+            L += ["", "| parameter | value (SI) | verdict |", "|---|---|---|"]
+        for name, v in verdicts.items():
+            marks = [] if v["identifiable"] else [f"**{NOT_IDENTIFIABLE}**"]
+            if v.get("on_bound"):
+                marks.append("**at the least value the model allows**" if v.get("at_limit")
+                             else "**on a bound: widen its range**")
+            verdict = ", ".join(marks) or "identifiable"
+            value = _g(v.get("value"), ".6g")
+            if rows:
+                row = rows.get(name, {})
+                interval = (f"[{_g(v['interval'][0], '.4g')}, {_g(v['interval'][1], '.4g')}]" if v.get("interval")
+                            else f"{NOT_IDENTIFIABLE}" if not v["identifiable"] else "-")
+                L.append(f"| {name} | {value} | {_g(row.get('se_hac'))} | {_g(row.get('se_jacobian'))} | "
+                         f"{interval} | {verdict} |")
+            else:
+                L.append(f"| {name} | {value} | {verdict} |")
+        groups = grouped_reasons(verdicts)
+        if groups:
+            L += ["", f"**{NOT_IDENTIFIABLE_MEANING[0].upper() + NOT_IDENTIFIABLE_MEANING[1:]}.** Why:", ""]
+            L += [f"- {', '.join(names)}: {why}" for names, why in groups]
         corr = summary.get("correlation")
         if corr and 1 < len(corr["names"]) <= MAX_REPORT_CORRELATION:
             names = corr["names"]
@@ -456,21 +484,28 @@ def report_markdown(summary: dict | None) -> list[str]:
               f"holds {eb['train']:.1%} of the training"
               + (f" and {eb['valid']:.1%} of the validation samples" if eb.get("valid") is not None else " samples")
               + ": it shows the optimiser's spread, not where new data fall."]
-    for d in summary.get("implausible", []):
-        L += ["", f"**Physically implausible ({d['rule']}):** {d['message']}."]
     return L
 
 
 def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
-    """The command line's short account of a physical fit: one line of intervals, and a
-    line per strongly correlated pair (nothing for a network or a fit without them)."""
-    u = None if fit.model.needs_scaling else fit.uncertainty
-    if u is None:
+    """The command line's short account of a physical fit: one line of intervals (a
+    parameter that is not identifiable says so instead, [`Fit.verdicts`][jaxfric.fit.Fit.verdicts]),
+    a line naming those parameters and what that means, and a line per strongly
+    correlated pair (nothing for a network)."""
+    verdicts = parameter_verdicts(fit, level)
+    if not verdicts:
         return []
-    loose = set(u.covers_box(level))
-    parts = [f"{k} {float(u.estimate[i]):.4g} " + ("(not determined: the interval covers the box)" if k in loose
-                                                  else f"[{lo:.3g}, {hi:.3g}]")
-             for i, (k, (lo, hi)) in enumerate(u.intervals(level).items())]
-    lines = [f"  {level:.0%} intervals ({u.default}): " + ", ".join(parts)]
-    lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
+    u = fit.uncertainty
+    lines = []
+    if u is not None:
+        parts = [f"{k} {v['value']:.4g} " + (f"[{v['interval'][0]:.3g}, {v['interval'][1]:.3g}]" if v["interval"]
+                                             else f"({NOT_IDENTIFIABLE})")
+                 for k, v in verdicts.items() if k in u.names]
+        lines.append(f"  {level:.0%} intervals ({u.default}): " + ", ".join(parts))
+    loose = [k for k, v in verdicts.items() if not v["identifiable"]]
+    if loose:
+        lines.append(f"  not identifiable from these data: {', '.join(loose)}; their values were set by the search "
+                     "box or a few samples: no physical properties (why: fit.summary(), report.md)")
+    if u is not None:
+        lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
     return lines

@@ -129,6 +129,60 @@ def test_demo_prints_the_comparison_table(demo):
     assert f"{mse:.4g}" in lines[2]
 
 
+def test_demo_report_lists_every_figure_and_reproduces_in_the_public_api(demo):
+    """results.json names every figure of the folder (the compensation study's too) and the
+    command says how many; the report's Python block uses only jaxfric's public API and,
+    run as printed, repeats the demo's LuGre fit."""
+    import re
+
+    from jaxfric import load_fit
+
+    out, proc = demo
+    results = json.loads((out / "results.json").read_text())
+    pngs = {p.name for p in out.glob("*.png")}
+    assert set(results["figures"]) == pngs and "compensation.png" in pngs
+    assert f"{len(pngs)} figures" in proc.stdout
+    block = re.search(r"In Python:\n\n```python\n(.*?)```", (out / "report.md").read_text(), re.S).group(1)
+    assert "jaxfric.cli" not in block and "FitSpec" not in block and "import jaxfric as jf" in block
+    assert re.search(r"^fit_lugre = jf\.identify\('lugre', data, key=fit_key, model_options=", block, re.M)
+    namespace = {}
+    exec("\n".join(ln for ln in block.splitlines() if not ln.startswith("fit_elman")), namespace)
+    saved = load_fit(out / "models" / "lugre.npz")
+    np.testing.assert_allclose(namespace["fit_lugre"].theta, saved.theta, rtol=1e-6)
+    assert namespace["fit_lugre"].metrics["valid"]["mse_percent"] == pytest.approx(
+        saved.metrics["valid"]["mse_percent"], rel=1e-6)
+
+
+def test_stage_lines_name_the_samples_the_global_stage_sees():
+    """The ENN's MAPSO searches on the first GLOBAL_STAGE_SAMPLES (2000) training samples:
+    the demo's 1600 training samples all, a longer record's first 2000."""
+    import jaxfric as jf
+    from jaxfric.cli.fitting import describe_solver
+
+    enn = jf.Elman()
+    assert "G = 50) on the 1600 training samples -> BFGS" in describe_solver(None, enn, n_train=1600)
+    assert "on the first 2000 of the 5000 training samples" in describe_solver(None, enn, n_train=5000)
+    assert "samples" not in describe_solver(None, enn)  # several records, used whole
+
+
+def test_help_says_what_the_demo_runs_and_every_model_name():
+    """The demo runs jaxfric's pipeline (the paper's only with --paper), and every --model
+    help lists the names the commands accept (the registry's, tests/test_cli_first_contact.py)."""
+    from jaxfric.cli.checks import MODEL_NAMES
+    from jaxfric.cli.parser import build_parser
+
+    parser = build_parser()
+    top = parser.format_help()
+    assert "jaxfric's" in top.split("identify ")[0] and "paper end to end" not in top
+    sub = parser._subparsers._group_actions[0].choices
+    demo = sub["demo"].format_help()
+    assert "first 2000 samples" not in demo and "on the 1600 training samples" in demo
+    for command in ("demo", "identify", "sweep"):
+        text = " ".join(sub[command].format_help().split())
+        assert f"friction models: {', '.join(MODEL_NAMES)}" in text or \
+            f"friction models ({', '.join(MODEL_NAMES)})" in text, command
+
+
 # -------------------------------------------------- identify and predict vs Python
 @pytest.fixture(scope="module")
 def python_fit(demo):
@@ -298,7 +352,7 @@ def test_box_option_reaches_the_fit_and_the_reproduce_line(small_csv, tmp_path, 
                  "--no-cache", "--out", str(out)]) == 0
     fit = load_fit(out / "models" / "coulomb.npz")
     assert fit.box["Fc"] == (1.0, 50.0) and fit.box["sigma2"] == (1.0, 1000.0)
-    assert "box=(('Fc', (1.0, 50.0)), ('sigma2', (1.0, 1000.0)))" in (out / "report.md").read_text()
+    assert "box={'Fc': (1.0, 50.0), 'sigma2': (1.0, 1000.0)}" in (out / "report.md").read_text()
     err = capsys.readouterr().err
     assert "jaxfric: warning: Coulomb: Fc = 50 ended on the upper bound" in err
     assert "(pass --box Fc=1,99) and fit again" in err and "box={" not in err

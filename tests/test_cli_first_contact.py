@@ -185,7 +185,7 @@ def test_cli_copies_no_library_default():
         assert option in inspect.signature(rig.estimate_friction).parameters
 
 
-def test_reproduce_line_is_the_specification_repr():
+def test_reproduce_line_is_the_specification_in_the_public_api():
     from jaxfric.cli.commands import _python_snippet
     from jaxfric.cli.spec import FitSpec
 
@@ -194,8 +194,12 @@ def test_reproduce_line_is_the_specification_repr():
     for spec in specs:
         assert eval(repr(spec), {"FitSpec": FitSpec}) == spec
     text = _python_snippet(args, ["lugre", "elman"], ["data = ..."], "fit_key")
-    for spec in specs:
-        assert f"{spec!r}.identify(data, key=fit_key)" in text
+    for name, spec in zip(("lugre", "elman"), specs):
+        assert f"fit_{name} = {spec.python('data', 'fit_key')}" in text
+    assert "jaxfric.cli" not in text  # the public API only
+    import jaxfric as jf  # the solver the line builds is the one the specification runs
+
+    assert eval(specs[0].python().split("solver=", 1)[1][:-1], {"jf": jf}) == specs[0].build_solver()
 
 
 # ------------------------------------------------------- 20.14: the quick subset
@@ -301,7 +305,7 @@ def test_demo_help_describes_the_pipelines_the_demo_runs():
     for name in ("elman", "lugre"):
         spec = FitSpec.from_args(name, args)
         model = spec.build_model()
-        text = describe_solver(spec.build_solver(model), model, spec.paper, spec.refine)
+        text = describe_solver(spec.build_solver(model), model, spec.paper, spec.refine, n_train=1600)
         assert text in DEMO_EPILOG, (name, text)
         assert f"{model.num_params} parameters" in DEMO_EPILOG
     assert FitSpec.from_args("elman", args).asymmetric is False  # the networks have no such form

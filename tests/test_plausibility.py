@@ -2,6 +2,7 @@
 warns with its reason and evidence, in the diagnostics, the summary and the file; an
 identifiable fit does not."""
 
+import re
 import warnings
 
 import numpy as np
@@ -57,7 +58,9 @@ def test_emps_like_lugre_warns_with_evidence(tmp_path):
     assert found["offset_asymmetric"]["evidence"]["F_off"] == pytest.approx(7.0)
     assert found["presliding_unvisited"]["evidence"]["range_m"] == pytest.approx(20.0 / 1e9)
     assert len(rec) == 3 and "Fs/Fc_neg = 3" in str(rec[0].message)
-    assert "! implausible Fs_neg" in fit.summary()
+    assert "So F_off is not identifiable from these data" in str(rec[1].message)  # what it means
+    assert re.search(r"!   Fs_neg: Fs/Fc_neg = 3.*plausibility rule stribeck_spike", fit.summary())
+    assert re.search(r"Fs_neg=\S+ \[not identifiable\]", fit.summary())
     fit._uncertainty_source = None     # no uncertainty needed for the file check
     fit.save(tmp_path / "f.npz")
     assert load_fit(tmp_path / "f.npz").diagnostics["implausible"] == fit.diagnostics["implausible"]

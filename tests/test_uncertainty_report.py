@@ -44,7 +44,9 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
     hi = np.max([coul.simulate(m, v) for m in members], axis=0)
     assert eb["valid"] == pytest.approx(np.mean((f[2400:] >= lo[2400:]) & (f[2400:] <= hi[2400:])))
     assert eb["valid"] < 0.3 and "3 members' min–max band" in md
-    assert "**Physically implausible (stribeck_spike):**" in md
+    # the plausibility rule's verdict is the parameter's verdict, in its row and with its reason
+    assert "| Fs | 80 |" in md and "| not identifiable | **not identifiable** |" in md
+    assert "- Fs: Fs/Fc = 4: a Stribeck peak" in md and "(plausibility rule stribeck_spike)" in md
     assert res["stribeck"]["uncertainty"]["implausible"][0]["name"] == "Fs"
     assert res["coulomb"]["fit"]["uncertainty"]["names"] == ["Fc", "sigma2"]
 

@@ -2,8 +2,8 @@
 
 Sub-commands (``jaxfric COMMAND --help`` for options and examples):
 
-- ``demo``: the paper end to end on the simulated rig -- ENN (30 neurons) and LuGre,
-  a comparison table and a report folder;
+- ``demo``: a simulated rig identified by jaxfric's pipeline -- ENN (30 neurons) and LuGre,
+  a comparison table, a friction-compensation study and a report folder;
 - ``identify FILE``: the same for a user's CSV (velocity/friction pairs or raw rig channels);
 - ``predict MODEL_FILE DATA_CSV``: predictions of a saved fit, as CSV;
 - ``bench table1|friction``: the benchmark scripts of ``benchmarks/``.

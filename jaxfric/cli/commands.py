@@ -54,8 +54,9 @@ def _save_fit_now(out: Path, velocity_filter=None):
     return keep
 
 
-def _settings(args, fits) -> dict:
-    """Budgets, seeds and options of the run, for report.md and results.json."""
+def _settings(args, fits, data=None) -> dict:
+    """Budgets, seeds and options of the run, for report.md and results.json (``data``: the
+    training record, whose length the pipeline's description names)."""
     from .fitting import describe_solver
 
     s = {"seed": args.seed, "float64": bool(args.x64), "quick": bool(args.quick),
@@ -65,10 +66,19 @@ def _settings(args, fits) -> dict:
     for name in fits:
         spec = FitSpec.from_args(name, args)
         model = spec.build_model()
-        s[f"{name}: pipeline"] = describe_solver(spec.build_solver(model), model, spec.paper, spec.refine)
+        s[f"{name}: pipeline"] = describe_solver(spec.build_solver(model), model, spec.paper, spec.refine,
+                                                 n_train=_global_samples(args, data))
         if getattr(model, "neurons", None) is not None:
             s["neurons"] = model.neurons
     return s
+
+
+def _global_samples(args, data) -> int | None:
+    """The training samples of ``data`` the global stage sees (``None`` with ``--valid``,
+    whose records are used whole)."""
+    if data is None or getattr(args, "valid", None):
+        return None
+    return int(data.n_train)
 
 
 def _choose_form(args, data, say) -> None:
@@ -86,29 +96,31 @@ def _choose_form(args, data, say) -> None:
     say(f"note: {args.form_reason}")
 
 
-def _python_snippet(args, names, data_lines: list[str], key_expr: str) -> str:
-    """Python that repeats the command's fits (shown under "Reproduce" in report.md): each
-    fit is its [`FitSpec`][jaxfric.cli.spec.FitSpec]'s repr, run on the same data and key."""
-    lines = ["import jax", "from jaxfric import rig", "from jaxfric.cli.spec import FitSpec", "",
-             *data_lines]
+def _python_snippet(args, names, data_lines: list[str], key_expr: str, valid: str | None = None) -> str:
+    """Python that repeats the command's fits (shown under "Reproduce" in report.md), in the
+    public API only: each fit is its [`FitSpec`][jaxfric.cli.spec.FitSpec]'s
+    ``jf.identify(...)`` call ([`FitSpec.python`][jaxfric.cli.spec.FitSpec.python]), run on
+    the same data and key."""
+    lines = ["import jax", "import jaxfric as jf", "", *data_lines]
+    train_name = getattr(args, "file", None) or "train"
     for name in names:
-        lines.append(f"fit_{name} = {FitSpec.from_args(name, args)!r}.identify(data, key={key_expr})")
+        lines.append(f"fit_{name} = " + FitSpec.from_args(name, args).python("data", key_expr, valid, train_name))
     return "\n".join(lines)
 
 
 def _finish(args, out: Path, data, fits, *, title, source, argv, notes, python, extra_files,
-            records=None, sections=None) -> int:
+            records=None, sections=None, figures=None) -> int:
     from jaxfric.report import write_report
 
     say = _say(args)
     say(f"writing the report to {out}/")
     result = write_report(out, data, fits, title=title, command=_command_line(argv), source=source,
-                          settings=_settings(args, fits), notes=notes, python=python,
+                          settings=_settings(args, fits, data), notes=notes, python=python,
                           extra_files=extra_files, on_written=KEPT.add, records=records,
-                          sections=sections)
+                          sections=sections, figures=figures)
     print(result["table"])
-    n_png = sum(p.suffix == ".png" for p in result["files"])
-    print(f"\nreport: {out / 'report.md'} (with results.json, {n_png} figures and the fits in {out / 'models'})")
+    print(f"\nreport: {out / 'report.md'} (with results.json, {len(result['figures'])} figures and the fits "
+          f"in {out / 'models'})")
     return 0
 
 
@@ -140,9 +152,9 @@ def cmd_demo(args, argv) -> int:
               "acceleration by differentiation, friction by force balance (docs/algorithms.md §7).")
     python = _python_snippet(args, list(fits), [
         f"data_key, fit_key = jax.random.split(jax.random.key({args.seed}))",
-        "r = rig.Rig()",
-        "record = rig.simulate(r, data_key)",
-        "data = rig.estimate_friction(record.measurements(), r.cylinder)"], "fit_key")
+        "r = jf.rig.Rig()",
+        "record = jf.rig.simulate(r, data_key)",
+        "data = jf.rig.estimate_friction(record.measurements(), r.cylinder)"], "fit_key")
     extra = {
         "rig_measurements.csv": "the simulated raw channels t [s], x [m], p1, p2 [Pa], load [N]; try "
         f"`jaxfric identify rig_measurements.csv --time-col t --x-col x --p1-col p1 --p2-col p2 "
@@ -153,11 +165,11 @@ def cmd_demo(args, argv) -> int:
     say("friction compensation on the rig simulator with each fit's feed-forward")
     t0 = time.perf_counter()
     comp_text = _compensation_section(out, r, fits, quick=args.quick, data=data)
-    extra["compensation.png"] = "tracking error against time for every compensation"
     say(f"  done in {time.perf_counter() - t0:.1f} s")
     return _finish(args, out, data, fits, title="jaxfric demo: friction identification on the simulated rig",
                    source=source, argv=argv, notes=notes, python=python, extra_files=extra,
-                   sections={"Friction compensation": comp_text})
+                   sections={"Friction compensation": comp_text},
+                   figures={"compensation.png": "Tracking error against time for every compensation"})
 
 
 def _compensation_section(out: Path, rig, fits, *, quick: bool, data=None) -> str:
@@ -251,7 +263,8 @@ def cmd_identify(args, argv) -> int:
     python = _python_snippet(args, list(fits), [
         f"# data: {desc}, as a jaxfric.rig.FrictionData (see jaxfric.rig.load_friction_pairs /",
         f"# load_measurements + estimate_friction), {split}",
-        "data = ..."], f"jax.random.key({args.seed})")
+        "data = ...", *(["valid = {...}  # each --valid file's name -> its FrictionData, loaded the same way"]
+                        if valid else [])], f"jax.random.key({args.seed})", "valid" if valid else None)
     return _finish(args, out, data, fits, title=f"jaxfric identify: {Path(args.file).name}",
                    source=desc[0].upper() + desc[1:] + ".", argv=argv, notes=notes, python=python,
                    extra_files=None, records=valid or None)

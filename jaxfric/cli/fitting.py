@@ -21,7 +21,7 @@ from .spec import FitSpec
 REFINE_CHOICES = ("none", "auto", "bfgs", "lbfgs", "lm", "gauss_newton")
 
 LABELS = {"elman": "ENN", "elman_full": "ENN (full context)", "lugre": "LuGre", "dahl": "Dahl",
-          "stribeck": "Stribeck", "coulomb": "Coulomb"}
+          "stribeck": "Stribeck", "coulomb": "Coulomb", "gms": "GMS", "cylinder": "Cylinder"}
 
 
 def check_models(names, box=None) -> list[str]:
@@ -123,18 +123,26 @@ def label(name: str, model) -> str:
     return f"{base} (asymmetric + offset)" if getattr(model, "asymmetric", False) else base
 
 
-def describe_solver(solver, model, paper: bool = False, refine: str = "default") -> str:
+def describe_solver(solver, model, paper: bool = False, refine: str = "default",
+                    n_train: int | None = None) -> str:
     """One phrase for the stage lines, the report's settings and ``--help`` (``solver=None``:
     ``identify``'s default for the method, the paper's with ``paper=True``), with the
     gradient stage ``refine`` adds (``"default"``: the method's own, BFGS for the networks
-    under jaxfric's pipeline; ``"none"``: none)."""
+    under jaxfric's pipeline; ``"none"``: none). ``n_train``: the training samples of the
+    one record the fit sees, so that the phrase says how many the global stage searches on
+    (``identify`` gives it the first ``GLOBAL_STAGE_SAMPLES`` of them); ``None`` (several
+    records, used whole): not said."""
     from jaxfric.identification import _api
 
     method = "paper" if paper else "jaxfric"
     s = _api.default_solver(model, method) if solver is None else solver
     text = _describe(s, model)
     if refine == "default" and _api._fast_pipeline(model, method):  # identify adds the gradient stage
-        where = f" on the first {_api.GLOBAL_STAGE_SAMPLES} samples" if solver is None else ""
+        where = ""
+        if solver is None and n_train is not None:
+            head = _api.GLOBAL_STAGE_SAMPLES
+            where = (f" on the {n_train} training samples" if n_train <= head
+                     else f" on the first {head} of the {n_train} training samples")
         text += f"{where} -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)"
     elif refine not in ("default", "none"):
         text += f" -> gradient stage {refine!r}"
@@ -257,7 +265,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         model = spec.build_model()
         solver = spec.build_solver(model)
         say(f"identifying {label(name, model)}: {model.num_params} parameters, "
-            f"{describe_solver(solver, model, spec.paper, spec.refine)}")
+            f"{describe_solver(solver, model, spec.paper, spec.refine, None if valid else data.n_train)}")
         t0 = time.perf_counter()
         bar = None if args.quiet else progress_bar(
             solver, model, label(name, model), spec.paper,

@@ -10,6 +10,7 @@ import argparse
 import math
 import sys
 
+from .checks import MODEL_NAMES
 from .errors import EXIT_USER_ERROR, error_line
 from .fitting import REFINE_CHOICES
 from .units import UNITS
@@ -124,12 +125,12 @@ Set JAXFRIC_DEBUG=1 (or pass --debug) to see tracebacks instead of one-line erro
 """
 
 DEMO_EPILOG = """\
-The demo runs the paper's setting end to end on the synthetic rig (docs/algorithms.md §1, §7):
-2000 samples at 128 Hz, 5 Hz Butterworth, friction by force balance, first 1600 samples
-for estimation and the last 400 for validation. Pipelines (the same words as the stage
-lines and the report):
+The demo simulates the paper's experiment (docs/algorithms.md §1, §7) and identifies it with
+jaxfric's own pipeline (--paper: the paper's MAPSO-NMDS): 2000 samples at 128 Hz, 5 Hz
+Butterworth, friction by force balance, the first 1600 samples for estimation and the last
+400 for validation. Pipelines (the same words as the stage lines and the report):
   ENN (30 neurons, 180 parameters):
-    MAPSO (8x8 agents, G = 50) on the first 2000 samples -> BFGS (<= 500 steps)
+    MAPSO (8x8 agents, G = 50) on the 1600 training samples -> BFGS (<= 500 steps)
   LuGre (asymmetric + offset, 10 parameters, as the rig's asymmetric friction needs; --form):
     MAPSO (5x5 agents, G = 200) -> Nelder-Mead (<= 2000 evaluations)
   with --paper, both: MAPSO -> Nelder-Mead (the paper's MAPSO-NMDS), no gradient stage.
@@ -216,8 +217,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 def _fitting(p: argparse.ArgumentParser, *, default_models: str) -> None:
     g = p.add_argument_group("identification")
     g.add_argument("--model", "--models", dest="models", type=model_list, default=default_models,
-                   metavar="NAMES", help="comma-separated friction models: elman, elman_full, lugre, dahl, "
-                   "stribeck, coulomb")
+                   metavar="NAMES", help=f"comma-separated friction models: {', '.join(MODEL_NAMES)}")
     g.add_argument("--neurons", type=positive_int, default=None,
                    help="hidden neurons of the Elman network (default: the model's, 30)")
     g.add_argument("--solver", choices=SOLVERS, default="mapso-nmds", help="optimiser")
@@ -283,9 +283,11 @@ def build_parser() -> Parser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
 
-    d = sub.add_parser("demo", help="the paper end to end on the simulated rig, with a report",
+    d = sub.add_parser("demo", help="simulate a test rig, fit the ENN and LuGre with jaxfric's pipeline, "
+                       "compare friction compensation, write a report",
                        description="Simulate the test rig, compute the friction, identify the ENN and "
-                       "LuGre, print the comparison table and write a report folder.",
+                       "LuGre (jaxfric's pipeline; --paper: the paper's method), compare each fit's friction "
+                       "compensation, print the comparison table and write a report folder.",
                        epilog=DEMO_EPILOG, formatter_class=_Formatter)
     _fitting(d, default_models="elman,lugre")
     _common(d)

@@ -118,6 +118,30 @@ class FitSpec:
         changes = {k: v for k, v in (("max_steps", g), ("max_evals", nm)) if v is not None}
         return dataclasses.replace(base.nelder_mead, **changes)
 
+    def python(self, data: str = "data", key: str = "key", valid: str | None = None,
+               train_name: str = "train") -> str:
+        """The ``jf.identify(...)`` call (``import jaxfric as jf``) that [`identify`][jaxfric.cli.spec.FitSpec.identify]
+        makes, as Python source in the public API only: the report's "Reproduce" block.
+        ``data``, ``key`` and ``valid`` are the names of variables holding the record, the
+        key and the validation records (``valid`` given: ``train={train_name: data}``)."""
+        args = [repr(self.model)]
+        args += ([f"train={{{train_name!r}: {data}}}", f"valid={valid}"] if valid else [data])
+        args.append(f"key={key}")
+        if self.model_options:
+            args.append(f"model_options={self.model_options!r}")
+        solver = self.build_solver()
+        if solver is not None:
+            args.append(f"solver={python_source(solver)}")
+        if self.box:
+            args.append(f"box={dict(self.box)!r}")
+        if self.refine == "none":
+            args.append("refine=False")
+        elif self.refine != "default":
+            args.append(f"refine={self.refine!r}")
+        if self.paper:
+            args.append("method='paper'")
+        return f"jf.identify({', '.join(args)})"
+
     def identify(self, data, *, key=None, progress=None, valid=None, train_name="train"):
         """``jaxfric.identify(model, data, ...)`` as this specification says; with ``valid``
         (name -> record, from ``--valid``) ``identify(model, train={train_name: data},
@@ -143,3 +167,29 @@ class FitSpec:
         if valid:
             return identify(self.model, train={train_name: data}, valid=valid, **kwargs)
         return identify(self.model, data, **kwargs)
+
+
+def python_source(obj) -> str:
+    """``jf.ClassName(field=value, ...)`` for a solver of jaxfric's public API (a dataclass,
+    e.g. [`jaxfric.MAPSONMDS`][jaxfric.optim.MAPSONMDS]), with the fields that differ from the defaults;
+    nested solvers likewise."""
+    import jaxfric as jf
+
+    name = type(obj).__name__
+    if getattr(jf, name, None) is not type(obj):
+        raise ValueError(f"{name} is not in jaxfric's public API")
+    parts = []
+    for f in dataclasses.fields(obj):
+        if not f.init:
+            continue
+        value = getattr(obj, f.name)
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            default = dataclasses.MISSING
+        if default is not dataclasses.MISSING and type(value) is type(default) and value == default:
+            continue
+        parts.append(f"{f.name}={python_source(value) if dataclasses.is_dataclass(value) else repr(value)}")
+    return f"jf.{name}({', '.join(parts)})"

@@ -13,6 +13,7 @@ import argparse
 import re
 from pathlib import Path
 
+from .checks import MODEL_NAMES
 from .errors import UserError
 from .fitting import REFINE_CHOICES
 
@@ -72,7 +73,7 @@ def add_parser(sub, *, common, columns, formatter, positive_int, fraction, box_e
     columns(p)
     g = p.add_argument_group("identification")
     g.add_argument("--model", "--models", dest="models", type=model_list, default="lugre", metavar="NAMES",
-                   help="comma-separated friction models (elman, elman_full, lugre, dahl, gms, stribeck, coulomb)")
+                   help=f"comma-separated friction models ({', '.join(MODEL_NAMES)})")
     g.add_argument("--neurons", type=positive_int, default=None, help="hidden neurons of the Elman networks")
     g.add_argument("--solver", choices=solvers, default="mapso-nmds", help="optimiser")
     g.add_argument("--generations", type=positive_int, default=None, metavar="G", help="swarm generations")
