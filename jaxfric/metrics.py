@@ -1,4 +1,4 @@
-"""Error metrics for friction identification (docs/algorithms.md §6; PEERS.md on FIT %).
+"""Error metrics for friction identification (docs/algorithms.md §6, with MATLAB's FIT %).
 
 With measured friction ``y``, prediction ``y_hat``, error ``e = y - y_hat``,
 ``n`` samples, mean ``ybar`` and *population* variance
@@ -95,7 +95,7 @@ def _table(ss_err, ss_tot, mse, rmse, mse_scaled_percent, max_abs, y_absmax) -> 
 def friction_metrics(y: ArrayLike, y_hat: ArrayLike) -> dict[str, float]:
     """All metrics of the module table for measured ``y`` and predicted ``y_hat``.
 
-    Implements docs/algorithms.md §6 (MSE %, MAX) and the MATLAB FIT % of PEERS.md.
+    Implements docs/algorithms.md §6 (MSE %, MAX, MATLAB's FIT %).
     Accepts NumPy or JAX arrays of equal shape (flattened; computed in
     float64) and returns plain Python floats, never NaN or inf: when the plain
     sums of squares would overflow or underflow (signals near 1e200 or 1e-200)

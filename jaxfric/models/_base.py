@@ -6,7 +6,7 @@ model's search box is data ([`jaxfric.models.SearchBox`][jaxfric.models.SearchBo
 [`bounds`][jaxfric.models.AbstractFrictionModel.bounds] and [`jaxfric.identify`][jaxfric.identification.identify].
 Measured data -- velocity, friction, sample time -- always arrive as function
 arguments, so a new data set never triggers recompilation and data sets can be
-vmapped (DESIGN.md, "Conventions").
+vmapped (docs/design.md, "Conventions").
 
 Every model maps a flat search vector ``theta`` (what the optimisers see, in
 *search coordinates*, e.g. log10 of a stiffness) to a friction prediction::

@@ -1,7 +1,7 @@
 """Shared pieces of every jaxfric optimiser: the result pytree, the fixed-size
 history buffer, bounds validation and the NaN-safe objective wrapper.
 
-Conventions (DESIGN.md): objectives are ``fn(y, args) -> scalar``; solvers see a
+Conventions (docs/design.md, "Conventions"): objectives are ``fn(y, args) -> scalar``; solvers see a
 flat 1-D parameter vector ``x`` inside a box ``[lower, upper]``; NaN and inf
 fitness are mapped to ``+inf`` so they can never be reported as the best.
 """

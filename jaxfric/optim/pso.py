@@ -22,7 +22,7 @@ def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_boun
 
     ``v ← w v + c1 r1 ⊙ (pbest − x) + c2 r2 ⊙ (social − x)``, ``v ← clip(v, ±Vmax)``,
     ``x ← clip(x + v, lower, upper)``; ``r1, r2 ~ U(0, 1)`` drawn per particle *and*
-    per dimension (per-particle coefficients measurably hurt, PEERS.md §3) and passed in
+    per dimension (per-particle coefficients measurably hurt, docs/algorithms.md §3.3) and passed in
     as ``r`` of shape ``(2,) + x.shape``. With ``zero_at_bounds`` the velocity of a
     clipped coordinate is set to zero so a particle does not keep pushing against the wall.
 
