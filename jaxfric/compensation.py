@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .records import same_sample_time
 from .rig import friction as _fr
 from .rig.params import Rig
 from .rig.simulator import _initial_state, _substep, load_force
@@ -100,7 +101,7 @@ def feedforward(fit, ref: Reference) -> np.ndarray:
         return np.zeros_like(ref.v)
     t = np.arange(ref.v.size) * ref.dt
     fit_dt = float(fit.dt)
-    if abs(fit_dt - ref.dt) <= 1e-12 * ref.dt:
+    if same_sample_time(fit_dt, ref.dt):
         f = np.asarray(fit.predict(ref.v, ref.dt), np.float64)
     else:
         tf = np.arange(int(np.floor(t[-1] / fit_dt)) + 1) * fit_dt

@@ -43,6 +43,7 @@ from .covariance import DEFAULT_LEVEL, ParameterUncertainty, _check_level
 from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
+from .records import same_sample_time
 
 __all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit"]
 
@@ -129,10 +130,6 @@ def _check_dt(dt) -> float:
     if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
         raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
     return float(dt)
-
-
-def _same_step(a: float, b: float) -> bool:
-    return abs(a - b) <= 1e-6 * b
 
 
 def unidentifiable_names(texts) -> set[str]:
@@ -449,7 +446,7 @@ class Fit:
         if dt is None:
             dt = self.dt
         dt = _check_dt(dt)
-        if self.model.uses_dt and not _same_step(dt, self.dt):
+        if self.model.uses_dt and not same_sample_time(dt, self.dt):
             if inputs is not None:
                 raise ValueError(
                     f"dt = {dt:.6g} s differs from the fit's {self.dt:.6g} s and input channels "
@@ -489,7 +486,7 @@ class Fit:
         self._warn_extrapolation(v)
         scalers = (self.velocity_scaler, self.friction_scaler)
         dtype = jnp.asarray(self.theta).dtype  # float32 unless x64 is on: never ask JAX for a dtype it lacks
-        uniform = steps.size == 0 or (np.ptp(steps) <= 1e-6 * self.dt and _same_step(float(steps.mean()), self.dt))
+        uniform = steps.size == 0 or (np.ptp(steps) <= 1e-6 * self.dt and same_sample_time(float(steps.mean()), self.dt))
         if not self.model.uses_dt or uniform:
             return predict(self.model, self.theta, scalers, jnp.asarray(v, dtype), self.dt)
         m = int(np.ceil((t[-1] - t[0]) / self.dt - 1e-9)) + 1

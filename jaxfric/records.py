@@ -95,6 +95,17 @@ def check_positive(name: str, value, allow_zero: bool = False) -> float:
     return v
 
 
+#: Two sample times within this relative difference are the same sample time: 1 kHz
+#: recordings whose float32 time stamps round differently (0.0010000080 s against
+#: 0.0009999840 s) are one rate, not a resampling problem.
+SAMPLE_TIME_RTOL = 1e-4
+
+
+def same_sample_time(a: float, b: float) -> bool:
+    """``|a - b| <= SAMPLE_TIME_RTOL * b``: the same sample time (see [`SAMPLE_TIME_RTOL`][jaxfric.records.SAMPLE_TIME_RTOL])."""
+    return abs(float(a) - float(b)) <= SAMPLE_TIME_RTOL * abs(float(b))
+
+
 _STAMPS_HINT = "for time stamps build the record with jaxfric.rig.FrictionData.from_arrays(v, F, t)"
 
 
