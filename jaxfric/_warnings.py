@@ -28,3 +28,9 @@ class FrictionSignWarning(UserWarning):
 
 class IrregularSamplingWarning(UserWarning):
     """Time stamps were not uniform and the record was resampled."""
+
+
+class BaselineWarning(UserWarning):
+    """A motion fit predicts its own training data worse than the least-squares Coulomb +
+    viscous + offset baseline: its search did not reach the optimum of its cost, or its
+    model cannot express what the baseline does. Do not use it over the baseline."""

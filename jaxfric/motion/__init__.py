@@ -8,9 +8,13 @@
   position, no friction signal), one record split or several (``train=[...]``, ``valid=[...]``);
   the default search ([`MotionSearch`][jaxfric.motion.MotionSearch]) with a budget (``max_evals``, ``max_time``);
 * [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
-  with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one.
+  with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one,
+  the least-squares baseline as a row, and a judge (the held-back tail, or blocked folds);
+* [`BaselineWarning`][jaxfric.motion.BaselineWarning] — a fit worse than the least-squares Coulomb + viscous + offset
+  baseline on its own training data.
 """
 
+from .._warnings import BaselineWarning
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,
                    motion_metrics)
 from ._compare import MotionComparison, OverfitWarning, compare_motion
@@ -20,6 +24,7 @@ from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep
                     friction_step)
 
 __all__ = [
+    "BaselineWarning",
     "DEFAULT_INIT_WINDOW",
     "MotionBudget",
     "MotionComparison",

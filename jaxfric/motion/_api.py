@@ -15,8 +15,10 @@ report k-step-ahead errors (MATLAB ``compare(..., k)``) beside the free run.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import numbers
+import warnings
 
 import equinox as eqx
 import jax
@@ -24,17 +26,21 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._warnings import BaselineWarning
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
 from ..identification._api import _as_key, _history, _key_record, _stages, resolve_model
 from ..identification._objective import search_dtype
+from ..identification.stages import as_member_keys
 from ..identification._refine import from_box
 from ..identification._timing import Stopwatch
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise
-from ..records import DEFAULT_TRAIN_FRACTION, as_channel, check_sample_time, split_count
+from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_sample_time,
+                       same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import FitKind, assess_fit, register_fit_kind
+from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start
 from ._forward import k_step_positions, simulate_motion, track_states
 from ._layout import Layout
 from ._lm import _res_jit
@@ -332,8 +338,9 @@ class MotionFit(Fit):
 
     def _simulate_record(self, data, init_window) -> dict:
         data = _as_motion_data(data)
-        if abs(data.dt - self.dt) > 1e-9 * self.dt:
-            raise ValueError(f"the record's sample time {data.dt} s differs from the fit's {self.dt} s")
+        if not same_sample_time(data.dt, self.dt):
+            raise ValueError(f"the record's sample time {data.dt} s differs from the fit's {self.dt} s "
+                             f"by more than {SAMPLE_TIME_RTOL:g} relative: resample it to the fit's rate")
         n = _init_window(init_window)
         if data.n_samples <= n:
             raise ValueError(f"init_window={n} leaves nothing to simulate in a record of {data.n_samples} samples")
@@ -427,6 +434,58 @@ class MotionFit(Fit):
                 out[kind] = motion_metrics(np.concatenate(xs), np.concatenate(hats))
         return out
 
+    def member(self, i: int) -> "MotionFit":
+        """Ensemble member ``i`` (``identify_motion(..., keys=K)``) as a fit of its own."""
+        if not self.ensemble or "mass" not in self.ensemble:
+            raise ValueError("this fit has no motion ensemble: identify_motion(..., keys=K) makes one")
+        e = self.ensemble
+        out = copy.copy(self)
+        out.theta = np.asarray(e["theta"][i], np.float64)
+        out.settings = {**self.settings, "motion": {**self.mechanics, "mass": float(e["mass"][i]),
+                                                    "offset": float(e["offset"][i]), "v0": float(e["v0"][i])}}
+        out.ensemble = None
+        return out
+
+    def simulate_ensemble(self, record, init_window: int = DEFAULT_INIT_WINDOW) -> dict:
+        """The kept ensemble members' free runs of ``record`` (:meth:`simulate` with
+        ``init_window``): ``{"x": their average, "lower", "upper": the elementwise min and
+        max, "members": (K_kept, T)}`` [m]."""
+        members = np.stack([self.member(i).simulate(record, init_window=init_window)["x"]
+                            for i in self.ensemble_kept()])
+        return {"x": members.mean(axis=0), "lower": members.min(axis=0), "upper": members.max(axis=0),
+                "members": members}
+
+    def ensemble_kept(self) -> list:
+        if not self.ensemble or "kept" not in self.ensemble:
+            raise ValueError("this fit has no motion ensemble: identify_motion(..., keys=K) makes one")
+        return list(self.ensemble["kept"])
+
+    def ensemble_metrics(self, data, n_train, train_records=(), valid_records=(),
+                         init_window: int = DEFAULT_INIT_WINDOW) -> dict:
+        """[`motion_metrics`][jaxfric.motion.motion_metrics] of the kept members' average free run, on the windows
+        of :meth:`evaluate` (``data`` given) or of :meth:`evaluate_records`."""
+        fits = [self.member(i) for i in self.ensemble_kept()]
+        if data is not None:
+            x = data.position
+            tr = np.mean([f.simulate_from(data, 0, n_train)["x"] for f in fits], axis=0)
+            va = np.mean([f.simulate_from(data, n_train)["x"] for f in fits], axis=0)
+            return {"train": motion_metrics(x[:n_train], tr), "valid": motion_metrics(x[n_train:], va)}
+        out = {}
+        for kind, recs in (("train", train_records), ("valid", valid_records)):
+            if not recs:
+                continue
+            xs, hats = [], []
+            for r in recs:
+                if kind == "train":
+                    xs.append(r.position)
+                    hats.append(np.mean([f.simulate_from(r)["x"] for f in fits], axis=0))
+                else:
+                    xs.append(r.position[init_window:])
+                    hats.append(np.mean([f.simulate(r, init_window=init_window)["x"][init_window:]
+                                         for f in fits], axis=0))
+            out[kind] = motion_metrics(np.concatenate(xs), np.concatenate(hats))
+        return out
+
     def summary(self) -> str:
         lines = [f"{type(self.model).__name__} motion fit: {self.num_params} friction parameters, "
                  f"mass {self.mass:.4g} kg, offset {self.offset:.4g} N"]
@@ -437,6 +496,18 @@ class MotionFit(Fit):
                 lines.append(f"{w:<13}{m['rmse_mm']:>11.4g}{m['fit_percent']:>9.2f}{m['max_abs_mm']:>10.4g}")
         if not self.model.needs_scaling:
             lines.append("params: " + ", ".join(f"{k}={float(v):.4g}" for k, v in self.params.items()))
+        base = self.metrics.get("baseline")
+        if base:
+            lines.append("baseline (least squares Coulomb + viscous + offset): "
+                         + ", ".join(f"{w} {base[w]['rmse_mm']:.4g} mm" for w in ("train", "valid") if w in base))
+        ens = self.metrics.get("ensemble")
+        if ens and self.ensemble:
+            e = self.ensemble
+            lines.append(f"ensemble: {len(e['train_rmse_mm'])} members (best #{e['best']}), average of "
+                         f"{len(e['kept'])}: " + ", ".join(f"{w} {ens[w]['rmse_mm']:.4g} mm" for w in ("train", "valid")
+                                                            if w in ens)
+                         + (f"; dropped (training RMSE > {ENSEMBLE_DROP:g} x the best): {e['dropped']}"
+                            if e["dropped"] else ""))
         lines += uncertainty_lines(self)
         return "\n".join(lines)
 
@@ -568,7 +639,7 @@ def identify_motion(
     model,
     data=None,
     *,
-    key,
+    key=None,
     mass,
     train=0.8,
     valid=None,
@@ -588,6 +659,7 @@ def identify_motion(
     max_evals: int | None = None,
     max_time: float | None = None,
     progress=None,
+    keys=None,
 ) -> MotionFit:
     """Identify friction inside ``m dv/dt = F_act - F_f - F_load`` from force and position (§13.2).
 
@@ -631,6 +703,13 @@ def identify_motion(
             so far and ``fit.settings["motion"]["stopped"]`` says why ([`MotionBudget`][jaxfric.motion.MotionBudget]).
         progress: ``True`` for progress bars (the global stage's, then one per
             Levenberg–Marquardt stage), or a callable sink (as [`jaxfric.minimise`][jaxfric.optim.minimise]).
+        keys: an ensemble: ``K`` members (their keys ``jax.random.split(key, K)``) or a
+            batch of keys (then no ``key``). Each member is ``identify_motion(...,
+            key=keys[i])``; the fit returned is the member with the lowest training
+            free-run RMSE, and ``fit.ensemble`` holds every member. Members whose
+            training RMSE exceeds [`ENSEMBLE_DROP`][jaxfric.motion._api.ENSEMBLE_DROP] times the best are dropped
+            and listed; the rest predict together: [`MotionFit.simulate_ensemble`][jaxfric.motion.MotionFit.simulate_ensemble]
+            (their average and band) and ``metrics["ensemble"]`` (the average's metrics).
 
     Metrics ([`motion_metrics`][jaxfric.motion.motion_metrics], position in mm and FIT %): ``data`` form:
     ``"train"``, ``"valid"`` (free run of the held-back block from the state at its
@@ -644,6 +723,9 @@ def identify_motion(
 
     Raises ``ValueError`` before any optimisation for bad data, split, mass, options.
     """
+    if keys is not None:
+        options = {name: value for name, value in locals().items() if name not in ("model", "data", "key", "keys")}
+        return _ensemble(model, data, key, keys, options)
     with Stopwatch() as total:
         tr_records, va_records, data, n_train = _records(data, train, valid)
         if error not in ERRORS:
@@ -735,6 +817,7 @@ def identify_motion(
                 return free if h is None else _pooled(tr_records, dtype, scalers, mass0, segment=h,
                                                       lead=search.lead)
         sol, stopped = None, None
+        est = least_squares(tr_records, mass0 if mass_range is None else None)
         with Stopwatch() as sw:
             if solver is not None:
                 sol = jax.block_until_ready(minimise(cost, solver, (lower, upper), args=free, key=key,
@@ -742,9 +825,14 @@ def identify_motion(
                 y = np.asarray(sol.value)
                 stages = _stages(sol, solver)
             else:
+                extra = []
+                if search.least_squares_start and not legacy_cost:
+                    start = least_squares_start(model, est, vt, box, layout, lower, upper)
+                    extra = [] if start is None else [start]
                 y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
                                                 global_data=glob, stage_data=stage_data,
-                                                key=key, dtype=dtype, progress=progress)
+                                                key=key, dtype=dtype, progress=progress,
+                                                extra_starts=extra)
         y = np.asarray(y, np.float64)
         j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)
         theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
@@ -776,11 +864,82 @@ def identify_motion(
             metrics = fit.evaluate(data, n_train, int(metric_horizon))
         else:
             metrics = fit.evaluate_records(tr_records, va_records, init_window)
-        fit.metrics = {**metrics, "num_params": int(y.size), "cost": j_final}
+        base = _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window)
+        fit.metrics = {**metrics, "num_params": int(y.size), "cost": j_final,
+                       "baseline": {w: base.metrics[w] for w in ("train", "valid") if w in base.metrics}}
+        fit.settings["motion"]["baseline"] = {"M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}
+        _warn_if_worse(fit)
         data = data if data is not None else _concatenated(tr_records)
     assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     fit.timings["total_s"] = total.wall_s
     return fit
+
+
+#: Ensemble members whose training free-run RMSE exceeds this factor times the best
+#: member's are dropped from the ensemble's prediction (and listed in ``fit.ensemble``).
+ENSEMBLE_DROP = 1.5
+
+
+def kept_members(train_rmse) -> list:
+    """Indices of the members whose training RMSE is finite and at most
+    [`ENSEMBLE_DROP`][jaxfric.motion._api.ENSEMBLE_DROP] times the best one's."""
+    train = np.asarray(train_rmse, np.float64)
+    best = np.min(np.where(np.isfinite(train), train, np.inf))
+    return [i for i in range(train.size) if np.isfinite(train[i]) and train[i] <= ENSEMBLE_DROP * best]
+
+
+def _ensemble(model, data, key, keys, options) -> MotionFit:
+    """``identify_motion(..., keys=K)``: every member in turn (same shapes: compiled once)."""
+    members, count = as_member_keys(key, keys)
+    with Stopwatch() as total:
+        fits = [identify_motion(model, data, key=members[i], **options) for i in range(count)]
+        train = np.array([f.metrics["train"]["rmse_mm"] for f in fits])
+        best = int(np.argmin(np.where(np.isfinite(train), train, np.inf)))
+        kept = kept_members(train)
+        fit = copy.copy(fits[best])
+        fit.ensemble = {
+            "theta": np.stack([f.theta for f in fits]), "mass": [f.mass for f in fits],
+            "offset": [f.offset for f in fits], "v0": [float(f.mechanics.get("v0", 0.0)) for f in fits],
+            "train_rmse_mm": train.tolist(),
+            "valid_rmse_mm": [f.metrics["valid"]["rmse_mm"] if "valid" in f.metrics else None for f in fits],
+            "best": best, "kept": kept, "dropped": [i for i in range(count) if i not in kept],
+            "keys": [_key_record(members[i])[0] for i in range(count)],
+        }
+        tr_records, va_records, whole, n_train = _records(data, options["train"], options["valid"])
+        fit.metrics = {**fit.metrics, "ensemble": fit.ensemble_metrics(whole, n_train, tr_records, va_records)}
+        fit.timings = {**fit.timings, "members_s": [f.timings["total_s"] for f in fits]}
+    fit.timings["total_s"] = total.wall_s
+    return fit
+
+
+def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
+    """The least-squares baseline (:mod:`._baseline`) as a fit, scored like the fit."""
+    model = baseline_model()
+    theta = np.asarray(model.from_physical(Fc=max(est.Fc, 0.0), sigma2=max(est.Fv, 1e-12)), np.float64)
+    fit = MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=tr_records[0].dt,
+                    n_train=sum(r.n_samples for r in tr_records), n_samples=0, metrics={},
+                    settings={"model_name": "coulomb", "motion": {"mass": est.M, "offset": est.offset, "v0": 0.0}})
+    if data is not None:
+        fit.metrics = fit.evaluate(data, n_train, int(metric_horizon))
+    else:
+        fit.metrics = fit.evaluate_records(tr_records, va_records, init_window)
+    return fit
+
+
+#: A fit counts as worse than the baseline when its training RMSE exceeds the baseline's
+#: by more than this fraction.
+BASELINE_MARGIN = 1e-3
+
+
+def _warn_if_worse(fit) -> None:
+    """:class:`BaselineWarning` when ``fit`` simulates its training data worse than the baseline."""
+    mine, base = fit.metrics["train"]["rmse_mm"], fit.metrics["baseline"]["train"]["rmse_mm"]
+    if not mine <= (1.0 + BASELINE_MARGIN) * base:
+        warnings.warn(
+            f"the {fit.settings['model_name']} fit simulates its training data worse than the "
+            f"{BASELINE_LABEL}: free-run RMSE {mine:.4g} mm against {base:.4g} mm; the search did "
+            "not reach its optimum or the model cannot express the baseline: use the baseline, "
+            "another key or more starts (MotionSearch(starts=...))", BaselineWarning, stacklevel=3)
 
 
 def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) -> float:

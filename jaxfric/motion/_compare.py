@@ -12,9 +12,12 @@ with more search parameters predicts the validation data worse than one with few
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 import warnings
 
-from ._api import identify_motion
+from ._api import DEFAULT_INIT_WINDOW, _as_motion_data, _split, identify_motion
+from ._baseline import BASELINE_LABEL
 
 __all__ = ["MotionComparison", "OverfitWarning", "compare_motion"]
 
@@ -32,21 +35,63 @@ class MotionComparison:
     fits: dict
     ranking: list
     overfit: list
+    judge: str = "tail"
+    scores: dict = dataclasses.field(default_factory=dict)
+    baseline_score: float | None = None
 
     @property
     def best(self):
         """The fit with the lowest validation free-run RMSE."""
         return self.fits[self.ranking[0]]
 
-    def table(self) -> str:
-        """A Markdown table: rank, model, parameters, train and validation RMSE [mm], FIT %."""
-        lines = ["| rank | model | parameters | train RMSE [mm] | valid RMSE [mm] | valid FIT % |",
-                 "|---|---|---|---|---|---|"]
+    @property
+    def baseline(self) -> dict:
+        """The least-squares Coulomb + viscous + offset baseline's metrics on the same data
+        and judge (``{"train": ..., "valid": ...}``, :func:`jaxfric.motion.motion_metrics`)."""
+        return next(iter(self.fits.values())).metrics["baseline"]
+
+    def rows(self) -> list[dict]:
+        """One dict per ranked fit, then the baseline: ``rank`` (``None`` for the
+        baseline), ``model``, ``parameters``, ``mass_kg``, ``offset_N``, ``train_rmse_mm``,
+        ``valid_rmse_mm``, ``valid_fit_percent``, ``beats_baseline`` (validation),
+        ``worse_than_simpler``."""
+        base = self.baseline
+        base_score = base["valid"]["rmse_mm"] if self.baseline_score is None else self.baseline_score
+        out = []
         for i, name in enumerate(self.ranking, 1):
-            m = self.fits[name].metrics
-            flag = " (worse than a simpler model)" if any(r == name for r, _ in self.overfit) else ""
-            lines.append(f"| {i} | {name}{flag} | {m['num_params']} | {m['train']['rmse_mm']:.4g} | "
-                         f"{m['valid']['rmse_mm']:.4g} | {m['valid']['fit_percent']:.2f} |")
+            fit = self.fits[name]
+            m = fit.metrics
+            score = self.scores.get(name, m["valid"]["rmse_mm"])
+            out.append({"rank": i, "model": name, "parameters": m["num_params"], "mass_kg": fit.mass,
+                        "offset_N": fit.offset, "train_rmse_mm": m["train"]["rmse_mm"],
+                        "valid_rmse_mm": m["valid"]["rmse_mm"], "valid_fit_percent": m["valid"]["fit_percent"],
+                        "judge_rmse_mm": score, "beats_baseline": bool(score < base_score),
+                        "worse_than_simpler": any(r == name for r, _ in self.overfit)})
+        settings = next(iter(self.fits.values())).settings["motion"]["baseline"]
+        out.append({"rank": None, "model": BASELINE_LABEL, "parameters": 4, "mass_kg": settings["M"],
+                    "offset_N": settings["offset"], "train_rmse_mm": base["train"]["rmse_mm"],
+                    "valid_rmse_mm": base["valid"]["rmse_mm"], "valid_fit_percent": base["valid"]["fit_percent"],
+                    "judge_rmse_mm": base_score, "beats_baseline": None, "worse_than_simpler": False})
+        return out
+
+    def table(self) -> str:
+        """A Markdown table of :meth:`rows`: rank, model, parameters, mass, offset, train and
+        validation free-run RMSE [mm], validation FIT %; the baseline as the last row."""
+        judged = self.judge != "tail"
+        lines = ["| rank | model | parameters | mass [kg] | offset [N] | train RMSE [mm] | valid RMSE [mm] "
+                 "| valid FIT % |" + (f" {self.judge} RMSE [mm] |" if judged else ""),
+                 "|---|---|---|---|---|---|---|---|" + ("---|" if judged else "")]
+        for r in self.rows():
+            flags = []
+            if r["worse_than_simpler"]:
+                flags.append("worse than a simpler model")
+            if r["beats_baseline"] is False:
+                flags.append("not better than the baseline")
+            name = r["model"] + (f" ({'; '.join(flags)})" if flags else "")
+            lines.append(f"| {'' if r['rank'] is None else r['rank']} | {name} | {r['parameters']} | "
+                         f"{r['mass_kg']:.4g} | {r['offset_N']:.4g} | {r['train_rmse_mm']:.4g} | "
+                         f"{r['valid_rmse_mm']:.4g} | {r['valid_fit_percent']:.2f} |"
+                         + (f" {r['judge_rmse_mm']:.4g} |" if judged else ""))
         return "\n".join(lines)
 
 
@@ -63,11 +108,14 @@ def _valid_rmse(fit) -> float:
 OVERFIT_MARGIN = 1e-3
 
 
-def rank_fits(fits: dict, *, stacklevel: int = 2) -> MotionComparison:
-    """Rank named motion fits by validation RMSE and warn about overfitting (module docstring):
-    a model with more search parameters (``metrics["num_params"]``) whose validation RMSE
-    exceeds a simpler one's by more than `OVERFIT_MARGIN`."""
-    scores = {name: _valid_rmse(fit) for name, fit in fits.items()}
+def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, judge: str = "tail",
+              baseline_score: float | None = None) -> MotionComparison:
+    """Rank named motion fits by validation RMSE (or by the judge's ``scores``, name -> mm)
+    and warn about overfitting (module docstring): a model with more search parameters
+    (``metrics["num_params"]``) whose score exceeds a simpler one's by more than
+    `OVERFIT_MARGIN`."""
+    judged = scores is not None
+    scores = dict(scores) if judged else {name: _valid_rmse(fit) for name, fit in fits.items()}
     ranking = sorted(fits, key=lambda k: (scores[k], k))
     overfit = []
     for rich, fr in fits.items():
@@ -81,18 +129,64 @@ def rank_fits(fits: dict, *, stacklevel: int = 2) -> MotionComparison:
             f"than {simple} ({fits[simple].metrics['num_params']}): {scores[rich]:.4g} mm against "
             f"{scores[simple]:.4g} mm free-run RMSE; prefer the simpler model unless it fails elsewhere",
             OverfitWarning, stacklevel=stacklevel + 1)
-    return MotionComparison(dict(fits), ranking, overfit)
+    return MotionComparison(dict(fits), ranking, overfit, judge, scores if judged else {}, baseline_score)
 
 
-def compare_motion(models, data=None, *, key, mass, **kwargs) -> MotionComparison:
+JUDGES = ("tail", "blocked")
+
+
+def _pooled_rmse(metrics) -> float:
+    """RMSE [mm] of several windows pooled: sqrt(sum n_i rmse_i^2 / sum n_i)."""
+    n = sum(m["n"] for m in metrics)
+    return math.sqrt(sum(m["n"] * m["rmse_mm"] ** 2 for m in metrics) / n)
+
+
+def blocked_score(model, records, folds: int, *, key, mass, init_window=DEFAULT_INIT_WINDOW, **kwargs):
+    """Blocked cross-validation of ``model`` on ``records`` (the training part): they are
+    joined end to end only in name; each is cut into ``folds`` contiguous blocks, and for each
+    fold one fit trains on every other block (each block a record of its own, simulated from
+    its first sample) and is scored on the held-out blocks, each simulated from its own first
+    ``init_window`` samples (the benchmark protocol). Returns ``(score, baseline score)``:
+    the pooled free-run RMSE [mm] of the model and of the least-squares baseline."""
+    blocks = []
+    for r in records:
+        edges = [round(i * r.n_samples / folds) for i in range(folds + 1)]
+        blocks.append([r.window(a, b) for a, b in zip(edges[:-1], edges[1:])])
+    model_m, base_m = [], []
+    for f in range(folds):
+        train = [b for rec in blocks for i, b in enumerate(rec) if i != f]
+        valid = [rec[f] for rec in blocks]
+        fit = identify_motion(model, train=train, valid=valid, key=key, mass=mass, init_window=init_window,
+                              **kwargs)
+        for i, m in enumerate(fit.metrics["records"]["valid"]):
+            n = valid[i].n_samples - init_window
+            model_m.append({**m, "n": n})
+        base_m.append({"rmse_mm": fit.metrics["baseline"]["valid"]["rmse_mm"],
+                       "n": sum(v.n_samples - init_window for v in valid)})
+    return _pooled_rmse(model_m), _pooled_rmse(base_m)
+
+
+def compare_motion(models, data=None, *, key, mass, judge: str = "tail", folds: int = 3,
+                   **kwargs) -> MotionComparison:
     """Fit each of ``models`` (names or instances, or a mapping label -> model) with
-    [`identify_motion`][jaxfric.motion.identify_motion] on the same data, key and options, rank them by validation
-    free-run RMSE and warn ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model with more search
-    parameters is worse on validation than one with fewer.
+    [`identify_motion`][jaxfric.motion.identify_motion] on the same data, key and options, rank them by the
+    judge and warn ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model with more search
+    parameters is judged worse than one with fewer.
 
     ``data``/``train``/``valid`` and every other keyword are [`identify_motion`][jaxfric.motion.identify_motion]'s;
     a validation part is required (a held-back block or ``valid=[...]``).
+
+    ``judge``: ``"tail"`` (default) ranks by the validation part's free-run RMSE (the held-back
+    block, or the ``valid`` records); ``"blocked"`` ranks by blocked cross-validation of the
+    training part ([`blocked_score`][jaxfric.motion._compare.blocked_score], ``folds`` blocks per record, each
+    held-out block simulated from its own first 20 samples): ``folds`` more fits per model, and
+    every block is scored on motion its fit never saw. The table shows the judge's score
+    beside the validation RMSE, and the baseline's under the same judge.
     """
+    if judge not in JUDGES:
+        raise ValueError(f"judge must be one of {JUDGES}, got {judge!r}")
+    if isinstance(folds, bool) or not isinstance(folds, numbers.Integral) or folds < 2:
+        raise ValueError(f"folds must be an integer >= 2, got {folds!r}")
     if isinstance(models, str):
         models = [m for m in models.split(",") if m.strip()]
     items = dict(models) if isinstance(models, dict) else {
@@ -104,4 +198,18 @@ def compare_motion(models, data=None, *, key, mass, **kwargs) -> MotionCompariso
     if data is None and kwargs.get("valid") is None:
         raise ValueError("compare_motion ranks by validation error: pass valid=[records...] with train=[...]")
     fits = {label: identify_motion(model, data, key=key, mass=mass, **kwargs) for label, model in items.items()}
-    return rank_fits(fits, stacklevel=2)
+    if judge == "tail":
+        return rank_fits(fits, stacklevel=2)
+    if data is not None:
+        data = _as_motion_data(data)
+        records = [data.window(0, _split(data.n_samples, kwargs.get("train", 0.8)))]
+    else:
+        train = kwargs["train"]
+        records = [_as_motion_data(r) for r in (train.values() if isinstance(train, dict) else
+                                                train if isinstance(train, (list, tuple)) else [train])]
+    options = {k: v for k, v in kwargs.items() if k not in ("train", "valid", "metric_horizon")}
+    scores, base = {}, []
+    for label, model in items.items():
+        scores[label], b = blocked_score(model, records, folds, key=key, mass=mass, **options)
+        base.append(b)
+    return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base[0])

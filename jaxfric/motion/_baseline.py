@@ -1,0 +1,62 @@
+"""The least-squares baseline of motion identification, and the start it gives (§13.1, §13.2).
+
+Inverse dynamics of the training records, ``F_act − F_load = M·a + Fc·sign(v) + Fv·v + F_off``,
+is linear in ``(M, Fc, Fv, F_off)``: with ``v`` the records' zero-phase filtered velocity and
+``a`` its central difference, one least-squares solve gives them
+(:func:`jaxfric.rig.emps.idim_ls`, the EMPS benchmark's IDIM-LS). The same parameters
+simulated in free run are the baseline every motion fit is shown beside: a model that does
+not beat it has not earned its extra parameters. Mapped into a richer model (its Coulomb
+level and viscous slope, the mass and the offset; the rest at the box centre), they are a
+start of the search that does not depend on the key.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..models import Coulomb
+from ..models._physical import AbstractPhysicalModel
+from ..rig.emps import IDIMResult, idim_ls
+
+__all__ = ["BASELINE_LABEL", "baseline_model", "least_squares", "least_squares_start"]
+
+#: How the baseline is named in tables and figures.
+BASELINE_LABEL = "least squares (Coulomb + viscous + offset)"
+#: Samples dropped at each end of a record: the zero-phase filter's edges.
+EDGE = 20
+
+
+def baseline_model() -> Coulomb:
+    """The baseline's friction model in the mechanics: ``Fc tanh(v / 1e-4) + Fv v``."""
+    return Coulomb(v_eps=1e-4)
+
+
+def least_squares(records, mass: float | None = None) -> IDIMResult:
+    """IDIM-LS on ``records`` (module docstring), pooled; ``mass`` given [kg]: fixed."""
+    v, a, u = [], [], []
+    for r in records:
+        keep = slice(EDGE, r.n_samples - EDGE) if r.n_samples > 4 * EDGE else slice(None)
+        v.append(r.velocity[keep])
+        a.append(np.gradient(r.velocity, r.dt, edge_order=2)[keep])
+        u.append(r.net_force[keep])
+    return idim_ls(np.concatenate(v), np.concatenate(a), np.concatenate(u), mass=mass)
+
+
+def least_squares_start(model, est: IDIMResult, velocity, box, layout, lower, upper) -> np.ndarray | None:
+    """The search vector of ``model`` (with ``layout``'s mechanics) closest to ``est``:
+    Coulomb level and viscous slope by ``model.initial_guess`` on the fitted friction law
+    along the training ``velocity``,
+    ``log10 M`` and the offset where searched; ``None`` for a model with no physical
+    parameters to map (a network). Clipped into ``[lower, upper]``."""
+    if not isinstance(model, AbstractPhysicalModel) or not np.isfinite(est.M) or est.M <= 0:
+        return None
+    v = np.asarray(velocity, np.float64)
+    friction = est.Fc * np.sign(v) + est.Fv * v
+    y = list(model.initial_guess(v, friction, box))
+    if layout.fit_mass:
+        y.append(np.log10(est.M))
+    if layout.fit_offset:
+        y.append(est.offset)
+    if layout.fit_v0:
+        y.append(0.0)
+    return np.clip(np.asarray(y, np.float64), lower, upper)

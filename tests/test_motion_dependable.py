@@ -1,0 +1,255 @@
+"""Motion identification that does not depend on luck: several starts polished on the free
+run, the least-squares baseline beside every fit, one sample-time tolerance, and the
+command line's checks (docs/motion.md, docs/algorithms.md §13.2)."""
+
+import json
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxfric import models
+from jaxfric._warnings import BaselineWarning
+from jaxfric.motion import MotionData, MotionSearch, compare_motion, friction_step, identify_motion, simulate_motion
+from jaxfric.motion._baseline import BASELINE_LABEL, least_squares, least_squares_start
+from jaxfric.motion._layout import Layout
+from jaxfric.motion._pipeline import distinct_starts
+from jaxfric.records import SAMPLE_TIME_RTOL, same_sample_time
+
+TRUTH = dict(Fc=12.0, sigma2=60.0)
+MASS, OFFSET = 2.5, 3.0
+SMALL = MotionSearch(particles=10, generations=6, global_window=150, horizons=(300, None), steps=(10, 20),
+                     starts=2, least_squares_start=True)
+
+
+def _record(n=1500, dt=1e-3, seed=0, v_eps=1e-3):
+    """Noise-free motion of a Coulomb + viscous axis (2.5 kg, offset 3 N) under two tones."""
+    model = models.Coulomb(v_eps=v_eps)
+    t = np.arange(n) * dt
+    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0 + seed)
+    with jax.enable_x64(True):
+        out = simulate_motion(friction_step(model), jnp.asarray(model.from_physical(**TRUTH), jnp.float64),
+                              MASS, u - OFFSET, dt, 0.0, 0.0)
+    return MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+
+
+def test_distinct_starts_keeps_the_best_distinct_finite_points_in_order():
+    pts = np.array([[0.0, 0.0], [0.5, 0.5], [0.50001, 0.5], [0.9, 0.1], [0.2, 0.2]])
+    f = np.array([3.0, 1.0, 0.5, np.nan, 2.0])
+    got = distinct_starts(pts, f, 3, [0.0, 0.0], [1.0, 1.0])
+    # 0.50001 (f 0.5) first; 0.5 lies within 1e-3 of it; NaN never; then 0.2 and 0.0
+    np.testing.assert_array_equal(np.array(got), pts[[2, 4, 0]])
+    assert distinct_starts(pts, np.full(5, np.inf), 2, [0, 0], [1, 1]) == []
+
+
+def test_least_squares_solves_the_inverse_dynamics_of_the_simulated_states():
+    """IDIM-LS on the record's filtered velocity equals least squares on the simulator's
+    exact states (an independent reference: numpy.linalg.lstsq on the true v and a); the mass
+    and the offset of the axis come out, while Fc and Fv carry least squares' known bias
+    from the samples where the axis sticks (sign(v) cannot express static friction)."""
+    rec = _record(4000)
+    model = models.Coulomb(v_eps=1e-3)
+    with jax.enable_x64(True):
+        v = np.asarray(simulate_motion(friction_step(model), jnp.asarray(model.from_physical(**TRUTH)), MASS,
+                                       rec.force - OFFSET, rec.dt, 0.0, 0.0)["v"])
+    a = np.gradient(v, rec.dt, edge_order=2)
+    keep = slice(20, -20)
+    A = np.stack([a, v, np.sign(v), np.ones_like(v)], axis=1)[keep]
+    ref, *_ = np.linalg.lstsq(A, rec.force[keep], rcond=None)
+    est = least_squares([rec])
+    np.testing.assert_allclose([est.M, est.Fv, est.Fc, est.offset], ref, rtol=0.03)
+    assert est.M == pytest.approx(MASS, rel=0.05) and est.offset == pytest.approx(OFFSET, abs=0.2)
+    fixed = least_squares([rec], mass=MASS)
+    assert fixed.M == MASS and fixed.offset == pytest.approx(OFFSET, abs=0.2)
+
+
+def test_least_squares_start_maps_the_solution_into_a_richer_model():
+    est = least_squares([_record(4000)])
+    model = models.LuGre()
+    layout = Layout(model.num_params, True, True, False)
+    v = _record(4000).velocity
+    lower, upper = (list(b) for b in model.bounds(model.search_box(None, v, _record(4000).force)))
+    lower += [np.log10(0.5), -10.0]
+    upper += [np.log10(10.0), 10.0]
+    y = least_squares_start(model, est, v, model.search_box(None, v, _record(4000).force), layout,
+                            np.array(lower), np.array(upper))
+    phys = model.to_physical(jnp.asarray(y[:model.num_params]))
+    assert float(phys["Fc"]) == pytest.approx(est.Fc, rel=0.05)
+    assert 10 ** y[-2] == pytest.approx(est.M) and y[-1] == pytest.approx(est.offset)
+    assert least_squares_start(models.Elman(neurons=2), est, v, None, Layout(12, False, False, False),
+                               np.zeros(12), np.ones(12)) is None
+
+
+def test_every_start_is_polished_and_the_lowest_free_run_wins():
+    with jax.enable_x64(True):
+        fit = identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=0, mass=(0.5, 10.0), fit_offset=True,
+                              search=SMALL, dtype=jnp.float64)
+    starts = sorted({s["start"] for s in fit.stages if s["start"] is not None})
+    assert starts == [0, 1, 2]          # 2 personal bests + the least-squares start
+    final = [s["J"] for s in fit.stages if s["stage"] == "free_run"]
+    assert len(final) == 3
+    assert fit.metrics["cost"] == pytest.approx(min(final), rel=1e-9)
+
+
+def test_every_fit_carries_the_least_squares_baseline_and_beats_it_here():
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("error", BaselineWarning)
+        fit = identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=0, mass=(0.5, 10.0), fit_offset=True,
+                              search=SMALL, dtype=jnp.float64)
+    base = fit.metrics["baseline"]
+    assert set(base) == {"train", "valid"}
+    assert fit.metrics["train"]["rmse_mm"] <= base["train"]["rmse_mm"]
+    assert fit.settings["motion"]["baseline"]["M"] == pytest.approx(MASS, rel=0.05)
+
+
+def test_a_fit_worse_than_the_baseline_on_its_training_data_warns_with_both_numbers():
+    """A search with no gradient stage and a box that excludes the truth (Fc in [30, 40] N
+    where it is 12 N) ends worse than least squares: it must say so."""
+    crippled = MotionSearch(particles=4, generations=1, horizons=(None,), steps=(0,))
+    with jax.enable_x64(True), pytest.warns(BaselineWarning, match=r"free-run RMSE .* mm against .* mm"):
+        fit = identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=0, mass=(0.5, 10.0), fit_offset=True,
+                              box={"Fc": (30.0, 40.0), "sigma2": (300.0, 500.0)}, data_bounds=False,
+                              search=crippled, dtype=jnp.float64)
+    assert fit.metrics["train"]["rmse_mm"] > fit.metrics["baseline"]["train"]["rmse_mm"]
+
+
+def test_compare_motion_shows_the_baseline_as_a_row():
+    with jax.enable_x64(True):
+        cmp = compare_motion(["coulomb"], _record(), key=0, mass=(0.5, 10.0), fit_offset=True, search=SMALL,
+                             model_options={"v_eps": 1e-3}, dtype=jnp.float64)
+    rows = cmp.rows()
+    assert rows[-1]["model"] == BASELINE_LABEL and rows[-1]["rank"] is None
+    assert rows[-1]["valid_rmse_mm"] == pytest.approx(cmp.fits["coulomb"].metrics["baseline"]["valid"]["rmse_mm"])
+    assert BASELINE_LABEL in cmp.table()
+
+
+@pytest.mark.filterwarnings("ignore::jaxfric._warnings.BaselineWarning")  # a 2-step search
+def test_one_sample_time_tolerance():
+    """Two 1 kHz recordings whose float32 stamps round differently are one rate."""
+    assert same_sample_time(0.0010000080, 0.0009999840)
+    assert not same_sample_time(1e-3 * (1 + 3 * SAMPLE_TIME_RTOL), 1e-3)
+    rec = _record(600)
+    with jax.enable_x64(True):
+        fit = identify_motion(models.Coulomb(v_eps=1e-3), rec, key=0, mass=MASS,
+                              search=MotionSearch(particles=4, generations=1, horizons=(None,), steps=(2,)),
+                              dtype=jnp.float64)
+        other = MotionData.from_arrays(rec.force, rec.position, 0.0010000080 / 0.0009999840 * rec.dt)
+        assert np.isfinite(fit.score(other, init_window=20)["rmse_mm"])
+        far = MotionData.from_arrays(rec.force, rec.position, rec.dt * 1.01)
+        with pytest.raises(ValueError, match="differs from the fit's"):
+            fit.score(far, init_window=20)
+
+
+def _csv(tmp_path, n=800):
+    rec = _record(n, dt=2.0**-10)
+    path = tmp_path / "m.csv"
+    np.savetxt(path, np.c_[np.arange(n) * rec.dt, rec.force, rec.position], delimiter=",", header="t,F,x",
+               comments="")
+    return path
+
+
+def test_cli_refuses_an_unknown_model_before_any_fit(tmp_path, capsys):
+    from jaxfric.cli import main
+
+    out = tmp_path / "r"
+    rc = main(["identify-motion", str(_csv(tmp_path)), "--force-col", "F", "--x-col", "x", "--time-col", "t",
+               "--mass", "2.5", "--model", "coulomb,foo", "--quiet", "--no-cache", "--out", str(out)])
+    assert rc != 0
+    assert "unknown model 'foo'" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_cli_mass_option_is_required_and_says_so(capsys):
+    from jaxfric.cli.parser import build_parser
+
+    parser = build_parser()
+    sub = parser._subparsers._group_actions[0].choices["identify-motion"]
+    assert "(--mass KG | --mass-range LO,HI)" in sub.format_usage()
+    with pytest.raises(SystemExit):
+        parser.parse_args(["identify-motion", "f.csv", "--force-col", "F", "--x-col", "x"])
+    assert "one of the arguments --mass --mass-range is required" in capsys.readouterr().err
+    args = parser.parse_args(["identify-motion", "f.csv", "--force-col", "F", "--x-col", "x", "--mass", "2"])
+    assert args.x64 is True      # motion computes in float64 unless --float32
+    args = parser.parse_args(["identify-motion", "f.csv", "--force-col", "F", "--x-col", "x", "--mass", "2",
+                              "--float32"])
+    assert args.x64 is False
+
+
+@pytest.mark.slow
+def test_cli_prints_the_ranking_with_the_baseline_and_writes_results_json(tmp_path, capsys):
+    from jaxfric.cli import main
+
+    out = tmp_path / "r"
+    rc = main(["identify-motion", str(_csv(tmp_path)), "--force-col", "F", "--x-col", "x", "--time-col", "t",
+               "--mass-range", "0.5,10", "--offset", "--model", "coulomb", "--quick", "--quiet", "--no-cache",
+               "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert rc == 0
+    assert "| rank | model |" in printed and BASELINE_LABEL in printed
+    results = json.loads((out / "results.json").read_text())
+    assert [r["model"] for r in results["ranking"]] == ["coulomb", BASELINE_LABEL]
+    assert results["float64"] is True and "held-back" in results["split"]
+
+
+QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
+
+
+def test_ensemble_members_are_the_fits_of_their_keys_and_predict_together(tmp_path):
+    from jaxfric.motion import load_motion_fit
+
+    rec = _record(800)
+    batch = jnp.stack([jax.random.key(i) for i in range(3)])
+    opts = dict(mass=(0.5, 10.0), fit_offset=True, search=QUICK, dtype=jnp.float64)
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore", BaselineWarning)   # a 2-step search
+        fit = identify_motion(models.Coulomb(v_eps=1e-3), rec, keys=batch, **opts)
+        one = identify_motion(models.Coulomb(v_eps=1e-3), rec, key=jax.random.key(1), **opts)
+        e = fit.ensemble
+        np.testing.assert_array_equal(e["theta"][1], one.theta)
+        assert e["mass"][1] == one.mass and e["train_rmse_mm"][1] == one.metrics["train"]["rmse_mm"]
+        assert e["best"] == int(np.argmin(e["train_rmse_mm"]))
+        np.testing.assert_array_equal(fit.theta, e["theta"][e["best"]])
+        band = fit.simulate_ensemble(_record(800, seed=1), init_window=20)
+        members = np.stack([fit.member(i).simulate(_record(800, seed=1), init_window=20)["x"] for i in e["kept"]])
+        np.testing.assert_allclose(band["x"], members.mean(axis=0))
+        assert np.all(band["lower"] <= band["x"]) and np.all(band["x"] <= band["upper"])
+        assert fit.metrics["ensemble"]["valid"]["rmse_mm"] >= 0
+        assert "ensemble: 3 members" in fit.summary()
+        fit.save(tmp_path / "e.npz")
+        back = load_motion_fit(tmp_path / "e.npz")
+        np.testing.assert_array_equal(back.simulate_ensemble(rec, init_window=20)["x"],
+                                      fit.simulate_ensemble(rec, init_window=20)["x"])
+
+
+def test_members_far_worse_than_the_best_are_dropped():
+    from jaxfric.motion._api import ENSEMBLE_DROP, kept_members
+
+    assert kept_members([2.0, 2.9, 3.1, np.nan, 2.5]) == [0, 1, 4]
+    assert ENSEMBLE_DROP == 1.5
+
+
+def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
+    """The blocked judge's score is the pooled RMSE of fits that each leave one block out,
+    recomputed here by hand."""
+    import math
+
+    rec = _record(1200)
+    opts = dict(mass=(0.5, 10.0), fit_offset=True, search=QUICK, dtype=jnp.float64,
+                model_options={"v_eps": 1e-3})
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore", BaselineWarning)
+        cmp = compare_motion(["coulomb"], rec, key=0, judge="blocked", folds=2, **opts)
+        train = rec.window(0, 960)
+        halves = [train.window(0, 480), train.window(480, 960)]
+        errs, n = 0.0, 0
+        for f in range(2):
+            fit = identify_motion("coulomb", train=[halves[1 - f]], valid=[halves[f]], key=0, **opts)
+            errs += (480 - 20) * fit.metrics["valid"]["rmse_mm"] ** 2
+            n += 480 - 20
+    assert cmp.judge == "blocked"
+    assert cmp.scores["coulomb"] == pytest.approx(math.sqrt(errs / n), rel=1e-9)
+    assert "blocked RMSE [mm]" in cmp.table()
+    with pytest.raises(ValueError, match="judge must be one of"):
+        compare_motion(["coulomb"], rec, key=0, judge="oracle", **opts)
