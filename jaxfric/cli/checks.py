@@ -47,7 +47,7 @@ def check_out_folder(path: str) -> None:
 def precheck(args) -> None:
     """Run the JAX-free checks of ``args.command`` (raises [`UserError`][jaxfric.cli.UserError])."""
     command = args.command
-    if command in ("demo", "identify"):
+    if command in ("demo", "identify", "identify-motion"):
         check_model_names(args.models)
         check_out_folder(args.out)
     if command == "identify":

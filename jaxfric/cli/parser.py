@@ -203,11 +203,11 @@ examples:
 
 
 # ------------------------------------------------------------------ builders
-def _common(p: argparse.ArgumentParser) -> None:
+def _common(p: argparse.ArgumentParser, *,
+            x64_help: str = "compute in float64 (slower; float32 is accurate enough for these fits)") -> None:
     g = p.add_argument_group("general")
     g.add_argument("--quiet", "-q", action="store_true", help="no progress bars or stage messages")
-    g.add_argument("--x64", action="store_true",
-                   help="compute in float64 (slower; float32 is accurate enough for these fits)")
+    g.add_argument("--x64", action="store_true", help=x64_help)
     g.add_argument("--debug", action="store_true", help="show tracebacks instead of one-line errors")
     g.add_argument("--no-cache", action="store_true",
                    help="do not keep compiled programs on disk (default: in $JAX_COMPILATION_CACHE_DIR, "
