@@ -112,13 +112,14 @@ def subprocess_slot():
 
 @pytest.fixture
 def run_cache_size():
-    """Number of compilations cached for ``minimise``'s single-run executable (with the
-    default ``compiler_options``): a test counts recompilations with it."""
+    """Number of compilations cached for ``minimise``'s single-run executable (the chunk
+    program every call runs, with the default ``compiler_options``): a test counts
+    recompilations with it."""
     from jaxfric import _xla
-    from jaxfric.optim.driver import _run
+    from jaxfric.optim.loop import _chunk
 
     def size():
-        return _xla.filter_jit(_run, _xla.resolve("auto", "solver"))._cached._cache_size()
+        return _xla.filter_jit(_chunk, _xla.resolve("auto", "solver"))._cached._cache_size()
 
     return size
 

@@ -276,7 +276,7 @@ def test_hybrid_refines_global_phase_and_multistart_counts(counter):
     assert float(sol.f) <= float(single.f) + 1e-6
 
 
-def test_progress_reports_from_inside_the_run_without_recompiling(run_cache_size):
+def test_progress_reports_every_percent_without_recompiling(run_cache_size):
     bounds = (-np.ones(3), np.ones(3))
     solver = jf.mapso_nmds(lattice_size=2, num_generations=200, sl_generations=1, nm_max_steps=120)
     fn = lambda y, a: jnp.sum((y - 0.2) ** 2)  # noqa: E731

@@ -9,7 +9,7 @@ from .hybrid import MAPSONMDS, mapso_nmds
 from .mapso import MAPSO
 from .nelder_mead import NelderMead, NelderMeadState
 from .optx_adapter import OptxMinimiser, OptxState
-from .progress import ProgressHook, RecordingProgress, TqdmProgress
+from .progress import RecordingProgress, TqdmProgress
 from .pso import PSO
 from .asktell import AskTellState
 from .contract import AbstractGenerational, AbstractSolver
@@ -39,7 +39,6 @@ __all__ = [
     "OptxState",
     "PSO",
     "Scan",
-    "ProgressHook",
     "RecordingProgress",
     "TqdmProgress",
     "SwarmState",

@@ -1,9 +1,9 @@
 """ask / tell: a run driven from Python, for an objective outside JAX (a simulator, a
 NumPy model, a lab rig).
 
-The run *is* the compiled run of [`jaxfric.minimise`][jaxfric.optim.minimise] (`jaxfric.optim.loop._run`),
-started in a worker thread with an objective that answers from Python: every batch the
-solver evaluates goes out through ``jax.pure_callback`` and waits until [`tell`][jaxfric.optim.asktell.tell]
+The run *is* the compiled run of [`jaxfric.minimise`][jaxfric.optim.minimise] (its start,
+loop and end in one call, `jaxfric.optim.loop._run`), started in a worker thread with an
+objective that answers from Python: every batch the solver evaluates goes out through ``jax.pure_callback`` and waits until [`tell`][jaxfric.optim.asktell.tell]
 brings its values. So ask/tell visits the points ``minimise`` visits for the same key,
 with the same evaluation counts and stage switches, for every solver that evaluates in
 batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
@@ -173,7 +173,7 @@ def _run_seeds(proto, flat, lower, upper, tokens, keys, x0):
     over the keys. The token travels batched (one copy per seed) so that every callback
     is batched over the seeds and carries their axis in front, even for points that do
     not depend on the key (a Nelder–Mead simplex around a shared ``x0``)."""
-    run = lambda t, k: _run(proto, flat, lower, upper, t, k, x0, None)[1]  # noqa: E731
+    run = lambda t, k: _run(proto, flat, lower, upper, t, k, x0)[1]  # noqa: E731
     return jax.vmap(run)(tokens, keys)
 
 
@@ -183,7 +183,7 @@ def _work(solver, lower, upper, key, x0, token, channel: _Channel, x64: bool):
             lo, hi, treedef, shapes = prepare_bounds((lower, upper), lower.dtype)
             flat = _Flat(_objective, treedef, shapes)
             if channel.seeds is None:
-                args = (solver, flat, lo, hi, jnp.asarray(token, jnp.int32), key, x0, None,
+                args = (solver, flat, lo, hi, jnp.asarray(token, jnp.int32), key, x0,
                         None, None, jnp.asarray(NO_STOP, jnp.int32))
                 _, sol = _executable(_run, args)(*args)
             else:

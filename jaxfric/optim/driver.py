@@ -15,6 +15,7 @@ in ``args`` (never closures), so new data of the same shapes do not recompile.
 from __future__ import annotations
 
 import contextlib
+import functools
 from pathlib import Path
 from typing import Any, Callable
 
@@ -22,15 +23,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
+import numpy as np
 
 from .. import _xla
 from . import checkpoint as ckpt
 from ._base import Solution, check_positive_int
-from .loop import NO_STOP, _begin, _run
+from .loop import NO_STOP, _begin, _chunk, blank_carry
 from .rounds import compiled_start
 from .optx_adapter import as_protocol
 from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
-from .progress import ProgressHook, TqdmProgress, register
+from .progress import Chunks, TqdmProgress
 from .sharding import Layout, resolve_devices, shard_keys
 
 # ------------------------------------------------------------------ validation
@@ -54,39 +56,128 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
 
 
 # ---------------------------------------------------------------------- progress
-def _progress(progress, proto):
-    """``(context manager yielding a hook or None)`` for ``progress=``."""
+def _display(progress, proto):
+    """The host display for ``progress=`` (``None``: no display)."""
     if progress is None or progress is False:
-        return contextlib.nullcontext(None)
+        return None
     total, local_total = proto.progress_totals()
     if progress is True:
-        sink = TqdmProgress(total, local_total)
-    elif callable(progress):
-        sink = progress
-    else:
-        raise ValueError(
-            "progress must be None, True (a tqdm bar) or a callable "
-            f"sink(phase, step, evals, f_best), got {type(progress).__name__}"
-        )
-    every = max(1, (total or 100) // 100)
-
-    @contextlib.contextmanager
-    def ctx():
-        with register(sink) as token:
-            yield ProgressHook(token, every_generation=every, every_step=50)
-
-    return ctx()
+        return TqdmProgress(total, local_total)
+    if callable(progress):
+        return progress
+    raise ValueError(
+        "progress must be None, True (a tqdm bar) or a callable "
+        f"sink(phase, step, evals, f_best), got {type(progress).__name__}"
+    )
 
 
-def _one(proto, flat, lower, upper, args, key, x0, hook):
-    return _run(proto, flat, lower, upper, args, key, x0, hook)[1]
+@contextlib.contextmanager
+def _closing(sink):
+    """``sink``, closed at the end when it has a ``close`` (a tqdm bar)."""
+    try:
+        yield sink
+    finally:
+        close = getattr(sink, "close", None)
+        if close is not None:
+            close()
 
 
-def _run_many(proto, flat, lower, upper, args, keys, x0, hook, batching="vmap"):
-    run = lambda k: _one(proto, flat, lower, upper, args, k, x0, hook)  # noqa: E731
+# ------------------------------------------------------------------ the chunks
+class _Signature:
+    """The arguments of `_begin` compared by structure, shapes and dtypes (what its
+    result's shapes depend on), so a blank carry is built once per problem shape."""
+
+    def __init__(self, args):
+        leaves, treedef = jtu.tree_flatten(args)
+        self.args = args
+        self.key = (treedef, tuple(
+            (tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False)))
+            if hasattr(x, "shape") and hasattr(x, "dtype") else x for x in leaves))
+        hash(self.key)  # TypeError for an unhashable leaf: the caller builds it uncached
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return isinstance(other, _Signature) and self.key == other.key
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_like(sig: _Signature):
+    return eqx.filter_eval_shape(_begin, *sig.args)
+
+
+def _blank(proto, flat, lower, upper, args, key, x0, warm, batch: int | None = None):
+    """The unused carry of a chunk that starts the run (`blank_carry`), with a leading
+    axis of ``batch`` runs when given; ``key`` is one run's key."""
+    begin_args = (proto, flat, lower, upper, args, key, x0, warm)
+    try:
+        like = _cached_like(_Signature(begin_args))
+    except TypeError:
+        like = eqx.filter_eval_shape(_begin, *begin_args)
+    if batch is not None:
+        like = jtu.tree_map(lambda x: jax.ShapeDtypeStruct((batch, *x.shape), x.dtype)
+                            if isinstance(x, jax.ShapeDtypeStruct) else x, like)
+    return blank_carry(like, jax.random.key_impl(key))
+
+
+def _chunked(call, blank, display=None, checkpoint=None):
+    """Run ``call(carry, fresh, stop_at) -> (carry, solution, report)`` (the compiled
+    `_chunk`, or its batch over keys) to the end and return the solution.
+
+    Without a display or a checkpoint that is one call. With a display the run goes in
+    chunks of [`Chunks`][jaxfric.optim.progress.Chunks] steps and the host reports each
+    chunk's end (each run's, for a batch; ``display = (sink, chunks)``); with ``checkpoint = (path, every, meta,
+    resumed)`` it saves the carry after every ``every`` steps, and starts from
+    ``resumed = (carry, steps_done)`` when that is not ``None``. Every call runs the same
+    program, and a chunk takes exactly the steps the whole run takes there, so the
+    solution is the same to the bit whatever the chunks.
+    """
+    sink, chunks = display if display is not None else (None, None)
+    path, every, meta, resumed = checkpoint if checkpoint is not None else (None, None, None, None)
+    carry, done, fresh = blank, 0, True
+    if resumed is not None:
+        (carry, done), fresh = resumed, False
+    saved, next_save = done, None if path is None else done + every
+    phases = None
+    while True:
+        stop = NO_STOP
+        if chunks is not None:
+            lengths = [chunks.length(p) for p in phases] if phases is not None else [
+                chunks.length(chunks.first_phase)]
+            stop = min(stop, done + min(lengths))
+        if next_save is not None:
+            stop = min(stop, next_save)
+        carry, sol, rep = call(carry, np.asarray(fresh), np.asarray(stop, np.int32))
+        fresh = False
+        rep = jax.device_get(rep)
+        finished = bool(np.all(rep.done))
+        running = ~np.atleast_1d(rep.done)
+        if sink is not None:
+            for i in range(np.size(rep.phase)):
+                sink(int(np.ravel(rep.phase)[i]), int(np.ravel(rep.step)[i]),
+                     int(np.ravel(rep.evals)[i]), float(np.ravel(rep.f_best)[i]))
+            phases = [int(p) for p in np.atleast_1d(rep.phase)[running]] or None
+        if path is not None and (finished or stop >= next_save):
+            steps = int(np.max(carry.steps))
+            if steps != saved or not path.exists():
+                ckpt.save(path, {**meta, "steps_done": steps}, carry)
+                saved = steps
+            next_save = steps + every
+        if finished or stop == NO_STOP:
+            return sol
+        done = stop
+
+
+def _run_many(proto, flat, lower, upper, args, keys, x0, carries, fresh, stop_at,
+              batching="vmap"):
+    """`_chunk` for every key: ``(carries, solutions, reports)`` with a leading axis."""
+    def run(key, carry):
+        return _chunk(proto, flat, lower, upper, args, key, x0, None, carry, fresh, stop_at)
+
     if batching == "map":
-        return jax.lax.map(run, keys)
-    return jax.vmap(run)(keys)
+        return jax.lax.map(lambda kc: run(*kc), (keys, carries))
+    return jax.vmap(run)(keys, carries)
 
 
 BATCHING = ("auto", "vmap", "map")
@@ -136,31 +227,20 @@ def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
     return proto.continued(state)
 
 
-def _run_checkpointed(run, proto, flat, lower, upper, args, key, x0, hook, warm,
-                      path: Path, every: int):
-    """Drive ``run`` (the compiled `_run`) in chunks of ``every`` steps, saving the
-    carry to ``path`` after each; resume from ``path`` when it exists. A chunked run
-    takes the same steps, in the same order, with the same compiled loop, so it returns
-    exactly what the uninterrupted run returns."""
+def _resume(proto, flat, lower, upper, args, key, x0, warm, path: Path, every: int):
+    """``checkpoint`` for `_chunked`: the file's header, and the stored carry and its
+    steps when ``path`` exists (after checking it belongs to this problem)."""
     fp = ckpt.fingerprint(flat.fn, (str(flat.treedef), flat.shapes), proto, lower,
-                                upper, args, key)
+                          upper, args, key)
     meta = ckpt.header(fp, key)
-    carry, done = None, 0
+    resumed = None
     if path.exists():
         like = eqx.filter_eval_shape(_begin, proto, flat, lower, upper, args, key, x0, warm)
         stored, carry = ckpt.load(path, fp, like)
         done = int(stored["steps_done"])
         carry = eqx.tree_at(lambda c: c.steps, carry, jnp.asarray(done, jnp.int32))
-    while True:
-        carry, sol = run(proto, flat, lower, upper, args, key, x0, hook, carry, warm,
-                         jnp.asarray(done + every, jnp.int32))
-        new_done = int(carry.steps)
-        finished = new_done < done + every
-        if new_done != done or not path.exists():
-            ckpt.save(path, {**meta, "steps_done": new_done}, carry)
-        if finished:
-            return sol
-        done = new_done
+        resumed = (carry, done)
+    return path, every, meta, resumed
 
 
 # ----------------------------------------------------------------------- entries
@@ -201,9 +281,12 @@ def minimise(
             searching in float32, or JAX's default float). float16 is refused.
         progress: ``True`` for a tqdm bar, a callable ``sink(phase, step, evals, f_best)``
             (phase 0 = global generations, 1 = local steps), or ``None`` (silent).
-            Reports come from inside the compiled run about every 1 % of the generations
-            and every 50 local steps, and once when each stage ends; a new display never
-            recompiles. A host callback costs time of its own: leave it off for short runs.
+            The run then goes in chunks of about 1 % of the generations and of 50 local
+            steps, and the display is updated on the host between chunks (also once at
+            the end). Every chunk runs the program a silent run compiles, so a display
+            neither recompiles nor changes the result (the same to the bit), and the
+            persistent compilation cache keeps the program. Each chunk costs a call from
+            Python, about a millisecond: leave it off for runs of a few milliseconds.
         devices: where to evaluate the population: ``None`` (default) splits it by
             agents over every device when there are several; ``False`` keeps it on one
             device; or a sequence of devices.
@@ -241,19 +324,20 @@ def minimise(
         warm = _warm_state(warm_start, proto, flat, lower, upper, args, key, x0)
     if checkpoint is not None:
         check_positive_int("checkpoint_every", checkpoint_every)
-    with _progress(progress, proto) as hook:
-        if checkpoint is None:
-            # stop_at as an array, as a checkpointed run's chunks pass it: the whole run
-            # and a checkpointed run's first chunk are then one compiled program
-            _, sol = _xla.filter_jit(_run, options)(
-                proto, flat, lower, upper, args, key, x0, hook, None, warm,
-                jnp.asarray(NO_STOP, jnp.int32))
-        else:
-            sol = _run_checkpointed(
-                _xla.filter_jit(_run, options), proto, flat, lower, upper, args, key, x0,
-                hook, warm, Path(checkpoint), checkpoint_every,
-            )
-        jax.block_until_ready(sol)
+    resume = None
+    if checkpoint is not None:
+        resume = _resume(proto, flat, lower, upper, args, key, x0, warm, Path(checkpoint),
+                         checkpoint_every)
+    program = _xla.filter_jit(_chunk, options)
+
+    def call(carry, fresh, stop_at):
+        return program(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at)
+
+    sink = _display(progress, proto)
+    with _closing(sink):
+        display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
+        blank = _blank(proto, flat, lower, upper, args, key, x0, warm)
+        sol = jax.block_until_ready(_chunked(call, blank, display, resume))
     return _unravel_solution(sol, flat, batched=False)
 
 
@@ -278,7 +362,7 @@ def minimise_many(
     equals ``minimise(..., key=keys[i])`` up to floating-point reassociation (bit for
     bit with ``batching="map"``). Stages run in loops of their own, so a batch of
     two-stage runs never computes a global step while refining, or the reverse.
-    ``progress`` as in [`minimise`][jaxfric.optim.minimise] (reports arrive once per run and step).
+    ``progress`` as in [`minimise`][jaxfric.optim.minimise] (each chunk's end is reported once per run).
     ``devices``: ``None`` (default) lays the runs out over every device when there
     are several (the batch is padded to a multiple of the device count and the
     padding dropped); ``False`` keeps them on one device; or a sequence of devices.
@@ -300,10 +384,16 @@ def minimise_many(
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
     mode = _batching(batching, proto, layout)
     keys, n = shard_keys(keys, layout)
-    with _progress(progress, proto) as hook:
-        sol = _xla.filter_jit(_run_many, options)(
-            proto, flat, lower, upper, args, keys, x0, hook, mode)
-        jax.block_until_ready(sol)
+    program = _xla.filter_jit(_run_many, options)
+
+    def call(carries, fresh, stop_at):
+        return program(proto, flat, lower, upper, args, keys, x0, carries, fresh, stop_at, mode)
+
+    sink = _display(progress, proto)
+    with _closing(sink):
+        display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
+        blank = _blank(proto, flat, lower, upper, args, keys[0], x0, None, keys.shape[0])
+        sol = jax.block_until_ready(_chunked(call, blank, display))
     if keys.shape[0] != n:
         sol = jax.tree_util.tree_map(lambda a: a[:n], sol)
     return _unravel_solution(sol, flat, batched=True)

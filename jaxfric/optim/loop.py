@@ -5,10 +5,15 @@ two-stage case)::
     for stage in range(num_stages()):          # a chain: global, then local
         while not finished(state) and stage(state) == stage:
             state = step(state, stage)         # step_rounds, evaluated in the program
-            record history; report progress
+            record history
 
-[`jaxfric.minimise`][jaxfric.optim.minimise] compiles `_run`; ask/tell ([`jaxfric.optim.asktell`][jaxfric.optim.asktell])
-compiles the same function with an objective answered from Python.
+[`jaxfric.minimise`][jaxfric.optim.minimise] compiles `_chunk`: the start (or the carry
+of an earlier chunk) and the loop up to a step count. A run with a progress display or
+a checkpoint calls it again and again, reporting and saving between the calls on the
+host; a plain run calls it once. It is one program either way, with no host callback in
+it, so JAX's persistent compilation cache keeps it like any other, and chunked and whole
+runs take bit-identical steps. ask/tell ([`jaxfric.optim.asktell`][jaxfric.optim.asktell])
+compiles `_run`, the whole run at once, with an objective answered from Python.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import NO_STEP_CAP, History, Solution
 from .rounds import compiled_start, compiled_step
@@ -42,22 +48,40 @@ def _record(proto, state, history):
     return history.record(proto.num_evals(state), f)
 
 
+def _strong(tree):
+    """Every array of ``tree`` with a fixed (not weak) dtype, so a carry built on the host
+    ([`blank_carry`][jaxfric.optim.loop.blank_carry]), one loaded from a checkpoint and
+    one returned by `_chunk` are the same input type to it (no recompilation)."""
+    return jax.tree_util.tree_map(
+        lambda a: jnp.asarray(a, a.dtype) if isinstance(a, jax.Array) else a, tree)
+
+
 def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
     state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
     cap = proto.steps_for(lower.shape[0])
     size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
     history = _record(proto, state, History.empty(size, lower.dtype))
-    return Carry(state, history, jnp.array(0, jnp.int32))
+    return _strong(Carry(state, history, jnp.array(0, jnp.int32)))
 
 
-def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry:
+def blank_carry(like, impl):
+    """A carry of zeros shaped as ``like`` (``eqx.filter_eval_shape`` of `_begin`), its
+    PRNG keys of implementation ``impl``: the unused ``carry`` argument of a chunk that
+    starts the run. NumPy zeros put on the device: it compiles nothing."""
+    def zero(x):
+        if not isinstance(x, jax.ShapeDtypeStruct):
+            return x
+        if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+            raw = jax.eval_shape(jax.random.key_data, x)
+            return jax.random.wrap_key_data(jax.device_put(np.zeros(raw.shape, raw.dtype)),
+                                            impl=impl)
+        return jax.device_put(np.zeros(x.shape, x.dtype))
+
+    return jax.tree_util.tree_map(zero, like)
+
+
+def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at) -> Carry:
     """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
-
-    def report(c: Carry, force: bool):
-        if hook is not None:
-            phase, step = proto.progress(c.state)
-            hook.emit(phase, step, proto.num_evals(c.state), proto.best(c.state)[1], force)
-
     for s in range(proto.num_stages()):
         def cond(c, s=s):
             done, _ = proto.finished(c.state)
@@ -65,12 +89,9 @@ def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at, hook) -> Carry
 
         def body(c, s=s):
             state = compiled_step(proto, flat, lower, upper, args, c.state, s)
-            c = Carry(state, _record(proto, state, c.history), c.steps + 1)
-            report(c, False)
-            return c
+            return Carry(state, _record(proto, state, c.history), c.steps + 1)
 
         carry = jax.lax.while_loop(cond, body, carry)
-    report(carry, True)
     return carry
 
 
@@ -87,11 +108,42 @@ def _end(proto, flat, lower, upper, args, carry: Carry) -> Solution:
 NO_STOP = 2**31 - 1
 
 
-def _run(proto, flat, lower, upper, args, key, x0, hook, carry=None, warm=None, stop_at=None):
-    """One compiled call: start (unless ``carry`` continues a chunked run), loop until
-    done or ``stop_at`` steps, and the solution. Returns ``(carry, solution)``."""
+class Report(eqx.Module):
+    """Where a chunked run stands after a chunk, for the host: the progress phase and
+    step ([`AbstractSolver.progress`][jaxfric.optim.AbstractSolver.progress]), the
+    evaluations, the best value, and whether the run has finished."""
+
+    phase: Any
+    step: Any
+    evals: Any
+    f_best: Any
+    done: Any
+
+
+def _report(proto, carry: Carry) -> Report:
+    phase, step = proto.progress(carry.state)
+    done, _ = proto.finished(carry.state)
+    return Report(phase, step, proto.num_evals(carry.state), proto.best(carry.state)[1], done)
+
+
+def _chunk(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at):
+    """[`jaxfric.minimise`][jaxfric.optim.minimise]'s one program: the start when
+    ``fresh`` (a boolean array; ``carry`` is then a [`blank_carry`][jaxfric.optim.loop.blank_carry]),
+    else ``carry``; then steps until done or ``carry.steps == stop_at``. Returns
+    ``(carry, solution, report)``."""
+    carry = jax.lax.cond(
+        fresh, lambda: _begin(proto, flat, lower, upper, args, key, x0, warm),
+        lambda: _strong(carry))
+    carry = _strong(_loop(proto, flat, lower, upper, args, carry, stop_at))
+    return carry, _end(proto, flat, lower, upper, args, carry), _report(proto, carry)
+
+
+def _run(proto, flat, lower, upper, args, key, x0, carry=None, warm=None, stop_at=None):
+    """The whole run in one call (ask/tell's program): start (unless ``carry`` continues
+    a run), loop until done or ``stop_at`` steps, and the solution. Returns
+    ``(carry, solution)``."""
     if carry is None:
         carry = _begin(proto, flat, lower, upper, args, key, x0, warm)
     stop_at = jnp.asarray(NO_STOP if stop_at is None else stop_at, jnp.int32)
-    carry = _loop(proto, flat, lower, upper, args, carry, stop_at, hook)
+    carry = _loop(proto, flat, lower, upper, args, carry, stop_at)
     return carry, _end(proto, flat, lower, upper, args, carry)

@@ -1,24 +1,18 @@
-"""Progress display for long runs, without leaving the compiled program.
+"""Progress displays for long runs, updated on the host between chunks of the run.
 
-The jitted run calls one fixed host function (``_dispatch``) through
-``jax.debug.callback`` every few generations. Which display receives the call is
-looked up by an integer *token* passed as an ordinary array argument, so showing
-a new progress bar never recompiles: the program only knows "progress on, every K
-generations". Under ``vmap`` the callback fires once per batch member; displays
-keep the best value seen for each step.
+A run with a display goes in chunks ([`jaxfric.optim.driver`][jaxfric.optim.driver]
+calls its one compiled program again and again, as a checkpointed run does); after each
+chunk the host hands the display ``(phase, step, evals, f_best)``. Nothing calls back
+from inside the compiled program, so the program is the one a run without a display
+compiles, and JAX's persistent compilation cache keeps it (a program holding a host
+callback is never written there). Chunks end about every 1 % of a global stage's
+generations and every 50 local steps ([`Chunks`][jaxfric.optim.progress.Chunks]); a
+chunked run takes exactly the steps of a whole one.
 """
 
 from __future__ import annotations
 
-import itertools
-import threading
 import time
-from typing import Callable
-
-import equinox as eqx
-import jax
-import jax.numpy as jnp
-from jaxtyping import Array
 
 PHASES = ("global", "local", "gradient")
 """Phase 0 is a swarm's generations, phase 1 Nelder–Mead's steps, phase 2 the steps of
@@ -26,59 +20,21 @@ PHASES = ("global", "local", "gradient")
 
 _STAGE_LABEL = {1: (" (Nelder–Mead)", "step"), 2: (" (gradient)", "step")}
 
-_SINKS: dict[int, Callable] = {}
-_LOCK = threading.Lock()
-_COUNTER = itertools.count(1)
+#: Local (Nelder–Mead) steps between two reports.
+EVERY_STEP = 50
 
 
-def _dispatch(token, phase, step, evals, f_best):
-    sink = _SINKS.get(int(token))
-    if sink is not None:
-        sink(int(phase), int(step), int(evals), float(f_best))
+class Chunks:
+    """How many steps a chunk of a run with a display takes: about 1 % of the global
+    stage's ``total`` generations (at least 1) while in phase 0, :data:`EVERY_STEP`
+    otherwise."""
 
+    def __init__(self, total: int | None):
+        self.every_generation = max(1, (total or 100) // 100)
+        self.first_phase = 0 if total is not None else 1
 
-class ProgressHook(eqx.Module):
-    """Traced side of progress reporting: a token and how often to report."""
-
-    token: Array
-    every_generation: int = eqx.field(static=True, default=1)
-    every_step: int = eqx.field(static=True, default=50)
-
-    def emit(self, phase, step, evals, f_best, force: bool = False):
-        """Report ``(step, evals, f_best)`` when ``step`` is a multiple of the phase's
-        period, or always with ``force`` (a stage's last step, so displays end there)."""
-        phase = jnp.asarray(phase, jnp.int32)
-        step = jnp.asarray(step)
-        every = jnp.where(phase == 0, self.every_generation, self.every_step)
-
-        def call():
-            jax.debug.callback(_dispatch, self.token, phase, step, evals, f_best)
-
-        if force:
-            call()
-        else:
-            jax.lax.cond(step % every == 0, call, lambda: None)
-
-
-class register:
-    """Context manager: route a host ``sink(phase, step, evals, f_best)`` to a token."""
-
-    def __init__(self, sink: Callable):
-        self.sink = sink
-
-    def __enter__(self) -> Array:
-        with _LOCK:
-            self.token = next(_COUNTER)
-            _SINKS[self.token] = self.sink
-        return jnp.asarray(self.token, jnp.int32)
-
-    def __exit__(self, *exc):
-        with _LOCK:
-            _SINKS.pop(self.token, None)
-        close = getattr(self.sink, "close", None)
-        if close is not None:
-            close()
-        return False
+    def length(self, phase: int) -> int:
+        return self.every_generation if phase == 0 else EVERY_STEP
 
 
 class TqdmProgress:
