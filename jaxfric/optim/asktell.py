@@ -3,9 +3,10 @@ NumPy model, a lab rig).
 
 The run *is* the compiled run of [`jaxfric.minimise`][jaxfric.optim.minimise] (its start,
 loop and end in one call, `jaxfric.optim.loop._run`), started in a worker thread with an
-objective that answers from Python: every batch the solver evaluates goes out through ``jax.pure_callback`` and waits until [`tell`][jaxfric.optim.asktell.tell]
-brings its values. So ask/tell visits the points ``minimise`` visits for the same key,
-with the same evaluation counts and stage switches, for every solver that evaluates in
+objective that answers from Python: every batch the solver evaluates goes out through
+``jax.pure_callback`` and waits until [`tell`][jaxfric.optim.asktell.tell] brings its
+values. So ask/tell visits the points ``minimise`` visits for the same key, with the same
+evaluation counts and stage switches, for every solver that evaluates in
 batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
 ``minimise`` compiles, once per solver and problem shape::
 
