@@ -447,7 +447,7 @@ class MotionFit(Fit):
         return out
 
     def simulate_ensemble(self, record, init_window: int = DEFAULT_INIT_WINDOW) -> dict:
-        """The kept ensemble members' free runs of ``record`` (:meth:`simulate` with
+        """The kept ensemble members' free runs of ``record`` ([`simulate`][jaxfric.motion.MotionFit.simulate] with
         ``init_window``): ``{"x": their average, "lower", "upper": the elementwise min and
         max, "members": (K_kept, T)}`` [m]."""
         members = np.stack([self.member(i).simulate(record, init_window=init_window)["x"]
@@ -463,7 +463,7 @@ class MotionFit(Fit):
     def ensemble_metrics(self, data, n_train, train_records=(), valid_records=(),
                          init_window: int = DEFAULT_INIT_WINDOW) -> dict:
         """[`motion_metrics`][jaxfric.motion.motion_metrics] of the kept members' average free run, on the windows
-        of :meth:`evaluate` (``data`` given) or of :meth:`evaluate_records`."""
+        of [`evaluate`][jaxfric.motion.MotionFit.evaluate] (``data`` given) or of [`evaluate_records`][jaxfric.motion.MotionFit.evaluate_records]."""
         fits = [self.member(i) for i in self.ensemble_kept()]
         if data is not None:
             x = data.position
@@ -913,7 +913,7 @@ def _ensemble(model, data, key, keys, options) -> MotionFit:
 
 
 def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
-    """The least-squares baseline (:mod:`._baseline`) as a fit, scored like the fit."""
+    """The least-squares baseline (`._baseline`) as a fit, scored like the fit."""
     model = baseline_model()
     theta = np.asarray(model.from_physical(Fc=max(est.Fc, 0.0), sigma2=max(est.Fv, 1e-12)), np.float64)
     fit = MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=tr_records[0].dt,
@@ -932,7 +932,7 @@ BASELINE_MARGIN = 1e-3
 
 
 def _warn_if_worse(fit) -> None:
-    """:class:`BaselineWarning` when ``fit`` simulates its training data worse than the baseline."""
+    """[`BaselineWarning`][jaxfric.motion.BaselineWarning] when ``fit`` simulates its training data worse than the baseline."""
     mine, base = fit.metrics["train"]["rmse_mm"], fit.metrics["baseline"]["train"]["rmse_mm"]
     if not mine <= (1.0 + BASELINE_MARGIN) * base:
         warnings.warn(

@@ -3,7 +3,7 @@
 Inverse dynamics of the training records, ``F_act − F_load = M·a + Fc·sign(v) + Fv·v + F_off``,
 is linear in ``(M, Fc, Fv, F_off)``: with ``v`` the records' zero-phase filtered velocity and
 ``a`` its central difference, one least-squares solve gives them
-(:func:`jaxfric.rig.emps.idim_ls`, the EMPS benchmark's IDIM-LS). The same parameters
+([`jaxfric.rig.emps.idim_ls`][jaxfric.rig.idim_ls], the EMPS benchmark's IDIM-LS). The same parameters
 simulated in free run are the baseline every motion fit is shown beside: a model that does
 not beat it has not earned its extra parameters. Mapped into a richer model (its Coulomb
 level and viscous slope, the mass and the offset; the rest at the box centre), they are a

@@ -47,7 +47,7 @@ class MotionComparison:
     @property
     def baseline(self) -> dict:
         """The least-squares Coulomb + viscous + offset baseline's metrics on the same data
-        and judge (``{"train": ..., "valid": ...}``, :func:`jaxfric.motion.motion_metrics`)."""
+        and judge (``{"train": ..., "valid": ...}``, [`jaxfric.motion.motion_metrics`][jaxfric.motion.motion_metrics])."""
         return next(iter(self.fits.values())).metrics["baseline"]
 
     def rows(self) -> list[dict]:
@@ -75,7 +75,7 @@ class MotionComparison:
         return out
 
     def table(self) -> str:
-        """A Markdown table of :meth:`rows`: rank, model, parameters, mass, offset, train and
+        """A Markdown table of [`rows`][jaxfric.motion.MotionComparison.rows]: rank, model, parameters, mass, offset, train and
         validation free-run RMSE [mm], validation FIT %; the baseline as the last row."""
         judged = self.judge != "tail"
         lines = ["| rank | model | parameters | mass [kg] | offset [N] | train RMSE [mm] | valid RMSE [mm] "

@@ -26,7 +26,7 @@ EVERY_STEP = 50
 
 class Chunks:
     """How many steps a chunk of a run with a display takes: about 1 % of the global
-    stage's ``total`` generations (at least 1) while in phase 0, :data:`EVERY_STEP`
+    stage's ``total`` generations (at least 1) while in phase 0, [`EVERY_STEP`][jaxfric.optim.progress.EVERY_STEP]
     otherwise."""
 
     def __init__(self, total: int | None):
