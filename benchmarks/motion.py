@@ -14,6 +14,11 @@ Usage::
 * ``rig``: on the simulated hydraulic rig, friction recovered from actuator force and
   position alone against the force-balance identification, both compared with the
   rig's true friction.
+* ``keys``: the spread over keys 0..K-1 (``--keys``) of each physical model's training
+  free-run RMSE on the whole estimation file (``identify_motion(..., keys=batch)``, the
+  members being exactly the fits of those keys), beside the least-squares baseline and the
+  ensemble average; then the same on the 80 % split with the held-back tail (same
+  excitation). Writes ``motion_keys.md`` / ``motion_keys.csv``.
 * ``compensation``: the position loop of ``jaxfric.compensation`` on the rig with no,
   static, LuGre, Elman and ideal (true friction) feed-forward.
 
@@ -48,7 +53,7 @@ from jaxfric.motion import MotionData, MotionFit, identify_motion
 from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
 
-from _harness import add_output_arguments, markdown_table, results_dir  # noqa: E402
+from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
 
 
 def _cell(v) -> str:
@@ -280,6 +285,59 @@ def run_compensation(quick, out, key=0):
     return rows, fits
 
 
+def run_keys(path, names, count, quick, on_row=None):
+    """Rows of the ``keys`` part (module docstring): one per (model, split)."""
+    data, n_train = emps_motion_data(path)
+    batch = jnp.stack([jax.random.key(i) for i in range(count)])
+    search = None
+    if quick:
+        from jaxfric.motion import MotionSearch
+
+        search = MotionSearch(particles=6, generations=2, horizons=(1000, None), steps=(3, 3), starts=2,
+                              least_squares_start=True)
+    rows = []
+    for name in names:
+        _, model, opts = EMPS_MODELS[name]
+        for split, train in (("whole file", 1.0), ("80 % / tail", n_train)):
+            t0 = time.perf_counter()
+            fit = identify_motion(model, data, keys=batch, mass=(50.0, 200.0), train=train, fit_offset=True,
+                                  dtype=jnp.float64, model_options=opts, search=search)
+            secs = time.perf_counter() - t0
+            e, ens, base = fit.ensemble, fit.metrics["ensemble"], fit.metrics["baseline"]
+            tr = np.asarray(e["train_rmse_mm"])
+            row = {"model": name, "split": split, "keys": f"0-{count - 1}",
+                   "train_rmse_mm_per_key": " ".join(f"{x:.3f}" for x in tr),
+                   "train_spread_percent": 100 * (tr.max() / tr.min() - 1),
+                   "train_best_mm": tr.min(), "train_ensemble_mm": ens["train"]["rmse_mm"],
+                   "train_baseline_mm": base["train"]["rmse_mm"],
+                   "worse_than_baseline_keys": int(np.sum(tr > base["train"]["rmse_mm"])),
+                   "dropped": len(e["dropped"]), "seconds_per_key": secs / count}
+            if "valid" in ens:
+                va = np.asarray(e["valid_rmse_mm"], np.float64)
+                row.update(tail_rmse_mm_per_key=" ".join(f"{x:.3f}" for x in va),
+                           tail_best_member_mm=va[e["best"]], tail_ensemble_mm=ens["valid"]["rmse_mm"],
+                           tail_baseline_mm=base["valid"]["rmse_mm"])
+            print(row, flush=True)
+            rows.append(row)
+            if on_row is not None:
+                on_row(rows)
+    return rows
+
+
+KEYS_NOTE = """Every row: `identify_motion(model, data, keys=[key(0), ..., key(K-1)], mass=(50, 200),
+fit_offset=True, dtype=float64)` with the default search (docs/motion.md: PSO on windows, then
+Levenberg-Marquardt on 5 000-sample shooting segments and on the whole free run, from 3 of the
+swarm's personal bests and the least-squares start). Member i is the fit of key i. "whole
+file": trained on all 24 841 samples of DATA_EMPS.mat, training free-run RMSE [mm] from the
+first sample; "80 % / tail": trained on the first 19 873 samples, "tail" = the held-back last
+20 %, free run from the state at its start (the same excitation as the training part: it is
+not a score on new motion). Spread = max/min - 1 over the keys. Ensemble = the average of the
+kept members' trajectories (members with a training RMSE above 1.5x the best are dropped).
+Baseline = least-squares Coulomb + viscous + offset (IDIM-LS on the training part) simulated
+the same way. seconds_per_key: wall time of the call / K, compilation included, on the shared
+2-core machine (load in the file's header)."""
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--emps", default=os.environ.get("JAXFRIC_EMPS", str(EMPS_DEFAULT)))
@@ -293,8 +351,29 @@ def main(argv=None):
                          "coulomb,stribeck,lugre,gms) in this process, compilation included, beside the "
                          "pre-0.9 default on 2 000 samples as a load reference; writes motion_timing.md")
     ap.add_argument("--no-reference", action="store_true", help="with --models: skip the reference run")
+    ap.add_argument("--keys", type=int, default=5, help="with --parts keys: keys 0..K-1")
+    ap.add_argument("--key-models", default="coulomb,stribeck,lugre,gms",
+                    help="with --parts keys: the EMPS rows to fit")
     args = ap.parse_args(argv)
     out = results_dir(args.out, quick=args.quick)
+    if args.parts == "keys":
+        load0 = os.getloadavg()[0]
+
+        def write(rows):  # after every row: a long run leaves what it measured
+            write_csv(rows, out / "motion_keys.csv")
+            text = "\n".join([
+                "# Motion identification over keys: spread, baseline, ensemble (benchmarks/motion.py)", "",
+                f"Command: `python benchmarks/motion.py --parts keys --keys {args.keys} --key-models "
+                f"{args.key_models}{' --quick' if args.quick else ''}` (1-minute load average {load0:.1f} at "
+                f"the start, {os.getloadavg()[0]:.1f} at the last row, {os.cpu_count()} CPUs)", "",
+                KEYS_NOTE, "", markdown_table(rows, fmt=_cell), ""])
+            (out / "motion_keys.md").write_text(text)
+            return text
+
+        rows = run_keys(args.emps, [m.strip() for m in args.key_models.split(",")], args.keys, args.quick,
+                        on_row=write)
+        print(write(rows))
+        return
     if args.models:
         names = [m.strip() for m in args.models.split(",") if m.strip()]
         load0 = os.getloadavg()[0]
