@@ -707,7 +707,7 @@ def identify_motion(
             batch of keys (then no ``key``). Each member is ``identify_motion(...,
             key=keys[i])``; the fit returned is the member with the lowest training
             free-run RMSE, and ``fit.ensemble`` holds every member. Members whose
-            training RMSE exceeds [`ENSEMBLE_DROP`][jaxfric.motion._api.ENSEMBLE_DROP] times the best are dropped
+            training RMSE exceeds `ENSEMBLE_DROP` times the best are dropped
             and listed; the rest predict together: [`MotionFit.simulate_ensemble`][jaxfric.motion.MotionFit.simulate_ensemble]
             (their average and band) and ``metrics["ensemble"]`` (the average's metrics).
 
@@ -882,7 +882,7 @@ ENSEMBLE_DROP = 1.5
 
 def kept_members(train_rmse) -> list:
     """Indices of the members whose training RMSE is finite and at most
-    [`ENSEMBLE_DROP`][jaxfric.motion._api.ENSEMBLE_DROP] times the best one's."""
+    `ENSEMBLE_DROP` times the best one's."""
     train = np.asarray(train_rmse, np.float64)
     best = np.min(np.where(np.isfinite(train), train, np.inf))
     return [i for i in range(train.size) if np.isfinite(train[i]) and train[i] <= ENSEMBLE_DROP * best]

@@ -178,7 +178,7 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "tail", folds: 
 
     ``judge``: ``"tail"`` (default) ranks by the validation part's free-run RMSE (the held-back
     block, or the ``valid`` records); ``"blocked"`` ranks by blocked cross-validation of the
-    training part ([`blocked_score`][jaxfric.motion._compare.blocked_score], ``folds`` blocks per record, each
+    training part (`blocked_score`, ``folds`` blocks per record, each
     held-out block simulated from its own first 20 samples): ``folds`` more fits per model, and
     every block is scored on motion its fit never saw. The table shows the judge's score
     beside the validation RMSE, and the baseline's under the same judge.
