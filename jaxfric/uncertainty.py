@@ -505,7 +505,7 @@ def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
     loose = [k for k, v in verdicts.items() if not v["identifiable"]]
     if loose:
         lines.append(f"  not identifiable from these data: {', '.join(loose)}; their values were set by the search "
-                     "box or a few samples: no physical properties (why: fit.summary(), report.md)")
+                     "box or a few samples, not measured: no physical properties (report.md says why)")
     if u is not None:
         lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
     return lines

@@ -1,7 +1,14 @@
 """The README is a user's page that works as written: every Python block runs (those that
-need the real data run on the local copies in ../shared/data and are skipped without them),
-the set-up commands are the ones CI runs, every link resolves, and every number of the
-results table is in the results file its row links to."""
+need the real data run on the local copies in ../shared/data and are skipped without them)
+and prints what the output block after it shows, the set-up commands are the ones CI runs,
+every link resolves, and every number of the results table is in the results file its row
+links to.
+
+What the output blocks show and the tests compare exactly: sample and parameter counts,
+evaluation and step counts of fixed budgets, the table layout, and the EMPS recipe's MSE and
+warning (a least-squares optimum, the same on every CPU). Machine-dependent, not compared:
+every time, and the quick start's MSE, MAX, FIT, R2 and J values (float32 rounding differs
+between CPUs and the network's free run amplifies it; docs/reproducibility.md)."""
 
 from __future__ import annotations
 
@@ -24,14 +31,37 @@ def blocks(language: str) -> list[str]:
     return re.findall(rf"^```{language}\n(.*?)^```", README, re.S | re.M)
 
 
+def code_and_output() -> list[tuple[str, str | None]]:
+    """Each Python block with the ``text`` block that follows it before the next code block
+    (what it prints), or ``None``."""
+    out = []
+    for m in re.finditer(r"^```(\w+)\n(.*?)^```", README, re.S | re.M):
+        if m.group(1) == "python":
+            out.append([m.group(2), None])
+        elif m.group(1) == "text" and out and out[-1][1] is None:
+            out[-1][1] = m.group(2)
+        elif m.group(1) != "text" and out and out[-1][1] is None:
+            out[-1][1] = ""  # another code block first: this one shows no output
+    return [(code, shown or None) for code, shown in out]
+
+
 def _python_params():
     out = []
-    for i, code in enumerate(blocks("python")):
+    for i, (code, shown) in enumerate(code_and_output()):
         marks = [pytest.mark.slow]
         if "jf.datasets" in code:
             marks.append(pytest.mark.skipif(not HAVE_DATA, reason="no local copy of the data in ../shared/data"))
-        out.append(pytest.param(code, id=f"block{i}", marks=marks))
+        out.append(pytest.param(code, shown, id=f"block{i}", marks=marks))
     return out
+
+
+def _masked(line: str) -> str:
+    """``line`` of the quick start's summary with its machine-dependent numbers replaced by
+    ``#``: all of a metrics or time row, the J values of the stage line; the sample,
+    evaluation and step counts stay."""
+    number = r"-?\d+(\.\d+)?(e[-+]?\d+)?" if line.startswith(("train", "valid", "all", "time")) \
+        else r"-?\d+\.\d+(e[-+]?\d+)?"
+    return " ".join(re.sub(number, "#", line).split())
 
 
 def test_readme_has_its_examples():
@@ -39,8 +69,15 @@ def test_readme_has_its_examples():
     assert any("progress=True" in b for b in blocks("python")), "the quick start shows its progress"
 
 
-@pytest.mark.parametrize("code", _python_params())
-def test_every_python_block_runs_as_written(code, tmp_path):
+def test_every_print_shows_its_output():
+    """A block that prints is followed by the output it prints."""
+    for code, shown in code_and_output():
+        if "print(" in code and "cmp.table()" not in code:  # the motion block's table: docs/motion.md
+            assert shown, code[:200]
+
+
+@pytest.mark.parametrize("code, shown", _python_params())
+def test_every_python_block_runs_as_written(code, shown, tmp_path):
     # the data sets are read from the local copy; the network is never needed here
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DATA=str(SHARED_DATA),
                XDG_CACHE_HOME=str(tmp_path / "cache"))
@@ -49,16 +86,19 @@ def test_every_python_block_runs_as_written(code, tmp_path):
                               text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     if "print(fit.summary())" in code and "elman" in code:
-        # the quick start prints what the README shows: the same table layout and stages
-        shown = blocks("text")[0].splitlines()
-        printed = proc.stdout.splitlines()
-        assert printed[0] == shown[0]
-        for row in ("window      MSE %", "train ", "valid ", "all ", "stages: mapso J=", "time [s]: compile"):
-            assert any(line.startswith(row) for line in printed), row
+        # the quick start: the same lines, counts and budgets; its decimals are machine-dependent
+        shown_lines, printed = shown.splitlines(), proc.stdout.splitlines()
+        assert printed[0] == shown_lines[0]  # model, parameter and sample counts
+        assert [_masked(x) for x in printed] == [_masked(x) for x in shown_lines]
+        valid = next(x for x in printed if x.startswith("valid "))
+        assert float(valid.split()[1]) < 1.0  # an excellent fit on any CPU (MSE % below 1)
         assert "jaxfric" in proc.stderr or "gen/s" in proc.stderr, "no progress bar"
     if "validation MSE" in code:
-        shown = re.search(r"# (\d+\.\d+) %; least squares", code).group(1)
-        assert f"validation MSE {shown} %" in proc.stdout
+        # the EMPS recipe: its MSE and its warning, on stdout and stderr, exactly as shown
+        lines = shown.splitlines()
+        assert proc.stdout.splitlines() == lines[:1]
+        for line in lines[1:]:
+            assert line in " ".join(proc.stderr.split()), line
 
 
 def test_the_two_set_up_commands():
@@ -66,7 +106,7 @@ def test_the_two_set_up_commands():
     bash = "\n".join(blocks("bash"))
     assert "pip install -e . && jaxfric demo" in bash
     ci = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()]
-    install = next(ln for ln in ci if "pip install" in ln)
+    install = next(ln for ln in ci if "pip install -e" in ln)
     test = next(ln for ln in ci if ln.startswith("python -m pytest"))
     assert f"{install} && {test}" in bash.splitlines()
 
@@ -103,7 +143,7 @@ def _rounds_from(number: str, text: str) -> bool:
 
 def test_readme_is_a_users_page():
     lines = README.splitlines()
-    assert len(lines) <= 230
+    assert len(lines) <= 220
     for word in ("session", "issue ", "round "):
         assert word not in README.lower(), word
     assert not re.search(r"\b\d+\.\d+\.\d+\b", README), "version narration belongs in CHANGELOG.md"
