@@ -65,7 +65,7 @@ DEFAULT_REPLICATES = 400
 #: What every output shows instead of the interval of a parameter the data do not determine.
 NOT_IDENTIFIABLE = "not identifiable"
 #: The reason [`ParameterUncertainty.not_identifiable`][jaxfric.uncertainty.ParameterUncertainty.not_identifiable] gives for an interval covering the box.
-COVERS_BOX = "the {level:.0%} interval covers the whole search box: the data do not determine it"
+COVERS_BOX = "its {level:.0%} interval covers its whole search box: the data do not determine it"
 
 
 # ----------------------------------------------------------------------- estimators
