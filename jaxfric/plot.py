@@ -305,15 +305,48 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     return fig
 
 
+#: The start-up transient of a record: its first ``1 / TRANSIENT_DIVISOR`` (5 %), where a
+#: free run's initial state and the zero-phase filter's edges dominate the error.
+TRANSIENT_DIVISOR = 20
+
+
+def _transient(n: int) -> int:
+    """Samples of the start-up transient of an ``n``-sample record (see ``TRANSIENT_DIVISOR``)."""
+    return n // TRANSIENT_DIVISOR
+
+
 def _max_window(data, n: int) -> tuple[slice, str]:
     """Where the error figure quotes MAX |e|: the validation window; without one, the
-    record after its start-up transient (the first 5 %, where a free run's initial state
-    and the zero-phase filter's edges dominate)."""
+    record after its start-up transient (``_transient``)."""
     n_train = _n_train(data)
     if 0 < n_train < n:
         return slice(n_train, n), "validation"
-    skip = n // 20
+    skip = _transient(n)
     return slice(skip, n), f"after the first {skip} samples"
+
+
+def _scale_to_steady(ax, t, errors, skip: int) -> None:
+    """Scale the error axis to the errors after the start-up transient (the first ``skip``
+    samples), and mark the transient: shaded, its extreme error named in the legend when it
+    is off the scale. A spike of a free run's first samples would otherwise set the scale and
+    flatten the errors that matter."""
+    errors = np.asarray(errors, np.float64)
+    if skip < 1 or errors.shape[-1] <= skip:
+        return
+    steady = errors[:, skip:]
+    lo, hi = float(np.nanmin(steady)), float(np.nanmax(steady))
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return
+    pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0)
+    lo, hi = min(lo, 0.0) - pad, max(hi, 0.0) + pad
+    ax.set_ylim(lo, hi)
+    start = errors[:, :skip]
+    worst = float(start.flat[np.nanargmax(np.abs(start))])
+    off = worst < lo or worst > hi
+    ax.axvspan(t[0], t[skip], color="0.5", alpha=0.15, lw=0,
+               label=f"start-up transient (first {t[skip] - t[0]:.2g} s)"
+               + (f": off scale, down to {worst:.3g} N" if off and worst < 0
+                  else f": off scale, up to {worst:.3g} N" if off else ""))
 
 
 def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | None = None) -> Figure:
@@ -323,19 +356,24 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     array). The validation window is shaded; the legend gives each model's MAX
     error |e| over the validation window (the paper's MAX, docs/algorithms.md §6), or,
     without one, over the record after its start-up transient: a spike in the first
-    samples would otherwise be the number quoted.
+    samples would otherwise be the number quoted. The error axis is scaled to the errors
+    after that transient, which is shaded and, when its error is off the scale, says how
+    far it reaches.
     """
     t = _time(data)
     y = _np(data.friction)
     window, where = _max_window(data, y.size)
     fig = Figure(figsize=(9, 4.2), layout="constrained")
     ax = fig.subplots()
+    errors = []
     for i, (label, fit) in enumerate(_as_fit_items(fits, labels)):
         e = y - predict_on(fit, data)
+        errors.append(e)
         ax.plot(t, e, lw=0.9, color=f"C{i}",
                 label=f"{label} (MAX |e| {where} = {np.max(np.abs(e[window])):.3g} N)")
     ax.axhline(0.0, color="0.4", lw=0.6)
     _mark_split(ax, data)
+    _scale_to_steady(ax, t, errors, _transient(y.size))
     ax.set_xlabel("time [s]")
     ax.set_ylabel("error  F - F_hat [N]")
     ax.set_title(title or "Friction estimation error")

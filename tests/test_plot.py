@@ -68,7 +68,8 @@ def test_plot_error_one_curve_per_fit(data, make_fit):
     fits = [make_fit(jf.Coulomb(), [fc, 1.0], dt=1 / 128.0, n_train=320, n_samples=400) for fc in (270.0, 330.0)]
     fig = plot.plot_error(fits, data)
     _check(fig)
-    assert len(fig.axes[0].get_legend().get_texts()) == 2
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert sum("MAX |e|" in t for t in texts) == 2 and texts[-1].startswith("start-up transient"), texts
 
 
 def test_plot_convergence_accepts_histories_solutions_and_pairs(data, make_fit):

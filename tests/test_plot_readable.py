@@ -69,6 +69,25 @@ def test_error_figure_without_validation_skips_the_transient():
     assert "after the first 50 samples = 1 N" in text, text
 
 
+def test_error_figure_is_scaled_to_the_steady_part_and_marks_the_transient(noisy):
+    """A -400 N start-up spike does not set the error axis: it spans the steady errors, and
+    the shaded transient says how far off the scale the spike reaches."""
+    y = np.asarray(noisy.friction)
+    pred = y - 0.5
+    pred[:50] += 400.0  # start-up transient of a free run: e = -400.5 N
+    pred[17_000] -= 7.0
+    ax = plot.plot_error({"model": pred}, noisy).axes[0]
+    lo, hi = ax.get_ylim()
+    assert -5.0 < lo < -0.5 and 7.5 < hi < 12.0, (lo, hi)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(t.startswith("start-up transient (first ") and t.endswith("off scale, down to -400 N")
+               for t in texts), texts
+    # a transient inside the scale is still marked, without "off scale"
+    pred[:50] = y[:50] - 3.0
+    texts = [t.get_text() for t in plot.plot_error({"model": pred}, noisy).axes[0].get_legend().get_texts()]
+    assert any(t.startswith("start-up transient") and "off scale" not in t for t in texts), texts
+
+
 def _overlaps_axes(fig) -> list[str]:
     """Axes whose legend overlaps the axes' own drawing area."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
