@@ -15,6 +15,8 @@ trivial NumPy objective, by ask/tell (one seed, or several seeds in one run with
     python benchmarks/compile_time.py --cache DIR  # JAX's persistent compilation cache
                                    # (a user option) in an empty DIR: one process fills
                                    # it, the next reads it; results/compile_time_cache.*
+                                   # then `jaxfric demo --quick` twice on one new cache
+                                   # (--no-demo: not), with --baseline DIR's version too
 
 ``--baseline DIR`` measures the jaxfric package in ``DIR`` in turn with this one, solver by
 solver, each in a fresh process (``git archive <commit> jaxfric | tar -x -C DIR``);
@@ -28,6 +30,7 @@ import collections
 import inspect
 import json
 import os
+import shlex
 import statistics
 import subprocess
 import sys
@@ -202,6 +205,70 @@ def _in_subprocess(label, a, pythonpath=None) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+DEMO = """
+import collections, json, logging, re, sys, jax
+events, seconds, hits = collections.Counter(), collections.Counter(), collections.Counter()
+def name(s):  # 'jit(_chunk)' (a compile event), 'jit__chunk' (a cache log): '_chunk'
+    return re.sub(r"^jit[(_]|[)]$", "", s)
+def listen(event, duration, **kw):  # every compilation, including one loaded from the cache
+    if event == "/jax/core/compile/backend_compile_duration":
+        events[name(kw.get("fun_name", "?"))] += 1
+        seconds[name(kw.get("fun_name", "?"))] += duration
+class Hits(logging.Handler):
+    def emit(self, record):
+        m = re.match(r"Persistent compilation cache hit for '([^']+)'", record.getMessage())
+        if m:
+            hits[name(m.group(1))] += 1
+log = logging.getLogger("jax._src.compiler")
+log.setLevel(logging.DEBUG)
+log.addHandler(Hits())
+jax.monitoring.register_event_duration_secs_listener(listen)
+from jaxfric.cli import main
+rc = main(sys.argv[2:])
+json.dump({"rc": rc, "events": dict(events), "seconds": dict(seconds), "hits": dict(hits)},
+          open(sys.argv[1], "w"))
+"""
+
+#: The optimiser's programs (jaxfric.optim.loop: `_chunk`; `_run_many` for ensembles;
+#: before issue 47, `_run`).
+SOLVER_PROGRAMS = ("_chunk", "_run_many", "_run")
+
+
+def demo_twice(label: str, cache: Path, work: Path, pythonpath=None, quick=True) -> list[dict]:
+    """``jaxfric demo --quick`` (the library in ``pythonpath``, or this one) run twice
+    in new processes on the one, new, cache folder ``cache``, as a user runs it (the
+    command line's own cache settings): wall seconds of each process, XLA compilations
+    (JAX's compile events, counted and timed by program name) and cache entries."""
+    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(cache), JAX_PLATFORMS="cpu")
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    rows = []
+    for run in (1, 2):
+        stats = work / f"{label}-{run}.json"
+        cmd = [sys.executable, "-c", DEMO, str(stats), "demo", *(["--quick"] if quick else []),
+               "--out", str(work / f"{label}-{run}")]
+        t0 = time.perf_counter()
+        # outside the repository, so PYTHONPATH's library is the one imported
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=work)
+        wall = time.perf_counter() - t0
+        if done.returncode:
+            raise RuntimeError(f"demo ({label}, run {run}) failed:\n{done.stderr[-3000:]}")
+        got = json.loads(stats.read_text())
+        compiled = {k: n - got["hits"].get(k, 0) for k, n in got["events"].items()}
+        solver = [k for k in SOLVER_PROGRAMS if k in got["events"]]
+        rows.append({
+            "version": label, "run": run, "wall_s": wall,
+            "xla_s": sum(got["seconds"].values()),
+            "compiled": sum(compiled.values()),
+            "loaded": sum(got["hits"].values()),
+            "solver_compiled": sum(compiled[k] for k in solver),
+            "solver_loaded": sum(got["hits"].get(k, 0) for k in solver),
+            "cache_entries": len(os.listdir(cache)),
+        })
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_output_arguments(p)
@@ -218,8 +285,11 @@ def main():
                    help="rounds of the versions in turn; medians over all rounds")
     p.add_argument("--no-asktell", action="store_true", help="compilation only")
     p.add_argument("--stem", default=None, help="result file stem (default compile_time)")
+    p.add_argument("--no-demo", action="store_true",
+                   help="with --cache: leave out `jaxfric demo --quick` run twice")
     p.add_argument("--one", default=None, help=argparse.SUPPRESS)
     a = p.parse_args()
+    command = "python benchmarks/compile_time.py " + shlex.join(sys.argv[1:])
     if a.cache:
         # the script's choice, never the library's: a user option (docs/solvers.md)
         jax.config.update("jax_compilation_cache_dir", a.cache)
@@ -232,6 +302,8 @@ def main():
     out = results_dir(a.out, quick=a.quick)
     if a.cache:  # the first process fills the cache, the second reads it
         versions = {"cache empty": None, "cache filled": None}
+        if Path(a.cache).exists() and os.listdir(a.cache):
+            raise SystemExit(f"--cache {a.cache} must be an empty folder")
     elif a.baseline:
         versions = {"baseline": a.baseline, "this": None}
     else:
@@ -257,6 +329,21 @@ def main():
                 "programs": int(med("programs")),
             })
             print(summary[-1], flush=True)
+    demo = []
+    if a.cache and not a.no_demo:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            # the versions in turn, each on a new cache of its own: the same load for both
+            todo = ([("baseline", a.baseline)] if a.baseline else []) + [("this", None)]
+            for r in range(a.repeat):
+                for label, path in todo:
+                    cache = tmp / f"cache-{label}-{r}"
+                    cache.mkdir()
+                    demo += [{**row, "round": r}
+                             for row in demo_twice(label, cache, tmp, path, quick=True)]
+        write_csv(demo, out / f"{a.stem or 'compile_time_cache'}_demo.csv")
     load = os.getloadavg()
     stem = a.stem or ("compile_time_cache" if a.cache else "compile_time")
     write_csv(rows, out / f"{stem}.csv")
@@ -282,9 +369,40 @@ def main():
         "`pure_callback` recipe under `minimise` "
         f"(one seed) or `minimise_many` ({a.seeds} keys).",
         markdown_table(asks, fmt=fmt) if asks else "(not measured: --no-asktell)",
+        *(_demo_text(demo, a, fmt) if demo else []),
+        f"Command: `{command}`",
     ])
     (out / f"{stem}.md").write_text(text + "\n")
     print(text)
+
+
+def _demo_text(demo, a, fmt) -> list[str]:
+    base = (f" `baseline` is the library in {a.baseline}, run in turn with `this` (each on a "
+            "new cache of its own)." if a.baseline else "")
+    return [
+        "## The command line: `jaxfric demo --quick` twice on one new cache",
+        "Each run a new process with `JAX_COMPILATION_CACHE_DIR` set to a new, empty folder "
+        "(the command line turns the cache on, with JAX's default of writing programs that "
+        "took at least 1 s to compile); the demo shows its progress bars (no `--quiet`)."
+        f"{base} `wall_s`: the process, start to end; `xla_s`: the seconds of JAX's compile "
+        "events (a program loaded from the cache included); `compiled` / `loaded`: programs "
+        "XLA compiled / loaded from the cache; `solver_*`: those of the optimiser's runs "
+        "(`_chunk`, `_run_many`; before issue 47 `_run`); `cache_entries`: files in the "
+        "cache afterwards; `round`: versions in turn, each round on new caches.",
+        markdown_table(demo, fmt=fmt),
+        *_demo_medians(demo, fmt),
+    ]
+
+
+def _demo_medians(demo, fmt) -> list[str]:
+    rows = []
+    for version in dict.fromkeys(r["version"] for r in demo):
+        first = [r["wall_s"] for r in demo if r["version"] == version and r["run"] == 1]
+        second = [r["wall_s"] for r in demo if r["version"] == version and r["run"] == 2]
+        rows.append({"version": version, "rounds": len(first),
+                     "first_s": statistics.median(first), "second_s": statistics.median(second),
+                     "second/first": statistics.median(second) / statistics.median(first)})
+    return ["Medians over the rounds:", markdown_table(rows, fmt=fmt)]
 
 
 if __name__ == "__main__":
