@@ -172,6 +172,21 @@ def test_docstrings_use_cross_references_not_sphinx_roles():
                        + "\n".join(found[:30]))
 
 
+def test_every_document_a_docstring_cites_is_shipped():
+    """A docstring that cites ``docs/solvers.md``, ``benchmarks/results/motion.md`` or
+    ``README.md`` sends the reader to a file of this repository; an unshipped one (a design
+    note outside it) sends them nowhere. Bare lower-case names (``report.md``) are files
+    jaxfric writes, not citations."""
+    cited = set()
+    for path in sorted((ROOT / "jaxfric").rglob("*.py")):
+        for name in re.findall(r"(?<![\w./-])((?:[\w-]+/)+[\w.-]+\.md|[A-Z][A-Z_]+\.md)\b",
+                               path.read_text(encoding="utf-8")):
+            cited.add((name, str(path.relative_to(ROOT))))
+    missing = sorted(f"{where}: {name}" for name, where in cited if not (ROOT / name).is_file())
+    assert not missing, "citations of files the project does not ship:\n" + "\n".join(missing)
+    assert any(name == "docs/algorithms.md" for name, _ in cited)
+
+
 # every public name of these modules has an entry in the API reference (docs/api/*.md)
 API_MODULES_SKIPPED = {"jaxfric.cli"}  # the command line, documented by ``jaxfric --help``
 
