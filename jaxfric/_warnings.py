@@ -1,7 +1,7 @@
 """jaxfric's warning categories, in a module that imports nothing heavy.
 
-Each is documented, and importable, where it is raised (``jaxfric.fit``,
-``jaxfric.identification``, ``jaxfric.rig``); they live here so that code which only
+Each is documented, and importable, where it is raised ([`jaxfric.fit`][jaxfric.fit],
+[`jaxfric.identification`][jaxfric.identification], [`jaxfric.rig`][jaxfric.rig]); they live here so that code which only
 needs a category (``warnings.filterwarnings(..., category=...)``, or pytest-xdist
 rebuilding a warning a worker recorded) does not import JAX with it.
 """

@@ -1,7 +1,7 @@
 """A fitted friction model outside JAX: a pure-NumPy step function and a C header.
 
 For a controller's real-time loop the free-run rollout of [`jaxfric.Fit.predict`][jaxfric.fit.Fit.predict]
-is split into one call per sample (the per-sample form of ``jaxfric.motion``):
+is split into one call per sample (the per-sample form of [`jaxfric.motion`][jaxfric.motion]):
 
     f, state = step(v, state)        F_k = output(s_k, v_k),  s_{k+1} = update(s_k, v_k)
 

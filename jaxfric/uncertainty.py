@@ -9,7 +9,7 @@ Each kind of fit says how its residuals are built ([`FitKind`][jaxfric.uncertain
 [`jaxfric.Fit`][jaxfric.fit.Fit] here (friction prediction minus measured friction), a
 [`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit] in [`jaxfric.motion`][jaxfric.motion] (simulated minus measured
 position), which registers it with [`register_fit_kind`][jaxfric.uncertainty.register_fit_kind]. A record type defined
-above this module (``jaxfric.identification.RecordSet``) registers how to read its
+above this module ([`jaxfric.identification.RecordSet`][jaxfric.identification.RecordSet]) registers how to read its
 training records with [`register_training_records`][jaxfric.uncertainty.register_training_records]. Both are looked up along the
 class's MRO, and registered by the module that defines the class, so the registration
 has run whenever an instance exists; this module imports nothing above it.

@@ -1,7 +1,7 @@
-"""Models, solvers and budgets for the command line, and the calls to ``jaxfric.identify``.
+"""Models, solvers and budgets for the command line, and the calls to [`jaxfric.identify`][jaxfric.identification.identify].
 
 Each model's fit is one [`jaxfric.cli.spec.FitSpec`][jaxfric.cli.spec.FitSpec] (arguments -> specification ->
-``jaxfric.identify``). Models are passed by *name* (with ``model_options``), so the command
+[`jaxfric.identify`][jaxfric.identification.identify]). Models are passed by *name* (with ``model_options``), so the command
 line gets the library's named-model defaults; without ``--generations`` / ``--nm-evals``
 the library's [`jaxfric.identification.default_solver`][jaxfric.identification.default_solver] is used unchanged, and a budget the
 user gives replaces only that field of it. ``--quick`` shrinks the budget to a smoke test

@@ -1,6 +1,6 @@
 """Friction identification: model + data + optimiser → [`jaxfric.Fit`][jaxfric.fit.Fit] (docs/algorithms.md §11).
 
-``from jaxfric.identification import identify`` (re-exported as ``jaxfric.identify``);
+``from jaxfric.identification import identify`` (re-exported as [`jaxfric.identify`][jaxfric.identification.identify]);
 its stages, each usable alone, are in [`jaxfric.identification.stages`][jaxfric.identification.stages].
 """
 

@@ -1,4 +1,4 @@
-"""``jaxfric.identify``: model + data + optimiser → [`jaxfric.Fit`][jaxfric.fit.Fit] (docs/algorithms.md §11).
+"""[`jaxfric.identify`][jaxfric.identification.identify]: model + data + optimiser → [`jaxfric.Fit`][jaxfric.fit.Fit] (docs/algorithms.md §11).
 
 The end-to-end algorithm of §11: split and scale the record (steps 2–3), build the
 cost J (step 4), run the optimiser (steps 5–7), then report metrics on the

@@ -4,7 +4,7 @@
 [`as_records`][jaxfric.identification.as_records] (several records, each wholly for training or for validation)
 accept
 
-* a [`FrictionData`][jaxfric.rig.FrictionData] (``jaxfric.FrictionData``, what every
+* a [`FrictionData`][jaxfric.rig.FrictionData] ([`jaxfric.FrictionData`][jaxfric.rig.FrictionData], what every
   loader of [`jaxfric.rig`][jaxfric.rig] returns), its split ``n_train`` used unless ``train=``
   overrides it;
 * a tuple ``(velocity, friction, dt)``.

@@ -1,4 +1,4 @@
-"""``jaxfric.identify_motion``: friction from actuator force and position alone (§13.2).
+"""[`jaxfric.identify_motion`][jaxfric.motion.identify_motion]: friction from actuator force and position alone (§13.2).
 
 No friction signal and no acceleration: the friction model sits inside the mechanics
 ([`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion]) and its parameters (optionally the mass, a

@@ -49,7 +49,7 @@ class FrictionStep(eqx.Module):
     """Per-sample friction of one model (module docstring). Units: v in m/s, F in N,
     ``dt`` in s. ``implicit_state``: whether the motion integrator may advance the
     state with the *new* velocity (backward Euler in the state, needed for stiff
-    bristle springs, ``jaxfric.motion.simulate_motion``)."""
+    bristle springs, [`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion])."""
 
     model: AbstractFrictionModel = eqx.field(static=True)
 
