@@ -253,3 +253,26 @@ def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
     assert "blocked RMSE [mm]" in cmp.table()
     with pytest.raises(ValueError, match="judge must be one of"):
         compare_motion(["coulomb"], rec, key=0, judge="oracle", **opts)
+
+
+def test_the_official_emps_script_reads_and_scores_any_emps_format_test_file(tmp_path):
+    """A test recording holding only t (float32 stamps that round to another 1 kHz step than
+    the estimation file's), qm and vir is read and scored from its first 20 samples."""
+    import sys
+    from pathlib import Path
+
+    from scipy.io import savemat
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import emps_official
+
+    rec = _record(1500)
+    t = (np.arange(1500) * 1.0000080e-3).astype(np.float32)
+    savemat(tmp_path / "test.mat", {"t": t[:, None], "qm": rec.position[:, None],
+                                    "vir": (rec.force / emps_official.GTAU)[:, None]})
+    test = emps_official.motion_data(tmp_path / "test.mat")
+    assert not test.dt == 0.0009999840 and same_sample_time(test.dt, 0.0009999840)
+    fit = emps_official.fixed_fit(MASS, TRUTH["sigma2"], TRUTH["Fc"], OFFSET, 0.0009999840)
+    with jax.enable_x64(True):
+        score = fit.score(test, init_window=20)
+    assert np.isfinite(score["rmse_mm"])

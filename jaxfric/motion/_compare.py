@@ -45,10 +45,11 @@ class MotionComparison:
         return self.fits[self.ranking[0]]
 
     @property
-    def baseline(self) -> dict:
+    def baseline(self) -> dict | None:
         """The least-squares Coulomb + viscous + offset baseline's metrics on the same data
-        and judge (``{"train": ..., "valid": ...}``, [`jaxfric.motion.motion_metrics`][jaxfric.motion.motion_metrics])."""
-        return next(iter(self.fits.values())).metrics["baseline"]
+        and judge (``{"train": ..., "valid": ...}``, [`jaxfric.motion.motion_metrics`][jaxfric.motion.motion_metrics]);
+        ``None`` for fits made without it (built by hand)."""
+        return next(iter(self.fits.values())).metrics.get("baseline")
 
     def rows(self) -> list[dict]:
         """One dict per ranked fit, then the baseline: ``rank`` (``None`` for the
@@ -56,7 +57,9 @@ class MotionComparison:
         ``valid_rmse_mm``, ``valid_fit_percent``, ``beats_baseline`` (validation),
         ``worse_than_simpler``."""
         base = self.baseline
-        base_score = base["valid"]["rmse_mm"] if self.baseline_score is None else self.baseline_score
+        base_score = None
+        if base is not None:
+            base_score = base["valid"]["rmse_mm"] if self.baseline_score is None else self.baseline_score
         out = []
         for i, name in enumerate(self.ranking, 1):
             fit = self.fits[name]
@@ -65,8 +68,11 @@ class MotionComparison:
             out.append({"rank": i, "model": name, "parameters": m["num_params"], "mass_kg": fit.mass,
                         "offset_N": fit.offset, "train_rmse_mm": m["train"]["rmse_mm"],
                         "valid_rmse_mm": m["valid"]["rmse_mm"], "valid_fit_percent": m["valid"]["fit_percent"],
-                        "judge_rmse_mm": score, "beats_baseline": bool(score < base_score),
+                        "judge_rmse_mm": score,
+                        "beats_baseline": None if base is None else bool(score < base_score),
                         "worse_than_simpler": any(r == name for r, _ in self.overfit)})
+        if base is None:
+            return out
         settings = next(iter(self.fits.values())).settings["motion"]["baseline"]
         out.append({"rank": None, "model": BASELINE_LABEL, "parameters": 4, "mass_kg": settings["M"],
                     "offset_N": settings["offset"], "train_rmse_mm": base["train"]["rmse_mm"],
