@@ -285,7 +285,10 @@ def run_compensation(quick, out, key=0):
     return rows, fits
 
 
-def run_keys(path, names, count, quick, on_row=None):
+SPLITS = {"whole": "whole file", "tail": "80 % / tail"}
+
+
+def run_keys(path, names, count, quick, on_row=None, splits=("whole", "tail")):
     """Rows of the ``keys`` part (module docstring): one per (model, split)."""
     data, n_train = emps_motion_data(path)
     batch = jnp.stack([jax.random.key(i) for i in range(count)])
@@ -298,7 +301,7 @@ def run_keys(path, names, count, quick, on_row=None):
     rows = []
     for name in names:
         _, model, opts = EMPS_MODELS[name]
-        for split, train in (("whole file", 1.0), ("80 % / tail", n_train)):
+        for split, train in ((SPLITS[k], 1.0 if k == "whole" else n_train) for k in splits):
             t0 = time.perf_counter()
             fit = identify_motion(model, data, keys=batch, mass=(50.0, 200.0), train=train, fit_offset=True,
                                   dtype=jnp.float64, model_options=opts, search=search)
@@ -354,6 +357,7 @@ def main(argv=None):
     ap.add_argument("--keys", type=int, default=5, help="with --parts keys: keys 0..K-1")
     ap.add_argument("--key-models", default="coulomb,stribeck,lugre,gms",
                     help="with --parts keys: the EMPS rows to fit")
+    ap.add_argument("--splits", default="whole,tail", help=f"with --parts keys: of {','.join(SPLITS)}")
     args = ap.parse_args(argv)
     out = results_dir(args.out, quick=args.quick)
     if args.parts == "keys":
@@ -364,14 +368,15 @@ def main(argv=None):
             text = "\n".join([
                 "# Motion identification over keys: spread, baseline, ensemble (benchmarks/motion.py)", "",
                 f"Command: `python benchmarks/motion.py --parts keys --keys {args.keys} --key-models "
-                f"{args.key_models}{' --quick' if args.quick else ''}` (1-minute load average {load0:.1f} at "
+                f"{args.key_models} --splits {args.splits}{' --quick' if args.quick else ''}` (1-minute load "
+                f"average {load0:.1f} at "
                 f"the start, {os.getloadavg()[0]:.1f} at the last row, {os.cpu_count()} CPUs)", "",
                 KEYS_NOTE, "", markdown_table(rows, fmt=_cell), ""])
             (out / "motion_keys.md").write_text(text)
             return text
 
         rows = run_keys(args.emps, [m.strip() for m in args.key_models.split(",")], args.keys, args.quick,
-                        on_row=write)
+                        on_row=write, splits=[k.strip() for k in args.splits.split(",")])
         print(write(rows))
         return
     if args.models:
