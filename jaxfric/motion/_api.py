@@ -456,6 +456,7 @@ class MotionFit(Fit):
                 "members": members}
 
     def ensemble_kept(self) -> list:
+        """Indices of the members that predict together (the dropped ones left out)."""
         if not self.ensemble or "kept" not in self.ensemble:
             raise ValueError("this fit has no motion ensemble: identify_motion(..., keys=K) makes one")
         return list(self.ensemble["kept"])
