@@ -1,24 +1,30 @@
 """Matplotlib figures shared by the command line, the report writer and the notebooks.
 
-Every function builds a new :class:`~matplotlib.figure.Figure` and returns it; none
+Every function builds a new `Figure` and returns it; none
 calls ``plt.show`` or picks a backend (the CLI selects Agg, notebooks keep theirs),
 so the caller decides whether to show, save or close it.
 
 Figures (paper numbering from docs/algorithms.md §1):
 
-- :func:`plot_data` -- velocity and computed friction against time, with the
+- [`plot_data`][jaxfric.plot.plot_data] -- velocity and computed friction against time, with the
   training/validation split marked (the paper's Figs 9-10);
-- :func:`plot_friction_velocity` -- friction against velocity (hysteresis loops);
-- :func:`plot_fit` -- measured against estimated friction for one model (Figs 11-12);
-- :func:`plot_error` -- error curves ``F - F_hat`` of several models;
-- :func:`plot_band` -- an ensemble's prediction band around its best member;
-- :func:`plot_convergence` -- best objective against function evaluations (log scale);
-- :func:`plot_table1` -- final values of the Table 1 benchmark, per function and solver.
+- [`plot_friction_velocity`][jaxfric.plot.plot_friction_velocity] -- friction against velocity (hysteresis loops);
+- [`plot_fit`][jaxfric.plot.plot_fit] -- measured against estimated friction for one model (Figs 11-12);
+- [`plot_error`][jaxfric.plot.plot_error] -- error curves ``F - F_hat`` of several models;
+- [`plot_models`][jaxfric.plot.plot_models] -- several models on one window: measured samples as dots under
+  the models' lines, and each model's error below;
+- [`plot_band`][jaxfric.plot.plot_band] -- an ensemble's prediction band around its best member;
+- [`plot_convergence`][jaxfric.plot.plot_convergence] -- best objective against function evaluations (log scale);
+- [`plot_table1`][jaxfric.plot.plot_table1] -- final values of the Table 1 benchmark, per function and solver.
 
-They take jaxfric's own types: data a :class:`jaxfric.FrictionData`, a fit a
-:class:`jaxfric.Fit` (or a plain prediction array, ``F_hat`` in N on the data's time
-grid), a history a :class:`jaxfric.History`, a :class:`jaxfric.Solution` or a fit
-(or an ``(evals, f)`` pair of arrays). Anything else is a :class:`TypeError` naming
+Every figure draws a model in its own colour and line style ([`STYLES`][jaxfric.plot.STYLES],
+[`style`][jaxfric.plot.style]): the same model looks the same in the CLI's report and in every
+notebook, and the least-squares baseline is always a dashed black line.
+
+They take jaxfric's own types: data a [`jaxfric.FrictionData`][jaxfric.FrictionData], a fit a
+[`jaxfric.Fit`][jaxfric.Fit] (or a plain prediction array, ``F_hat`` in N on the data's time
+grid), a history a [`jaxfric.History`][jaxfric.History], a [`jaxfric.Solution`][jaxfric.Solution] or a fit
+(or an ``(evals, f)`` pair of arrays). Anything else is a `TypeError` naming
 what was given.
 """
 
@@ -43,13 +49,70 @@ __all__ = [
     "plot_error",
     "plot_fit",
     "plot_friction_velocity",
+    "plot_models",
     "plot_table1",
     "predict_on",
+    "STYLES",
+    "style",
     "velocity_unit",
 ]
 
 _MEASURED = dict(color="0.15", lw=1.1)
 _VALID_SHADE = dict(color="tab:orange", alpha=0.08, lw=0)
+
+#: One look per model family (and per solver), shared by every figure: ``family ->
+#: matplotlib line keywords``. [`style`][jaxfric.plot.style] picks the entry from a label. The
+#: least-squares baseline (asymmetric Coulomb + viscous + offset by least squares) is a
+#: dashed black line, so that it stays visible under and beside the models.
+STYLES: dict[str, dict] = {
+    "measured": dict(color="0.15"),
+    "baseline": dict(color="black", ls="--"),
+    "ENN full": dict(color="tab:cyan"),
+    "ENN": dict(color="tab:blue"),
+    "LuGre": dict(color="tab:red"),
+    "Coulomb": dict(color="tab:green"),
+    "Stribeck": dict(color="tab:purple"),
+    "Dahl": dict(color="tab:olive"),
+    "GMS": dict(color="tab:pink"),
+    "Cylinder": dict(color="tab:brown"),
+    "no compensation": dict(color="0.55"),
+    "true friction": dict(color="goldenrod", ls=":"),
+    "MAPSO-NMDS": dict(color="tab:blue"),
+    "PSO": dict(color="tab:orange"),
+    "CMA-ES": dict(color="tab:green"),
+}
+
+# label words -> family, checked in this order (the first match wins)
+_STYLE_WORDS = (
+    (("baseline", "least squares", "least-squares", "ls map", "idim"), "baseline"),
+    (("measured",), "measured"),
+    (("elman_full", "elman full", "enn full", "full elman"), "ENN full"),
+    (("enn", "elman"), "ENN"),
+    (("lugre",), "LuGre"),
+    (("stribeck",), "Stribeck"),
+    (("coulomb",), "Coulomb"),
+    (("dahl",), "Dahl"),
+    (("gms", "maxwell"), "GMS"),
+    (("cylinder",), "Cylinder"),
+    (("no compensation", "none"), "no compensation"),
+    (("true friction", "ideal"), "true friction"),
+    (("mapso-nmds", "mapso–nmds", "mapso_nmds", "mapso"), "MAPSO-NMDS"),
+    (("cma",), "CMA-ES"),
+    (("pso",), "PSO"),
+)
+_SPARE_COLOURS = ("tab:gray", "darkorange", "teal", "indigo", "crimson", "sienna")
+
+
+def style(label: str, index: int = 0) -> dict:
+    """Line keywords (``color``, and ``ls`` where the family has one) for a model or
+    solver ``label``: its family's entry of [`STYLES`][jaxfric.plot.STYLES], found by the words of the
+    label (``"ENN (30 neurons)"`` -> ENN, ``"LuGre (asymmetric + offset)"`` -> LuGre,
+    ``"LS baseline"`` -> baseline), else a spare colour chosen by ``index``."""
+    text = str(label).lower()
+    for words, family in _STYLE_WORDS:
+        if any(w in text for w in words):
+            return dict(STYLES[family])
+    return dict(color=_SPARE_COLOURS[index % len(_SPARE_COLOURS)])
 
 
 # ----------------------------------------------------------------------- helpers
@@ -107,7 +170,7 @@ def _split_legend_note(data) -> str:
 
 
 def fit_label(fit, default: str = "model") -> str:
-    """A short display name: a :class:`jaxfric.Fit`'s model class name (with the neuron
+    """A short display name: a [`jaxfric.Fit`][jaxfric.Fit]'s model class name (with the neuron
     count for an Elman network), ``default`` for anything else (a prediction array, a
     history)."""
     if not isinstance(fit, Fit):
@@ -123,9 +186,9 @@ def fit_label(fit, default: str = "model") -> str:
 def predict_on(fit, data) -> np.ndarray:
     """Friction [N] predicted by ``fit`` on ``data``'s velocity (free run over the record),
     with ``data``'s measured channels for a model that needs them (``input_names``, e.g.
-    the chamber pressures of :class:`~jaxfric.models.Cylinder`).
+    the chamber pressures of [`Cylinder`][jaxfric.models.Cylinder]).
 
-    ``fit`` is a :class:`jaxfric.Fit` or an array of predictions already on the data's grid.
+    ``fit`` is a [`jaxfric.Fit`][jaxfric.Fit] or an array of predictions already on the data's grid.
     """
     _checked(data)
     if isinstance(fit, Fit):
@@ -171,13 +234,13 @@ def _mse_percent(y, y_hat) -> float:
 def plot_data(data, *, title: str | None = None) -> Figure:
     """Velocity and computed friction against time (the paper's Figs 9 and 10).
 
-    ``data`` is a :class:`jaxfric.FrictionData`. The validation window is shaded.
+    ``data`` is a [`jaxfric.FrictionData`][jaxfric.FrictionData]. The validation window is shaded.
     """
     t = _time(data)
     scale, unit = velocity_unit(data.velocity)
     fig = Figure(figsize=(9, 5.5), layout="constrained")
     ax_v, ax_f = fig.subplots(2, 1, sharex=True)
-    ax_v.plot(t, _np(data.velocity) * scale, color="tab:blue", lw=1.1, label="velocity")
+    ax_v.plot(t, _np(data.velocity) * scale, color="0.15", lw=1.1, label="velocity")
     ax_v.axhline(0.0, color="0.6", lw=0.6)
     ax_v.set_ylabel(f"piston velocity [{unit}]")
     # Records from the rig pipeline carry pressures; velocity/friction pairs loaded as such do not.
@@ -221,7 +284,8 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
                            bins: int = 60) -> Figure:
     """Friction against velocity: the hysteresis loops of the record.
 
-    Training samples are drawn in blue, validation samples in orange. With
+    Training samples are drawn in grey, validation samples in orange (the models'
+    colours are [`style`][jaxfric.plot.style]'s). With
     ``fits`` (one fit, a sequence, or a mapping label -> fit) the models'
     predictions are drawn on top of the measurements.
 
@@ -242,7 +306,7 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
     ax = fig.subplots()
     train, valid = keep[keep < n], keep[keep >= n]
     thin_note = f" ({keep.size} of {v.size} samples)" if dense else ""
-    ax.plot(v[train] * scale, f[train], ".", color="tab:blue", label="measured, training" + thin_note, **dots)
+    ax.plot(v[train] * scale, f[train], ".", color="0.6", label="measured, training" + thin_note, **dots)
     if valid.size:
         ax.plot(v[valid] * scale, f[valid], ".", color="tab:orange", label="measured, validation", **dots)
     edges = np.linspace(v.min(), v.max(), bins + 1) if dense and v.max() > v.min() else None
@@ -254,9 +318,10 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
             y_hat = predict_on(fit, data)
             if edges is not None:
                 c, m = _binned(v, y_hat, edges)
-                ax.plot(c * scale, m, "-", lw=2.0, color=f"C{i + 2}", zorder=4, label=f"{label} (binned median)")
+                ax.plot(c * scale, m, lw=2.0, zorder=4, label=f"{label} (binned median)",
+                        **{"ls": "-", **style(label, i)})
             else:
-                ax.plot(v * scale, y_hat, "-", lw=1.2, color=f"C{i + 2}", zorder=4, label=label)
+                ax.plot(v * scale, y_hat, lw=1.2, zorder=4, label=label, **{"ls": "-", **style(label, i)})
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.axvline(0.0, color="0.6", lw=0.6)
     ax.set_xlabel(f"piston velocity [{unit}]")
@@ -287,7 +352,8 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     fig = Figure(figsize=(12, 4.6), layout="constrained")
     ax_t, ax_v = fig.subplots(1, 2, width_ratios=[2.4, 1])
     ax_t.plot(t, y, label="measured", **_MEASURED)
-    ax_t.plot(t, y_hat, color="tab:red", lw=1.0, ls="-", label=f"estimated: {label}")
+    look = {"ls": "-", **style(label)}
+    ax_t.plot(t, y_hat, lw=1.0, label=f"estimated: {label}", **look)
     _mark_split(ax_t, data)
     ax_t.set_xlabel("time [s]")
     ax_t.set_ylabel("friction force [N]")
@@ -295,7 +361,7 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     ax_t.grid(alpha=0.3)
     _legend_outside(ax_t)
     ax_v.plot(v * scale, y, ".", ms=1.5, color="0.35", label="measured")
-    ax_v.plot(v * scale, y_hat, "-", lw=0.8, color="tab:red", label="estimated")
+    ax_v.plot(v * scale, y_hat, lw=0.8, label="estimated", **look)
     ax_v.set_xlabel(f"piston velocity [{unit}]")
     ax_v.set_ylabel("friction force [N]")
     ax_v.set_title("against velocity")
@@ -369,7 +435,7 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     for i, (label, fit) in enumerate(_as_fit_items(fits, labels)):
         e = y - predict_on(fit, data)
         errors.append(e)
-        ax.plot(t, e, lw=0.9, color=f"C{i}",
+        ax.plot(t, e, lw=0.9, **style(label, i),
                 label=f"{label} (MAX |e| {where} = {np.max(np.abs(e[window])):.3g} N)")
     ax.axhline(0.0, color="0.4", lw=0.6)
     _mark_split(ax, data)
@@ -379,6 +445,51 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     ax.set_title(title or "Friction estimation error")
     ax.grid(alpha=0.3)
     _legend_outside(ax)
+    return fig
+
+
+def plot_models(fits, data, *, window: str = "valid", labels: Sequence[str] | None = None,
+                title: str | None = None, max_points: int = 4000) -> Figure:
+    """Several models against the measured friction on one window of ``data``.
+
+    Top: the measured friction as grey dots (so that it stays visible under the models)
+    and each model's prediction as a line in its [`style`][jaxfric.plot.style]; bottom: each model's
+    error ``F - F_hat``, with its normalised MSE % over the window in the legend.
+    ``fits``: one fit, a sequence, or a mapping label -> fit or prediction array (on the
+    whole record). ``window``: ``"valid"`` (the validation window; the whole record
+    when there is none), ``"train"`` or ``"all"``. At most ``max_points`` samples are
+    drawn as dots (evenly thinned); the lines use every sample.
+    """
+    t = _time(data)
+    y = _np(data.friction)
+    n = _n_train(data)
+    if window not in ("valid", "train", "all"):
+        raise ValueError(f"window must be 'valid', 'train' or 'all', got {window!r}")
+    sl = {"valid": slice(n, None) if 0 < n < y.size else slice(None), "train": slice(None, n),
+          "all": slice(None)}[window]
+    name = {"valid": "validation window" if 0 < n < y.size else "whole record",
+            "train": "training window", "all": "whole record"}[window]
+    ts, ys = t[sl], y[sl]
+    keep = _thinned(ys.size, max_points)
+    fig = Figure(figsize=(11, 6.2), layout="constrained")
+    ax_f, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[1.6, 1])
+    ax_f.plot(ts[keep], ys[keep], ".", ms=2.5, color=STYLES["measured"]["color"], alpha=0.6, zorder=1,
+              label="measured" + (f" ({keep.size} of {ys.size} samples)" if keep.size < ys.size else ""))
+    for i, (label, fit) in enumerate(_as_fit_items(fits, labels)):
+        look = {"ls": "-", **style(label, i)}
+        y_hat = predict_on(fit, data)[sl]
+        # the dashed baseline on top: the models show through its gaps, and it is never hidden
+        ax_f.plot(ts, y_hat, lw=1.1, zorder=4 if look == STYLES["baseline"] else 3, label=label, **look)
+        ax_e.plot(ts, ys - y_hat, lw=0.9, label=f"{label}: MSE {_mse_percent(ys, y_hat):.3g} %", **look)
+    ax_e.axhline(0.0, color="0.4", lw=0.6)
+    ax_f.set_ylabel("friction force [N]")
+    ax_e.set_ylabel("error  F - F_hat [N]")
+    ax_e.set_xlabel("time [s]")
+    ax_f.set_title(title or f"Measured friction and the models on the {name}")
+    ax_e.set_title(f"Error on the {name} (normalised MSE % in the legend)")
+    for ax in (ax_f, ax_e):
+        ax.grid(alpha=0.3)
+        _legend_outside(ax, markerscale=3)
     return fig
 
 
@@ -397,9 +508,10 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
     k = len(fit.ensemble.get("J", []))
     fig = Figure(figsize=(9, 4.2), layout="constrained")
     ax = fig.subplots()
-    ax.fill_between(t, lo, hi, color="tab:red", alpha=0.25, lw=0, label=f"band: min-max of {k} members")
+    colour = style(label)["color"]
+    ax.fill_between(t, lo, hi, color=colour, alpha=0.25, lw=0, label=f"band: min-max of {k} members")
     ax.plot(t, y, label="measured", **_MEASURED)
-    ax.plot(t, y_hat, color="tab:red", lw=1.0, label=f"best member: {label}")
+    ax.plot(t, y_hat, color=colour, lw=1.0, label=f"best member: {label}")
     _mark_split(ax, data)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("friction force [N]")
@@ -411,7 +523,8 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
 
 # ------------------------------------------------------------------ convergence
 def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
-    """``(evals, f)`` from a :class:`History`, a :class:`Solution`, a :class:`Fit` or an
+    """``(evals, f)`` from a [`History`][jaxfric.History], a [`Solution`][jaxfric.Solution],
+    a [`Fit`][jaxfric.Fit] or an
     ``(evals, f)`` pair.
 
     Batched histories (from ``minimise_many``) come back 2-D, one row per run.
@@ -471,7 +584,7 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
                      title: str | None = None, ylabel: str = "best objective value J") -> Figure:
     """Best objective value against function evaluations, log scale.
 
-    Items may be :class:`jaxfric.Solution`, :class:`jaxfric.History`, fits holding
+    Items may be [`jaxfric.Solution`][jaxfric.Solution], [`jaxfric.History`][jaxfric.History], fits holding
     a solution, or ``(evals, f)`` pairs; a mapping label -> item works too. For a
     batch of runs (``minimise_many``) the median is drawn with the min-max band.
     Every stage of a fit is drawn and named in the legend per model: a dotted line
@@ -510,7 +623,7 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
     clipped = False
     gradient_steps = False
     for i, ((evals, f), label) in enumerate(zip(curves, labels)):
-        color = f"C{i}"
+        color = style(label, i)["color"]
         searched = [s for s in getattr(items[i], "stages", []) if "num_evals" in s]
         first = _stage_name(searched[0]) if searched else None
         if evals.ndim == 2:  # a batch of runs: median and band on a common grid
@@ -585,7 +698,7 @@ def plot_table1(rows: Sequence[Mapping], *, title: str | None = None) -> Figure:
             lo.append(max(float(r.get("best", m)), floor) if r else np.nan)
             hi.append(max(float(r.get("worst", m)), floor) if r else np.nan)
         means, lo, hi = map(np.asarray, (means, lo, hi))
-        ax.bar(x + (j - (len(solvers) - 1) / 2) * width, means, width, color=f"C{j}", label=solver,
+        ax.bar(x + (j - (len(solvers) - 1) / 2) * width, means, width, color=style(solver, j)["color"], label=solver,
                yerr=np.stack([np.maximum(means - lo, 0), np.maximum(hi - means, 0)]), capsize=2,
                error_kw=dict(lw=0.8))
     ax.set_yscale("log")

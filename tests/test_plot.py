@@ -111,3 +111,27 @@ def test_figures_take_jaxfric_types_only(data):
         plot.plot_fit(Duck(), data)
     with pytest.raises(TypeError, match="data must be a jaxfric.FrictionData, got tuple"):
         plot.plot_data((data.velocity, data.friction, 1 / 128.0))
+
+
+def test_one_style_per_model_family_and_a_dashed_baseline():
+    assert plot.style("ENN (30 neurons)") == plot.style("elman") == plot.STYLES["ENN"]
+    assert plot.style("LuGre (asymmetric + offset)")["color"] == plot.STYLES["LuGre"]["color"]
+    assert plot.style("LS baseline") == {"color": "black", "ls": "--"}
+    assert plot.style("MAPSO-NMDS") != plot.style("PSO")
+    colours = {plot.style(m)["color"] for m in ("ENN", "LuGre", "Coulomb", "Stribeck", "Dahl", "GMS", "baseline")}
+    assert len(colours) == 7
+    assert plot.style("something else", 1)["color"] != plot.style("something else", 2)["color"]
+
+
+def test_plot_models_shows_the_measurement_every_model_and_their_errors(data, make_fit):
+    fit = make_fit(jf.Coulomb(), [300.0, 1.0], dt=1 / 128.0, n_train=320, n_samples=400)
+    fig = plot.plot_models({"LS baseline": np.asarray(data.friction) * 0.95, "Coulomb": fit}, data)
+    _check(fig)
+    top, errors = fig.axes[0], fig.axes[1]
+    labels = [t.get_text() for t in top.get_legend().get_texts()]
+    assert labels[0].startswith("measured") and "LS baseline" in labels and "Coulomb" in labels
+    assert [ln.get_linestyle() for ln in top.get_lines()][1] == "--"  # the baseline, dashed
+    assert sum("MSE" in t.get_text() for t in errors.get_legend().get_texts()) == 2
+    assert all(np.size(ln.get_xdata()) == 80 for ln in errors.get_lines() if np.size(ln.get_xdata()) > 2)  # validation
+    with pytest.raises(ValueError, match="window"):
+        plot.plot_models(fit, data, window="test")
