@@ -216,16 +216,20 @@ def compensation_table(rows: list[dict]) -> str:
 
 
 def plot_tracking(runs: dict, ref: Reference | None = None):
-    """Figure: tracking error [mm] against time for every controller of a study."""
+    """Figure: tracking error [mm] against time for every controller of a study, each in
+    its model's look ([`jaxfric.plot.style`][jaxfric.plot.style]: the same colour as in the report's other
+    figures; no compensation grey, the true friction dotted)."""
     import matplotlib.pyplot as plt
+
+    from .plot import style
 
     fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     first = next(iter(runs.values()))
     if ref is not None:
         ax[0].plot(first["t"], 1e3 * ref.v, "k")
         ax[0].set_ylabel("reference velocity [mm/s]")
-    for label, r in runs.items():
-        ax[1].plot(r["t"], 1e3 * r["error"], lw=1, label=label)
+    for i, (label, r) in enumerate(runs.items()):
+        ax[1].plot(r["t"], 1e3 * r["error"], lw=1, label=label, **style(label, i))
     ax[1].set_ylabel("tracking error [mm]")
     ax[1].set_xlabel("time [s]")
     ax[1].legend(fontsize=7)

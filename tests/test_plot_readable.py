@@ -88,6 +88,41 @@ def test_error_figure_is_scaled_to_the_steady_part_and_marks_the_transient(noisy
     assert any(t.startswith("start-up transient") and "off scale" not in t for t in texts), texts
 
 
+def test_a_model_has_one_colour_in_every_figure_of_the_report(noisy):
+    """The ENN and LuGre are drawn in the same colour in the error, friction-velocity, fit,
+    convergence and compensation figures (jaxfric.plot.style), distinct from each other and
+    from the measured samples."""
+    import matplotlib.colors as mcolors
+
+    from jaxfric.compensation import plot_tracking
+
+    y = np.asarray(noisy.friction)
+    preds = {"ENN (30 neurons)": y - 1.0, "LuGre (asymmetric + offset)": y + 2.0}
+
+    def colours(ax):
+        return {ln.get_label().split(" (MAX")[0].split(" (binned")[0].removeprefix("estimated: "):
+                mcolors.to_hex(ln.get_color()) for ln in ax.get_lines()}
+
+    seen = [colours(plot.plot_error(preds, noisy).axes[0]),
+            colours(plot.plot_friction_velocity(noisy, preds).axes[0])]
+    seen += [colours(plot.plot_fit(p, noisy, label=k).axes[0]) for k, p in preds.items()]
+    evals = np.arange(1.0, 11.0)
+    seen.append({k.split(":")[0]: c for k, c in colours(plot.plot_convergence(
+        {k: (evals, 1.0 / evals) for k in preds}).axes[0]).items()})
+    t = np.arange(10) * 0.1
+    seen.append(colours(plot_tracking({"none": {"t": t, "error": t}, **{k: {"t": t, "error": t} for k in preds},
+                                       "ideal (true friction)": {"t": t, "error": t}}).axes[1]))
+    for name in preds:
+        got = {s[name] for s in seen if name in s}
+        assert len(got) == 1, (name, seen)
+    assert all(sum(name in s for s in seen) >= 1 for name in preds)
+    assert sum("ENN (30 neurons)" in s for s in seen) == len(seen) - 1  # plot_fit draws one model each
+    enn, lugre = (seen[0][k] for k in preds)
+    dots = {mcolors.to_hex(ln.get_color()) for ln in plot.plot_friction_velocity(noisy, preds).axes[0].get_lines()
+            if ln.get_label().startswith("measured")}
+    assert enn != lugre and not {enn, lugre} & dots
+
+
 def _overlaps_axes(fig) -> list[str]:
     """Axes whose legend overlaps the axes' own drawing area."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
