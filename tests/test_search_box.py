@@ -163,9 +163,13 @@ def test_bound_advice_is_a_box_the_model_accepts(model, ranges):
 
 
 def test_report_marks_a_parameter_at_the_models_limit_apart_from_one_to_widen():
-    from jaxfric.report import _fmt_params
+    """The report's parameter table (one verdict per parameter, jaxfric.uncertainty.report_markdown)."""
+    from jaxfric.uncertainty import report_markdown
 
-    rows = _fmt_params({"Fs": 16.8, "Fc": 20.0, "vs": 1e-3},
-                       [{"name": "Fs", "at_limit": True}, {"name": "Fc", "at_limit": False}])
-    assert rows == ["| Fs | 16.8 **(at the least value the model allows)** |",
-                    "| Fc | 20 **(on a bound: widen its range)** |", "| vs | 0.001 |"]
+    verdicts = {"Fs": {"value": 16.8, "identifiable": True, "reasons": [], "on_bound": True, "at_limit": True},
+                "Fc": {"value": 20.0, "identifiable": True, "reasons": [], "on_bound": True, "at_limit": False},
+                "vs": {"value": 1e-3, "identifiable": True, "reasons": [], "on_bound": False, "at_limit": False}}
+    rows = [line for line in report_markdown({"level": 0.95, "verdicts": verdicts}) if line.startswith("| F")
+            or line.startswith("| vs")]
+    assert rows == ["| Fs | 16.8 | **at the least value the model allows** |",
+                    "| Fc | 20 | **on a bound: widen its range** |", "| vs | 0.001 | identifiable |"]
