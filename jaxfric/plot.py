@@ -316,12 +316,13 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
     if fits is not None:
         for i, (label, fit) in enumerate(_as_fit_items(fits)):
             y_hat = predict_on(fit, data)
+            look = {"ls": "-", **style(label, i)}
+            z = 5 if look == STYLES["baseline"] else 4  # the dashed baseline on top, never hidden
             if edges is not None:
                 c, m = _binned(v, y_hat, edges)
-                ax.plot(c * scale, m, lw=2.0, zorder=4, label=f"{label} (binned median)",
-                        **{"ls": "-", **style(label, i)})
+                ax.plot(c * scale, m, lw=2.0, zorder=z, label=f"{label} (binned median)", **look)
             else:
-                ax.plot(v * scale, y_hat, lw=1.2, zorder=4, label=label, **{"ls": "-", **style(label, i)})
+                ax.plot(v * scale, y_hat, lw=1.2, zorder=z, label=label, **look)
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.axvline(0.0, color="0.6", lw=0.6)
     ax.set_xlabel(f"piston velocity [{unit}]")
