@@ -21,9 +21,9 @@ Every figure draws a model in its own colour and line style ([`STYLES`][jaxfric.
 [`style`][jaxfric.plot.style]): the same model looks the same in the CLI's report and in every
 notebook, and the least-squares baseline is always a dashed black line.
 
-They take jaxfric's own types: data a [`jaxfric.FrictionData`][jaxfric.FrictionData], a fit a
-[`jaxfric.Fit`][jaxfric.Fit] (or a plain prediction array, ``F_hat`` in N on the data's time
-grid), a history a [`jaxfric.History`][jaxfric.History], a [`jaxfric.Solution`][jaxfric.Solution] or a fit
+They take jaxfric's own types: data a [`jaxfric.FrictionData`][jaxfric.rig.FrictionData], a fit a
+[`jaxfric.Fit`][jaxfric.fit.Fit] (or a plain prediction array, ``F_hat`` in N on the data's time
+grid), a history a [`jaxfric.History`][jaxfric.optim.History], a [`jaxfric.Solution`][jaxfric.optim.Solution] or a fit
 (or an ``(evals, f)`` pair of arrays). Anything else is a `TypeError` naming
 what was given.
 """
@@ -170,7 +170,7 @@ def _split_legend_note(data) -> str:
 
 
 def fit_label(fit, default: str = "model") -> str:
-    """A short display name: a [`jaxfric.Fit`][jaxfric.Fit]'s model class name (with the neuron
+    """A short display name: a [`jaxfric.Fit`][jaxfric.fit.Fit]'s model class name (with the neuron
     count for an Elman network), ``default`` for anything else (a prediction array, a
     history)."""
     if not isinstance(fit, Fit):
@@ -188,7 +188,7 @@ def predict_on(fit, data) -> np.ndarray:
     with ``data``'s measured channels for a model that needs them (``input_names``, e.g.
     the chamber pressures of [`Cylinder`][jaxfric.models.Cylinder]).
 
-    ``fit`` is a [`jaxfric.Fit`][jaxfric.Fit] or an array of predictions already on the data's grid.
+    ``fit`` is a [`jaxfric.Fit`][jaxfric.fit.Fit] or an array of predictions already on the data's grid.
     """
     _checked(data)
     if isinstance(fit, Fit):
@@ -234,7 +234,7 @@ def _mse_percent(y, y_hat) -> float:
 def plot_data(data, *, title: str | None = None) -> Figure:
     """Velocity and computed friction against time (the paper's Figs 9 and 10).
 
-    ``data`` is a [`jaxfric.FrictionData`][jaxfric.FrictionData]. The validation window is shaded.
+    ``data`` is a [`jaxfric.FrictionData`][jaxfric.rig.FrictionData]. The validation window is shaded.
     """
     t = _time(data)
     scale, unit = velocity_unit(data.velocity)
@@ -524,8 +524,8 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
 
 # ------------------------------------------------------------------ convergence
 def _history_arrays(item) -> tuple[np.ndarray, np.ndarray]:
-    """``(evals, f)`` from a [`History`][jaxfric.History], a [`Solution`][jaxfric.Solution],
-    a [`Fit`][jaxfric.Fit] or an
+    """``(evals, f)`` from a [`History`][jaxfric.optim.History], a [`Solution`][jaxfric.optim.Solution],
+    a [`Fit`][jaxfric.fit.Fit] or an
     ``(evals, f)`` pair.
 
     Batched histories (from ``minimise_many``) come back 2-D, one row per run.
@@ -585,7 +585,7 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
                      title: str | None = None, ylabel: str = "best objective value J") -> Figure:
     """Best objective value against function evaluations, log scale.
 
-    Items may be [`jaxfric.Solution`][jaxfric.Solution], [`jaxfric.History`][jaxfric.History], fits holding
+    Items may be [`jaxfric.Solution`][jaxfric.optim.Solution], [`jaxfric.History`][jaxfric.optim.History], fits holding
     a solution, or ``(evals, f)`` pairs; a mapping label -> item works too. For a
     batch of runs (``minimise_many``) the median is drawn with the min-max band.
     Every stage of a fit is drawn and named in the legend per model: a dotted line
