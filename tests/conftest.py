@@ -170,7 +170,7 @@ SLOW_TESTS = {
 # subprocess tests (test_cli's waited 10-20 s for the lock when it came second).
 LONGEST_FIRST = [
     "test_notebooks.py", "test_optim_protocol.py", "test_parallel_scan.py", "test_cli.py",
-    "test_reproducibility.py", "test_motion_api.py", "test_evosax_adapter.py",
+    "test_reproducibility.py", "test_motion_api.py", "test_motion_dependable.py", "test_evosax_adapter.py",
     "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
     "test_identify.py", "test_sharding.py", "test_reliability.py", "test_motion.py",
