@@ -126,7 +126,7 @@ def _chunked(call, blank, display=None, checkpoint=None):
     `_chunk`, or its batch over keys) to the end and return the solution.
 
     Without a display or a checkpoint that is one call. With a display the run goes in
-    chunks of [`Chunks`][jaxfric.optim.progress.Chunks] steps and the host reports each
+    chunks of ``Chunks`` steps and the host reports each
     chunk's end (each run's, for a batch; ``display = (sink, chunks)``); with ``checkpoint = (path, every, meta,
     resumed)`` it saves the carry after every ``every`` steps, and starts from
     ``resumed = (carry, steps_done)`` when that is not ``None``. Every call runs the same

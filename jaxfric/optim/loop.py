@@ -50,7 +50,7 @@ def _record(proto, state, history):
 
 def _strong(tree):
     """Every array of ``tree`` with a fixed (not weak) dtype, so a carry built on the host
-    ([`blank_carry`][jaxfric.optim.loop.blank_carry]), one loaded from a checkpoint and
+    (``blank_carry``), one loaded from a checkpoint and
     one returned by `_chunk` are the same input type to it (no recompilation)."""
     return jax.tree_util.tree_map(
         lambda a: jnp.asarray(a, a.dtype) if isinstance(a, jax.Array) else a, tree)
@@ -128,7 +128,7 @@ def _report(proto, carry: Carry) -> Report:
 
 def _chunk(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at):
     """[`jaxfric.minimise`][jaxfric.optim.minimise]'s one program: the start when
-    ``fresh`` (a boolean array; ``carry`` is then a [`blank_carry`][jaxfric.optim.loop.blank_carry]),
+    ``fresh`` (a boolean array; ``carry`` is then a ``blank_carry``),
     else ``carry``; then steps until done or ``carry.steps == stop_at``. Returns
     ``(carry, solution, report)``."""
     carry = jax.lax.cond(

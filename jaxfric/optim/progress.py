@@ -6,7 +6,7 @@ chunk the host hands the display ``(phase, step, evals, f_best)``. Nothing calls
 from inside the compiled program, so the program is the one a run without a display
 compiles, and JAX's persistent compilation cache keeps it (a program holding a host
 callback is never written there). Chunks end about every 1 % of a global stage's
-generations and every 50 local steps ([`Chunks`][jaxfric.optim.progress.Chunks]); a
+generations and every 50 local steps (``Chunks``); a
 chunked run takes exactly the steps of a whole one.
 """
 
@@ -26,7 +26,7 @@ EVERY_STEP = 50
 
 class Chunks:
     """How many steps a chunk of a run with a display takes: about 1 % of the global
-    stage's ``total`` generations (at least 1) while in phase 0, [`EVERY_STEP`][jaxfric.optim.progress.EVERY_STEP]
+    stage's ``total`` generations (at least 1) while in phase 0, ``EVERY_STEP``
     otherwise."""
 
     def __init__(self, total: int | None):
