@@ -218,3 +218,158 @@ def test_identify_accepts_an_evosax_chain():
     assert np.isfinite(fit.metrics["cost"])
     assert fit.stages[0]["stage"] == "evosax"
     assert fit.stages[0]["num_evals"] == solver.global_solver.evaluations(len(fit.theta))
+
+
+# ------------------------------------------------------------------ IPOP restarts
+def _steps(solver, fn, lower, upper, key, n):
+    """The state after each of ``n`` steps, the steps taken one by one from Python
+    (jaxfric.optim.rounds' compiled start and step, as the driver's loop takes them)."""
+    from jaxfric.optim.driver import _prepare
+    from jaxfric.optim.problem import check_key
+    from jaxfric.optim.rounds import compiled_start, compiled_step
+
+    proto, flat, lo, hi, _ = _prepare(fn, solver, (lower, upper), None, None, None)
+    state = jax.jit(lambda k: compiled_start(proto, flat, lo, hi, None, k))(check_key(key))
+    step = jax.jit(lambda s: compiled_step(proto, flat, lo, hi, None, s))
+    states = []
+    for _ in range(n):
+        state = step(state)
+        states.append(jax.device_get(state))
+    return states
+
+
+def test_ipop_doubles_the_population_after_stagnation():
+    """CMA-ES on a 2-D sphere (float64) converges in some hundred generations; IPOP then
+    restarts from a new mean with twice the population: a generation of population P·2^j
+    takes 2^j steps (batches of P points), the strategy is told once per generation, and
+    restarts come only at a generation's end, after the values stagnated."""
+    P, R = 6, 2
+    solver = Evosax("CMA_ES", num_generations=2000, restarts=R)
+    assert solver.population(2) == P
+    with jax.enable_x64(True):
+        states = _steps(solver, lambda y, a: jnp.sum((y - 0.3) ** 2), -np.ones(2), np.ones(2),
+                        key=3, n=1500)
+    level = np.array([int(s.ipop.level) for s in states])
+    batch = np.array([int(s.ipop.batch) for s in states])
+    restarts = np.array([int(s.restarts) for s in states])
+    tells = np.array([int(s.inner.generation_counter) for s in states])
+    assert restarts[-1] >= R + 1, "no restarts after convergence"
+    np.testing.assert_array_equal(level, np.minimum(restarts, R))
+    firsts = [int(np.argmax(restarts >= k)) for k in range(1, R + 1)]
+    assert firsts[0] > 20  # converged first: no restart in the early generations
+    f_then = float(states[firsts[0] - 1].f_best)
+    assert f_then < 1e-10, f_then
+    for k in range(R + 1):
+        # the steps of the k-th run (after k restarts): batches 0 .. 2^j − 1 in turn,
+        # one tell per generation (evosax counts them from 0 at each start)
+        idx = np.flatnonzero(restarts == k)[1:-1]  # inside the run
+        j = min(k, R)
+        assert np.all(batch[idx] < 2**j)
+        np.testing.assert_array_equal(np.diff(batch[idx]) % 2**j, np.ones(len(idx) - 1) % 2**j)
+        told = np.flatnonzero(np.diff(tells[idx]) == 1)
+        assert np.all(np.diff(told) == 2**j), f"run {k}: a tell every {2 ** j} steps"
+        assert np.all(batch[idx][told + 1] == 0)
+    # a restart ends a generation: the step before it was the generation's last batch
+    for i in np.flatnonzero(np.diff(restarts) == 1) + 1:
+        assert batch[i] == 0 and batch[i - 1] == 2 ** int(level[i - 1]) - 1
+
+
+def test_ipop_same_key_same_result_exact_counts_and_chunks(tmp_path, sphere_counter):
+    solver = Evosax("CMA_ES", num_generations=400, restarts=3)
+    one = jf.minimise(COUNTED_SPHERE, solver, (LOWER, UPPER), args=TARGET, key=9)
+    assert sphere_counter.count == int(one.stats["num_evals"]) == solver.evaluations(D)
+    again = jf.minimise(COUNTED_SPHERE, solver, (LOWER, UPPER), args=TARGET, key=9)
+    chunked = jf.minimise(shifted_sphere, solver, (LOWER, UPPER), args=TARGET, key=9,
+                          checkpoint=tmp_path / "ipop.ckpt", checkpoint_every=37)
+    for other in (again, chunked):
+        assert bool(eqx.tree_equal(one.value, other.value)) and float(one.f) == float(other.f)
+        assert int(one.state.restarts) == int(other.state.restarts)
+    assert int(one.state.restarts) >= 1  # float32 stagnates within 400 steps
+    other_key = jf.minimise(shifted_sphere, solver, (LOWER, UPPER), args=TARGET, key=10)
+    assert not np.array_equal(np.asarray(other_key.value), np.asarray(one.value))
+
+
+def _plain_cmaes(fn, lower, upper, key, generations):
+    """The adapter's one-run CMA-ES written out with evosax directly (the reference for
+    ``restarts=0``): same keys, unit box, projection and std_init."""
+    from evosax.algorithms import CMA_ES
+
+    n = lower.shape[0]
+    es = CMA_ES(population_size=4 + int(np.floor(3 * np.log(n))), solution=jnp.zeros(n))
+    params = es.default_params.replace(std_init=jnp.asarray(0.3))
+    k_init, k_start, key = jax.random.split(key, 3)
+    mean = jax.random.uniform(k_start, (n,), jnp.float64)
+    inner = es.init(k_init, mean, params)
+    box = lambda u: jnp.clip(lower + u * (upper - lower), lower, upper)  # noqa: E731
+    best = float(fn(box(mean)))
+    for g in range(generations):
+        k_ask, k_tell = jax.random.split(jax.random.fold_in(key, g))
+        U, inner = es.ask(k_ask, inner, params)
+        U = jnp.clip(U, 0.0, 1.0)
+        F = jax.vmap(fn)(box(U))
+        inner, _ = es.tell(k_tell, U, F, inner, params)
+        best = min(best, float(jnp.min(F)))
+    return best
+
+
+def test_restarts_zero_is_one_plain_run():
+    """restarts=0 is CMA-ES run once, as before restarts existed: its best value follows
+    evosax driven directly, also past the point where IPOP would have restarted."""
+    fn = lambda y: jnp.sum((y - 0.3) ** 2)  # noqa: E731
+    with jax.enable_x64(True):
+        lo, hi = -np.ones(2), np.ones(2)
+        plain = jf.minimise(lambda y, a: fn(y), Evosax("CMA_ES", num_generations=250, restarts=0),
+                            (lo, hi), key=3)
+        ipop = jf.minimise(lambda y, a: fn(y), Evosax("CMA_ES", num_generations=250, restarts=2),
+                           (lo, hi), key=3)
+        ref = _plain_cmaes(fn, jnp.asarray(lo), jnp.asarray(hi), jax.random.key(3), 250)
+    assert plain.state.ipop is None and int(plain.state.restarts) == 0
+    assert int(ipop.state.restarts) >= 1
+    assert float(plain.f) == pytest.approx(ref, rel=1e-6, abs=1e-300)
+    assert float(plain.f) < 1e-20
+
+
+def test_padded_generation_equals_the_smaller_strategy():
+    """For CMA-ES and Sep-CMA-ES restarts run one strategy object of the largest
+    population: a generation of λ points told with λ's parameters (weights padded with
+    zeros) and the other points valued +inf updates the state as the strategy of
+    population λ does."""
+    from evosax.algorithms import CMA_ES, Sep_CMA_ES
+
+    n, lam, big = 3, 7, 28
+    with jax.enable_x64(True):
+        for cls in (CMA_ES, Sep_CMA_ES):
+            small = cls(population_size=lam, solution=jnp.zeros(n))
+            large = cls(population_size=big, solution=jnp.zeros(n))
+            p_small = small.default_params.replace(std_init=jnp.asarray(0.3))
+            p_pad = p_small.replace(weights=jnp.pad(p_small.weights, (0, big - lam)))
+            state = small.init(jax.random.key(0), jnp.full(n, 0.4), p_small)
+            X, state = small.ask(jax.random.key(1), state, p_small)
+            F = jnp.sum((X - 0.5) ** 2 * jnp.arange(1, n + 1), axis=1)
+            ref, _ = small.tell(jax.random.key(2), X, F, state, p_small)
+            Xp = jnp.concatenate([X, jax.random.uniform(jax.random.key(3), (big - lam, n))])
+            Fp = jnp.concatenate([F, jnp.full(big - lam, jnp.inf)])
+            got, _ = large.tell(jax.random.key(2), Xp, Fp, state, p_pad)
+            for name in ("mean", "std", "p_std", "p_c", "C"):
+                np.testing.assert_allclose(getattr(got, name), getattr(ref, name),
+                                           rtol=1e-12, atol=1e-15, err_msg=f"{cls.__name__}.{name}")
+
+
+def test_restarts_refuse_strategies_that_keep_a_population():
+    with pytest.raises(ValueError, match="distribution-based"):
+        jf.minimise(shifted_sphere, Evosax("DE", population_size=12, restarts=2), (LOWER, UPPER),
+                    args=TARGET, key=0)
+    with pytest.raises(ValueError, match="restarts"):
+        Evosax("CMA_ES", restarts=-1)
+
+
+def test_ipop_with_a_strategy_object_per_population_size(counter):
+    """SNES is not run padded (one strategy object per population size): its restarts
+    double the population too, with exact counts and the best point kept."""
+    solver = Evosax("SNES", num_generations=600, restarts=2)
+    lo, hi = -np.ones(2, np.float32), np.ones(2, np.float32)
+    sol = jf.minimise(counter.wrap(lambda y, a: jnp.sum((y - 0.3) ** 2)), solver, (lo, hi), key=0)
+    assert counter.count == int(sol.stats["num_evals"]) == solver.evaluations(2)
+    assert int(sol.state.restarts) >= 1
+    assert int(sol.state.ipop.level) == min(int(sol.state.restarts), 2)
+    assert float(sol.f) < 1e-8
