@@ -217,11 +217,11 @@ def compensation_table(rows: list[dict]) -> str:
 
 def plot_tracking(runs: dict, ref: Reference | None = None):
     """Figure: tracking error [mm] against time for every controller of a study, each in
-    its model's look ([`jaxfric.plot.style`][jaxfric.plot.style]: the same colour as in the report's other
+    its model's look ([`jaxfric.styles.style`][jaxfric.styles.style]: the same colour as in the report's other
     figures; no compensation grey, the true friction dotted)."""
     import matplotlib.pyplot as plt
 
-    from .plot import style
+    from .styles import style
 
     fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     first = next(iter(runs.values()))

@@ -17,8 +17,8 @@ Figures (paper numbering from docs/algorithms.md §1):
 - [`plot_convergence`][jaxfric.plot.plot_convergence] -- best objective against function evaluations (log scale);
 - [`plot_table1`][jaxfric.plot.plot_table1] -- final values of the Table 1 benchmark, per function and solver.
 
-Every figure draws a model in its own colour and line style ([`STYLES`][jaxfric.plot.STYLES],
-[`style`][jaxfric.plot.style]): the same model looks the same in the CLI's report and in every
+Every figure draws a model in its own colour and line style ([`STYLES`][jaxfric.styles.STYLES],
+[`style`][jaxfric.styles.style]): the same model looks the same in the CLI's report and in every
 notebook, and the least-squares baseline is always a dashed black line.
 
 They take jaxfric's own types: data a [`jaxfric.FrictionData`][jaxfric.rig.FrictionData], a fit a
@@ -40,6 +40,7 @@ from matplotlib.figure import Figure
 from .fit import ExtrapolationWarning, Fit
 from .optim import History, Solution
 from .records import FrictionData
+from .styles import STYLES, style
 
 __all__ = [
     "fit_label",
@@ -59,61 +60,6 @@ __all__ = [
 
 _MEASURED = dict(color="0.15", lw=1.1)
 _VALID_SHADE = dict(color="tab:orange", alpha=0.08, lw=0)
-
-#: One look per model family (and per solver), shared by every figure: ``family ->
-#: matplotlib line keywords``. [`style`][jaxfric.plot.style] picks the entry from a label. The
-#: least-squares baseline (asymmetric Coulomb + viscous + offset by least squares) is a
-#: dashed black line, so that it stays visible under and beside the models.
-STYLES: dict[str, dict] = {
-    "measured": dict(color="0.15"),
-    "baseline": dict(color="black", ls="--"),
-    "ENN full": dict(color="tab:cyan"),
-    "ENN": dict(color="tab:blue"),
-    "LuGre": dict(color="tab:red"),
-    "Coulomb": dict(color="tab:green"),
-    "Stribeck": dict(color="tab:purple"),
-    "Dahl": dict(color="tab:olive"),
-    "GMS": dict(color="tab:pink"),
-    "Cylinder": dict(color="tab:brown"),
-    "no compensation": dict(color="0.55"),
-    "true friction": dict(color="goldenrod", ls=":"),
-    "MAPSO-NMDS": dict(color="tab:blue"),
-    "PSO": dict(color="tab:orange"),
-    "CMA-ES": dict(color="tab:green"),
-}
-
-# label words -> family, checked in this order (the first match wins)
-_STYLE_WORDS = (
-    (("baseline", "least squares", "least-squares", "ls map", "idim"), "baseline"),
-    (("measured",), "measured"),
-    (("elman_full", "elman full", "enn full", "full elman"), "ENN full"),
-    (("enn", "elman"), "ENN"),
-    (("lugre",), "LuGre"),
-    (("stribeck",), "Stribeck"),
-    (("coulomb",), "Coulomb"),
-    (("dahl",), "Dahl"),
-    (("gms", "maxwell"), "GMS"),
-    (("cylinder",), "Cylinder"),
-    (("no compensation", "none"), "no compensation"),
-    (("true friction", "ideal"), "true friction"),
-    (("mapso-nmds", "mapso–nmds", "mapso_nmds", "mapso"), "MAPSO-NMDS"),
-    (("cma",), "CMA-ES"),
-    (("pso",), "PSO"),
-)
-_SPARE_COLOURS = ("tab:gray", "darkorange", "teal", "indigo", "crimson", "sienna")
-
-
-def style(label: str, index: int = 0) -> dict:
-    """Line keywords (``color``, and ``ls`` where the family has one) for a model or
-    solver ``label``: its family's entry of [`STYLES`][jaxfric.plot.STYLES], found by the words of the
-    label (``"ENN (30 neurons)"`` -> ENN, ``"LuGre (asymmetric + offset)"`` -> LuGre,
-    ``"LS baseline"`` -> baseline), else a spare colour chosen by ``index``."""
-    text = str(label).lower()
-    for words, family in _STYLE_WORDS:
-        if any(w in text for w in words):
-            return dict(STYLES[family])
-    return dict(color=_SPARE_COLOURS[index % len(_SPARE_COLOURS)])
-
 
 # ----------------------------------------------------------------------- helpers
 def _np(a) -> np.ndarray:
@@ -285,7 +231,7 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
     """Friction against velocity: the hysteresis loops of the record.
 
     Training samples are drawn in grey, validation samples in orange (the models'
-    colours are [`style`][jaxfric.plot.style]'s). With
+    colours are [`style`][jaxfric.styles.style]'s). With
     ``fits`` (one fit, a sequence, or a mapping label -> fit) the models'
     predictions are drawn on top of the measurements.
 
@@ -454,7 +400,7 @@ def plot_models(fits, data, *, window: str = "valid", labels: Sequence[str] | No
     """Several models against the measured friction on one window of ``data``.
 
     Top: the measured friction as grey dots (so that it stays visible under the models)
-    and each model's prediction as a line in its [`style`][jaxfric.plot.style]; bottom: each model's
+    and each model's prediction as a line in its [`style`][jaxfric.styles.style]; bottom: each model's
     error ``F - F_hat``, with its normalised MSE % over the window in the legend.
     ``fits``: one fit, a sequence, or a mapping label -> fit or prediction array (on the
     whole record). ``window``: ``"valid"`` (the validation window; the whole record
