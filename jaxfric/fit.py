@@ -653,7 +653,7 @@ class Fit:
         return "\n".join(lines)
 
     def __repr__(self) -> str:
-        m = self.metrics.get("valid", {})
+        m = self.metrics.get("valid") or {}  # None for a fit with no validation part
         mse = m.get("mse_percent")
         tail = f", valid MSE {mse:.4g} %" if mse is not None else ""
         return f"Fit({type(self.model).__name__}, {self.num_params} params{tail})"

@@ -73,7 +73,7 @@ def _forbidden(*args, **kwargs):
 @pytest.fixture
 def guarded(monkeypatch):
     """No compiled optimiser run and no identify → minimise call may happen."""
-    monkeypatch.setattr(minimise_module, "_run", _forbidden)
+    monkeypatch.setattr(minimise_module, "_chunk", _forbidden)
     monkeypatch.setattr(minimise_module, "_run_many", _forbidden)
     monkeypatch.setattr(identify_api, "minimise", _forbidden)
     Evaluations.count = 0

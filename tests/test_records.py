@@ -369,4 +369,6 @@ def test_unidentifiable_parameters_come_from_the_models_hook(monkeypatch):
                        dtype=jnp.float64)
     assert calls[-1] == 550  # the training samples of both records
     assert fit.diagnostics["unidentifiable"] == ["sigma2: one sliding speed per direction"]
-    assert "! sigma2: one sliding speed per direction" in fit.summary()
+    # the summary groups the parameters by reason: "!   name: reason" under one "!" heading
+    assert "!   sigma2: one sliding speed per direction" in fit.summary()
+    assert "Fit(Coulomb, 2 params)" == repr(fit)  # no validation part: no valid MSE
