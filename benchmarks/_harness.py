@@ -10,6 +10,14 @@
 * :func:`write_csv` / :func:`markdown_table` — result rows as CSV and as a Markdown table.
 * :func:`render` — report prose lives in ``benchmarks/templates/*.md.in`` files
   (:class:`string.Template` ``$fields``), not in f-strings inside the measuring code.
+* Start-up: importing this module puts the checkout's ``jaxfric`` first on ``sys.path``;
+  :func:`x64` switches a script to float64 (the script's choice: the library never does);
+  :func:`emps_file` / :func:`pneumatic` find the real data (``jaxfric.datasets``' folders,
+  no download) or return ``None`` so a script can say so and skip; :func:`machine` is
+  the one-line machine description every report starts with.
+
+A script starts with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under
+``jaxfric bench`` the folder is not on ``sys.path``) and then imports from here.
 """
 
 from __future__ import annotations
@@ -17,8 +25,11 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import os
+import platform
 import statistics
 import string
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +39,66 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 QUICK_RESULTS = RESULTS / "quick"
 TEMPLATES = HERE / "templates"
+ROOT = HERE.parent
+if (ROOT / "jaxfric").is_dir() and str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))  # this checkout's jaxfric, installed or not
+#: the data folder next to a checkout (``../shared/data``), the last place looked in
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+# --------------------------------------------------------------------------- start-up
+def x64() -> None:
+    """Switch this process to float64 (call before any array is made)."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+def machine() -> str:
+    """Machine, cores, load and versions, for a report's first lines."""
+    import jax
+    import numpy
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (f"{platform.machine()}, {os.cpu_count()} CPU cores (load average {load:.1f}); devices: "
+            f"{', '.join(sorted({d.platform for d in jax.devices()}))}; jax {jax.__version__}, "
+            f"numpy {numpy.__version__}, Python {platform.python_version()}")
+
+
+def _found(get) -> Path | None:
+    from jaxfric import datasets
+
+    try:
+        return get(datasets)
+    except datasets.DatasetUnavailable:
+        return None
+
+
+def emps_file(path=None) -> Path | None:
+    """``DATA_EMPS.mat``: ``path``, else ``$JAXFRIC_EMPS``, else ``jaxfric.datasets``' folders
+    (``$JAXFRIC_DATA``, the cache; never a download), else ``../shared/data``; ``None`` if absent."""
+    given = path or os.environ.get("JAXFRIC_EMPS")
+    if given:
+        return Path(given) if Path(given).is_file() else None
+    found = _found(lambda d: d.emps_path(download=False))
+    if found is None and (SHARED_DATA / "emps" / "DATA_EMPS.mat").is_file():
+        found = SHARED_DATA / "emps" / "DATA_EMPS.mat"
+    return found
+
+
+def pneumatic(seal: str = "O-ring", bar: int = 3, folder=None):
+    """``(measurements, friction_data)`` of one pneumatic seal recording
+    (:func:`jaxfric.datasets.pneumatic`; ``folder`` holds ``raw/``), or ``None`` if absent."""
+    from jaxfric import datasets
+
+    local = folder or os.environ.get("JAXFRIC_PNEUMATIC_DATA")
+    candidates = [Path(local).parent] if local else [None, SHARED_DATA]
+    for where in candidates:
+        try:
+            return datasets.pneumatic(seal, bar, where, download=False)
+        except datasets.DatasetUnavailable:
+            continue
+    return None
 
 
 def results_dir(out=None, *, quick: bool = False) -> Path:

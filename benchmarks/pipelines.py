@@ -36,28 +36,17 @@ never overwrite committed results).
 from __future__ import annotations
 
 import argparse
-import csv
-import os
-import platform
 import sys
 import time
 import warnings
 from pathlib import Path
 
-try:
-    import jaxfric  # noqa: F401
-except ImportError:  # running from a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import jax
-import jax.numpy as jnp
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir  # noqa: E402
+from _harness import add_output_arguments, emps_file, machine, pneumatic, results_dir, write_csv  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
-DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
 #: Nelder–Mead evaluations granted per BFGS step of the jaxfric pipeline (DE → NM row).
 NM_EVALS_PER_BFGS_STEP = 6
 
@@ -68,48 +57,28 @@ def parse(argv=None):
     p.add_argument("--seeds", type=int, default=None, help="keys for jaxfric and DE→NM (rig 5, else 1)")
     p.add_argument("--paper-seeds", type=int, default=None, help="keys for the paper pipeline (default: --seeds)")
     p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat or pneumatic_seal_friction")
-    p.add_argument("--out", default=None)
-    p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
+    add_output_arguments(p, "tiny budgets (smoke test)")
     p.add_argument("--skip", default="", help="comma list of pipelines to skip: jaxfric,paper,de_nm")
     p.add_argument("--tag", default="", help="suffix of the output names (pipelines_<record><tag>.md)")
     return p.parse_args(argv)
 
 
 # --------------------------------------------------------------------- data
-def _fetched(get, fallback: Path) -> Path:
-    """No local copy: ``jaxfric.datasets``' checked download, or ``fallback`` with its one-line reason."""
-    from jaxfric import datasets
-
-    try:
-        return get(datasets)
-    except datasets.DatasetUnavailable as err:
-        print(f"pipelines: {err}", file=sys.stderr)
-        return fallback
-
-
 def load(args):
     from jaxfric import rig
 
     if args.record == "rig":
         return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
     if args.record == "emps":
-        path = Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"
-        if not path.is_file() and not args.data_dir:
-            path = _fetched(lambda d: d.emps_path(), path)
-        if not path.is_file():
-            return None, f"no EMPS file at {path}"
+        path = emps_file(args.data_dir and Path(args.data_dir) / "DATA_EMPS.mat")
+        if path is None:
+            return None, "no EMPS file (pass --data-dir or set JAXFRIC_DATA)"
         return (rig.emps_friction_data(rig.load_emps(path)),
                 "EMPS estimation file at 1 kHz, the benchmark's recipe, IDIM-LS mass")
-    folder = Path(args.data_dir or DATA_ROOT / "pneumatic_seal_friction")
-    path = folder / "raw" / "O-ring_3bar.csv"
-    if not path.is_file() and not args.data_dir:
-        path = _fetched(lambda d: d.pneumatic_path("O-ring", 3), path)
-    if not path.is_file():
-        return None, f"no O-ring file at {path}"
-    sys.path.insert(0, str(HERE))
-    from real_recordings import load_record
-
-    return load_record(str(path))[1].with_split(0.8), "pneumatic O-ring_3bar.csv (real_recordings.py pipeline)"
+    rec = pneumatic("O-ring", 3, args.data_dir)
+    if rec is None:
+        return None, "no O-ring_3bar.csv (pass --data-dir or set JAXFRIC_DATA)"
+    return rec[1].with_split(0.8), "pneumatic O-ring_3bar.csv (jaxfric.datasets.pneumatic pipeline)"
 
 
 def ls_baseline(v, f, n):
@@ -127,7 +96,7 @@ def idim_rows(args):
     from emps import idim_table  # benchmarks/emps.py: the IDIM-LS table against the published values
     from jaxfric.rig import emps
 
-    return idim_table(emps.load_emps(Path(args.data_dir or DATA_ROOT / "emps") / "DATA_EMPS.mat"))
+    return idim_table(emps.load_emps(emps_file(args.data_dir and Path(args.data_dir) / "DATA_EMPS.mat")))
 
 
 # ---------------------------------------------------------------- pipelines
@@ -250,15 +219,10 @@ LABELS = {"jaxfric": "ENN N = 30, jaxfric default (MAPSO G = 50 on ≤ 2000 samp
 def write(out, args, desc, rows, base, wall, idim):
     keys = ["pipeline", "seed", "valid", "train", "run_s", "compile_s", "cpu_s", "evals", "steps"]
     stem = f"pipelines_{args.record}{args.tag}"
-    with open(out / f"{stem}.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in keys})
+    write_csv([{k: r.get(k, "") for k in keys} for r in rows], out / f"{stem}.csv")
     lines = [f"# ENN identification pipelines: {desc}", "",
-             f"Generated by `python benchmarks/pipelines.py {' '.join(sys.argv[1:])}` (see its docstring). Machine: {platform.machine()}, "
-             f"{os.cpu_count()} CPU cores shared with other jobs (load average {os.getloadavg()[0]:.1f} at the end), "
-             f"jax {jax.__version__}, float32. MSE % = 100·mean(e²)/var(F) on the window. Run time excludes "
+             f"Generated by `python benchmarks/pipelines.py {' '.join(sys.argv[1:])}` (see its docstring). Machine: "
+             f"{machine()} (at the end), float32. MSE % = 100·mean(e²)/var(F) on the window. Run time excludes "
              "compilation; cells are mean (min–max) over keys; the first key also paid the compile time shown. "
              "CPU [s] = the process's CPU time over the call (all threads; compilation included for the first "
              "key): unlike wall time it hardly depends on what else runs, and the rollouts are sequential, so on "
