@@ -16,7 +16,8 @@ For each dimension (default D = 30 and D = 10), each function and each solver,
 * ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row;
 * ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (when evosax is installed): evosax's CMA-ES
   through :class:`jaxfric.Evosax`, alone and followed by Nelder–Mead
-  (:func:`jaxfric.cmaes_nm`), within the same budget as PSO (see ``table1_rows.py``).
+  (:func:`jaxfric.cmaes_nm`), within the same budget as PSO: ``⌊(budget − 1)/P⌋``
+  generations alone; ``GLOBAL_SHARE`` of it, then Nelder–Mead from the best point.
 
 Writes ``table1.md``, ``table1.csv`` and ``table1_convergence.png`` to ``--out``
 (default ``benchmarks/results``; all three are rewritten after every function, so an
@@ -41,30 +42,48 @@ Besides the table, every run saves its median curves (``table1_curves.npz``) so
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import math
 import os
 import platform
 import sys
 from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench table1`
+from _harness import results_dir, write_csv, x64  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # benchmarks choose x64 at start-up
-
+x64()
+import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
-
-# the evosax rows (issue 16 item 3); this folder is not on sys.path when the CLI
-# (`jaxfric bench table1`) loads the script by path
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import table1_rows  # noqa: E402
-from table1_rows import timed_batch  # noqa: E402
-from _harness import results_dir, write_csv  # noqa: E402
+from jaxfric.identification._timing import Stopwatch  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis
+#: Share of the budget CMA-ES gets in CMA-ES → NM (Nelder–Mead gets the rest).
+GLOBAL_SHARE = 0.8
+
+
+def timed_batch(fn_name, solver, dim, keys):
+    """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run once, its wall
+    time split by JAX's compile events (the Stopwatch ``identify`` uses)."""
+    obj, bounds = F.objective(fn_name), F.get(fn_name).bounds(dim)
+    with Stopwatch() as sw:
+        sol = jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
+    return sol, sw.compile_s, sw.run_s
+
+
+def evosax_runs(fn_name: str, dim: int, keys, budget: int):
+    """``[(label, solutions, compile s, run s)]``: CMA-ES and CMA-ES → NM within ``budget``."""
+    pop = jf.Evosax("CMA_ES", num_generations=1).population(dim)
+    cma = jf.Evosax("CMA_ES", num_generations=max(1, (budget - 1) // pop))
+    g = max(1, int(GLOBAL_SHARE * budget - 1) // pop)
+    nm_evals = budget - jf.Evosax("CMA_ES", num_generations=g).evaluations(dim) - (dim + 2)
+    chain = jf.cmaes_nm(num_generations=g, nm_max_evals=max(dim + 2, nm_evals))
+    return [(label, *timed_batch(fn_name, s, dim, keys)) for label, s in
+            [("CMA-ES (evosax)", cma), ("CMA-ES→NM", chain)]]
 
 
 def evals_to_success(sol):
@@ -188,8 +207,8 @@ def main(argv=None):
                 pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
                 sol, c, r = timed_batch(name, pso, dim, keys)
                 results.append(("PSO (equal evaluations)", sol, c, r))
-            if a.rows != "swarm" and table1_rows.have_evosax():  # CMA-ES, CMA-ES→NM at this budget
-                results += table1_rows.evosax_runs(name, dim, keys, budget)
+            if a.rows != "swarm" and importlib.util.find_spec("evosax"):  # CMA-ES rows at this budget
+                results += evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
                 row = summarise(label, name, dim, sol, c, r)
                 rows.append(row)
