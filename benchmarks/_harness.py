@@ -1,4 +1,4 @@
-"""What every benchmark script shares: where results go, timing, tables, templates.
+"""What every benchmark script shares: start-up, data, where results go, timing, tables.
 
 * :func:`results_dir` — the one rule for output folders: ``--out`` when given; otherwise
   ``benchmarks/results/`` for a full run and ``benchmarks/results/quick/`` (git-ignored)
@@ -8,8 +8,6 @@
   medians over rounds, so load from other processes on a shared machine hits all alike;
   :func:`median_time` for a single function.
 * :func:`write_csv` / :func:`markdown_table` — result rows as CSV and as a Markdown table.
-* :func:`render` — report prose lives in ``benchmarks/templates/*.md.in`` files
-  (:class:`string.Template` ``$fields``), not in f-strings inside the measuring code.
 * Start-up: importing this module puts the checkout's ``jaxfric`` first on ``sys.path``;
   :func:`x64` switches a script to float64 (the script's choice: the library never does);
   :func:`emps_file` / :func:`pneumatic` find the real data (``jaxfric.datasets``' folders,
@@ -28,7 +26,6 @@ import io
 import os
 import platform
 import statistics
-import string
 import sys
 import time
 from dataclasses import dataclass, field
@@ -38,7 +35,6 @@ from typing import Callable
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 QUICK_RESULTS = RESULTS / "quick"
-TEMPLATES = HERE / "templates"
 ROOT = HERE.parent
 if (ROOT / "jaxfric").is_dir() and str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))  # this checkout's jaxfric, installed or not
@@ -203,29 +199,3 @@ def markdown_table(rows, columns: list[str] | None = None, *, headers: list[str]
     for r in rows:
         lines.append("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |")
     return "\n".join(lines)
-
-
-def render(template: str, **fields) -> str:
-    """``benchmarks/templates/<template>`` with its ``$fields`` substituted (all required)."""
-    text = (TEMPLATES / template).read_text(encoding="utf-8")
-    return string.Template(text).substitute(**fields)
-
-
-def render_blocks(template: str) -> Callable[..., str]:
-    """A template of named blocks (``@@ name`` lines start each), for a report built piece
-    by piece: ``block = render_blocks("peers.md.in"); block("intro", quick_flag="")``."""
-    text = (TEMPLATES / template).read_text(encoding="utf-8")
-    blocks: dict[str, list[str]] = {}
-    name = None
-    for line in text.splitlines():
-        if line.startswith("@@ "):
-            name = line[3:].strip()
-            blocks[name] = []
-        elif name is not None:
-            blocks[name].append(line)
-    templates = {k: string.Template("\n".join(v).strip("\n")) for k, v in blocks.items()}
-
-    def block(name: str, **fields) -> str:
-        return templates[name].substitute(**fields)
-
-    return block

@@ -2,7 +2,7 @@
 
 Elman rollouts implement the same recursion as :class:`jaxfric.models.Elman`
 (docs/algorithms.md §2.2, parameter layout ``[w | r | b | v | alpha | c0] (+ b_o)``)
-without JAX, so ``benchmarks/rollout_speed.py`` and ``scaling.py`` compare like with like:
+without JAX, so ``benchmarks/peers.py`` compares like with like:
 
 - :func:`elman_rollout_vectorised`: a Python loop over time, NumPy-vectorised
   over candidates and neurons (the usual "numpy PSO" way to score a swarm);
@@ -14,13 +14,13 @@ comparison with JAX's default precision), return ``(P, T)`` arrays, and are
 tested against the JAX rollout (``tests/test_baselines.py``).
 
 LuGre rollouts (exact zero-order-hold update, docs/algorithms.md §8.2), for
-``benchmarks/peers.py`` section 2: :func:`lugre_numpy_per_step` (everything recomputed
+``benchmarks/peers.py``: :func:`lugre_numpy_per_step` (everything recomputed
 inside the time loop, as MATLAB code would run it), :func:`lugre_numpy_hoisted` (the
 v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_loop`
 (scalar Python, one candidate at a time).
 
 NumPy test functions on a batch of rows (:data:`NUMPY_BATCH`), for the peers that take a
-vectorised objective (pyswarms) in ``speed_optim.py``, ``peers.py`` and ``scaling.py``.
+vectorised objective (pyswarms) in ``speed_optim.py``.
 """
 
 from __future__ import annotations
