@@ -19,6 +19,9 @@ inside the time loop, as MATLAB code would run it), :func:`lugre_numpy_hoisted` 
 v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_loop`
 (scalar Python, one candidate at a time).
 
+:func:`ls_coulomb_viscous`: the least-squares friction baseline every model must beat
+(``emps.py``, ``pipelines.py``, ``pressure_records.py``).
+
 NumPy test functions on a batch of rows (:data:`NUMPY_BATCH`), for the peers that take a
 vectorised objective (pyswarms) in ``speed_optim.py``.
 """
@@ -151,6 +154,17 @@ def lugre_python_loop(p, v, dt):
 
 
 # ------------------------------------------------------------- test functions
+def ls_coulomb_viscous(v, f, n=None):
+    """Asymmetric Coulomb + viscous + offset, ``F = Fv± v + Fc+ [v>0] − Fc− [v<0] + o``, by
+    least squares on the first ``n`` samples (all if None): ``(prediction on all samples,
+    [Fv+, Fv−, Fc+, Fc−, o])``."""
+    v, f = np.asarray(v, np.float64), np.asarray(f, np.float64)
+    pos, neg = (v > 0).astype(float), (v < 0).astype(float)
+    A = np.stack([v * pos, v * neg, pos, -neg, np.ones_like(v)], axis=1)
+    coef, *_ = np.linalg.lstsq(A[:n], f[:n], rcond=None)
+    return A @ coef, coef
+
+
 def rosen_batch(X):
     return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
 

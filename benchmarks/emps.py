@@ -5,8 +5,8 @@ Usage::
 
     python benchmarks/emps.py [--data PATH/DATA_EMPS.mat] [--quick] [--out DIR] [--refine lm|none|both]
 
-Data: ``--data``, else ``$JAXFRIC_EMPS``, else ``../shared/data/emps/DATA_EMPS.mat``
-next to the repository; without it the script says so and writes nothing (exit 0).
+Data: ``--data``, else :func:`_harness.emps_file`; without it the script says so and
+writes nothing (exit 0).
 
 The record is the benchmark's own recipe (:mod:`jaxfric.rig.emps`: Butterworth 100 Hz
 forward–backward on ``qm``, central differences, ``friction = gtau·vir − M·a`` with the
@@ -34,27 +34,16 @@ Writes ``emps.md``, ``emps.csv`` and ``emps_validation.png`` into
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 import warnings
 from pathlib import Path
 
-try:
-    import jaxfric  # noqa: F401
-except ImportError:  # running from a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_csv  # noqa: E402
+from baselines import ls_coulomb_viscous  # noqa: E402
 
-import jax  # noqa: E402
 import numpy as np  # noqa: E402
-
-from _harness import markdown_table, results_dir, write_csv  # noqa: E402
-
-HERE = Path(__file__).resolve().parent
-DEFAULT_DATA = HERE.parents[1] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 #: Published IDIM-LS values (Janot, Gautier & Brunot 2019; SOURCE.md next to the data).
 PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648,
              "Fv_pos": 166.71, "Fc_pos": 20.14, "Fv_neg": 240.42, "Fc_neg": 20.63}
@@ -63,24 +52,10 @@ PHYS_LATTICE, PHYS_GENERATIONS = 5, 30
 QUICK_GENERATIONS = 3
 
 
-def data_path(arg) -> Path:
-    path = Path(arg or os.environ.get("JAXFRIC_EMPS") or DEFAULT_DATA)
-    if path.is_file() or arg or os.environ.get("JAXFRIC_EMPS"):
-        return path
-    from jaxfric import datasets  # no local copy: the checked download (or its one-line reason)
-
-    try:
-        return datasets.emps_path()
-    except datasets.DatasetUnavailable as err:
-        print(f"emps: {err}", file=sys.stderr)
-        return path
-
-
 def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", default=None, help="path of DATA_EMPS.mat (default $JAXFRIC_EMPS or the shared folder)")
-    p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
-    p.add_argument("--out", type=Path, default=None)
+    add_output_arguments(p, "tiny budgets (smoke test)")
     p.add_argument("--refine", choices=("lm", "none", "both"), default="lm",
                    help="gradient stage of the physical models after MAPSO (default lm)")
     p.add_argument("--seed", type=int, default=0)
@@ -104,15 +79,6 @@ def idim_table(rec):
 
 
 # ----------------------------------------------------------------------- (b) models
-def ls_baseline(v, f, n):
-    """Asymmetric Coulomb + viscous + offset, ``F = Fv± v + Fc+ [v>0] − Fc− [v<0] + o``,
-    by least squares on the training window; returns the prediction on all samples."""
-    pos, neg = (v > 0).astype(float), (v < 0).astype(float)
-    A = np.stack([v * pos, v * neg, pos, -neg, np.ones_like(v)], axis=1)
-    coef, *_ = np.linalg.lstsq(A[:n], f[:n], rcond=None)
-    return A @ coef, coef
-
-
 def nmse(f, y):
     e = f - y
     return float(100.0 * np.mean(e ** 2) / np.var(f))
@@ -159,10 +125,9 @@ def run_identify(model, data, seed, quick, refine):
 
 def main(argv=None):
     args = parse(argv)
-    path = data_path(args.data)
-    if not path.is_file():
-        print(f"emps: no EMPS file at {path} (pass --data or set JAXFRIC_EMPS); skipped, nothing written.",
-              file=sys.stderr)
+    path = emps_file(args.data)
+    if path is None:
+        print("emps: no EMPS file (pass --data or set JAXFRIC_DATA); skipped, nothing written.", file=sys.stderr)
         return 0
     from jaxfric import rig
 
@@ -173,7 +138,7 @@ def main(argv=None):
     data = rig.emps_friction_data(rec)
     v, f, n = np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
     t0 = time.perf_counter()
-    y_ls, coef = ls_baseline(v, f, n)
+    y_ls, coef = ls_coulomb_viscous(v, f, n)
     ls_s = time.perf_counter() - t0
     rows = [{"model": "LS baseline: asymmetric Coulomb + viscous + offset (numpy lstsq)", "refine": "-",
              "valid": nmse(f[n:], y_ls[n:]), "train": nmse(f[:n], y_ls[:n]), "wall_s": ls_s, "run_s": ls_s,
@@ -238,8 +203,7 @@ def write(out, args, path, data, idim, rows, coef, wall):
         f"(Butterworth 100 Hz forward–backward, central differences, 50 samples dropped at each end, "
         f"IDIM-LS mass); first {data.n_train} samples train, last {data.n_samples - data.n_train} validate and "
         "were never used to choose anything. "
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPU cores shared with other jobs "
-        f"(load average {os.getloadavg()[0]:.1f} at the end), jax {jax.__version__}, float32, key {args.seed}"
+        f"Machine: {machine()} (at the end), float32, key {args.seed}"
         + (" — **--quick smoke budgets, not results**" if args.quick else "") + ".", "",
         "## (a) IDIM-LS on the whole kept record against the published values", "",
         markdown_table([{**r, "ours": f"{r['ours']:.4f}", "published": f"{r['published']:.4f}",

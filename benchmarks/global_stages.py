@@ -30,6 +30,7 @@ includes compilation (reported apart).
 
     python benchmarks/global_stages.py                       # both data sets, 5 keys
     python benchmarks/global_stages.py --data rig --models lugre --keys 2
+    python benchmarks/global_stages.py --quick               # rig, LuGre, 1 key, tiny budgets
 
 Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
 """
@@ -37,34 +38,21 @@ Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 import warnings
 from pathlib import Path
 
-import jax
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import add_output_arguments, emps_file, machine, results_dir, write_csv  # noqa: E402
 
-try:
-    import jaxfric as jf
-except ImportError:  # a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    import jaxfric as jf
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxfric as jf  # noqa: E402
 from jaxfric.identification._api import LARGE_MODEL_PARAMS, NAMED_MODEL_DEFAULTS  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir, write_csv  # noqa: E402
-
 EMPS_MASS = 95.1089  # kg, SOURCE.md (IDIM-LS reference)
-
-
-def emps_path() -> Path:
-    env = os.environ.get("JAXFRIC_EMPS")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 
 
 def emps_record(path: Path, decimate: int = 10, drop: int = 50):
@@ -90,12 +78,12 @@ def datasets(names):
     if "rig" in names:
         out["rig"] = jf.rig.synthetic_friction_data(jax.random.key(0))
     if "emps" in names:
-        p = emps_path()
-        if p.exists():
+        p = emps_file()
+        if p is not None:
             v, f, dt = emps_record(p)
             out["emps"] = jf.FrictionData.from_arrays(v, f, dt, train_fraction=0.8)
         else:
-            print(f"EMPS data not found at {p}: skipped (set JAXFRIC_EMPS)", flush=True)
+            print("EMPS data not found: skipped (set JAXFRIC_DATA)", flush=True)
     return out
 
 
@@ -151,22 +139,6 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
             yield row
 
 
-def read_csv(path: Path) -> list[dict]:
-    import csv
-
-    def num(v):
-        try:
-            return int(v)
-        except ValueError:
-            try:
-                return float(v)
-            except ValueError:
-                return v
-
-    with open(path) as fh:
-        return [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
-
-
 def write(out: Path, rows, a):
     out.mkdir(parents=True, exist_ok=True)
     write_csv(rows, out / "global_stages.csv", float_format="")
@@ -186,9 +158,8 @@ def write(out: Path, rows, a):
         "its step size underflows). Run s: median over keys of the global + Nelder–Mead run "
         "without compilation (identify's timing; the BFGS stage's time not included).",
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPU(s) shared with other jobs "
-        f"(load average {a.load:.1f} at the start; timings noisy), jax {jax.__version__}, "
-        f"jaxfric {jf.__version__}.",
+        f"Machine: {a.machine} (at the start; timings noisy), jaxfric {jf.__version__}."
+        + (" **--quick smoke budgets, not results.**" if a.quick else ""),
         "",
         "| data | model | global stage | global evals | valid MSE % | train MSE % | J after global "
         "| J final | run s |",
@@ -226,18 +197,12 @@ def main(argv=None):
     p.add_argument("--enn-generations", type=int, default=50,
                    help="MAPSO generations for the ENN (identify's default network pipeline uses 50)")
     p.add_argument("--nm-evals", type=int, default=1000)
-    p.add_argument("--out", default=None)
-    p.add_argument("--report-only", action="store_true",
-                   help="rewrite global_stages.md from global_stages.csv in --out (no runs)")
-    p.add_argument("--report-only-load", default=None, help="load average at the original run's start")
+    add_output_arguments(p, "rig, LuGre, 1 key, tiny budgets (smoke test)")
     a = p.parse_args(argv)
-    a.out = results_dir(a.out, quick=getattr(a, "quick", False))
-    a.load = os.getloadavg()[0]
-    if a.report_only:  # rewrite the table from the CSV of an earlier run
-        rows = read_csv(Path(a.out) / "global_stages.csv")
-        a.load = float(a.report_only_load) if a.report_only_load is not None else a.load
-        write(Path(a.out), rows, a)
-        return
+    if a.quick:
+        a.data, a.models, a.keys, a.generations, a.enn_generations, a.nm_evals = "rig", "lugre", 1, 3, 2, 50
+    a.out = results_dir(a.out, quick=a.quick)
+    a.machine = machine()
     rows = []
     for dname, data in datasets(a.data.split(",")).items():
         for model_name in a.models.split(","):

@@ -43,6 +43,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
 from _harness import add_output_arguments, emps_file, machine, pneumatic, results_dir, write_csv  # noqa: E402
+from baselines import ls_coulomb_viscous  # noqa: E402
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -82,13 +83,10 @@ def load(args):
 
 
 def ls_baseline(v, f, n):
-    """Asymmetric Coulomb + viscous + offset by least squares on the training window."""
+    """The least-squares baseline (``baselines.ls_coulomb_viscous``) with its metrics."""
     from jaxfric.metrics import friction_metrics
 
-    pos, neg = (v > 0).astype(float), (v < 0).astype(float)
-    A = np.stack([v * pos, v * neg, pos, -neg, np.ones_like(v)], axis=1)
-    x, *_ = np.linalg.lstsq(A[:n], f[:n], rcond=None)
-    y = A @ x
+    y, x = ls_coulomb_viscous(v, f, n)
     return {"train": friction_metrics(f[:n], y[:n]), "valid": friction_metrics(f[n:], y[n:]), "coef": x}
 
 
@@ -126,7 +124,6 @@ def run_de_nm(data, seed, quick):
     """scipy DE on the first GLOBAL_STAGE_SAMPLES samples, then scipy Nelder–Mead on all."""
     import scipy.optimize
 
-    from jaxfric import models
     from jaxfric.fit import predict
     from jaxfric.identification import _api
     from jaxfric.identification._data import as_record

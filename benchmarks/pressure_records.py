@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _harness import add_output_arguments, markdown_table, pneumatic, results_dir, write_csv  # noqa: E402
+from baselines import ls_coulomb_viscous  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
@@ -35,19 +36,13 @@ SEALS = ("NAPN", "O-ring", "O-ring257", "PK", "X-ring257")
 TRAIN_BAR, VALID_BAR = (1, 5, 7), 3
 
 
-def ls_regressors(v: np.ndarray) -> np.ndarray:
-    """Asymmetric Coulomb + viscous + offset: F = Fc+[v>0] − Fc−[v<0] + Fv± v + offset."""
-    pos, neg = (v > 0).astype(float), (v < 0).astype(float)
-    return np.column_stack([pos, -neg, v * pos, v * neg, np.ones_like(v)])
-
-
 def one_seal(folder, seal: str, key: int = 0) -> dict:
     train = {f"{seal}_{p}bar": pneumatic(seal, p, folder)[1] for p in TRAIN_BAR}
     held = pneumatic(seal, VALID_BAR, folder)[1]
     v = np.concatenate([d.velocity for d in train.values()])
     f = np.concatenate([d.friction for d in train.values()])
-    coef, *_ = np.linalg.lstsq(ls_regressors(v), f, rcond=None)
-    ls = friction_metrics(held.friction, ls_regressors(held.velocity) @ coef)["mse_percent"]
+    y, _ = ls_coulomb_viscous(np.concatenate([v, held.velocity]), np.concatenate([f, held.friction]), v.size)
+    ls = friction_metrics(held.friction, y[v.size:])["mse_percent"]
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a parameter on its bound is reported in the table
