@@ -18,7 +18,7 @@ import jaxfric
 from jaxfric.identification import GradientRefinement, identify
 from jaxfric.identification import _api
 from jaxfric.identification._objective import CostData, OutputErrorCost, _plain_cost
-from jaxfric.identification._refine import GRADIENT_PHASE
+from jaxfric.optim.progress import GRADIENT_PHASE
 from jaxfric.models import Coulomb, Elman
 
 DT = 1.0 / 128.0

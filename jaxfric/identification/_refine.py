@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ..optim.progress import step_progress
 from ._objective import CostData, OutputErrorCost
 
 METHODS = ("bfgs", "lbfgs", "lm", "gauss_newton")
@@ -163,9 +164,6 @@ class RefineOutcome(eqx.Module):
 REFINE_CHUNK = 50
 
 _TAGS = frozenset()
-#: Phase number of the gradient stage's reports to a callable progress sink
-#: (``jaxfric.optim.progress.PHASES``).
-GRADIENT_PHASE = 2
 
 
 def _fn(settings: GradientRefinement):
@@ -233,31 +231,7 @@ def _finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data, max
 
 def _progress_sink(progress, settings: GradientRefinement):
     """``(update(steps, f), close(steps))`` for ``progress`` (None, True or a callable)."""
-    if progress is None or progress is False:
-        return (lambda steps, f: None), (lambda steps: None)
-    if progress is True:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=settings.max_steps, desc=f"gradient ({settings.method})", unit="step",
-                   leave=True)
-
-        def update(steps, f):
-            bar.update(steps - bar.n)
-            bar.set_postfix(J=f"{f:.4g}", refresh=False)
-
-        def close(steps):
-            # An early stop (converged) still ends the bar at 100 %, saying when it stopped.
-            if steps < settings.max_steps:
-                bar.set_postfix_str(f"converged at step {steps}", refresh=False)
-            bar.update(bar.total - bar.n)
-            bar.close()
-
-        return update, close
-    if callable(progress):
-        # Phase 2 of jaxfric.optim's progress protocol (PHASES); ``evals`` carries the
-        # step count.
-        return (lambda steps, f: progress(GRADIENT_PHASE, steps, steps, f)), (lambda steps: None)
-    raise ValueError(f"progress must be None, True (a tqdm bar) or a callable, got {progress!r}")
+    return step_progress(progress, f"gradient ({settings.method})", settings.max_steps)
 
 
 def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
@@ -266,7 +240,8 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
 
     The optimistix solver (``init``/``step``/``terminate``) runs in compiled chunks of
     `REFINE_CHUNK` steps; ``progress`` (``True`` for a tqdm bar, or a callable
-    ``sink(GRADIENT_PHASE, step, step, J)``) is told after each chunk. ``compiler_options``:
+    ``sink(GRADIENT_PHASE, step, step, J)``, ``jaxfric.optim.progress``) is told after each
+    chunk. ``compiler_options``:
     a `jaxfric._xla.resolve` tuple for the compiled chunks.
 
     ``cost(theta, data)`` is J; the start's own J is evaluated too, so the

@@ -50,8 +50,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..identification._refine import GRADIENT_PHASE
 from ..optim import PSO, minimise
+from ..optim.progress import step_progress
 from ._lm import levenberg_marquardt
 
 __all__ = ["MotionBudget", "MotionSearch", "default_search"]
@@ -164,19 +164,7 @@ class MotionBudget:
 
 def _lm_progress(progress, desc, total):
     """``(on_step, close)`` for one Levenberg–Marquardt stage."""
-    if progress is None or progress is False:
-        return None, lambda: None
-    if progress is True:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=total, desc=desc, unit="step", leave=True)
-
-        def on_step(step, f):
-            bar.update(step - bar.n)
-            bar.set_postfix(J=f"{f:.4g}", refresh=False)
-
-        return on_step, bar.close
-    return (lambda step, f: progress(GRADIENT_PHASE, step, step, f)), (lambda: None)
+    return step_progress(progress, desc, total)
 
 
 class _Clock:

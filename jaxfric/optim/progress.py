@@ -18,6 +18,11 @@ PHASES = ("global", "local", "gradient")
 """Phase 0 is a swarm's generations, phase 1 Nelder–Mead's steps, phase 2 the steps of
 [`jaxfric.identify`][jaxfric.identification.identify]'s gradient stage."""
 
+#: Phase number of the reports of a stage counted in steps: the gradient stage of
+#: [`jaxfric.identify`][jaxfric.identification.identify] and each Levenberg–Marquardt stage
+#: of [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] (`step_progress`).
+GRADIENT_PHASE = 2
+
 _STAGE_LABEL = {1: (" (Nelder–Mead)", "step"), 2: (" (gradient)", "step")}
 
 #: Local (Nelder–Mead) steps between two reports.
@@ -108,3 +113,35 @@ class RecordingProgress:
 
     def __call__(self, phase, step, evals, f_best):
         self.reports.append((PHASES[phase], step, evals, f_best))
+
+
+def step_progress(progress, desc: str, total: int):
+    """``(update(step, f), close(step=None))`` of one stage counted in steps (the gradient
+    stage, a Levenberg–Marquardt stage) for ``progress``: ``None`` or ``False`` shows
+    nothing; ``True`` draws a tqdm bar labelled ``desc`` of ``total`` steps with J beside
+    it, which ``close(step)`` ends at 100 % (saying "converged at step N" when the stage
+    stopped early) and ``close()`` simply closes; a callable sink is told
+    ``(GRADIENT_PHASE, step, step, f)``."""
+    if progress is None or progress is False:
+        return (lambda step, f: None), (lambda step=None: None)
+    if progress is True:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc=desc, unit="step", leave=True)
+
+        def update(step, f):
+            bar.update(step - bar.n)
+            bar.set_postfix(J=f"{f:.4g}", refresh=False)
+
+        def close(step=None):
+            if step is not None:
+                if step < total:
+                    bar.set_postfix_str(f"converged at step {step}", refresh=False)
+                bar.update(bar.total - bar.n)
+            bar.close()
+
+        return update, close
+    if callable(progress):
+        # ``evals`` carries the step count
+        return (lambda step, f: progress(GRADIENT_PHASE, step, step, f)), (lambda step=None: None)
+    raise ValueError(f"progress must be None, True (a tqdm bar) or a callable, got {progress!r}")
