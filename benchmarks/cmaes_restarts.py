@@ -31,22 +31,21 @@ from __future__ import annotations
 import argparse
 import collections
 import importlib.metadata
-import os
 import shlex
 import sys
 import time
+from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import add_output_arguments, machine, markdown_table, results_dir, write_csv, x64  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # the script's choice: |f − f*| < 1e-5 needs it
-
+x64()  # the script's choice: |f − f*| < 1e-5 needs it
+import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
-
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
 
 SUCCESS = 1e-5
 
@@ -231,12 +230,10 @@ def main():
 
     write_csv(rows, out / "cmaes_restarts.csv")
     fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
-    load = os.getloadavg()
     text = "\n\n".join([
         "# CMA-ES restarts (IPOP) beside pycma",
-        f"Command: `{command}` ({time.perf_counter() - t_start:.0f} s; load average at the "
-        f"end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}).",
-        f"jax {jax.__version__}, evosax {importlib.metadata.version('evosax')}, "
+        f"Command: `{command}` ({time.perf_counter() - t_start:.0f} s). Machine: {machine()} (at the end).",
+        f"evosax {importlib.metadata.version('evosax')}, "
         f"pycma {sys.modules['cma'].__version__}, float64. {len(probs)} functions × D ∈ "
         f"{dims} × {a.seeds} seeds; budget {budget_per_dim}·D evaluations for every "
         f"solver; success: |f − f*| < {SUCCESS:g} at the end; IPOP restarts "

@@ -34,13 +34,10 @@ import sys
 import time
 from pathlib import Path
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _harness import add_output_arguments, emps_file, markdown_table, results_dir, write_csv, x64  # noqa: E402
 
+x64()
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -48,9 +45,6 @@ from jaxfric import models  # noqa: E402
 from jaxfric.motion import MotionData, MotionFit, MotionSearch, identify_motion  # noqa: E402
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, emps_states, idim_ls, load_emps  # noqa: E402
 
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
-
-EMPS_DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 INIT_WINDOW = 20
 #: Published IDIM-LS values (SOURCE.md; Janot, Gautier, Brunot 2019).
 IDIM = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
@@ -104,7 +98,7 @@ def _cell(v) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--emps", default=os.environ.get("JAXFRIC_EMPS", str(EMPS_DEFAULT)))
+    ap.add_argument("--emps", default=None, help="DATA_EMPS.mat (default: _harness.emps_file)")
     ap.add_argument("--test", default=os.environ.get("JAXFRIC_EMPS_TEST"),
                     help="the benchmark's test recording DATA_EMPS_PULSES.mat (not shipped)")
     ap.add_argument("--models", default="coulomb,stribeck,lugre,gms")
@@ -115,8 +109,9 @@ def main(argv=None):
         print(f"EMPS test recording {args.test!r} not given or not found: skipping the official task "
               "(pass --test PATH/DATA_EMPS_PULSES.mat)")
         return 0
-    if not Path(args.emps).exists():
-        print(f"EMPS estimation file {args.emps} not found: skipping")
+    args.emps = emps_file(args.emps)
+    if args.emps is None:
+        print("EMPS estimation file not found: skipping")
         return 0
     out = results_dir(args.out, quick=args.quick)
     est, test = motion_data(args.emps), motion_data(args.test)

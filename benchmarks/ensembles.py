@@ -40,34 +40,24 @@ costs K times one run for K members, whatever the layout.
 
 Writes ``ensembles_<record>[_<tag>].md`` and ``.csv`` into ``--out`` (default
 ``benchmarks/results``; ``--quick``: tiny budgets, ``benchmarks/results/quick``).
-The EMPS file is ``--data-dir``/DATA_EMPS.mat, else ``$JAXFRIC_EMPS``, else
-``../shared/data/emps/DATA_EMPS.mat``.
+The EMPS file is ``--data-dir``/DATA_EMPS.mat, else :func:`_harness.emps_file`.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import sys
 import time
 import warnings
 from pathlib import Path
 
-try:
-    import jaxfric  # noqa: F401
-except ImportError:  # running from a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_csv  # noqa: E402
 
-import jax
-import numpy as np
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import markdown_table, results_dir, write_csv  # noqa: E402
-
-HERE = Path(__file__).resolve().parent
-DATA_ROOT = Path(os.environ.get("JAXFRIC_SHARED_DATA", HERE.parents[1] / "shared" / "data"))
 ROLLOUT_BATCHES = (1, 8, 25, 64, 200)
 
 
@@ -86,8 +76,7 @@ def parse(argv=None):
                    help="also time the cost of P candidates at once (the floor of the ratios)")
     p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
     p.add_argument("--tag", default="", help="suffix of the result files (e.g. gpu)")
-    p.add_argument("--quick", action="store_true", help="tiny budgets, written to results/quick/")
-    p.add_argument("--out", default=None)
+    add_output_arguments(p, "tiny budgets (smoke test)")
     p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
     p.add_argument("--append", action="store_true",
                    help="keep the rows of the existing result files (a row of the same model and K "
@@ -122,22 +111,14 @@ def merge(old: list[dict], new: list[dict], keys: tuple[str, ...]) -> list[dict]
     return [r for r in old if tuple(r[k] for k in keys) not in fresh] + new
 
 
-def emps_path(args) -> Path:
-    if args.data_dir:
-        return Path(args.data_dir) / "DATA_EMPS.mat"
-    if os.environ.get("JAXFRIC_EMPS"):
-        return Path(os.environ["JAXFRIC_EMPS"])
-    return DATA_ROOT / "emps" / "DATA_EMPS.mat"
-
-
 def load(args):
     from jaxfric import rig
 
     if args.record == "rig":
         return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
-    path = emps_path(args)
-    if not path.is_file():
-        return None, f"no EMPS file at {path}"
+    path = emps_file(args.data_dir and Path(args.data_dir) / "DATA_EMPS.mat")
+    if path is None:
+        return None, "no EMPS file (pass --data-dir or set JAXFRIC_DATA)"
     return (rig.emps_friction_data(rig.load_emps(path)),
             "EMPS estimation file at 1 kHz (DATA_EMPS.mat, 24 741 samples, 80 % training)")
 
@@ -349,11 +330,6 @@ def _fmt(x) -> str:
     return f"{x:.3g}" if isinstance(x, float) else str(x)
 
 
-def _device() -> str:
-    d = jax.devices()[0]
-    return f"{getattr(d, 'device_kind', d.platform)} ({d.platform})"
-
-
 def command() -> str:
     return " ".join(["python benchmarks/ensembles.py"] + sys.argv[1:])
 
@@ -380,8 +356,7 @@ def report(rows, floor, args, desc: str, runs: list[str], costs=()) -> str:
         "",
         *[f"* {r}" for r in runs],
         "",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; device "
-        f"{_device()}, jax {jax.__version__}. Warm wall times, medians over {args.rounds} round(s); "
+        f"Machine: {machine()}; device {getattr(jax.devices()[0], 'device_kind', '')}. Warm wall times, medians over {args.rounds} round(s); "
         "'CPU time' is the process's CPU seconds (steadier on a loaded machine).",
         "Stage columns: the global (derivative-free) stage's and the gradient stage's run time "
         "(compilation apart), ensemble over one fit. Members: member i against the single fit "

@@ -17,27 +17,26 @@ Writes ``nm_vs_scipy.md`` and ``nm_vs_scipy.csv`` to ``--out`` (default
 with fewer starts.
 
     python benchmarks/nm_vs_scipy.py             # 30 starts per case, ~minutes
+    python benchmarks/nm_vs_scipy.py --quick     # 5 starts, n = 4 (smoke test)
 """
 
 from __future__ import annotations
 
 import argparse
-import platform
 import sys
 from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import add_output_arguments, machine, results_dir, write_csv  # noqa: E402
 
-import jax.numpy as jnp
-import numpy as np
-import optimistix as optx
-import scipy
-import scipy.optimize
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import optimistix as optx  # noqa: E402
+import scipy  # noqa: E402
+import scipy.optimize  # noqa: E402
 
-import jaxfric as jf
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import results_dir, write_csv  # noqa: E402
+import jaxfric as jf  # noqa: E402
 
 FUNCTIONS = ("sphere", "rosenbrock")
 
@@ -113,8 +112,10 @@ def main(argv=None):
     p.add_argument("--tol", type=float, default=1e-10, help="xatol = fatol")
     p.add_argument("--solved", type=float, default=1e-8)
     p.add_argument("--dims", default="4,8,12")
-    p.add_argument("--out", default=None)
+    add_output_arguments(p, "5 starts, n = 4 (smoke test)")
     a = p.parse_args(argv)
+    if a.quick:
+        a.starts, a.dims = 5, "4"
     rows = []
     for name in FUNCTIONS:
         for n in (int(d) for d in a.dims.split(",")):
@@ -124,16 +125,14 @@ def main(argv=None):
                              "median_evals": med_ev, "median_f": float(np.median(f)), "worst_f": float(np.max(f))})
                 print(f"{name:10s} n={n:2d} {label:36s} solved {ok:2d}/{a.starts}  median evals {med_ev:8.0f}  "
                       f"median f {np.median(f):.1e}", flush=True)
-    out = results_dir(a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = results_dir(a.out, quick=a.quick)
     write_csv(rows, out / "nm_vs_scipy.csv", float_format="")
     lines = [
         "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
         "",
         f"{a.starts} random starts per case (fixed seeds), budget {a.budget}·n evaluations, "
         f"xatol = fatol = {a.tol:g} (absolute), solved: f < {a.solved:g}; first simplex: fminsearch's "
-        f"rule for both; float64. SciPy {scipy.__version__}, jax {jax.__version__}, jaxfric "
-        f"{jf.__version__}, {platform.machine()}. Re-run: `python benchmarks/nm_vs_scipy.py`.",
+        f"rule for both; float64. SciPy {scipy.__version__}, jaxfric {jf.__version__}; {machine()}. Re-run: `python benchmarks/nm_vs_scipy.py`.",
         "",
         "| function | n | solver | solved | median evaluations | median f | worst f |",
         "|---|---|---|---|---|---|---|",

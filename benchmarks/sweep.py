@@ -1,7 +1,6 @@
 """Throughput of ``jaxfric.sweep``: runs per second over a (model, record, seed) grid.
 
-Records: the EMPS estimation record (``--data``, else ``$JAXFRIC_EMPS``, else the shared
-data folder) cut into ``--segments`` equal pieces, each its own record; without the file,
+Records: the EMPS estimation record (``--data``, else :func:`_harness.emps_file`) cut into ``--segments`` equal pieces, each its own record; without the file,
 simulated Coulomb + viscous friction records of the same length. Models: ``--models``
 (default LuGre and Dahl, the library's default solver for each); seeds ``0 .. K-1``.
 
@@ -14,7 +13,6 @@ its fit file, none recomputed). ``--tag gpu`` names the outputs ``sweep_gpu.*``.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import tempfile
@@ -25,9 +23,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
-
-SHARED_EMPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
+from _harness import add_output_arguments, emps_file, markdown_table, results_dir, write_csv  # noqa: E402
 
 
 def _device() -> str:
@@ -40,7 +36,7 @@ def _device() -> str:
 def records(path, segments: int, length: int | None):
     from jaxfric.records import FrictionData
 
-    if path is not None and Path(path).exists():
+    if path is not None:
         from jaxfric import rig
 
         data = rig.emps_friction_data(rig.load_emps(path))
@@ -73,7 +69,7 @@ def ls_valid_mse(rec) -> float:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_output_arguments(p)
-    p.add_argument("--data", type=Path, default=Path(os.environ.get("JAXFRIC_EMPS", SHARED_EMPS)))
+    p.add_argument("--data", type=Path, default=None, help="DATA_EMPS.mat (default: _harness.emps_file)")
     p.add_argument("--models", default="lugre,dahl")
     p.add_argument("--segments", type=int, default=4)
     p.add_argument("--keys", type=int, default=4)
@@ -87,7 +83,7 @@ def main(argv=None) -> int:
     segments, keys, length = (args.segments, args.keys, None) if not args.quick else (2, 2, 1000)
     if args.quick:
         models = models[:1]
-    recs, source, size = records(args.data, segments, length)
+    recs, source, size = records(emps_file(args.data), segments, length)
     options = {}
     if args.quick:
         options["solver"] = jaxfric.MAPSONMDS(mapso=jaxfric.MAPSO(lattice_size=3, num_generations=5),

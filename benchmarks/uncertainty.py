@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/uncertainty.py [--emps /work/shared/data/emps/DATA_EMPS.mat] [--quick] [--out DIR]
+    python benchmarks/uncertainty.py [--emps PATH/DATA_EMPS.mat] [--quick] [--out DIR]
 
 1. **Parameter coverage on the rig simulator.** The velocity is the simulated rig's
    (``rig.simulate(Rig(), key 0)``, 2000 samples at 128 Hz, first 1600 used); the friction
@@ -25,34 +25,26 @@ Writes ``uncertainty.md`` and ``uncertainty.csv`` into ``--out`` (default
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 import warnings
 from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_csv, x64  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)  # scripts choose x64 at start-up
-
+x64()
+import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import optimize, stats  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-try:
-    import jaxfric  # noqa: E402
-except ImportError:  # running from a source checkout without installing
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    import jaxfric  # noqa: E402
+import jaxfric  # noqa: E402
 from jaxfric import Fit, models, rig  # noqa: E402
 from jaxfric.uncertainty import (andrews_bandwidth, block_bootstrap_covariance, coverage,  # noqa: E402
                                  hac_covariance, jacobian_covariance)
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
-
-EMPS_DEFAULT = "/work/shared/data/emps/DATA_EMPS.mat"
 N_TRAIN = 1600
 LEVEL = 0.95
 TRUTHS = {
@@ -167,7 +159,7 @@ def ls_baseline_fit(data):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--emps", default=EMPS_DEFAULT, help="DATA_EMPS.mat (skipped when absent)")
+    ap.add_argument("--emps", default=None, help="DATA_EMPS.mat (default: _harness.emps_file; skipped when absent)")
     ap.add_argument("--replicates", type=int, default=None)
     add_output_arguments(ap, "fewer replicates, no ensemble (smoke test)")
     args = ap.parse_args(argv)
@@ -198,7 +190,8 @@ def main(argv=None):
                "half_width": float(np.mean(hi - lo) / 2)}
 
     emps_note = "EMPS: skipped (no file at --emps)."
-    if os.path.exists(args.emps):
+    args.emps = emps_file(args.emps)
+    if args.emps is not None:
         data = rig.emps_friction_data(rig.load_emps(args.emps))
         split = f"estimation {data.n_train} / held-back {data.n_samples - data.n_train}"
         base = ls_baseline_fit(data)
@@ -211,17 +204,17 @@ def main(argv=None):
             fit = jaxfric.identify(name, data, key=0, **opts)
             band_rows.append(band_row("EMPS", fit, data, split, suffix=" (asym+offset)" if opts else ""))
             iv_rows += interval_rows("EMPS", fit)
-        emps_note = f"EMPS: {args.emps}, {data.n_samples} samples at {1 / data.dt:.4g} Hz, {split}."
+        emps_note = f"EMPS: {args.emps.name}, {data.n_samples} samples at {1 / data.dt:.4g} Hz, {split}."
 
     write_csv(cov_rows + band_rows, out / "uncertainty.csv")
     ens_text = ("not run (--quick)" if ens is None else
                 f"LuGre, keys=8 on the rig: the members' min–max band (mean half-width "
                 f"{ens['half_width']:.3g} N) holds {ens['train']:.1%} of the training and "
                 f"{ens['valid']:.1%} of the validation samples")
-    md = [f"# Parameter intervals and prediction bands: measured coverage", "",
+    md = ["# Parameter intervals and prediction bands: measured coverage", "",
           f"`python benchmarks/uncertainty.py{' --quick' if args.quick else ''}` — jaxfric "
           f"{jaxfric.__version__ if hasattr(jaxfric, '__version__') else ''}, float64, "
-          f"{os.cpu_count()} CPU cores (shared, loaded machine), {time.perf_counter() - t0:.0f} s in all.", "",
+          f"{machine()}, {time.perf_counter() - t0:.0f} s in all.", "",
           "## 1. Parameter coverage (known truth, rig velocity, noise 20 N)", "",
           f"Fraction of {reps} noisy replicates whose 95 % interval holds the true parameter "
           "(nominal 0.95; the test asks 0.85–0.99). `block_bootstrap`: "
