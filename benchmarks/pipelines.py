@@ -25,7 +25,7 @@ last 20 % validation; the rig's own 1600/400), float32:
 
 EMPS also gets the IDIM-LS table (M, Fv, Fc symmetric and asymmetric) against the
 published values (``jaxfric.rig.emps``). Run time excludes compilation (JAX compile
-events, ``jaxfric.identification._timing.Stopwatch``); the first key of each pipeline also
+events, ``jaxfric._timing.Stopwatch``); the first key of each pipeline also
 pays it and is reported apart.
 
 Writes ``pipelines_<record>.md`` and ``.csv`` into ``--out`` (default
@@ -128,7 +128,7 @@ def run_de_nm(data, seed, quick):
     from jaxfric.identification import _api
     from jaxfric.identification._data import as_record
     from jaxfric.identification._objective import OutputErrorCost, cost_data, fit_scalers
-    from jaxfric.identification._timing import Stopwatch
+    from jaxfric._timing import Stopwatch
     from jaxfric.metrics import friction_metrics
 
     rec = as_record(data)

@@ -58,7 +58,7 @@ import numpy as np  # noqa: E402
 
 import jaxfric as jf  # noqa: E402
 from jaxfric import functions as F  # noqa: E402
-from jaxfric.identification._timing import Stopwatch  # noqa: E402
+from jaxfric._timing import Stopwatch  # noqa: E402
 
 SUCCESS = 1e-8
 FLOOR = 1e-30  # exact zeros and 1e-200s would squash the log axis

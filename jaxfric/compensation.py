@@ -32,7 +32,7 @@ import numpy as np
 from .records import same_sample_time
 from .rig import friction as _fr
 from .rig.params import Rig
-from .rig.simulator import _initial_state, _substep, load_force
+from .rig.simulator import initial_state, load_force, substep
 
 __all__ = ["Gains", "Reference", "compensation_study", "compensation_table", "feedforward",
            "reference", "track"]
@@ -143,7 +143,7 @@ def _track(rig, gains, x_ref, v_ref, a_ref, ff, fs, substeps, ideal, cutoff):
     cyl = rig.cylinder
     a1, a2 = cyl.areas
     lp = 1.0 - jnp.exp(-2 * jnp.pi * cutoff * dt)  # first-order low-pass of de/dt
-    y, fe = _initial_state(rig, x_ref[0], jnp.float64)
+    y, fe = initial_state(rig, x_ref[0], jnp.float64)
 
     def control(carry, inp):
         (y, fe), integ, e_prev, de = carry
@@ -159,7 +159,7 @@ def _track(rig, gains, x_ref, v_ref, a_ref, ff, fs, substeps, ideal, cutoff):
         u = jnp.clip(gains.ff * vr + gains.kf * (f_d - (p1 * a1 - p2 * a2)), -1.0, 1.0)
         sub = (jnp.full((substeps,), t) + h * (jnp.arange(substeps) + 1), jnp.full((substeps,), xr),
                jnp.full((substeps,), vr), jnp.full((substeps,), u))
-        (y2, fe2), _ = jax.lax.scan(lambda c, i: _substep(rig, h, False, c, i), (y, fe), sub)
+        (y2, fe2), _ = jax.lax.scan(lambda c, i: substep(rig, h, False, c, i), (y, fe), sub)
         return ((y2, fe2), integ + e * dt, e, de), {"x": x, "command": u, "friction": f_true,
                                                     "feedforward": f_comp}
 

@@ -48,7 +48,7 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
-from .models._scan import time_scan
+from .models import time_scan
 
 __all__ = ["DeerResult", "deer_scan", "elman_rollout", "simulate_motion_parallel"]
 
@@ -255,13 +255,13 @@ def simulate_motion_parallel(step, theta, mass, force, dt, x0, v0, state0=None, 
     ``(x, v, friction state)`` -- 2 states for static maps, 3 for LuGre and Dahl --
     solved by [`deer_scan`][jaxfric.parallel_scan.deer_scan] with dense Jacobians. Same arguments and outputs
     (``{"x", "v", "friction"}``, sample k before the step driven by ``force[k]``)."""
-    from .motion._forward import _advance, _start
+    from .motion import advance_motion, motion_start
 
-    force, dt, inv_m, x0, v0, s0 = _start(step, theta, mass, force, dt, x0, v0, state0)
+    force, dt, inv_m, x0, v0, s0 = motion_start(step, theta, mass, force, dt, x0, v0, state0)
 
     def one(carry, u):
         x, v, s = carry
-        x, v, s, _ = _advance(step, theta, inv_m, dt, x, v, s, u)
+        x, v, s, _ = advance_motion(step, theta, inv_m, dt, x, v, s, u)
         return x, v, s
 
     info = deer_scan(one, (x0, v0, s0), force, jacobian="dense", rtol=rtol,

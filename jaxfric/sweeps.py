@@ -359,8 +359,7 @@ def sweep(
     """
     from tqdm.auto import tqdm
 
-    from .identification import as_record, identify
-    from .identification._api import resolve_model
+    from .identification import as_record, identify, resolve_model
     from .motion import MotionData, identify_motion
 
     for forbidden in ("key", "keys", "progress"):

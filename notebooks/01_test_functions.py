@@ -50,7 +50,7 @@ from IPython.display import Markdown, display
 import jaxfric as jf
 from jaxfric import plot
 from jaxfric import functions as F
-from jaxfric.identification._timing import Stopwatch  # splits a call's wall time: compile | run
+from jaxfric._timing import Stopwatch  # splits a call's wall time: compile | run
 
 # %% [markdown]
 # Helpers (each notebook has its own copy, so that it runs alone): `say` prints a sentence made

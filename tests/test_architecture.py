@@ -162,3 +162,111 @@ def test_no_import_circle_anywhere():
         graph = {p.stem: {t for _, t in _imported_modules(p, folder.name) if t in modules}
                  for p in folder.glob("*.py") if p.stem in modules}
         assert _cycle(graph) is None, (folder.name, _cycle(graph))
+
+
+def _jaxfric_module(path: Path) -> list[str]:
+    """``path``'s dotted name under jaxfric as parts: ``motion/_api.py`` -> ``["motion", "_api"]``
+    (a package's ``__init__`` is the package itself)."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return parts[:-1] if parts[-1] == "__init__" else parts
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def _imported_paths(path: Path):
+    """``(line, dotted parts under jaxfric)`` of every name ``path`` takes from jaxfric:
+    ``from ..identification._api import x`` gives ``identification._api.x``, ``from
+    ..motion import _compare`` gives ``motion._compare``, and an attribute read on an
+    imported jaxfric module (``_api._fast_pipeline``) gives its full path too."""
+    here = _jaxfric_module(path)
+    package = list(path.relative_to(ROOT).parent.parts)
+    tree = ast.parse(path.read_text())
+    modules: dict[str, list[str]] = {}  # local name -> jaxfric path of an imported module
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+            elif (node.module or "").split(".")[0] == "jaxfric":
+                base = []
+            else:
+                continue
+            module = base + [p for p in (node.module or "").split(".") if p and p != "jaxfric"]
+            if not node.level and (node.module or "").startswith("jaxfric"):
+                module = node.module.split(".")[1:]
+            for a in node.names:
+                full = module + [a.name]
+                target = ROOT.joinpath(*full)
+                if target.is_dir() or target.with_suffix(".py").exists():
+                    modules[a.asname or a.name] = full
+                yield node.lineno, full
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("jaxfric."):
+                    full = a.name.split(".")[1:]
+                    if a.asname:
+                        modules[a.asname] = full
+                    yield node.lineno, full
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                and node.value.id in modules and modules[node.value.id] != here):
+            yield node.lineno, modules[node.value.id] + [node.attr]
+
+
+def private_reaches() -> list[str]:
+    """Every place a jaxfric module uses a name that is private to a package it is not
+    in (issue 46's packages: each subpackage, and the top-level modules together). A
+    leading underscore makes a name private to the package that holds it:
+    ``jaxfric.identification._api`` and ``jaxfric.rig.simulator._substep`` are their
+    subpackage's, ``jaxfric.uncertainty._g`` the top-level modules'. The root's private
+    modules (``_xla``, ``_timing``, ``_warnings``: the bottom layer) serve every package."""
+    found = []
+    for path in sorted(ROOT.rglob("*.py")):
+        here = _jaxfric_module(path)
+        top_level = len(here) <= 1 and not (ROOT.joinpath(*here).is_dir() and here)
+        for line, full in _imported_paths(path):
+            first = next((i for i, p in enumerate(full) if _is_private(p)), None)
+            if first is None:
+                continue
+            owner = full[:first]
+            while owner and not ROOT.joinpath(*owner).is_dir():  # a module: its package
+                owner = owner[:-1]
+            if owner:
+                allowed = here[: len(owner)] == owner
+            else:  # a root module (open to all) or a private name of a top-level module
+                allowed = first == 0 or top_level
+            if not allowed:
+                found.append(f"{path.relative_to(ROOT)}:{line} uses jaxfric.{'.'.join(full)}")
+    return found
+
+
+def test_the_private_name_finder_finds_each_kind(tmp_path, monkeypatch):
+    """The finder flags a private module, a private name and a private attribute of an
+    imported module across packages, and lets a package use its own and the root's."""
+    root = tmp_path / "jaxfric"
+    for folder in ("a", "b"):
+        (root / folder).mkdir(parents=True)
+        (root / folder / "__init__.py").write_text("")
+    (root / "_shared.py").write_text("")
+    (root / "top.py").write_text("from .a.public import shown\n")
+    (root / "other.py").write_text("from .top import _helper\n")
+    (root / "a" / "_inner.py").write_text("def _hidden(): pass\ndef shown(): pass\n")
+    (root / "a" / "public.py").write_text("from ._inner import _hidden\nfrom .. import _shared\n"
+                                          "from .._shared import z\n")
+    (root / "b" / "user.py").write_text(
+        "from ..a._inner import shown\nfrom ..a import _inner\nfrom jaxfric.a.public import _hidden\n"
+        "from ..a import public\nx = public._hidden\nfrom .._shared import y\n"
+        "from ..top import _helper\n")
+    monkeypatch.setattr(__import__(__name__), "ROOT", root)
+    assert private_reaches() == ["b/user.py:1 uses jaxfric.a._inner.shown",
+                                 "b/user.py:2 uses jaxfric.a._inner",
+                                 "b/user.py:3 uses jaxfric.a.public._hidden",
+                                 "b/user.py:7 uses jaxfric.top._helper",
+                                 "b/user.py:5 uses jaxfric.a.public._hidden"]
+
+
+def test_no_module_uses_another_package_private_names():
+    """Issue 46: what one package needs of another is public there (its ``__init__`` or a
+    public module, documented); a private name is its own package's business."""
+    assert not private_reaches(), private_reaches()

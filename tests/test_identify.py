@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 import jaxfric
 from jaxfric.identification import GradientRefinement, identify
 from jaxfric.identification import _api, stages
-from jaxfric.identification._timing import Stopwatch
+from jaxfric._timing import Stopwatch
 from jaxfric.models import Elman, LuGre
 from jaxfric.rig import FrictionData
 

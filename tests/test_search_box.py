@@ -9,7 +9,7 @@ import pytest
 
 import jaxfric as jf
 from jaxfric.identification import BoundWarning, stages
-from jaxfric.identification._timing import Stopwatch
+from jaxfric._timing import Stopwatch
 from jaxfric.models import DEFAULT_RANGES, GMS, Coulomb, Cylinder, LuGre, SearchBox
 
 DT = 0.01

@@ -81,18 +81,18 @@ def memory_need(spec, model, *, x64: bool) -> tuple[int, str]:
     it is: BFGS's dense ``n x n`` inverse Hessian (the networks' default gradient stage,
     ``--refine bfgs``/``lm``/``gauss_newton``/``auto``) or Nelder-Mead's ``(n+1) x n``
     simplex; 0 when neither runs (a swarm alone, L-BFGS)."""
-    from jaxfric.identification import _api
+    from jaxfric.identification import fast_pipeline
 
     n = int(model.num_params)
     item = 8 if x64 else 4
     dense = spec.refine in ("bfgs", "lm", "gauss_newton", "auto") or (
-        spec.refine == "default" and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
+        spec.refine == "default" and fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
     if dense:
         what = "BFGS's dense Hessian" if spec.refine in ("default", "bfgs", "auto") else "the Gauss-Newton matrix"
         return n * n * item, f"{what} ({_n(n)} x {_n(n)} x {item} bytes)"
     solver = spec.build_solver(model)
     uses_nm = spec.solver in ("mapso-nmds", "nelder-mead") and not (
-        solver is None and _api._fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
+        solver is None and fast_pipeline(model, "paper" if spec.paper else "jaxfric"))
     if uses_nm:
         return (n + 1) * n * item, f"Nelder-Mead's simplex ({_n(n + 1)} x {_n(n)} x {item} bytes)"
     return 0, ""
@@ -132,18 +132,18 @@ def describe_solver(solver, model, paper: bool = False, refine: str = "default",
     one record the fit sees, so that the phrase says how many the global stage searches on
     (``identify`` gives it the first ``GLOBAL_STAGE_SAMPLES`` of them); ``None`` (several
     records, used whole): not said."""
-    from jaxfric.identification import _api
+    from jaxfric.identification import FAST_REFINE_STEPS, GLOBAL_STAGE_SAMPLES, default_solver, fast_pipeline
 
     method = "paper" if paper else "jaxfric"
-    s = _api.default_solver(model, method) if solver is None else solver
+    s = default_solver(model, method) if solver is None else solver
     text = _describe(s, model)
-    if refine == "default" and _api._fast_pipeline(model, method):  # identify adds the gradient stage
+    if refine == "default" and fast_pipeline(model, method):  # identify adds the gradient stage
         where = ""
         if solver is None and n_train is not None:
-            head = _api.GLOBAL_STAGE_SAMPLES
+            head = GLOBAL_STAGE_SAMPLES
             where = (f" on the {n_train} training samples" if n_train <= head
                      else f" on the first {head} of the {n_train} training samples")
-        text += f"{where} -> BFGS (<= {_api.FAST_REFINE_STEPS} steps)"
+        text += f"{where} -> BFGS (<= {FAST_REFINE_STEPS} steps)"
     elif refine not in ("default", "none"):
         text += f" -> gradient stage {refine!r}"
     return text
@@ -222,15 +222,14 @@ def progress_bar(solver, model, desc: str, paper: bool = False, refine=None):
     (``refine=None`` on a model whose method has one)."""
     import importlib.util
 
-    from jaxfric.identification import _api
+    from jaxfric.identification import FAST_REFINE_STEPS, default_solver, fast_pipeline
 
     if importlib.util.find_spec("tqdm") is None:
         return None
     method = "paper" if paper else "jaxfric"
-    s = _api.default_solver(model, method) if solver is None else solver
+    s = default_solver(model, method) if solver is None else solver
     total, local_total = s.progress_totals()
-    gradient_total = (_api.FAST_REFINE_STEPS
-                      if refine is None and _api._fast_pipeline(model, method) else None)
+    gradient_total = FAST_REFINE_STEPS if refine is None and fast_pipeline(model, method) else None
     return LazyBar(total, local_total, desc, gradient_total)
 
 
@@ -254,8 +253,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
     (e.g. a free run that diverges on validation) become one ``jaxfric: warning:`` line each,
     shown even with ``--quiet``, and are appended to ``notes`` for the report.
     """
-    from jaxfric.identification import BoundWarning
-    from jaxfric.identification._diagnostics import bound_message
+    from jaxfric.identification import BoundWarning, bound_message
     from jaxfric.uncertainty import cli_lines
 
     names = check_models(args.models, getattr(args, "box", None))

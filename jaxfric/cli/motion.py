@@ -88,7 +88,7 @@ def _data(args):
     """[`jaxfric.motion.MotionData`][jaxfric.motion.MotionData] from the file and options; irregular time stamps
     are resampled onto a uniform grid and said on stderr (also under ``--quiet``)."""
     from jaxfric.motion import MotionData
-    from jaxfric.rig.io import _uniformise
+    from jaxfric.rig.io import uniformise
 
     from .data import _load_quietly, _time_column, read_table
     from .units import unit_factor
@@ -100,7 +100,7 @@ def _data(args):
     if args.load_col is not None:
         signals["load"] = table.column(args.load_col, "--load-col")
     try:
-        signals, notes = _load_quietly(_uniformise, signals, "resample", None, 1e-3)
+        signals, notes = _load_quietly(uniformise, signals, "resample", None, 1e-3)
         dt = float(np.median(np.diff(signals["t"])))
         data = MotionData.from_arrays(signals["force"], signals["x"], dt, load=signals.get("load"),
                                       cutoff=args.cutoff)
@@ -119,8 +119,7 @@ def cmd_identify_motion(args, argv) -> int:
 
     from jaxfric.files import atomic_write_text, jsonable
     from jaxfric._warnings import BaselineWarning
-    from jaxfric.motion import MotionSearch, OverfitWarning, identify_motion
-    from jaxfric.motion._compare import rank_fits
+    from jaxfric.motion import MotionSearch, OverfitWarning, identify_motion, rank_fits
     from jaxfric.report import save_figure
 
     say = _say(args)

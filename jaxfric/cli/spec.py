@@ -93,7 +93,7 @@ class FitSpec:
 
     def build_model(self):
         """The model ``identify`` builds for this name (its named defaults + options)."""
-        from jaxfric.identification._api import resolve_model  # the model identify() builds from a name
+        from jaxfric.identification import resolve_model  # the model identify() builds from a name
 
         return resolve_model(self.model, self.model_options)
 

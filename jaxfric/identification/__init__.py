@@ -12,13 +12,16 @@ from ._api import (
     GLOBAL_STAGE_SAMPLES,
     NAMED_MODEL_DEFAULTS,
     default_solver,
+    fast_pipeline,
     identify,
     paper_solver,
+    resolve_model,
 )
 from ._data import MIN_VALID_SAMPLES, Record, RecordSet, as_record, as_records
-from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
-from ._objective import CostData, OutputErrorCost
-from ._refine import GradientRefinement
+from ._diagnostics import (BoundWarning, FrictionSignWarning, bound_message, friction_sign, on_bound,
+                           unidentifiable)
+from ._objective import CostData, OutputErrorCost, search_dtype
+from ._refine import GradientRefinement, from_box, to_box
 
 __all__ = [
     "DEFAULT_GENERATIONS_BLACK_BOX",
@@ -40,6 +43,12 @@ __all__ = [
     "default_solver",
     "identify",
     "paper_solver",
+    "bound_message",
+    "fast_pipeline",
+    "from_box",
+    "resolve_model",
+    "search_dtype",
+    "to_box",
     "FAST_GENERATIONS_BLACK_BOX",
     "FAST_REFINE_STEPS",
     "GLOBAL_STAGE_SAMPLES",

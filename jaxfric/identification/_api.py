@@ -45,7 +45,7 @@ from ..uncertainty import assess_fit
 from ._data import as_record, as_records  # noqa: F401  (re-exported: _api.as_record)
 from ._objective import search_dtype
 from ._refine import GradientRefinement, as_refinement
-from ._timing import Stopwatch
+from .._timing import Stopwatch
 # The underscored names stay importable from here for jaxfric.motion, the CLI and the
 # benchmarks.
 from .stages import (  # noqa: F401
@@ -133,7 +133,10 @@ def paper_solver(model: AbstractFrictionModel) -> MAPSONMDS:
     return MAPSONMDS(mapso=mapso, nelder_mead=NelderMead(max_steps=200 * n, max_evals=200 * n))
 
 
-def _fast_pipeline(model: AbstractFrictionModel, method: str) -> bool:
+def fast_pipeline(model: AbstractFrictionModel, method: str) -> bool:
+    """Whether ``identify``'s ``method`` runs jaxfric's pipeline for the networks on
+    ``model``: a short swarm on the first training samples, then the gradient stage
+    (``method="jaxfric"`` and more than `LARGE_MODEL_PARAMS` parameters)."""
     return method == "jaxfric" and model.num_params > LARGE_MODEL_PARAMS
 
 
@@ -148,7 +151,7 @@ def default_solver(model: AbstractFrictionModel, method: str = "jaxfric") -> Abs
     physical models [`paper_solver`][jaxfric.identification.paper_solver]. ``method="paper"``: [`paper_solver`][jaxfric.identification.paper_solver].
     """
     _check_method(method)
-    if _fast_pipeline(model, method):
+    if fast_pipeline(model, method):
         return MAPSO(lattice_size=8, num_generations=FAST_GENERATIONS_BLACK_BOX)
     return paper_solver(model)
 
@@ -366,7 +369,7 @@ def _plan(model: AbstractFrictionModel, method: str, solver, refine):
     samples the global stage sees or None)``, the user's ``solver`` and ``refine``
     winning over the method's; checked."""
     _check_method(method)
-    fast = _fast_pipeline(model, method)
+    fast = fast_pipeline(model, method)
     head = GLOBAL_STAGE_SAMPLES if solver is None and fast else None
     if solver is None:
         solver = default_solver(model, method)

@@ -17,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._warnings import BoundWarning, FrictionSignWarning  # noqa: F401 (re-exported)
-from ..models import AbstractFrictionModel, AbstractPhysicalModel
-from ..models._box import RANGE_FLOORS, widened
+from ..models import RANGE_FLOORS, AbstractFrictionModel, AbstractPhysicalModel, widened
 
 #: A parameter within this fraction of its box width of a bound counts as on it (the
 #: swarms clip to the box, so a stopped parameter sits exactly there).

@@ -221,7 +221,7 @@ def _time_loop(model, step, init, xs, reverse=False):
     the CPU because, with ``(T, N·K)`` arrays scanned over, an unroll of 2 made the
     reverse loop 20× slower for 8 networks.
     """
-    from ..models._scan import ACCELERATOR_UNROLL
+    from ..models import ACCELERATOR_UNROLL
 
     def scan_with(k):
         return lambda c, x: jax.lax.scan(step, c, x, unroll=k, reverse=reverse)

@@ -45,7 +45,7 @@ from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_b
 from ._objective import CostData, OutputErrorCost, cost_data, fit_scalers
 from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, RefineOutcome, refine_impl, refine_many, result_name
-from ._timing import Stopwatch
+from .._timing import Stopwatch
 
 __all__ = [
     "Bounds",

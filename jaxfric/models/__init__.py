@@ -19,12 +19,13 @@ record may not determine.
 from __future__ import annotations
 
 from ._base import AbstractFrictionModel, Unidentifiable, check_theta, friction_scales
-from ._box import DEFAULT_RANGES, SearchBox, data_ranges
-from ._physical import AbstractPhysicalModel, stribeck_curve
+from ._box import DEFAULT_RANGES, RANGE_FLOORS, SearchBox, data_ranges, widened
+from ._physical import AbstractPhysicalModel, add_offset, by_direction, stribeck_curve
 from ._scaling import Scaler
+from ._scan import ACCELERATOR_UNROLL, time_scan
 from .elman import Elman, ElmanFull
 from .gms import GMS
-from .lugre import Dahl, LuGre, bristle_friction
+from .lugre import Dahl, LuGre, bristle_friction, bristle_phi
 from .static import Coulomb, Cylinder, Stribeck
 
 __all__ = [
@@ -44,6 +45,13 @@ __all__ = [
     "Unidentifiable",
     "available",
     "bristle_friction",
+    "bristle_phi",
+    "ACCELERATOR_UNROLL",
+    "RANGE_FLOORS",
+    "add_offset",
+    "by_direction",
+    "time_scan",
+    "widened",
     "check_theta",
     "data_ranges",
     "friction_scales",

@@ -43,7 +43,7 @@ from ._physical import (
 )
 from ._scan import linear_recurrence
 
-__all__ = ["LuGre", "Dahl", "bristle_friction"]
+__all__ = ["LuGre", "Dahl", "bristle_friction", "bristle_phi"]
 
 _PHI_SWITCH = 1e-8
 
@@ -65,7 +65,7 @@ def _bristle_columns(model, thetas, velocity, dt):
     return p, v, _sample_time(dt, v.dtype)
 
 
-def _phi(x: Array) -> Array:
+def bristle_phi(x: Array) -> Array:
     """phi(x) = (1 - e^{-x}) / x with the double-``where`` guard (§8.2).
 
     The series 1 - x/2 is used below the switch; the inner ``where`` keeps the
@@ -96,7 +96,7 @@ def bristle_friction(
     a = sigma0 * jnp.abs(v) / g
     x = a * dt
     decay = jnp.exp(-x)
-    gain = v * dt * _phi(x)
+    gain = v * dt * bristle_phi(x)
     z0 = jnp.sign(v[:, 0]) * g[:, 0] / sigma0[:, 0]
 
     z = linear_recurrence(decay, gain, z0)

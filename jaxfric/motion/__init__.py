@@ -17,9 +17,9 @@
 from .._warnings import BaselineWarning
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,
                    motion_metrics)
-from ._compare import MotionComparison, OverfitWarning, compare_motion
+from ._compare import MotionComparison, OverfitWarning, compare_motion, rank_fits
 from ._pipeline import MotionBudget, MotionSearch, default_search
-from ._forward import k_step_positions, simulate_motion, track_states
+from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
                     friction_step)
 
@@ -31,6 +31,9 @@ __all__ = [
     "MotionSearch",
     "OverfitWarning",
     "compare_motion",
+    "rank_fits",
+    "advance_motion",
+    "motion_start",
     "default_search",
     "BristleStep",
     "ElmanFullStep",

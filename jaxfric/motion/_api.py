@@ -28,11 +28,13 @@ from jaxtyping import Array
 
 from .._warnings import BaselineWarning
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
-from ..identification._api import _as_key, _history, _key_record, _stages, resolve_model
-from ..identification._objective import search_dtype
+from .._timing import Stopwatch
+from ..identification import from_box, resolve_model, search_dtype
+from ..identification.stages import as_key as _as_key
 from ..identification.stages import as_member_keys
-from ..identification._refine import from_box
-from ..identification._timing import Stopwatch
+from ..identification.stages import history as _history
+from ..identification.stages import key_record as _key_record
+from ..identification.stages import solver_stages as _stages
 from ..metrics import friction_metrics
 from ..models import Scaler
 from ..optim import AbstractSolver, minimise

@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..models import Coulomb
-from ..models._physical import AbstractPhysicalModel
+from ..models import AbstractPhysicalModel, Coulomb
 from ..rig.emps import IDIMResult, idim_ls
 
 __all__ = ["BASELINE_LABEL", "baseline_model", "least_squares", "least_squares_start"]

@@ -37,11 +37,12 @@ from jaxtyping import Array
 
 from ._step import FrictionStep
 
-__all__ = ["simulate_motion", "track_states", "k_step_positions"]
+__all__ = ["advance_motion", "motion_start", "simulate_motion", "track_states", "k_step_positions"]
 
 
-def _advance(step: FrictionStep, theta, inv_m, dt, x, v, s, u):
-    """One sample of the module's scheme: ``(x, v, s, u_k) -> (x', v', s', F_k)``."""
+def advance_motion(step: FrictionStep, theta, inv_m, dt, x, v, s, u):
+    """One sample of [`simulate_motion`][jaxfric.motion.simulate_motion]'s scheme (this module's
+    docstring, §13.2): ``(x, v, s, u_k) -> (x', v', s', F_k)``, with ``inv_m`` = 1/m."""
     f_now = step.output(theta, s, v, dt)
 
     def phi(w):
@@ -56,7 +57,7 @@ def _advance(step: FrictionStep, theta, inv_m, dt, x, v, s, u):
     return x_new, v_new, s_new, f_now
 
 
-def _start(step, theta, mass, force, dt, x0, v0, state0):
+def motion_start(step, theta, mass, force, dt, x0, v0, state0):
     """The free run's inputs in one dtype (the force's and theta's, at least float) and its
     initial state ``(x0, v0, friction state)``; the friction state defaults to
     ``step.init(theta, v0, dt)``."""
@@ -80,11 +81,11 @@ def simulate_motion(step: FrictionStep, theta, mass, force, dt, x0, v0, state0=N
     each ``(T,)``, sample k before the step driven by ``force[k]``. Pure JAX: jit,
     grad and vmap work.
     """
-    force, dt, inv_m, x0, v0, s0 = _start(step, theta, mass, force, dt, x0, v0, state0)
+    force, dt, inv_m, x0, v0, s0 = motion_start(step, theta, mass, force, dt, x0, v0, state0)
 
     def body(carry, u):
         x, v, s = carry
-        x, v_next, s, f = _advance(step, theta, inv_m, dt, x, v, s, u)
+        x, v_next, s, f = advance_motion(step, theta, inv_m, dt, x, v, s, u)
         return (x, v_next, s), (carry[0], v, f)
 
     _, (x, v, f) = jax.lax.scan(body, (x0, v0, s0), force)
@@ -129,7 +130,7 @@ def k_step_positions(step: FrictionStep, theta, mass, force, dt, x, v, states, h
     def one(u_win, x0, v0, s0):
         def body(carry, u):
             xk, vk, sk = carry
-            xk, vk, sk, _ = _advance(step, theta, inv_m, dt, xk, vk, sk, u)
+            xk, vk, sk, _ = advance_motion(step, theta, inv_m, dt, xk, vk, sk, u)
             return (xk, vk, sk), None
 
         (xk, _, _), _ = jax.lax.scan(body, (x0, v0, s0), u_win)

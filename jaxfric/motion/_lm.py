@@ -11,7 +11,7 @@ in NumPy and adapts μ by Nielsen's rule (gain ratio ρ: accept if ρ > 0, then
 ``μ ← μ·max(1/3, 1 − (2ρ − 1)³)``; else ``μ ← μ·ν``, ``ν ← 2ν``).
 
 The search runs on ``z`` with θ = lo + (hi − lo)(1 + sin z)/2
-(`jaxfric.identification._refine.to_box`), so every iterate is inside the box.
+([`jaxfric.identification.to_box`][jaxfric.identification.to_box]), so every iterate is inside the box.
 Each step is one compiled call; between steps the loop checks the budget (steps,
 evaluations, wall time) and reports progress, so a run can end at any step with the best
 point so far (the accepted iterate never gets worse).
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..identification._refine import from_box, to_box
+from ..identification import from_box, to_box
 
 __all__ = ["LMOutcome", "levenberg_marquardt"]
 

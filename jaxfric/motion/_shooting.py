@@ -18,7 +18,7 @@ for ``m`` samples (a lead-in), as [`jaxfric.motion.track_states`][jaxfric.motion
 are forced and reset, and the weight of each sample's squared error, are data (arrays),
 so one compiled scan serves every segment length.
 
-The step itself is [`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion]'s (``_forward._advance``).
+The step itself is [`jaxfric.motion.simulate_motion`][jaxfric.motion.simulate_motion]'s ([`advance_motion`][jaxfric.motion.advance_motion]).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._forward import _advance
+from ._forward import advance_motion
 from ._step import FrictionStep
 
 __all__ = ["Schedule", "shoot", "schedule"]
@@ -96,7 +96,7 @@ def shoot(step: FrictionStep, theta, mass, force, dt, x_meas, v_meas, plan: Sche
         x = jnp.where(forced, xm, x)
         v = jnp.where(forced, vm, v)
         s = jax.tree_util.tree_map(lambda a, b: jnp.where(reset, a, b), s_init, s)
-        x_new, v_new, s_new, _ = _advance(step, theta, inv_m, dt, x, v, s, u)
+        x_new, v_new, s_new, _ = advance_motion(step, theta, inv_m, dt, x, v, s, u)
         return (x_new, v_new, s_new), x
 
     _, x_hat = jax.lax.scan(body, (x_meas[0], v_meas[0], s0),

@@ -38,8 +38,7 @@ from jaxtyping import Array
 
 from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
                       stribeck_curve)
-from ..models._physical import add_offset, by_direction
-from ..models.lugre import _phi
+from ..models import add_offset, bristle_phi, by_direction
 
 __all__ = ["FrictionStep", "StaticStep", "BristleStep", "GMSStep", "ElmanStep", "ElmanFullStep",
            "friction_step"]
@@ -109,7 +108,7 @@ class BristleStep(FrictionStep):
     def update(self, theta, z, v, dt):
         _, s0, _, _, g = self._params(theta, v)
         x = s0 * jnp.abs(v) / g * dt
-        return z * jnp.exp(-x) + v * dt * _phi(x)
+        return z * jnp.exp(-x) + v * dt * bristle_phi(x)
 
 
 class GMSStep(FrictionStep):

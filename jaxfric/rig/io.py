@@ -42,7 +42,12 @@ def resample_uniform(t, *channels, dt: float | None = None):
     return (grid, *out)
 
 
-def _uniformise(signals: dict, on_irregular: str, dt: float | None, rtol: float) -> dict:
+def uniformise(signals: dict, on_irregular: str, dt: float | None, rtol: float) -> dict:
+    """``signals`` (a ``"t"`` column and channels) on a uniform time grid: as they are when
+    the stamps are uniform within ``rtol`` and ``dt`` is not given, else resampled
+    linearly (``on_irregular="resample"``, with an
+    [`IrregularSamplingWarning`][jaxfric.rig.IrregularSamplingWarning]) or refused
+    (``"raise"``)."""
     if on_irregular not in ("resample", "raise"):
         raise ValueError(f"on_irregular must be 'resample' or 'raise', got {on_irregular!r}")
     t = signals["t"]
@@ -182,7 +187,7 @@ def load_measurements(source, columns: Mapping | None = None, *, scale: Mapping 
         an [`IrregularSamplingWarning`][jaxfric.rig.IrregularSamplingWarning]) or ``"raise"``; ``dt`` forces the grid step.
     """
     sig = _gather(source, columns, RAW_CHANNELS, scale, fill, delimiter, skip_rows, comments)
-    sig = _uniformise(sig, on_irregular, dt, rtol)
+    sig = uniformise(sig, on_irregular, dt, rtol)
     return Measurements.from_arrays(sig["t"], sig["x"], sig["p1"], sig["p2"], sig["load"])
 
 
@@ -198,7 +203,7 @@ def load_friction_pairs(source, columns: Mapping | None = None, *, scale: Mappin
     """
     sig = _gather(source, columns, PAIR_CHANNELS, scale, None, delimiter, skip_rows, comments,
                   optional=PAIR_EXTRA_CHANNELS)
-    sig = _uniformise(sig, on_irregular, dt, rtol)
+    sig = uniformise(sig, on_irregular, dt, rtol)
     return FrictionData.from_arrays(sig["velocity"], sig["friction"], sig["t"], train_fraction,
                                     n_train=n_train, rtol=max(rtol, 1e-6),
                                     p1=sig.get("p1"), p2=sig.get("p2"))

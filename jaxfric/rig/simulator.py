@@ -161,7 +161,7 @@ def _scales(rig: Rig):
     return jnp.stack([cyl.stroke, vmax, val.supply, val.supply, one, cyl.stroke * one])
 
 
-def _substep(rig: Rig, h, closed_loop, carry, inp):
+def substep(rig: Rig, h, closed_loop, carry, inp):
     """One Rosenbrock-Euler step of the hydraulics + exact Maxwell-slip step of the seal."""
     y, fe = carry
     t1, x_ref, v_ref, command = inp
@@ -203,7 +203,7 @@ def _observe(rig: Rig, t, y, fe):
     return dict(x=x, v=v, a=acc, p1=p1, p2=p2, load=fl, friction=ff, valve=u)
 
 
-def _initial_state(rig: Rig, x_start, dtype):
+def initial_state(rig: Rig, x_start, dtype):
     """Rest at ``x_start`` with pressures balancing the load (refined by the settling run)."""
     cyl, val = rig.cylinder, rig.valve
     a1, a2 = cyl.areas
@@ -356,10 +356,10 @@ def _simulate(rig, key, velocity_reference, command, sensors, n_samples, fs, sub
 
     def step(carry, inp):
         on, sub_inp = inp
-        new, _ = _substep(rig, h, closed_loop, carry, sub_inp)
+        new, _ = substep(rig, h, closed_loop, carry, sub_inp)
         return jax.tree.map(lambda a, b: jnp.where(on, a, b), new, carry), None
 
-    y, fe = _initial_state(rig, x_start, dtype)
+    y, fe = initial_state(rig, x_start, dtype)
     y = y.at[4].set(u_start)
 
     def sample(carry, inp):
