@@ -5,8 +5,7 @@
   for a ``--quick`` smoke run, so a smoke test never overwrites the committed numbers.
   :func:`add_output_arguments` adds ``--quick`` and ``--out`` with that rule.
 * :class:`Case` / :func:`run_round_robin` — time implementations side by side, in turn,
-  medians over rounds, so load from other processes on a shared machine hits all alike;
-  :func:`median_time` for a single function.
+  medians over rounds, so load from other processes on a shared machine hits all alike.
 * :func:`write_csv` / :func:`markdown_table` — result rows as CSV and as a Markdown table.
 * Start-up: importing this module puts the checkout's ``jaxfric`` first on ``sys.path``;
   :func:`x64` switches a script to float64 (the script's choice: the library never does);
@@ -151,20 +150,6 @@ def run_round_robin(cases: list[Case], rounds: int) -> None:
                     res = c.once(r)
                 c.times.append((time.perf_counter() - t0) / c.per_round)
             c.results.append(res)
-
-
-def median_time(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> float:
-    """Median wall time [s] of ``fn()`` over ``repeats`` calls after ``warmup`` calls.
-
-    ``fn`` must block until its work is done (``jax.block_until_ready`` on its output)."""
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 # --------------------------------------------------------------------------- tables

@@ -183,7 +183,7 @@ def per_function(rows, solvers):
     return list(table.values())
 
 
-def main():
+def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_output_arguments(p, quick_help="2-D, 4 functions, budget 2000·D (results/quick/)")
     p.add_argument("--dims", default="2,5,10")
@@ -191,7 +191,7 @@ def main():
     p.add_argument("--budget", type=int, default=10_000, help="evaluations per dimension")
     p.add_argument("--restarts", type=int, default=9, help="IPOP restarts (both IPOPs)")
     p.add_argument("--no-pycma", action="store_true")
-    a = p.parse_args()
+    a = p.parse_args(argv)
     command = " ".join(["python benchmarks/cmaes_restarts.py", *map(shlex.quote, sys.argv[1:])])
     dims = [2] if a.quick else [int(d) for d in a.dims.split(",")]
     budget_per_dim = 2000 if a.quick else a.budget
