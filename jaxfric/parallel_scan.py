@@ -225,7 +225,7 @@ def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
     [`deer_scan`][jaxfric.parallel_scan.deer_scan] (elementwise: each neuron's context of each candidate is its own
     scalar recurrence, Jacobian ``α + r (1 - h²)``). Returns ``(P, T)`` outputs (and the
     [`DeerResult`][jaxfric.parallel_scan.DeerResult] with ``return_info``)."""
-    from .models import Elman
+    from .models import Elman, elman_hidden
 
     if type(model) is not Elman:
         raise ValueError(f"elman_rollout takes a jaxfric.models.Elman, got {type(model).__name__}")
@@ -235,12 +235,12 @@ def elman_rollout(model, thetas, velocity, *, rtol: float | None = None,
     w, r, b, v, alpha, c0 = (p[k].T.reshape(-1) for k in model._BLOCKS)
 
     def step(c, uk):
-        return alpha * c + jnp.tanh(w * uk + r * c + b)
+        return alpha * c + elman_hidden(uk, c, w, r, b)
 
     info = deer_scan(step, c0, u, jacobian="elementwise", rtol=rtol, max_iterations=max_iterations,
                      fallback=fallback, chunk=chunk)
     prev = jnp.concatenate([c0[None], info.states[:-1]], axis=0)  # c_0 .. c_{T-1}
-    h = jnp.tanh(w * u[:, None] + r * prev + b)
+    h = elman_hidden(u[:, None], prev, w, r, b)
     y = jnp.sum((v * h).reshape((u.shape[0],) + shape), axis=1).T
     if model.output_bias:
         y = y + p["b_o"][:, None]

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ..models import AbstractFrictionModel, Elman, Scaler
+from ..models import AbstractFrictionModel, Elman, Scaler, elman_hidden
 from ._data import Record
 
 
@@ -170,11 +170,11 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
     kept = (jnp.arange(n_blocks * block) < t).reshape(n_blocks, block, 1)
 
     def context(c, uk):
-        return alpha * c + jnp.tanh(w * uk + r * c + b)
+        return alpha * c + elman_hidden(uk, c, w, r, b)
 
     def forward_block(c, u_blk):
         def step(c, uk):
-            h = jnp.tanh(w * uk + r * c + b)
+            h = elman_hidden(uk, c, w, r, b)
             return alpha * c + h, jnp.sum((v * h).reshape(k_members, n_neurons), axis=1)
 
         c_next, y = _time_loop(model, step, c, u_blk)
@@ -193,7 +193,7 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
         lam, d_w, d_r, d_b, d_v, d_alpha = carry
         start, gy_blk, u_blk = blk
         _, cs = _time_loop(model, lambda c, uk: (context(c, uk), c), start, u_blk)
-        hs = jnp.tanh(w * u_blk[:, None] + r * cs + b)
+        hs = elman_hidden(u_blk[:, None], cs, w, r, b)
         g = jnp.broadcast_to(gy_blk[:, :, None], gy_blk.shape + (n_neurons,)).reshape(block, -1)
         a, slope = v * g, 1.0 - hs * hs
         lam, lam_next = _time_loop(

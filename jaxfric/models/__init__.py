@@ -23,7 +23,7 @@ from ._box import DEFAULT_RANGES, RANGE_FLOORS, SearchBox, data_ranges, widened
 from ._physical import AbstractPhysicalModel, add_offset, by_direction, stribeck_curve
 from ._scaling import Scaler
 from ._scan import ACCELERATOR_UNROLL, time_scan
-from .elman import Elman, ElmanFull
+from .elman import Elman, ElmanFull, elman_hidden
 from .gms import GMS
 from .lugre import Dahl, LuGre, bristle_friction, bristle_phi
 from .static import Coulomb, Cylinder, Stribeck
@@ -46,6 +46,7 @@ __all__ = [
     "available",
     "bristle_friction",
     "bristle_phi",
+    "elman_hidden",
     "ACCELERATOR_UNROLL",
     "RANGE_FLOORS",
     "add_offset",

@@ -41,7 +41,16 @@ from jaxtyping import Array, ArrayLike, Float
 from ._base import AbstractFrictionModel
 from ._scan import reverse_affine_scan, time_scan
 
-__all__ = ["Elman", "ElmanFull"]
+__all__ = ["Elman", "ElmanFull", "elman_hidden"]
+
+
+def elman_hidden(u, c, w, r, b):
+    """The diagonal-context Elman network's hidden layer, §2.2: ``h = tanh(w u + r c + b)``,
+    elementwise over any broadcastable shapes (neurons, candidates, time). The one home of
+    the recurrence: the rollouts and the adjoint here, the batched cost gradient of
+    ``jaxfric.identification``, the motion step and the parallel-in-time rollout call it;
+    the context then moves as ``c' = α c + h``."""
+    return jnp.tanh(w * u + r * c + b)
 
 
 def _check_neurons(neurons) -> None:
@@ -194,7 +203,7 @@ class Elman(AbstractFrictionModel):
         w, r, b, v, alpha, c0 = (p[k].T.reshape(-1) for k in self._BLOCKS)
 
         def step(c, uk):
-            h = jnp.tanh(w * uk + r * c + b)
+            h = elman_hidden(uk, c, w, r, b)
             return alpha * c + h, jnp.sum((v * h).reshape(shape), axis=0)
 
         cpu_unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2
@@ -227,7 +236,7 @@ class Elman(AbstractFrictionModel):
         w, r, b, v, alpha, c0 = (p[k] for k in self._BLOCKS)
 
         def forward(c, uk):
-            h = jnp.tanh(w * uk + r * c + b)
+            h = elman_hidden(uk, c, w, r, b)
             return alpha * c + h, (c, h)
 
         cpu_unroll = 1 if jnp.dtype(u.dtype).itemsize >= 8 else 2

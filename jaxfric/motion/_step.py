@@ -38,7 +38,7 @@ from jaxtyping import Array
 
 from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
                       stribeck_curve)
-from ..models import add_offset, bristle_phi, by_direction
+from ..models import add_offset, bristle_phi, by_direction, elman_hidden
 
 __all__ = ["FrictionStep", "StaticStep", "BristleStep", "GMSStep", "ElmanStep", "ElmanFullStep",
            "friction_step"]
@@ -179,7 +179,7 @@ class ElmanStep(_ScaledStep):
 
     def _hidden(self, theta, c, v):
         p = self.model.to_physical(theta)
-        return p, jnp.tanh(p["w"] * self._u(v) + p["r"] * c + p["b"])
+        return p, elman_hidden(self._u(v), c, p["w"], p["r"], p["b"])
 
     def output(self, theta, c, v, dt):
         p, h = self._hidden(theta, c, v)
