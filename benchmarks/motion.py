@@ -80,8 +80,7 @@ def reference_fit(model, theta, mass, offset, data, n_train) -> MotionFit:
     fit = MotionFit(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None,
                     friction_scaler=None, dt=data.dt, n_train=n_train, n_samples=data.n_samples,
                     metrics={}, settings={"motion": {"mass": float(mass), "offset": float(offset), "v0": 0.0}})
-    fit.metrics = fit.evaluate(data, n_train, K_STEP)
-    return fit
+    return fit.replace(metrics=fit.evaluate(data, n_train, K_STEP))
 
 
 def _solver(n_params, quick):

@@ -45,7 +45,7 @@ from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 from .records import same_sample_time
 
-__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "ResamplingWarning", "load_fit"]
+__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "LazyUncertainty", "ResamplingWarning", "load_fit"]
 
 FORMAT_NAME = "jaxfric.fit"
 #: Version of the file layout written by `Fit.save`; `load_fit` reads
@@ -247,6 +247,29 @@ def rollout(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     return model.simulate(theta, v, dt, inputs)
 
 
+class LazyUncertainty:
+    """A fit's parameter uncertainty: given (a
+    [`ParameterUncertainty`][jaxfric.uncertainty.ParameterUncertainty] or ``None``), or
+    computed once, on first use, by a zero-argument callable (the Jacobian's compilation
+    costs seconds that a fit nobody inspects should not pay). A memo, not a field: the fit
+    holding it never changes; ``error`` says why the computation failed."""
+
+    __slots__ = ("_value", "_source", "error")
+
+    def __init__(self, value=None, source=None):
+        self._value, self._source, self.error = value, source, None
+
+    def value(self):
+        if self._value is None and self._source is not None:
+            compute, self._source = self._source, None
+            try:
+                self._value = compute()
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
+                # a fit stays usable (and savable) without its intervals; say why
+                self.error = str(err)
+        return self._value
+
+
 class Fit:
     """An identified friction model and its report (returned by [`jaxfric.identify`][jaxfric.identification.identify]).
 
@@ -286,12 +309,24 @@ class Fit:
         ensemble: for ``identify(..., keys=K)``: the members' ``theta`` ``(K, n)``,
             final costs ``J``, keys, per-member validation MSE %, the index of the
             best member (this fit) and the spread of each parameter; else ``None``.
+
+    A fit is immutable: everything it reports is computed before it is built, setting
+    an attribute raises ``dataclasses.FrozenInstanceError``, and
+    [`replace`][jaxfric.fit.Fit.replace] returns a changed copy. The constructor's
+    ``uncertainty`` is a ``ParameterUncertainty``, ``None``, or a zero-argument callable
+    computing it on first use ([`LazyUncertainty`][jaxfric.fit.LazyUncertainty]).
     """
+
+    #: The constructor's arguments, in order: what [`replace`][jaxfric.fit.Fit.replace] copies.
+    FIELDS = ("model", "theta", "velocity_scaler", "friction_scaler", "dt", "n_train", "n_samples",
+              "metrics", "stages", "history", "solution", "timings", "key_data", "key_impl", "seed",
+              "settings", "version", "velocity_range", "diagnostics", "ensemble", "box", "uncertainty")
 
     def __init__(self, *, model, theta, velocity_scaler, friction_scaler, dt, n_train,
                  n_samples, metrics, stages=(), history=None, solution=None, timings=None,
                  key_data=None, key_impl=None, seed=None, settings=None, version=None,
                  velocity_range=None, diagnostics=None, ensemble=None, box=None, uncertainty=None):
+        object.__setattr__(self, "_frozen", False)
         self.model = model
         self.box = model.search_box(box)
         self.theta = model.check_theta(np.asarray(theta))
@@ -300,7 +335,7 @@ class Fit:
         self.dt = float(dt)
         self.n_train = int(n_train)
         self.n_samples = int(n_samples)
-        self.metrics = metrics
+        self.metrics = dict(metrics or {})
         self.stages = [dict(s) for s in stages]
         self.history = history if history is not None else {
             "evals": np.zeros(0, np.int64), "f": np.zeros(0, np.float64)}
@@ -319,10 +354,35 @@ class Fit:
         self.diagnostics = {"on_bound": [], "unidentifiable": [], **dict(diagnostics or {})}
         self.ensemble = None if ensemble is None else dict(ensemble)
         # parameter uncertainty (jaxfric.uncertainty): given, or computed on first use by
-        # the zero-argument callable identify attaches with the training data (never
+        # the zero-argument callable identify passes with the training data (never
         # saved: only the result is); jaxfric.uncertainty sits above this module
+        if not isinstance(uncertainty, LazyUncertainty):
+            uncertainty = (LazyUncertainty(source=uncertainty) if callable(uncertainty)
+                           and not isinstance(uncertainty, ParameterUncertainty) else LazyUncertainty(uncertainty))
         self._uncertainty = uncertainty
-        self._uncertainty_source = None
+        object.__setattr__(self, "_frozen", True)
+
+    # ------------------------------------------------------------- frozen
+    def __setattr__(self, name, value):
+        if self.__dict__.get("_frozen", False):
+            raise dataclasses.FrozenInstanceError(
+                f"cannot assign to {type(self).__name__}.{name}: a fit is immutable; "
+                f"fit.replace({name.lstrip('_')}=...) returns a new one")
+        object.__setattr__(self, name, value)
+
+    def __delattr__(self, name):
+        raise dataclasses.FrozenInstanceError(f"cannot delete {type(self).__name__}.{name}: a fit is immutable")
+
+    def replace(self, **changes) -> "Fit":
+        """A new fit of the same type with ``changes`` (constructor arguments, `FIELDS`)
+        and every other field as here; a pending uncertainty stays pending (shared)."""
+        unknown = sorted(set(changes) - set(self.FIELDS))
+        if unknown:
+            raise TypeError(f"{type(self).__name__}.replace: unknown field(s) {unknown}; fields are {list(self.FIELDS)}")
+        args = {name: getattr(self, name) for name in self.FIELDS if name != "uncertainty"}
+        args["uncertainty"] = self._uncertainty
+        args.update(changes)
+        return type(self)(**args)
 
     # ---------------------------------------------------------- uncertainty
     @property
@@ -330,20 +390,19 @@ class Fit:
         """The [`jaxfric.uncertainty.ParameterUncertainty`][jaxfric.uncertainty.ParameterUncertainty] of a physical model's
         parameters (Newey–West and Jacobian covariances, docs/uncertainty.md), or
         ``None`` (a network; a fit loaded from a file without it). Computed on first
-        use from the training data [`jaxfric.identify`][jaxfric.identification.identify] attached."""
-        if self._uncertainty is None and self._uncertainty_source is not None:
-            compute, self._uncertainty_source = self._uncertainty_source, None
-            try:
-                self._uncertainty = compute()
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
-                # a fit stays usable (and savable) without its intervals; say why
-                self.diagnostics["uncertainty_error"] = str(err)
-        return self._uncertainty
+        use from the training data [`jaxfric.identify`][jaxfric.identification.identify] passed."""
+        return self._uncertainty.value()
+
+    @property
+    def uncertainty_error(self) -> str | None:
+        """Why the uncertainty could not be computed (``None``: it was, or was never asked for)."""
+        self._uncertainty.value()
+        return self._uncertainty.error or self.diagnostics.get("uncertainty_error")
 
     def _need_uncertainty(self):
         u = self.uncertainty
         if u is None:
-            why = self.diagnostics.get("uncertainty_error") or (
+            why = self.uncertainty_error or (
                 "a network has no physical parameters" if self.model.needs_scaling
                 else "none was computed: jaxfric.uncertainty.parameter_uncertainty(fit, data)")
             raise ValueError(f"this fit has no parameter uncertainty: {why}")
@@ -582,7 +641,8 @@ class Fit:
             "settings": jsonable(self.settings),
             "jaxfric_version": self.version,
             "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
-            "diagnostics": jsonable(self.diagnostics),
+            "diagnostics": jsonable({**self.diagnostics, **(
+                {"uncertainty_error": self._uncertainty.error} if self._uncertainty.error else {})}),
         }
         if uncertainty is not None:
             out["uncertainty"] = uncertainty.to_json(diagnostic_flags(self))

@@ -437,7 +437,7 @@ def sweep(
             start = time.perf_counter()
             fit = fit_fn(model_map[run.model][0], record_map[run.record], key=run.seed,
                          **run_options[run.model])
-            fit.timings = {**(fit.timings or {}), "total_s": time.perf_counter() - start}
+            fit = fit.replace(timings={**(fit.timings or {}), "total_s": time.perf_counter() - start})
             fit.save(out / run.fit_file)
             rows[run.index] = _row(run, fit)
             computed.append(run)

@@ -342,20 +342,22 @@ def coverage(y, low, high) -> float:
     return float(np.mean((y >= low) & (y <= high)))
 
 
-def assess_fit(fit, data) -> None:
+def assess_fit(fit, data):
     """What [`jaxfric.identify`][jaxfric.identification.identify] and [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] run on every
     physical fit: the plausibility rules ([`jaxfric.plausibility.check_plausibility`][jaxfric.plausibility.check_plausibility],
     into ``fit.diagnostics["implausible"]``, each with a
     [`PlausibilityWarning`][jaxfric.plausibility.PlausibilityWarning]), and the training ``data``
     attached so that [`jaxfric.Fit.uncertainty`][jaxfric.fit.Fit.uncertainty] is computed on first use (the
-    Jacobian's compilation costs seconds that a fit nobody inspects should not pay)."""
+    Jacobian's compilation costs seconds that a fit nobody inspects should not pay).
+    Returns the fit with both (a new one: a fit is immutable), ``fit`` itself for a network."""
     if fit.model.needs_scaling:
-        return
+        return fit
     velocity = _fit_kind(fit).train_velocity(fit, data)
     found = check_plausibility(fit.model, fit.params, velocity, fit.dt)
-    fit.diagnostics["implausible"] = [f.to_json() for f in found]
     warn_implausible(fit.model, found, stacklevel=4)
-    fit._uncertainty_source = functools.partial(parameter_uncertainty, fit, data, method=DEFAULT_METHODS)
+    # the computation reads the model, parameters and scalers, which the new fit shares
+    return fit.replace(diagnostics={**fit.diagnostics, "implausible": [f.to_json() for f in found]},
+                       uncertainty=functools.partial(parameter_uncertainty, fit, data, method=DEFAULT_METHODS))
 
 
 # ----------------------------------------------------------------------- report
@@ -382,7 +384,7 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
                    rank=u.rank, table=u.table(level, diagnostic_flags(fit)), correlated=[list(x) for x in u.strongly_correlated()],
                    correlation={"names": list(u.names),
                                 "matrix": np.round(u.correlation(), 3).tolist()},
-                   error=fit.diagnostics.get("uncertainty_error"))
+                   error=fit.uncertainty_error)
         if one_record:
             try:
                 inputs = fit.model.inputs_from(data, len(data.velocity))

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from jaxfric import fit as fit_module
+from jaxfric import models
 from jaxfric.fit import FORMAT_VERSION, Fit, load_fit
 from jaxfric.metrics import friction_metrics
 from jaxfric.models import Elman, LuGre, Scaler
@@ -247,3 +248,32 @@ def test_a_0_7_fit_file_with_range_fields_loads_its_box(tmp_path):
 def test_missing_file_is_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError):
         load_fit(tmp_path / "nope.npz")
+
+
+def test_a_fit_is_frozen_and_replace_returns_a_changed_copy():
+    """Issue 46: a fit is immutable: setting or deleting an attribute raises, and
+    ``replace`` builds a new fit with the change, leaving the original as it was."""
+    import dataclasses
+
+    model = models.Coulomb()
+    theta = np.asarray(model.from_physical(Fc=10.0, sigma2=5.0), np.float64)
+    fit = Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=0.01,
+              n_train=10, n_samples=12, metrics={"train": {"mse_percent": 1.0}})
+    for name in ("metrics", "theta", "timings", "settings", "_uncertainty", "new_name"):
+        with pytest.raises(dataclasses.FrozenInstanceError, match="immutable"):
+            setattr(fit, name, {})
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        del fit.metrics
+    other = fit.replace(timings={"total_s": 1.5}, n_train=11)
+    assert type(other) is Fit and other is not fit
+    assert other.timings == {"total_s": 1.5} and other.n_train == 11
+    assert fit.timings == {} and fit.n_train == 10
+    np.testing.assert_array_equal(other.theta, fit.theta)
+    assert other.metrics == fit.metrics and other.box == fit.box
+    with pytest.raises(TypeError, match="unknown field"):
+        fit.replace(thetaa=theta)
+    # a pending uncertainty is computed once, on first use, and shared by the copy
+    calls = []
+    lazy = fit.replace(uncertainty=lambda: calls.append(1))
+    assert lazy.uncertainty is None and calls == [1]
+    assert lazy.replace(n_train=9).uncertainty is None and calls == [1]

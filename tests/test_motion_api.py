@@ -246,17 +246,17 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
 
     fits = {"coulomb": coul, "stribeck": strib(30.0)}
     with jax.enable_x64(True):
-        for f in fits.values():
-            f.metrics = {**f.evaluate_records([train], [valid]), "num_params": f.model.num_params + 2}
+        fits = {name: f.replace(metrics={**f.evaluate_records([train], [valid]), "num_params": f.model.num_params + 2})
+                for name, f in fits.items()}
         with pytest.warns(OverfitWarning, match="stribeck .* worse than coulomb"):
             out = rank_fits(fits)
         assert out.ranking == ["coulomb", "stribeck"] and out.overfit == [("stribeck", "coulomb")]
         assert "worse than a simpler model" in out.table()
         good = strib(12.0)  # Fs = Fc: the Coulomb model itself
-        good.metrics = {**good.evaluate_records([train], [valid]), "num_params": 6}
+        good = good.replace(metrics={**good.evaluate_records([train], [valid]), "num_params": 6})
         with warnings.catch_warnings():
             warnings.simplefilter("error", OverfitWarning)
-            rank_fits({"coulomb": coul, "stribeck": good})
+            rank_fits({"coulomb": fits["coulomb"], "stribeck": good})
 
 
 @pytest.mark.slow

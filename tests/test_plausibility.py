@@ -61,7 +61,7 @@ def test_emps_like_lugre_warns_with_evidence(tmp_path):
     assert "So F_off is not identifiable from these data" in str(rec[1].message)  # what it means
     assert re.search(r"!   Fs_neg: Fs/Fc_neg = 3.*plausibility rule stribeck_spike", fit.summary())
     assert re.search(r"Fs_neg=\S+ \[not identifiable\]", fit.summary())
-    fit._uncertainty_source = None     # no uncertainty needed for the file check
+    fit = fit.replace(uncertainty=None)     # no uncertainty needed for the file check
     fit.save(tmp_path / "f.npz")
     assert load_fit(tmp_path / "f.npz").diagnostics["implausible"] == fit.diagnostics["implausible"]
 

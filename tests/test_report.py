@@ -80,7 +80,7 @@ def test_markdown_and_text_tables(written):
 
 def test_fit_metrics_prefers_the_fits_own(data, make_fit):
     fit = make_fit(jf.Coulomb(), [300.0, 1.0])
-    fit.metrics = {"train": {"mse_percent": 1.5}, "valid": None, "all": {"mse_percent": 2.0}}
+    fit = fit.replace(metrics={"train": {"mse_percent": 1.5}, "valid": None, "all": {"mse_percent": 2.0}})
     m = report.fit_metrics(fit, data)
     assert m == {"train": {"mse_percent": 1.5}, "all": {"mse_percent": 2.0}}
 

@@ -227,7 +227,7 @@ def test_stiffness_without_presliding_is_not_a_confident_number():
     assert u.estimate[i] == pytest.approx(1e7)
     # the band moves the undetermined parameters over their box, not by their linearised ±1e9:
     # on a slow sweep (where Fs and vs act) it stays within the friction levels the box allows
-    fit._uncertainty = u
+    fit = fit.replace(uncertainty=u)
     with jax.enable_x64(True):
         slow = np.linspace(-0.02, 0.02, 400)
         y, lo, hi = fit.prediction_interval(slow, 0.95)
@@ -263,8 +263,8 @@ def test_fit_api_summary_and_round_trip(tmp_path, rig_velocity):
         v = rig_velocity
         f = FC * np.tanh(v / model.v_eps) + SIGMA2 * v + NOISE * np.random.default_rng(7).standard_normal(v.size)
         fit = _fit(model, model.from_physical(**model.fit_least_squares(v, f)), v, 1 / 128, n_train=1600)
-        fit._uncertainty = parameter_uncertainty(fit, (v, f, 1 / 128), method=("hac", "jacobian",
-                                                                                   "block_bootstrap"), key=0)
+        fit = fit.replace(uncertainty=parameter_uncertainty(fit, (v, f, 1 / 128), method=(
+            "hac", "jacobian", "block_bootstrap"), key=0))
         assert set(fit.stderr) == {"Fc", "sigma2"}
         iv = fit.intervals(0.95)
         assert iv["Fc"][0] < FC < iv["Fc"][1]

@@ -3,6 +3,7 @@
 differences of the public simulate_motion, and the Fit API on a MotionFit."""
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -59,7 +60,7 @@ def test_motion_jacobian_matches_finite_differences():
 def test_motion_fit_shows_intervals():
     with jax.enable_x64(True):
         _, fit, data, _ = _motion_fit()
-        fit._uncertainty_source = lambda: parameter_uncertainty(fit, data)
+        fit = fit.replace(uncertainty=functools.partial(parameter_uncertainty, fit, data))
         iv = fit.intervals(0.95)
         assert iv["Fc"][0] < 12.0 < iv["Fc"][1] and iv["mass"][0] < 2.5 < iv["mass"][1]
         assert "uncertainty (hac" in fit.summary()
@@ -75,8 +76,8 @@ def test_motion_fit_on_several_records_runs_each_from_its_own_start():
         first = MotionData.from_arrays(data.force[:N_TRAIN], data.position[:N_TRAIN], DT)
         both = dataclasses.replace(first, **{k: np.concatenate([getattr(first, k), getattr(second, k)])
                                              for k in ("force", "position", "load", "velocity")})
-        fit.n_train = 2 * N_TRAIN
-        fit.settings["motion"]["records"] = {"train": [N_TRAIN, N_TRAIN], "valid": []}
+        fit = fit.replace(n_train=2 * N_TRAIN, settings={**fit.settings, "motion": {
+            **fit.mechanics, "records": {"train": [N_TRAIN, N_TRAIN], "valid": []}}})
         u = parameter_uncertainty(fit, both)
     assert u.segments == (N_TRAIN, N_TRAIN) and u.n == 2 * N_TRAIN
     assert np.sqrt(u.s2) < 1e-4          # 2 µm noise plus filter edges, not a 5 cm jump

@@ -47,9 +47,10 @@ def _save_fit_now(out: Path, velocity_filter=None):
     def keep(name, fit):
         _prepare_out(str(out))
         if velocity_filter is not None:
-            fit.settings["velocity_filter"] = dict(velocity_filter)
+            fit = fit.replace(settings={**fit.settings, "velocity_filter": dict(velocity_filter)})
         if hasattr(fit, "save"):
             KEPT.add(save_fit(fit, out / "models" / f"{slug(name)}.npz"))
+        return fit
 
     return keep
 

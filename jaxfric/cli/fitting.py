@@ -248,7 +248,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
 
     Every model gets the same ``key`` (they are independent problems), so a model's
     result does not depend on which other models were asked for. ``say(msg)`` prints
-    stage messages (silent with ``--quiet``); ``kept_fit(name, fit)`` runs as soon as a
+    stage messages (silent with ``--quiet``); ``kept_fit(name, fit)`` (returning the fit kept) runs as soon as a
     model is done (the CLI saves it there, so Ctrl-C keeps it). Warnings from ``identify``
     (e.g. a free run that diverges on validation) become one ``jaxfric: warning:`` line each,
     shown even with ``--quiet``, and are appended to ``notes`` for the report.
@@ -292,7 +292,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         say(f"  done in {time.perf_counter() - t0:.1f} s (validation MSE {m.get('mse_percent', float('nan')):.4g} %)")
         for line in cli_lines(fit):
             say(line)
-        fits[name] = fit
         if kept_fit is not None:
-            kept_fit(name, fit)
+            fit = kept_fit(name, fit)
+        fits[name] = fit
     return fits

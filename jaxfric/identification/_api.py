@@ -359,9 +359,8 @@ def identify(
                         settings={"dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
                                   "method": method},
                         refine=refine, theta0_given=theta0 is not None)
-    assess_fit(fit, records)  # plausibility now, parameter uncertainty on first use
-    fit.timings = {**timings, **refine_timings, "total_s": total.wall_s}
-    return fit
+    fit = assess_fit(fit, records)  # plausibility now, parameter uncertainty on first use
+    return fit.replace(timings={**timings, **refine_timings, "total_s": total.wall_s})
 
 
 def _plan(model: AbstractFrictionModel, method: str, solver, refine):

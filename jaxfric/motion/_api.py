@@ -15,7 +15,6 @@ report k-step-ahead errors (MATLAB ``compare(..., k)``) beside the free run.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import numbers
 import warnings
@@ -441,12 +440,11 @@ class MotionFit(Fit):
         if not self.ensemble or "mass" not in self.ensemble:
             raise ValueError("this fit has no motion ensemble: identify_motion(..., keys=K) makes one")
         e = self.ensemble
-        out = copy.copy(self)
-        out.theta = np.asarray(e["theta"][i], np.float64)
-        out.settings = {**self.settings, "motion": {**self.mechanics, "mass": float(e["mass"][i]),
-                                                    "offset": float(e["offset"][i]), "v0": float(e["v0"][i])}}
-        out.ensemble = None
-        return out
+        # the best member's uncertainty is not this member's: none
+        return self.replace(
+            theta=np.asarray(e["theta"][i], np.float64), ensemble=None, uncertainty=None,
+            settings={**self.settings, "motion": {**self.mechanics, "mass": float(e["mass"][i]),
+                                                  "offset": float(e["offset"][i]), "v0": float(e["v0"][i])}})
 
     def simulate_ensemble(self, record, init_window: int = DEFAULT_INIT_WINDOW) -> dict:
         """The kept ensemble members' free runs of ``record`` ([`simulate`][jaxfric.motion.MotionFit.simulate] with
@@ -868,14 +866,16 @@ def identify_motion(
         else:
             metrics = fit.evaluate_records(tr_records, va_records, init_window)
         base = _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window)
-        fit.metrics = {**metrics, "num_params": int(y.size), "cost": j_final,
-                       "baseline": {w: base.metrics[w] for w in ("train", "valid") if w in base.metrics}}
-        fit.settings["motion"]["baseline"] = {"M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}
+        # the fit above only simulates for its metrics; the one returned carries them
+        fit = fit.replace(
+            metrics={**metrics, "num_params": int(y.size), "cost": j_final,
+                     "baseline": {w: base.metrics[w] for w in ("train", "valid") if w in base.metrics}},
+            settings={**fit.settings, "motion": {**fit.mechanics, "baseline": {
+                "M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}}})
         _warn_if_worse(fit)
         data = data if data is not None else _concatenated(tr_records)
-    assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
-    fit.timings["total_s"] = total.wall_s
-    return fit
+    fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
+    return fit.replace(timings={**fit.timings, "total_s": total.wall_s})
 
 
 #: Ensemble members whose training free-run RMSE exceeds this factor times the best
@@ -899,20 +899,18 @@ def _ensemble(model, data, key, keys, options) -> MotionFit:
         train = np.array([f.metrics["train"]["rmse_mm"] for f in fits])
         best = int(np.argmin(np.where(np.isfinite(train), train, np.inf)))
         kept = kept_members(train)
-        fit = copy.copy(fits[best])
-        fit.ensemble = {
+        fit = fits[best].replace(ensemble={
             "theta": np.stack([f.theta for f in fits]), "mass": [f.mass for f in fits],
             "offset": [f.offset for f in fits], "v0": [float(f.mechanics.get("v0", 0.0)) for f in fits],
             "train_rmse_mm": train.tolist(),
             "valid_rmse_mm": [f.metrics["valid"]["rmse_mm"] if "valid" in f.metrics else None for f in fits],
             "best": best, "kept": kept, "dropped": [i for i in range(count) if i not in kept],
             "keys": [_key_record(members[i])[0] for i in range(count)],
-        }
+        })
         tr_records, va_records, whole, n_train = _records(data, options["train"], options["valid"])
-        fit.metrics = {**fit.metrics, "ensemble": fit.ensemble_metrics(whole, n_train, tr_records, va_records)}
-        fit.timings = {**fit.timings, "members_s": [f.timings["total_s"] for f in fits]}
-    fit.timings["total_s"] = total.wall_s
-    return fit
+        metrics = {**fit.metrics, "ensemble": fit.ensemble_metrics(whole, n_train, tr_records, va_records)}
+    return fit.replace(metrics=metrics, timings={**fit.timings, "members_s": [f.timings["total_s"] for f in fits],
+                                                 "total_s": total.wall_s})
 
 
 def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
@@ -923,10 +921,8 @@ def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, in
                     n_train=sum(r.n_samples for r in tr_records), n_samples=0, metrics={},
                     settings={"model_name": "coulomb", "motion": {"mass": est.M, "offset": est.offset, "v0": 0.0}})
     if data is not None:
-        fit.metrics = fit.evaluate(data, n_train, int(metric_horizon))
-    else:
-        fit.metrics = fit.evaluate_records(tr_records, va_records, init_window)
-    return fit
+        return fit.replace(metrics=fit.evaluate(data, n_train, int(metric_horizon)))
+    return fit.replace(metrics=fit.evaluate_records(tr_records, va_records, init_window))
 
 
 #: A fit counts as worse than the baseline when its training RMSE exceeds the baseline's
