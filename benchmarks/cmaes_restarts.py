@@ -1,29 +1,19 @@
-"""CMA-ES with and without IPOP restarts, beside pycma's IPOP-CMA-ES (issue 47 item 4).
+"""CMA-ES with and without IPOP restarts, beside pycma's IPOP-CMA-ES.
 
-Every solver gets the same evaluation budget (``--budget`` × D evaluations) on the same
-problems: 14 test functions at D = 2, 5 and 10 (float64), 3 seeds each; a run succeeds
-when it ends with |f − f*| < 1e-5.
+Every solver gets ``--budget`` × D evaluations on 14 test functions at D = 2, 5, 10 (float64),
+3 seeds each; a run succeeds when it ends with |f − f*| < 1e-5.
 
-* ``jaxfric CMA-ES``: ``Evosax("CMA_ES", restarts=0)`` (one run; restarted only when its
-  state turns non-finite), ``num_generations = (budget − 1) // P``;
+* ``jaxfric CMA-ES``: ``Evosax("CMA_ES", restarts=0)``, ``num_generations = (budget − 1) // P``;
 * ``jaxfric IPOP-CMA-ES``: ``Evosax("CMA_ES", restarts=R)``, the same budget;
-* ``pycma IPOP-CMA-ES``: ``cma.fmin2(f, x0, 0.3, {"bounds": [0, 1], "maxfevals": budget,
-  "ftarget": f* + 1e-5}, restarts=R, incpopsize=2)`` on the same unit box as jaxfric's
-  adapter (``x = lower + u·(upper − lower)``), from a uniform random start (a new one
-  at each restart, as jaxfric's), ``σ0 = 0.3`` box widths as jaxfric's. The target only
-  stops a successful run early; jaxfric's runs spend their whole budget.
+* ``pycma IPOP-CMA-ES``: ``cma.fmin2(..., restarts=R, incpopsize=2)`` on jaxfric's unit box,
+  from a uniform random start (a new one at each restart), σ0 = 0.3 box widths; its
+  ``ftarget`` only stops a successful run early.
 
-Functions: jaxfric.functions' sphere, ellipsoid-like Schwefel 1.2, Schwefel 2.21, 2.22,
-Rosenbrock, Rastrigin, Ackley, Griewank, and, defined here only, Levy, Zakharov,
-Styblinski–Tang, Michalewicz (m = 10), Dixon–Price and Schwefel 2.26, on their usual
-boxes. One compiled program per dimension and jaxfric solver serves every function (a
-``lax.switch`` over them, its index in ``args``); the seeds run in one
-``minimise_many`` call.
+Functions: jaxfric.functions' sphere, Schwefel 1.2, 2.21, 2.22, Rosenbrock, Rastrigin, Ackley,
+Griewank and, defined here, Levy, Zakharov, Styblinski–Tang, Michalewicz (m = 10), Dixon–Price,
+Schwefel 2.26. One program per dimension and solver serves every function (``lax.switch``).
 
-    python benchmarks/cmaes_restarts.py            # results/cmaes_restarts.{md,csv}
-    python benchmarks/cmaes_restarts.py --quick    # results/quick/ (2-D, 4 functions)
-
-pycma (``pip install cma``) is a benchmark-only dependency.
+    python benchmarks/cmaes_restarts.py [--quick]    # pycma (pip install cma): benchmark only
 """
 
 from __future__ import annotations

@@ -1,34 +1,21 @@
-"""EMPS as the real-data example (issue 17 item 8): IDIM-LS against the published values,
-then every jaxfric model on the held-back last 20 %.
+"""EMPS as the real-data example: IDIM-LS against the published values, then every jaxfric
+model on the held-back last 20 %.
 
-Usage::
+    python benchmarks/emps.py [--data PATH/DATA_EMPS.mat] [--refine lm|none|both] [--quick] [--out DIR]
 
-    python benchmarks/emps.py [--data PATH/DATA_EMPS.mat] [--quick] [--out DIR] [--refine lm|none|both]
+Data: ``--data``, else :func:`_harness.emps_file` (none: says so, writes nothing). The record
+follows the benchmark's recipe (:mod:`jaxfric.rig.emps`: Butterworth 100 Hz forward–backward
+on ``qm``, central differences, ``friction = gtau·vir − M·a`` with the IDIM-LS mass); the
+first 80 % train, the last 20 % were never used to choose anything.
 
-Data: ``--data``, else :func:`_harness.emps_file`; without it the script says so and
-writes nothing (exit 0).
+(a) Fc, Fv (symmetric and asymmetric) from IDIM-LS on the whole record against Janot et al.
+    2019 (target: within 2 %);
+(b) validation MSE % = 100·mean(e²)/var(F) and run time of the least-squares baseline
+    (``baselines.ls_coulomb_viscous``), Coulomb, Stribeck, LuGre and GMS (symmetric, and
+    asymmetric + offset; MAPSO ``PHYS_LATTICE``², ``PHYS_GENERATIONS`` generations,
+    ``data_bounds=True``, then LM unless ``--refine none``) and the default ENN.
 
-The record is the benchmark's own recipe (:mod:`jaxfric.rig.emps`: Butterworth 100 Hz
-forward–backward on ``qm``, central differences, ``friction = gtau·vir − M·a`` with the
-IDIM-LS mass). The first 80 % of the samples train, the last 20 % validate and are never
-used to choose anything (budgets and options were set before looking at them).
-
-Tables:
-
-(a) Fc and Fv, symmetric and asymmetric, from IDIM-LS on the whole kept record (M
-    estimated with them), against the published IDIM-LS values (Janot et al. 2019; see
-    ``SOURCE.md`` next to the data), relative difference % (target: within 2 %);
-(b) validation normalised MSE % = 100·mean(e²)/var(F) on the last 20 %, and the run time,
-    of: the least-squares asymmetric Coulomb + viscous + offset baseline (written here,
-    not in the library), jaxfric Coulomb (symmetric), Coulomb, Stribeck and LuGre
-    asymmetric + offset, GMS (symmetric, and asymmetric + offset), and the ENN default ``identify("elman", ...)``. The
-    physical models run a short MAPSO (``PHYS_LATTICE``² agents, ``PHYS_GENERATIONS``
-    generations, ``data_bounds=True``) then, with ``--refine lm`` (default), a
-    Levenberg–Marquardt stage; ``--refine both`` also runs them without it to show
-    which measures better.
-
-Writes ``emps.md``, ``emps.csv`` and ``emps_validation.png`` into
-:func:`_harness.results_dir` (``results/quick/`` with ``--quick``).
+Writes ``emps.md``, ``emps.csv``, ``emps_idim.csv`` and ``emps_validation.png``.
 """
 
 from __future__ import annotations

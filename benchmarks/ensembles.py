@@ -2,45 +2,25 @@
 
 Usage::
 
-    python benchmarks/ensembles.py --record emps            # DATA_EMPS.mat, 1 kHz (default)
-    python benchmarks/ensembles.py --record rig             # jaxfric.rig.synthetic_friction_data
-    ... [--models elman,lugre,elman:map] [--sizes 1,8] [--loop-fits N] [--rounds 1] [--rollouts]
-        [--tag gpu] [--quick] [--out DIR] [--data-dir DIR] [--note TEXT]
+    python benchmarks/ensembles.py --record emps|rig [--models elman,lugre,elman:map] [--sizes 1,8]
+        [--loop-fits N] [--rounds 1] [--rollouts] [--tag gpu] [--append] [--quick] [--out DIR] [--data-dir DIR]
 
-For each model (every ``identify`` default; float32) and ensemble size K, one round
-times, side by side on the same machine and in the same process:
+For each model (every ``identify`` default, float32) and size K, in one process: the K single
+fits one after another (or the first ``--loop-fits`` N, the loop's time then estimated as K
+times their median, "est.") and the ensemble with the same keys; both compiled first, so the
+medians are warm wall times. ``NAME:map`` runs the gradient stage's members one after another
+(``GradientRefinement(batching="map")``, members equal to single fits to the bit). The report
+gives the ensemble's time over one fit's (targets: 2-core CPU, ENN K = 8 ≤ 3, LuGre ≤ 2; GPU
+K = 64 ≤ 2), in wall and CPU time and per stage, and checks member i against the single fit
+with key i (bitwise after the global stage and at the end, largest relative ΔJ and Δ valid. MSE).
 
-* single fits ``identify(model, data, key=keys[i])`` one after another (the loop): all
-  K of them, or the first ``--loop-fits`` N (a GPU row of K = 64; the loop's time is
-  then K times the median single fit, marked "est.");
-* the ensemble ``identify(model, data, keys=keys)`` with the same K keys.
+``--rollouts`` adds each stage's CPU time for one key and K keys, and the floor under those
+ratios: J of P candidates at once (``vmap`` of the cost) for P = 1 … 200 and, for the
+networks, J and gradient of 1 and of K networks. A stage whose cost per candidate does not fall
+with P costs K times one run for K members, whatever the layout.
 
-A model written ``elman:map`` runs the gradient stage's members one after another
-(``GradientRefinement(batching="map")``): the price of members equal to the single
-fits to the bit.
-
-Both paths are compiled before the rounds (first calls reported apart), so the
-medians are warm wall times. The table gives one fit's time (median of the loop's
-fits), the ensemble's, their ratio (the price of K members in single fits; the
-targets: on a 2-core CPU ENN K = 8 at most 3, LuGre at most 2; on a GPU K = 64 at most
-2) and the loop's time over the ensemble's, the same ratio in CPU time, and where the
-time goes: the global stage's and the gradient stage's run times as ensemble over one
-fit. It checks member i against the single fit with key i: members whose global-stage
-result equals the single run's to the bit, members whose final θ does, the largest
-relative difference of the training cost J, the largest difference of validation MSE
-(percentage points), and for scale the spread of J over the single fits' keys
-(max/min − 1).
-
-``--rollouts`` adds each stage's CPU time for one key and for K keys (the stages run
-alone), and the floor under those ratios: the cost J of P candidates at once
-(``vmap`` of the cost, the global stage's evaluation) for P = 1 … 200, in µs per
-candidate, and for the networks the gradient stage's J-and-gradient of 1 and of K
-networks (CPU time, medians). A stage whose cost per candidate does not fall with P
-costs K times one run for K members, whatever the layout.
-
-Writes ``ensembles_<record>[_<tag>].md`` and ``.csv`` into ``--out`` (default
-``benchmarks/results``; ``--quick``: tiny budgets, ``benchmarks/results/quick``).
-The EMPS file is ``--data-dir``/DATA_EMPS.mat, else :func:`_harness.emps_file`.
+Writes ``ensembles_<record>[_<tag>].md``, ``.csv`` (and ``_floor``/``_stages`` CSVs, a ``.runs``
+list). The EMPS file: ``--data-dir``/DATA_EMPS.mat, else :func:`_harness.emps_file`.
 """
 
 from __future__ import annotations

@@ -1,38 +1,23 @@
-"""Global stages compared on the main job (issue 16 item 4): MAPSO vs CMA-ES vs PSO,
-each followed by the same Nelder–Mead stage, at equal evaluation budgets.
+"""Global stages compared on the main job: MAPSO vs CMA-ES vs PSO, each followed by the same
+Nelder–Mead stage, at equal evaluation budgets.
 
-Models: the Elman network (ENN, N = 30 neurons, 180 parameters, |r| ≤ 1) and LuGre
-(6 parameters), identified with :func:`jaxfric.identify` (``solver=chain(global, NM)``,
-no gradient stage) on
+Models: the Elman network (N = 30, 180 parameters, |r| ≤ 1) and LuGre (6 parameters), by
+:func:`jaxfric.identify` (``solver=chain(global, NM)``; the ENN then runs identify's default
+gradient stage, 500 BFGS steps) on ``rig`` (``jaxfric.rig.synthetic_friction_data``, 1600/400)
+and ``emps`` (``DATA_EMPS.mat``: Butterworth 100 Hz forward-backward on ``qm``, central
+differences twice, ``friction = gtau·vir − M·a`` with the published M, every 10th sample,
+last 20 % validation).
 
-* ``rig``: the simulated hydraulic rig, ``jaxfric.rig.synthetic_friction_data``
-  (2000 samples at 128 Hz, 1600 training / 400 validation);
-* ``emps``: the EMPS ball-screw axis (``DATA_EMPS.mat``, when found; see its
-  SOURCE.md), friction from the benchmark's force-balance recipe: 4th-order
-  Butterworth at 100 Hz on ``qm`` run forward-backward, central differences twice,
-  ``friction = gtau·vir − M·a`` with the published M = 95.1089 kg, 50 samples dropped
-  at each end, then every ``--emps-decimate``-th sample (default 10: 100 Hz, about
-  2480 samples, so one rollout costs about what the rig's does); last 20 % validation.
-
-Equal budgets: MAPSO runs ``--generations`` generations for LuGre (5×5 lattice) and
-``--enn-generations`` for the ENN (8×8, as :func:`jaxfric.identification.default_solver`);
-PSO (same number of particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`,
-population 4 + ⌊3 ln D⌋) get generations so that their evaluations do not exceed MAPSO's.
-For models with more than ``LARGE_MODEL_PARAMS`` parameters (the ENN, 180) the CMA-ES
-row is evosax's ``Sep_CMA_ES`` (diagonal covariance): full CMA-ES eigendecomposes its
-D×D covariance every generation, and ``jnp.linalg.eigh`` of a 180×180 matrix takes
-0.2–0.9 s on this CPU (measured), 40 ms per evaluation against MAPSO's 0.16 ms. The
-same ``NelderMead(max_evals=--nm-evals)`` follows each; for the ENN ``identify`` then
-runs its default gradient stage (``refine=None``: 500 BFGS steps under the default
-``method="jaxfric"``), for LuGre none. Per key: validation and
-training MSE %, the global stage's J, evaluations, run time; the first key's call
-includes compilation (reported apart).
+MAPSO runs ``--generations`` (LuGre, 5×5) or ``--enn-generations`` (ENN, 8×8); PSO (as many
+particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`) get at most MAPSO's evaluations.
+Above ``LARGE_MODEL_PARAMS`` parameters CMA-ES is ``Sep_CMA_ES``: full CMA-ES's 180×180
+eigendecomposition takes 0.2–0.9 s per generation on this CPU (measured).
 
     python benchmarks/global_stages.py                       # both data sets, 5 keys
     python benchmarks/global_stages.py --data rig --models lugre --keys 2
     python benchmarks/global_stages.py --quick               # rig, LuGre, 1 key, tiny budgets
 
-Writes ``global_stages.md`` and ``global_stages.csv`` to ``--out``.
+Writes ``global_stages.md`` and ``global_stages.csv``.
 """
 
 from __future__ import annotations

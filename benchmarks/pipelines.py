@@ -2,35 +2,22 @@
 
 Usage::
 
-    python benchmarks/pipelines.py --record rig   [--seeds 5]      # jaxfric.rig.synthetic_friction_data
-    python benchmarks/pipelines.py --record emps  [--seeds 1] [--paper-seeds 1]   # DATA_EMPS.mat, 1 kHz
-    python benchmarks/pipelines.py --record oring [--seeds 1]      # pneumatic O-ring_3bar.csv
-    ... [--quick] [--out DIR] [--data-dir DIR]
+    python benchmarks/pipelines.py --record rig|emps|oring [--seeds K] [--paper-seeds K]
+        [--skip jaxfric,paper,de_nm] [--quick] [--out DIR] [--data-dir DIR]
 
-Pipelines (issue 17 items 2-3), each on the same record and split (first 80 % train,
-last 20 % validation; the rig's own 1600/400), float32:
+Each on the same record and split (first 80 % train; the rig's 1600/400), float32:
 
-* ``jaxfric``: ``identify("elman", data, key=k)`` with every default (MAPSO 8×8 for
-  ``FAST_GENERATIONS_BLACK_BOX`` generations on the first ``GLOBAL_STAGE_SAMPLES``
-  training samples, then ``FAST_REFINE_STEPS`` BFGS steps on the whole window);
-* ``paper``: ``identify(..., method="paper")``: MAPSO–NMDS as the paper describes;
-* ``DE → NM``: ``scipy.optimize.differential_evolution`` (vectorised, the same jitted
-  batched cost) on the same first samples with the same number of evaluations as the
-  ``jaxfric`` swarm, then ``scipy.optimize.minimize(method="Nelder-Mead")`` on the
-  whole training window with as many cost evaluations as the BFGS stage's budget
-  costs in rollouts (``NM_EVALS_PER_BFGS_STEP`` per step, measured: one BFGS step =
-  a forward and an adjoint loop plus line-search evaluations);
-* least-squares baselines on the same split (not in the library): asymmetric
-  Coulomb + viscous + offset, ``F = Fv± v + Fc+ [v>0] − Fc− [v<0] + o``.
+* ``jaxfric``: ``identify("elman", data, key=k)``, every default (MAPSO 8×8 for
+  ``FAST_GENERATIONS_BLACK_BOX`` generations on the first ``GLOBAL_STAGE_SAMPLES`` samples,
+  then ``FAST_REFINE_STEPS`` BFGS steps on the whole window);
+* ``paper``: ``identify(..., method="paper")``, MAPSO–NMDS as the paper describes;
+* ``DE → NM``: scipy's vectorised differential evolution on the same jitted batched cost with
+  the swarm's evaluations, then scipy's Nelder–Mead on the whole window with
+  ``NM_EVALS_PER_BFGS_STEP`` evaluations per BFGS step of the ``jaxfric`` row;
+* the least-squares baseline ``baselines.ls_coulomb_viscous`` (not in the library).
 
-EMPS also gets the IDIM-LS table (M, Fv, Fc symmetric and asymmetric) against the
-published values (``jaxfric.rig.emps``). Run time excludes compilation (JAX compile
-events, ``jaxfric._timing.Stopwatch``); the first key of each pipeline also
-pays it and is reported apart.
-
-Writes ``pipelines_<record>.md`` and ``.csv`` into ``--out`` (default
-``benchmarks/results``; ``--quick`` writes to ``benchmarks/results/quick`` so smoke runs
-never overwrite committed results).
+EMPS adds the IDIM-LS table against the published values. Run time excludes compilation
+(JAX's compile events); the first key pays it, reported apart. Writes ``pipelines_<record>.md``/``.csv``.
 """
 
 from __future__ import annotations

@@ -1,42 +1,26 @@
 """The paper's Table 1: MAPSO–NMDS against PSO and CMA-ES on five test functions (+ Rastrigin).
 
-For each dimension (default D = 30 and D = 10), each function and each solver,
-``--runs`` independent runs (default 30) go through ONE vmapped call
-(:func:`jaxfric.minimise_many`). Rows:
+For each dimension (default 30 and 10), function and solver, ``--runs`` independent runs
+(default 30) go through ONE vmapped call (:func:`jaxfric.minimise_many`). Rows:
 
-* ``MAPSO-NMDS (paper)``: the paper's configuration, G = ``--generations`` (1000), then
-  one Nelder–Mead run from gBest with fminsearch's budget;
-* ``MAPSO-NMDS + NM restarts``: G = ``--restart-generations`` (1000) with
-  ``--restart-sl-generations`` (5) self-learning generations (78 025 evaluations), then
-  Nelder–Mead restarted from its own result with a fresh simplex
-  (``NelderMead(restarts=...)``) until a restart stops improving or the total budget
-  ``--budget`` (200 000 evaluations) is spent;
-* ``MAPSO-NMDS (sR=0.2, MAGA)``: MAGA's self-learning radius (the paper's value is
-  unknown; jaxfric's default is 1.0, see ``jaxfric.MAPSO``), unless ``--no-maga``;
-* ``PSO (equal evaluations)``: PSO with the largest evaluation count of the paper row;
-* ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (when evosax is installed): evosax's CMA-ES
-  through :class:`jaxfric.Evosax`, alone and followed by Nelder–Mead
-  (:func:`jaxfric.cmaes_nm`), within the same budget as PSO: ``⌊(budget − 1)/P⌋``
-  generations alone; ``GLOBAL_SHARE`` of it, then Nelder–Mead from the best point.
+* ``MAPSO-NMDS (paper)``: G = ``--generations`` (1000), then one Nelder–Mead run from gBest
+  with fminsearch's budget;
+* ``MAPSO-NMDS + NM restarts``: G = ``--restart-generations`` with ``--restart-sl-generations``
+  (5) self-learning generations, then Nelder–Mead restarted from its own result
+  (``NelderMead(restarts=...)``) within ``--budget`` (200 000) evaluations in all;
+* ``MAPSO-NMDS (sR=0.2, MAGA)``: MAGA's self-learning radius (jaxfric's default is 1.0), unless ``--no-maga``;
+* ``PSO (equal evaluations)``, ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (``jaxfric.cmaes_nm``; evosax
+  installed): the paper row's largest evaluation count; CMA-ES→NM gives ``GLOBAL_SHARE`` of it to CMA-ES.
 
-Writes ``table1.md``, ``table1.csv`` and ``table1_convergence.png`` to ``--out``
-(default ``benchmarks/results``; all three are rewritten after every function, so an
-interrupted run keeps what finished). Columns: mean, sample standard deviation and
-variance (n − 1, MATLAB's ``std``/``var``), best, worst, success rate (f ≤ 1e-8), median evaluations to success (the
-first history entry ≤ 1e-8, over the successful runs; the history is a fixed-size
-record, so this is exact to within one history stride), evaluations per
-run, and time: one call per row, its compile time (JAX's compile events) apart from
-the run time of the whole batch and per run.
+Columns (``table1.md``, ``table1.csv``, ``table1_convergence.png``, rewritten after every
+function): mean, sample std and variance (n − 1), best, worst, success (f ≤ 1e-8), median
+evaluations to success (first history entry ≤ 1e-8), evaluations per run, compile time (JAX's
+compile events) apart from the batch's run time.
 
     python benchmarks/table1.py                 # the full table (tens of minutes on 2 cores)
-    python benchmarks/table1.py --dims 30 --functions rosenbrock --no-maga
     python benchmarks/table1.py --quick         # D = 10, 5 runs, 100 generations
-    # the two dimensions as two processes (twice the CPU share on a busy machine), then one table:
     python benchmarks/table1.py --dims 30 --out a & python benchmarks/table1.py --dims 10 --out b
-    python benchmarks/table1.py --merge a,b     # rows and curves of both into --out
-
-Besides the table, every run saves its median curves (``table1_curves.npz``) so
-``--merge`` can redraw the figure.
+    python benchmarks/table1.py --merge a,b     # one table from both (median curves: table1_curves.npz)
 """
 
 from __future__ import annotations
