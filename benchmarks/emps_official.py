@@ -77,10 +77,7 @@ def motion_data(path) -> MotionData:
 
 def fixed_fit(mass, fv, fc, offset, dt) -> MotionFit:
     """A Coulomb + viscous + offset motion fit holding given parameters."""
-    model = models.Coulomb(v_eps=1e-4)
-    return MotionFit(model=model, theta=np.asarray(model.from_physical(Fc=fc, sigma2=fv), np.float64),
-                     velocity_scaler=None, friction_scaler=None, dt=dt, n_train=0, n_samples=0, metrics={},
-                     settings={"motion": {"mass": float(mass), "offset": float(offset), "v0": 0.0}})
+    return MotionFit.given(models.Coulomb(v_eps=1e-4), dict(Fc=fc, sigma2=fv), mass=mass, offset=offset, dt=dt)
 
 
 def least_squares_baseline(path, dt) -> MotionFit:

@@ -77,9 +77,8 @@ def emps_motion_data(path) -> tuple[MotionData, int]:
 
 def reference_fit(model, theta, mass, offset, data, n_train) -> MotionFit:
     """A MotionFit holding given (published) parameters, evaluated like the identified ones."""
-    fit = MotionFit(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None,
-                    friction_scaler=None, dt=data.dt, n_train=n_train, n_samples=data.n_samples,
-                    metrics={}, settings={"motion": {"mass": float(mass), "offset": float(offset), "v0": 0.0}})
+    fit = MotionFit.given(model, theta, mass=mass, offset=offset, dt=data.dt, n_train=n_train,
+                          n_samples=data.n_samples)
     return fit.replace(metrics=fit.evaluate(data, n_train, K_STEP))
 
 

@@ -145,9 +145,7 @@ def test_motion_fit_export_includes_its_offset(tmp_path):
     v = _velocity()  # the record of the tests above, whose LuGre programs it reuses
     lugre = models.LuGre()
     theta = lugre.from_physical(sigma0=1e6, sigma1=300.0, sigma2=500.0, Fc=20.0, Fs=30.0, vs=5e-3)
-    fit = MotionFit(model=lugre, theta=np.asarray(theta, np.float64), velocity_scaler=None,
-                    friction_scaler=None, dt=1e-3, n_train=10, n_samples=10, metrics={},
-                    settings={"motion": {"mass": 1.0, "offset": -3.25, "v0": 0.0}})
+    fit = MotionFit.given(lugre, theta, mass=1.0, offset=-3.25, dt=1e-3, n_train=10, n_samples=10)
     with jax.enable_x64(True):
         ref = np.asarray(fit.predict(v))
         plain = np.asarray(Fit.predict(fit, v))

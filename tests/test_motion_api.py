@@ -183,10 +183,8 @@ def test_same_key_same_fit(default_fit):
 # ----------------------------------------------------------------- initial-state rule
 def _reference_fit(rec):
     model = models.Coulomb(v_eps=1e-3)
-    return MotionFit(model=model, theta=np.asarray(model.from_physical(**TRUTH), np.float64),
-                     velocity_scaler=None, friction_scaler=None, dt=rec.dt, n_train=rec.n_samples,
-                     n_samples=rec.n_samples, metrics={},
-                     settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 0.0}})
+    return MotionFit.given(model, TRUTH, mass=MASS, offset=OFFSET, dt=rec.dt, n_train=rec.n_samples,
+                           n_samples=rec.n_samples)
 
 
 def test_initial_state_reads_only_its_window():
@@ -239,10 +237,8 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
     strib_model = models.Stribeck(v_eps=1e-3)
 
     def strib(fs):
-        return MotionFit(model=strib_model, theta=np.asarray(
-            strib_model.from_physical(Fc=12.0, Fs=fs, vs=2e-3, sigma2=60.0), np.float64),
-            velocity_scaler=None, friction_scaler=None, dt=rec.dt, n_train=1000, n_samples=1500,
-            metrics={}, settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 0.0}})
+        return MotionFit.given(strib_model, dict(Fc=12.0, Fs=fs, vs=2e-3, sigma2=60.0), mass=MASS, offset=OFFSET,
+                               dt=rec.dt, n_train=1000, n_samples=1500)
 
     fits = {"coulomb": coul, "stribeck": strib(30.0)}
     with jax.enable_x64(True):
@@ -333,10 +329,8 @@ def test_evaluate_is_simulate_from_and_k_step():
 
     model = models.LuGre()
     rec = _record(600)
-    fit = MotionFit(model=model, theta=np.asarray(model.from_physical(
-        sigma0=1e5, sigma1=50.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=5e-3), np.float64), velocity_scaler=None,
-        friction_scaler=None, dt=rec.dt, n_train=450, n_samples=600, metrics={},
-        settings={"motion": {"mass": MASS, "offset": OFFSET, "v0": 1e-3}})
+    fit = MotionFit.given(model, dict(sigma0=1e5, sigma1=50.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=5e-3),
+                          mass=MASS, offset=OFFSET, v0=1e-3, dt=rec.dt, n_train=450, n_samples=600)
     x = rec.position
     with jax.enable_x64(True):
         ev = fit.evaluate(rec, 450, 10)
@@ -362,3 +356,23 @@ def test_emps_official_benchmark_skips_cleanly_without_the_test_recording(tmp_pa
     assert out.returncode == 0, out.stderr
     assert "skipping the official task" in out.stdout
     assert not (tmp_path / "res").exists()
+
+
+def test_a_motion_fit_of_given_parameters_is_the_one_built_by_hand():
+    """``MotionFit.given`` (published parameters, a baseline, a test's truth) holds the
+    parameters as θ, the mechanics in settings, and predicts friction plus the offset;
+    ``baseline_motion_fit`` is the least-squares baseline's model with those values."""
+    from jaxfric.motion import baseline_motion_fit
+
+    model = models.Coulomb(v_eps=1e-3)
+    by_name = MotionFit.given(model, TRUTH, mass=MASS, offset=OFFSET, dt=1e-3, settings={"model_name": "x"})
+    by_theta = MotionFit.given(model, np.asarray(model.from_physical(**TRUTH)), mass=MASS, offset=OFFSET, dt=1e-3)
+    np.testing.assert_array_equal(by_name.theta, by_theta.theta)
+    assert by_name.mechanics == {"mass": MASS, "offset": OFFSET, "v0": 0.0} and by_name.settings["model_name"] == "x"
+    v = np.linspace(-0.02, 0.02, 7)
+    expected = TRUTH["Fc"] * np.tanh(v / 1e-3) + TRUTH["sigma2"] * v + OFFSET
+    np.testing.assert_allclose(np.asarray(by_name.predict(v)), expected, rtol=1e-5, atol=1e-4)
+    base = baseline_motion_fit(2.0, -1.0, 3.0, 0.5, dt=1e-3, n_train=5)
+    assert base.mass == 2.0 and base.offset == 0.5 and base.n_train == 5
+    assert base.params["Fc"] == pytest.approx(0.0, abs=1e-6)  # a negative Coulomb level is held at zero
+    assert base.params["sigma2"] == pytest.approx(3.0, rel=1e-6)

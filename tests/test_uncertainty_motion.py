@@ -25,11 +25,9 @@ def _motion_fit():
     x = np.asarray(out["x"]) + 2e-6 * np.random.default_rng(0).standard_normal(N)
     data = MotionData.from_arrays(u, x, DT)
     y = list(theta) + [np.log10(2.5), 3.0]
-    fit = MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=DT,
-                    n_train=N_TRAIN, n_samples=N, metrics={},
-                    settings={"motion": {"mass": 2.5, "offset": 3.0, "v0": 0.0, "error": "position",
-                                         "horizon": None, "search_names": list(model.param_names)
-                                         + ["log10_mass", "offset"], "y": y}})
+    fit = MotionFit.given(model, theta, mass=2.5, offset=3.0, dt=DT, n_train=N_TRAIN, n_samples=N,
+                          settings={"motion": {"error": "position", "horizon": None, "y": y,
+                                               "search_names": list(model.param_names) + ["log10_mass", "offset"]}})
     return model, fit, data, np.asarray(y)
 
 

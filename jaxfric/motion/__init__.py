@@ -15,8 +15,8 @@
 """
 
 from .._warnings import BaselineWarning
-from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, identify_motion, load_motion_fit,
-                   motion_metrics)
+from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, baseline_motion_fit, identify_motion,
+                   load_motion_fit, motion_metrics)
 from ._compare import MotionComparison, OverfitWarning, compare_motion, rank_fits
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
@@ -42,6 +42,7 @@ __all__ = [
     "GMSStep",
     "MotionData",
     "MotionFit",
+    "baseline_motion_fit",
     "StaticStep",
     "friction_step",
     "identify_motion",

@@ -50,7 +50,7 @@ from ._residuals import motion_residuals, motion_train_velocity
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
-__all__ = ["MotionData", "MotionFit", "identify_motion", "load_motion_fit", "motion_metrics"]
+__all__ = ["MotionData", "MotionFit", "baseline_motion_fit", "identify_motion", "load_motion_fit", "motion_metrics"]
 
 #: k of the k-step-ahead metrics when none is asked for: 10 samples.
 DEFAULT_METRIC_HORIZON = 10
@@ -248,6 +248,21 @@ class MotionFit(Fit):
     ``offset`` [N] (a constant force added to the friction, 0 unless fitted),
     ``v0`` correction [m/s], the velocity filter ``cutoff`` [Hz], and [`simulate`][jaxfric.motion.MotionFit.simulate].
     ``metrics`` holds position metrics per window (``"train"``, ``"valid"``: free run;
+    @classmethod
+    def given(cls, model, params, *, mass: float, dt: float, offset: float = 0.0, v0: float = 0.0,
+              n_train: int = 0, n_samples: int = 0, settings: dict | None = None) -> "MotionFit":
+        """A motion fit holding given parameters rather than identified ones (published
+        values, a least-squares baseline, a test's truth), to be simulated and scored like
+        an identified fit. ``params``: physical values by name (``model.from_physical``) or
+        ``theta`` in search coordinates; ``mass`` [kg], ``offset`` [N] (added to the
+        friction), ``v0`` [m/s] the initial-velocity correction; ``settings`` more entries."""
+        theta = model.from_physical(**params) if isinstance(params, dict) else params
+        motion = {"mass": float(mass), "offset": float(offset), "v0": float(v0)}
+        extra = dict(settings or {})
+        return cls(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None, friction_scaler=None,
+                   dt=dt, n_train=n_train, n_samples=n_samples, metrics={},
+                   settings={**extra, "motion": {**motion, **extra.get("motion", {})}})
+
     ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see [`motion_metrics`][jaxfric.motion.motion_metrics].
     """
 
@@ -915,11 +930,33 @@ def _ensemble(model, data, key, keys, options) -> MotionFit:
 
 def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
     """The least-squares baseline (`._baseline`) as a fit, scored like the fit."""
-    model = baseline_model()
-    theta = np.asarray(model.from_physical(Fc=max(est.Fc, 0.0), sigma2=max(est.Fv, 1e-12)), np.float64)
-    fit = MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=tr_records[0].dt,
-                    n_train=sum(r.n_samples for r in tr_records), n_samples=0, metrics={},
-                    settings={"model_name": "coulomb", "motion": {"mass": est.M, "offset": est.offset, "v0": 0.0}})
+    fit = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt,
+                              n_train=sum(r.n_samples for r in tr_records))
+def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
+    """``(y0, stages)``: a [`GreyBox`][jaxfric.models.GreyBox] search starts from its physical
+    model's own ``identify_motion`` fit (same data, key and mechanics; the physical entries
+    of ``box``) with the network's output weights at zero, where the grey-box *is* that fit;
+    ``stages`` is one row for the physical fit, put before the grey-box's own."""
+    phys = model.physical
+    fit = identify_motion(phys, box={k: box[k] for k in phys.box_keys}, **options)
+    y = np.asarray(fit.settings["motion"]["y"], np.float64)
+    y0 = np.concatenate([y[:phys.num_params], model.network_start(box), y[phys.num_params:]])
+    row = {"stage": f"physical {type(phys).__name__} fit", "start": None, "J": fit.metrics["cost"],
+           "num_evals": int(sum(s.get("num_evals", 0) for s in fit.stages or [])),
+           "num_steps": 0, "seconds": fit.timings.get("total_s"), "reason": "done"}
+    return np.clip(y0, lower, upper), [row]
+
+
+def baseline_motion_fit(M: float, Fc: float, Fv: float, offset: float, *, dt: float,
+                        n_train: int = 0) -> MotionFit:
+    """The least-squares Coulomb + viscous + offset baseline (mass ``M`` [kg], ``Fc`` [N],
+    ``Fv`` [N s/m], ``offset`` [N]; `._baseline.least_squares`) as a fit of its own
+    ([`MotionFit.given`][jaxfric.motion.MotionFit.given]), with the smoothing of
+    `._baseline.baseline_model`; a negative ``Fc`` or ``Fv`` is held at its model's floor."""
+    return MotionFit.given(baseline_model(), dict(Fc=max(Fc, 0.0), sigma2=max(Fv, 1e-12)), mass=M, offset=offset,
+                           dt=dt, n_train=n_train, settings={"model_name": "coulomb"})
+
+
     if data is not None:
         return fit.replace(metrics=fit.evaluate(data, n_train, int(metric_horizon)))
     return fit.replace(metrics=fit.evaluate_records(tr_records, va_records, init_window))
