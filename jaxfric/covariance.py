@@ -68,6 +68,33 @@ NOT_IDENTIFIABLE = "not identifiable"
 COVERS_BOX = "its {level:.0%} interval covers its whole search box: the data do not determine it"
 
 
+# ------------------------------------------------------------------ text
+# The one formatter of the uncertainty texts: Fit.summary (`ParameterUncertainty.format`),
+# report.md (`jaxfric.uncertainty.report_markdown`) and the command line
+# (`jaxfric.uncertainty.cli_lines`) write numbers, intervals and correlations through these.
+def number_text(x, fmt: str = ".3g") -> str:
+    """``x`` in ``fmt``; ``-`` for ``None``; text (a JSON summary's ``"inf"``) as it is."""
+    if x is None:
+        return "-"
+    try:
+        return format(float(x), fmt)
+    except (TypeError, ValueError):
+        return str(x)
+
+
+def interval_text(interval, fmt: str = ".4g", missing: str = NOT_IDENTIFIABLE) -> str:
+    """``[low, high]`` in ``fmt``, or ``missing`` where there is no interval to show (a
+    parameter that is not identifiable: its numbers are never shown)."""
+    if not interval:
+        return missing
+    return f"[{number_text(interval[0], fmt)}, {number_text(interval[1], fmt)}]"
+
+
+def correlation_text(a: str, b: str, r: float) -> str:
+    """The sentence for a strongly correlated pair of estimates."""
+    return f"corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each"
+
+
 # ----------------------------------------------------------------------- estimators
 # NumPy float64: J is (n, p) with p a handful, so the linear algebra costs microseconds
 # and, unlike eager jnp, compiles nothing for each new record length.
@@ -346,10 +373,9 @@ class ParameterUncertainty:
         for row in self.table(level, flags):
             lines.append(f"  {row['name']:<10}{row['estimate']:>12.4g}"
                          + "".join(f"{row['se_' + m]:>18.3g}" for m in methods)
-                         + (f"   [{row['low']:.4g}, {row['high']:.4g}]" if row["identifiable"]
-                            else f"   {NOT_IDENTIFIABLE}"))
+                         + "   " + interval_text((row["low"], row["high"]) if row["identifiable"] else None))
         for a, b, r in self.strongly_correlated():
-            lines.append(f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each")
+            lines.append("  " + correlation_text(a, b, r))
         return lines
 
     # ------------------------------------------------------------------ json

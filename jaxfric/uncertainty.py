@@ -38,8 +38,8 @@ import numpy as np
 from ._warnings import ExtrapolationWarning
 from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_REPLICATES, METHODS,
                          MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level, _check_methods,
-                         andrews_bandwidth, block_bootstrap_covariance, hac_covariance,
-                         jacobian_covariance)
+                         andrews_bandwidth, block_bootstrap_covariance, correlation_text, hac_covariance,
+                         interval_text, jacobian_covariance, number_text)
 from .fit import (NOT_IDENTIFIABLE_MEANING, Fit, _check_dt, _velocity_np, diagnostic_flags, grouped_reasons,
                   parameter_verdicts, rollout)
 from .plausibility import check_plausibility, warn_implausible
@@ -400,16 +400,6 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
     return out
 
 
-def _g(x, fmt: str = ".3g") -> str:
-    """A number of a JSON summary (``"inf"`` text for non-finite ones, ``None``: ``-``)."""
-    if x is None:
-        return "-"
-    try:
-        return format(float(x), fmt)
-    except (TypeError, ValueError):
-        return str(x)
-
-
 def _ensemble_band(fit, data) -> dict | None:
     """Measured coverage of an ensemble's min–max band (``fit.predict_band``)."""
     try:
@@ -450,12 +440,11 @@ def report_markdown(summary: dict | None) -> list[str]:
                 marks.append("**at the least value the model allows**" if v.get("at_limit")
                              else "**on a bound: widen its range**")
             verdict = ", ".join(marks) or "identifiable"
-            value = _g(v.get("value"), ".6g")
+            value = number_text(v.get("value"), ".6g")
             if rows:
                 row = rows.get(name, {})
-                interval = (f"[{_g(v['interval'][0], '.4g')}, {_g(v['interval'][1], '.4g')}]" if v.get("interval")
-                            else f"{NOT_IDENTIFIABLE}" if not v["identifiable"] else "-")
-                L.append(f"| {name} | {value} | {_g(row.get('se_hac'))} | {_g(row.get('se_jacobian'))} | "
+                interval = interval_text(v.get("interval"), ".4g", NOT_IDENTIFIABLE if not v["identifiable"] else "-")
+                L.append(f"| {name} | {value} | {number_text(row.get('se_hac'))} | {number_text(row.get('se_jacobian'))} | "
                          f"{interval} | {verdict} |")
             else:
                 L.append(f"| {name} | {value} | {verdict} |")
@@ -471,7 +460,7 @@ def report_markdown(summary: dict | None) -> list[str]:
             L += [f"| {a} | " + " | ".join(f"{x:+.2f}" for x in row) + " |"
                   for a, row in zip(names, corr["matrix"])]
         for a, b, r in summary.get("correlated", []):
-            L += ["", f"corr({a}, {b}) = {r:+.3f}: the data fix a combination of the two, not each."]
+            L += ["", correlation_text(a, b, r) + "."]
         band = summary.get("band")
         if band:
             cov = [f"{band['train']:.1%} of the training samples"]
@@ -500,8 +489,7 @@ def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
     u = fit.uncertainty
     lines = []
     if u is not None:
-        parts = [f"{k} {v['value']:.4g} " + (f"[{v['interval'][0]:.3g}, {v['interval'][1]:.3g}]" if v["interval"]
-                                             else f"({NOT_IDENTIFIABLE})")
+        parts = [f"{k} {v['value']:.4g} " + interval_text(v["interval"], ".3g", f"({NOT_IDENTIFIABLE})")
                  for k, v in verdicts.items() if k in u.names]
         lines.append(f"  {level:.0%} intervals ({u.default}): " + ", ".join(parts))
     loose = [k for k, v in verdicts.items() if not v["identifiable"]]
@@ -509,5 +497,5 @@ def cli_lines(fit, level: float = DEFAULT_LEVEL) -> list[str]:
         lines.append(f"  not identifiable from these data: {', '.join(loose)}; their values were set by the search "
                      "box or a few samples, not measured: no physical properties (report.md says why)")
     if u is not None:
-        lines += [f"  corr({a}, {b}) = {r:+.3f}: the data fix a combination only" for a, b, r in u.strongly_correlated()]
+        lines += ["  " + correlation_text(a, b, r) for a, b, r in u.strongly_correlated()]
     return lines
