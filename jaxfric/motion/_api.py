@@ -42,7 +42,7 @@ from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, che
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import FitKind, assess_fit, register_fit_kind
 from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start
-from ._forward import k_step_positions, simulate_motion, track_states
+from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search
@@ -171,14 +171,8 @@ class MotionCost(eqx.Module):
     def simulate(self, y, args):
         theta, mass, offset, dv0 = self.layout.unpack(y, args)
         step = friction_step(self.model, args["scalers"])
-        u = args["force"] - offset
-        if self.horizon is None:
-            out = simulate_motion(step, theta, mass, u, args["dt"], args["x"][0], args["v"][0] + dv0)
-            return out["x"], out["v"], args["x"], args["v"]
-        states = track_states(step, theta, args["v"], args["dt"])
-        x_hat = k_step_positions(step, theta, mass, u, args["dt"], args["x"], args["v"], states,
-                                 self.horizon)
-        return x_hat, None, args["x"][self.horizon:], None
+        return motion_prediction(step, theta, mass, args["force"] - offset, args["dt"], args["x"],
+                                 args["v"], dv0, self.horizon)
 
     def residuals(self, y, args):
         """The terms of J as a vector (``J = sum(residuals**2)``), for Levenberg–Marquardt."""

@@ -137,3 +137,17 @@ def k_step_positions(step: FrictionStep, theta, mass, force, dt, x, v, states, h
         return xk
 
     return jax.vmap(one)(windows, jnp.asarray(x[:n], dtype), jnp.asarray(v[:n], dtype), start)
+
+
+def motion_prediction(step: FrictionStep, theta, mass, force, dt, x, v, dv0, horizon: int | None):
+    """``(x̂, v̂, x, v)``: what a motion cost compares, §13.2. ``horizon=None``: the free
+    run from the first measured sample (its velocity shifted by ``dv0``) against the whole
+    record; an int ``h``: the h-step-ahead positions from tracked friction states
+    against ``x[h:]``, with no velocity (``None``). The one prediction behind the
+    free-run and k-step cost (``MotionCost``) and the residuals of a fit's uncertainty
+    (``MotionResiduals``), which weigh the errors each their own way."""
+    if horizon is None:
+        out = simulate_motion(step, theta, mass, force, dt, x[0], v[0] + dv0)
+        return out["x"], out["v"], x, v
+    states = track_states(step, theta, v, dt)
+    return k_step_positions(step, theta, mass, force, dt, x, v, states, horizon), None, x[horizon:], None

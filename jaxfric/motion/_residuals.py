@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..uncertainty import Residuals
-from ._forward import k_step_positions, simulate_motion, track_states
+from ._forward import motion_prediction
 from ._layout import Layout
 from ._step import friction_step
 
@@ -97,22 +97,18 @@ class MotionResiduals(eqx.Module):
         step, dt = self.step, jnp.asarray(self.dt, y.dtype)
         u = jnp.asarray(self.force, y.dtype) - off
         xs, vs = jnp.asarray(self.x, y.dtype), jnp.asarray(self.v, y.dtype)
-        if self.horizon is not None:
-            states = track_states(step, theta, vs, dt)
-            xh = k_step_positions(step, theta, mass, u, dt, xs, vs, states, self.horizon)
-            return xh - xs[self.horizon:]
-        if self.records is not None:  # whole training records, each run from its own start
+        if self.records is not None and self.horizon is None:  # whole records, each from its own start
             cuts = np.cumsum((0,) + self.records)
             return jnp.concatenate([
-                simulate_motion(step, theta, mass, u[a:b], dt, xs[a], vs[a] + dv0)["x"] - xs[a:b]
+                motion_prediction(step, theta, mass, u[a:b], dt, xs[a:b], vs[a:b], dv0, None)[0] - xs[a:b]
                 for a, b in zip(cuts[:-1], cuts[1:])])
-        out = simulate_motion(step, theta, mass, u, dt, xs[0], vs[0] + dv0)
-        if self.error == "position":
-            return out["x"] - xs
+        x_hat, v_hat, x, v = motion_prediction(step, theta, mass, u, dt, xs, vs, dv0, self.horizon)
+        if self.horizon is not None or self.error == "position":
+            return x_hat - x
         if self.error == "velocity":
-            return out["v"] - vs
+            return v_hat - v
         sx, sv = jnp.asarray(self.scale[0], y.dtype), jnp.asarray(self.scale[1], y.dtype)
-        return jnp.concatenate([(out["x"] - xs) / sx, (out["v"] - vs) / sv])
+        return jnp.concatenate([(x_hat - x) / sx, (v_hat - v) / sv])
 
 
 def motion_train_velocity(fit, data) -> np.ndarray:
