@@ -242,6 +242,9 @@ class MotionFit(Fit):
     ``offset`` [N] (a constant force added to the friction, 0 unless fitted),
     ``v0`` correction [m/s], the velocity filter ``cutoff`` [Hz], and [`simulate`][jaxfric.motion.MotionFit.simulate].
     ``metrics`` holds position metrics per window (``"train"``, ``"valid"``: free run;
+    ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see [`motion_metrics`][jaxfric.motion.motion_metrics].
+    """
+
     @classmethod
     def given(cls, model, params, *, mass: float, dt: float, offset: float = 0.0, v0: float = 0.0,
               n_train: int = 0, n_samples: int = 0, settings: dict | None = None) -> "MotionFit":
@@ -256,9 +259,6 @@ class MotionFit(Fit):
         return cls(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None, friction_scaler=None,
                    dt=dt, n_train=n_train, n_samples=n_samples, metrics={},
                    settings={**extra, "motion": {**motion, **extra.get("motion", {})}})
-
-    ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see [`motion_metrics`][jaxfric.motion.motion_metrics].
-    """
 
     @property
     def mechanics(self) -> dict:
@@ -922,25 +922,6 @@ def _ensemble(model, data, key, keys, options) -> MotionFit:
                                                  "total_s": total.wall_s})
 
 
-def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
-    """The least-squares baseline (`._baseline`) as a fit, scored like the fit."""
-    fit = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt,
-                              n_train=sum(r.n_samples for r in tr_records))
-def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
-    """``(y0, stages)``: a [`GreyBox`][jaxfric.models.GreyBox] search starts from its physical
-    model's own ``identify_motion`` fit (same data, key and mechanics; the physical entries
-    of ``box``) with the network's output weights at zero, where the grey-box *is* that fit;
-    ``stages`` is one row for the physical fit, put before the grey-box's own."""
-    phys = model.physical
-    fit = identify_motion(phys, box={k: box[k] for k in phys.box_keys}, **options)
-    y = np.asarray(fit.settings["motion"]["y"], np.float64)
-    y0 = np.concatenate([y[:phys.num_params], model.network_start(box), y[phys.num_params:]])
-    row = {"stage": f"physical {type(phys).__name__} fit", "start": None, "J": fit.metrics["cost"],
-           "num_evals": int(sum(s.get("num_evals", 0) for s in fit.stages or [])),
-           "num_steps": 0, "seconds": fit.timings.get("total_s"), "reason": "done"}
-    return np.clip(y0, lower, upper), [row]
-
-
 def baseline_motion_fit(M: float, Fc: float, Fv: float, offset: float, *, dt: float,
                         n_train: int = 0) -> MotionFit:
     """The least-squares Coulomb + viscous + offset baseline (mass ``M`` [kg], ``Fc`` [N],
@@ -951,6 +932,10 @@ def baseline_motion_fit(M: float, Fc: float, Fv: float, offset: float, *, dt: fl
                            dt=dt, n_train=n_train, settings={"model_name": "coulomb"})
 
 
+def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
+    """The least-squares baseline (`._baseline`) as a fit, scored like the fit."""
+    fit = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt,
+                              n_train=sum(r.n_samples for r in tr_records))
     if data is not None:
         return fit.replace(metrics=fit.evaluate(data, n_train, int(metric_horizon)))
     return fit.replace(metrics=fit.evaluate_records(tr_records, va_records, init_window))
