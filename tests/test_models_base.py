@@ -12,8 +12,9 @@ from jaxfric.models import AbstractFrictionModel, Scaler, check_theta
 
 SMALL = {"elman": dict(neurons=3), "elman_full": dict(neurons=3)}
 NAMES = ("elman", "elman_full", "lugre", "dahl", "coulomb", "stribeck", "gms")
-#: Models that also need measured inputs (chamber pressures): tested in test_models_realdrive.py.
-REGISTRY = NAMES + ("cylinder",)
+#: Models that also need measured inputs (chamber pressures): tested in test_models_realdrive.py;
+#: the grey-box (a physical model plus a network): tested in test_models_greybox.py.
+REGISTRY = NAMES + ("cylinder", "greybox")
 
 
 def make(name):

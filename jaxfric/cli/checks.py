@@ -21,7 +21,7 @@ from .errors import UserError
 
 #: The models the commands accept (jaxfric.models.available(); a test keeps them equal,
 #: here so that a misspelt name is refused without importing JAX).
-MODEL_NAMES = ("elman", "elman_full", "lugre", "dahl", "coulomb", "stribeck", "gms", "cylinder")
+MODEL_NAMES = ("elman", "elman_full", "lugre", "dahl", "coulomb", "stribeck", "gms", "cylinder", "greybox")
 
 
 def check_model_names(names) -> list[str]:

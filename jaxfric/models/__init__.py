@@ -9,7 +9,9 @@ rollout ``simulate(theta, velocity, dt)`` / ``simulate_batch(thetas, velocity, d
 Black-box models (``needs_scaling = True``: [`Elman`][jaxfric.models.Elman], [`ElmanFull`][jaxfric.models.ElmanFull])
 are fitted on data scaled with [`Scaler`][jaxfric.models.Scaler]; physical models ([`LuGre`][jaxfric.models.LuGre],
 [`Dahl`][jaxfric.models.Dahl], [`Coulomb`][jaxfric.models.Coulomb], [`Stribeck`][jaxfric.models.Stribeck], [`GMS`][jaxfric.models.GMS],
-[`Cylinder`][jaxfric.models.Cylinder]) work in SI units. ``asymmetric=True`` / ``offset=True`` give
+[`Cylinder`][jaxfric.models.Cylinder]) work in SI units, as does
+[`GreyBox`][jaxfric.models.GreyBox] (a physical model plus a bounded, contractive network
+correction). ``asymmetric=True`` / ``offset=True`` give
 Coulomb, Stribeck, LuGre and Dahl direction-dependent levels and an output offset
 (§13.1); [`Cylinder`][jaxfric.models.Cylinder] needs the chamber pressures as ``inputs``
 (``model.input_names``). ``model.unidentifiable(record)`` names the parameters a
@@ -25,6 +27,7 @@ from ._scaling import Scaler
 from ._scan import ACCELERATOR_UNROLL, time_scan
 from .elman import Elman, ElmanFull, elman_hidden
 from .gms import GMS
+from .greybox import GreyBox
 from .lugre import Dahl, LuGre, bristle_friction, bristle_phi
 from .static import Coulomb, Cylinder, Stribeck
 
@@ -38,6 +41,7 @@ __all__ = [
     "Elman",
     "ElmanFull",
     "GMS",
+    "GreyBox",
     "LuGre",
     "Scaler",
     "SearchBox",
@@ -69,6 +73,7 @@ _REGISTRY: dict[str, type[AbstractFrictionModel]] = {
     "stribeck": Stribeck,
     "gms": GMS,
     "cylinder": Cylinder,
+    "greybox": GreyBox,
 }
 
 

@@ -305,6 +305,13 @@ class AbstractFrictionModel(eqx.Module):
         """Eager validation of ``theta`` (shape, length, finiteness); see [`check_theta`][jaxfric.models.AbstractFrictionModel.check_theta]."""
         return check_theta(theta, self.num_params)
 
+    def penalty(self, theta: ArrayLike) -> Array:
+        """Extra residual rows a motion fit appends to its cost (its sum of squares is added
+        to J): a regularisation term of the model's own. Empty (no penalty) by default;
+        [`GreyBox`][jaxfric.models.GreyBox] returns its ridge rows."""
+        theta = jnp.asarray(theta)
+        return jnp.zeros(theta.shape[:-1] + (0,), _as_float_dtype(theta))
+
     def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
         """A starting point inside [`bounds`][jaxfric.models.AbstractFrictionModel.bounds]; the default is the box centre."""
         lower, upper = self.bounds(box)

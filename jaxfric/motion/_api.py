@@ -35,7 +35,7 @@ from ..identification.stages import history as _history
 from ..identification.stages import key_record as _key_record
 from ..identification.stages import solver_stages as _stages
 from ..metrics import friction_metrics
-from ..models import Scaler
+from ..models import GreyBox, Scaler
 from ..optim import AbstractSolver, minimise
 from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_sample_time,
                        same_sample_time, split_count)
@@ -182,6 +182,7 @@ class MotionCost(eqx.Module):
             out.append((x_hat - x) * jnp.sqrt(args["inv_var_x"] / x.shape[0]))
         if self.error in ("velocity", "both") and v_hat is not None:
             out.append((v_hat - v) * jnp.sqrt(args["inv_var_v"] / v.shape[0]))
+        out.append(self.model.penalty(y[:self.model.num_params]))  # the model's own rows (GreyBox's ridge)
         return jnp.concatenate(out)
 
     def __call__(self, y, args):
@@ -191,7 +192,8 @@ class MotionCost(eqx.Module):
             j = j + jnp.mean((x_hat - x) ** 2) * args["inv_var_x"]
         if self.error in ("velocity", "both") and v_hat is not None:
             j = j + jnp.mean((v_hat - v) ** 2) * args["inv_var_v"]
-        return j
+        pen = self.model.penalty(y[:self.model.num_params])
+        return j + jnp.sum(pen * pen)
 
 
 class ShootingResiduals(eqx.Module):
@@ -209,7 +211,8 @@ class ShootingResiduals(eqx.Module):
         plan = args["plan"]
         v = args["v"] + dv0 * plan.reset
         x_hat = shoot(step, theta, mass, args["force"] - offset, args["dt"], args["x"], v, plan)
-        return jnp.sqrt(plan.weight) * (x_hat - args["x"])
+        # the model's own regularisation rows (GreyBox's ridge; none for the other models)
+        return jnp.concatenate([jnp.sqrt(plan.weight) * (x_hat - args["x"]), self.model.penalty(theta)])
 
 
 class SumOfSquares(eqx.Module):
@@ -765,7 +768,7 @@ def identify_motion(
             raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
         mass0, mass_range = _mass_setting(mass)
         model = resolve_model(model, model_options)
-        search = default_search(model) if search is None else search
+        given_search, search = search, (default_search(model) if search is None else search)
         search.check()
         vt = np.concatenate([r.velocity for r in tr_records])
         ut = np.concatenate([r.net_force for r in tr_records])
@@ -835,14 +838,23 @@ def identify_motion(
                 y = np.asarray(sol.value)
                 stages = _stages(sol, solver)
             else:
-                extra = []
+                extra, y0, before = [], None, []
                 if search.least_squares_start and not legacy_cost:
                     start = least_squares_start(model, est, vt, box, layout, lower, upper)
                     extra = [] if start is None else [start]
+                if isinstance(model, GreyBox):  # from its physical model's fit, correction off
+                    y0, before = _greybox_start(model, box, lower, upper, dict(
+                        data=data, train=train if data is not None else list(tr_records), key=key, mass=mass,
+                        valid=valid if data is not None else (list(va_records) or None), error=error,
+                        search=given_search,
+                        horizon=horizon, fit_offset=fit_offset, fit_v0=fit_v0, offset_range=offset_range,
+                        data_bounds=data_bounds, dtype=dtype, init_window=init_window,
+                        max_evals=max_evals, max_time=max_time, progress=progress))
                 y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
                                                 global_data=glob, stage_data=stage_data,
                                                 key=key, dtype=dtype, progress=progress,
-                                                extra_starts=extra)
+                                                y0=y0, extra_starts=extra)
+                stages = before + stages
         y = np.asarray(y, np.float64)
         j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)
         theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
@@ -930,6 +942,21 @@ def baseline_motion_fit(M: float, Fc: float, Fv: float, offset: float, *, dt: fl
     `._baseline.baseline_model`; a negative ``Fc`` or ``Fv`` is held at its model's floor."""
     return MotionFit.given(baseline_model(), dict(Fc=max(Fc, 0.0), sigma2=max(Fv, 1e-12)), mass=M, offset=offset,
                            dt=dt, n_train=n_train, settings={"model_name": "coulomb"})
+
+
+def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
+    """``(y0, stages)``: a [`GreyBox`][jaxfric.models.GreyBox] search starts from its physical
+    model's own ``identify_motion`` fit (same data, key and mechanics; the physical entries
+    of ``box``) with the network's output weights at zero, where the grey-box *is* that fit;
+    ``stages`` is one row for the physical fit, put before the grey-box's own."""
+    phys = model.physical
+    fit = identify_motion(phys, box={k: box[k] for k in phys.box_keys}, **options)
+    y = np.asarray(fit.settings["motion"]["y"], np.float64)
+    y0 = np.concatenate([y[:phys.num_params], model.network_start(box), y[phys.num_params:]])
+    row = {"stage": f"physical {type(phys).__name__} fit", "start": None, "J": fit.metrics["cost"],
+           "num_evals": int(sum(s.get("num_evals", 0) for s in fit.stages or [])),
+           "num_steps": 0, "seconds": fit.timings.get("total_s"), "reason": "done"}
+    return np.clip(y0, lower, upper), [row]
 
 
 def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:

@@ -50,6 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..models import GreyBox
 from ..optim import PSO, minimise
 from ..optim.progress import step_progress
 from ._lm import levenberg_marquardt
@@ -134,8 +135,13 @@ def default_search(model) -> MotionSearch:
     gradient stages do the work, coarse to fine: 60 steps on 1 000-sample segments, then 150
     on 5 000. On the EMPS estimation split this took the Elman(10) network's held-back error
     from 15.3 mm (the physical models' schedule, converged at a poor point) to 3.1 mm
-    (``benchmarks/results/motion.md``).
+    (``benchmarks/results/motion.md``). A [`jaxfric.models.GreyBox`][jaxfric.models.GreyBox] is
+    not searched from a swarm: [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] fits its
+    physical model first and starts from that fit with the correction off; then 60 steps on
+    5 000-sample segments, 100 on the free run and a 100-step polish.
     """
+    if isinstance(model, GreyBox):  # starts from its physical model's fit: no swarm, free run last
+        return MotionSearch(horizons=(5000, None), steps=(60, 100), polish=100)
     if model.num_params > NETWORK_PARAMS:
         return MotionSearch(horizons=(1000, 5000), steps=(60, 150))
     return MotionSearch(horizons=(5000, None), steps=(60, 100), starts=3, least_squares_start=True, polish=200)

@@ -20,6 +20,7 @@ sample for sample; ``tests/test_motion.py`` checks this for every model. The sta
   symmetric or in the §13.1 asymmetric / offset forms;
 * GMS: the element forces and their stick/slip directions (§8.4);
 * Elman, ElmanFull: the context vector (§2.2, §2.3), in the fit's scaled units;
+* GreyBox: its physical model's state and the network's context (``jaxfric.models.greybox``);
 * any other model whose output ignores ``dt`` (``uses_dt = False``: the static maps
   Coulomb, Stribeck and their variants) is memoryless: ``output`` is the model's own
   ``simulate`` on one sample, so a new static form needs nothing here.
@@ -36,12 +37,12 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, LuGre, Scaler,
+from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, GreyBox, LuGre, Scaler,
                       stribeck_curve)
 from ..models import add_offset, bristle_phi, by_direction, elman_hidden
 
 __all__ = ["FrictionStep", "StaticStep", "BristleStep", "GMSStep", "ElmanStep", "ElmanFullStep",
-           "friction_step"]
+           "GreyBoxStep", "friction_step"]
 
 
 class FrictionStep(eqx.Module):
@@ -254,3 +255,39 @@ def _elman(model, scalers=(None, None)):
 @friction_step.register(ElmanFull)
 def _elman_full(model, scalers=(None, None)):
     return ElmanFullStep(model, *_scalers(model, scalers))
+
+
+class GreyBoxStep(FrictionStep):
+    """[`jaxfric.models.GreyBox`][jaxfric.models.GreyBox]: state = (physical model's state,
+    network context c); ``F = F_phys + B tanh(v.h)``, ``h = tanh(w u + r c + b)``,
+    ``c' = α c + (1 − α) h``, ``u = v / v_net``. ``implicit_state`` is the physical step's."""
+
+    inner: FrictionStep
+
+    @property
+    def implicit_state(self):  # type: ignore[override]
+        return self.inner.implicit_state
+
+    def _parts(self, theta, v):
+        theta_p, net = self.model._split(theta)
+        level = self.model.correction_bound(theta) / self.model.bound
+        return theta_p, net, level, v / net["vscale"]
+
+    def init(self, theta, v0, dt):
+        theta_p, net, _, _ = self._parts(theta, v0)
+        return self.inner.init(theta_p, v0, dt), net["c0"]
+
+    def output(self, theta, state, v, dt):
+        theta_p, net, level, u = self._parts(theta, v)
+        h, _ = self.model.network_step(net, state[1], u)
+        return self.inner.output(theta_p, state[0], v, dt) + self.model.correction(level, net, h)
+
+    def update(self, theta, state, v, dt):
+        theta_p, net, _, u = self._parts(theta, v)
+        _, c = self.model.network_step(net, state[1], u)
+        return self.inner.update(theta_p, state[0], v, dt), c
+
+
+@friction_step.register(GreyBox)
+def _greybox(model, scalers=(None, None)):
+    return GreyBoxStep(model, friction_step(model.physical))
