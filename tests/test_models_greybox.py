@@ -200,3 +200,25 @@ def test_options_are_checked_and_the_default_search_starts_from_the_physical_fit
         theta = model.initial_guess(_velocity(), 20.0 * np.sign(_velocity()))
         back = model.from_physical(**model.to_physical(theta))
     np.testing.assert_allclose(np.asarray(back), theta, rtol=1e-12, atol=1e-12)
+
+
+def test_a_saved_grey_box_fit_loads_with_its_physical_model(tmp_path):
+    """The fit file holds the physical model as its repr; loading rebuilds it (parsed,
+    never evaluated) and predicts the same friction."""
+    from jaxfric.fit import Fit, load_fit
+
+    model = models.GreyBox(models.LuGre(asymmetric=True, offset=True), hidden=2)
+    v = _velocity(500)
+    with jax.enable_x64(True):
+        theta = _random_theta(model, np.random.default_rng(5), v)
+        fit = Fit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=DT,
+                  n_train=v.size, n_samples=v.size, metrics={})
+        fit.save(tmp_path / "grey.npz")
+        back = load_fit(tmp_path / "grey.npz")
+        assert back.model == model
+        np.testing.assert_array_equal(back.predict(v), fit.predict(v))
+    with pytest.raises(ValueError, match="cannot read"):
+        models.GreyBox("LuGre(__import__('os'))")
+    with pytest.raises(ValueError, match="not a physical model"):
+        models.GreyBox("Elman(neurons=2)")
+

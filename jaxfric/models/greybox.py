@@ -26,6 +26,8 @@ input is the velocity divided by a searched scale ``v_net`` [m/s] (search coordi
 
 from __future__ import annotations
 
+import ast
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -48,13 +50,34 @@ RIDGE_BLOCKS = ("v",)
 
 
 def _as_physical(model):
+    """``None`` -> ``LuGre()``; a [`get`][jaxfric.models.get] name, or the repr a saved fit's
+    configuration holds (``"LuGre(asymmetric=True)"``: a class of ``jaxfric.models`` and
+    literal keyword values, parsed with ``ast``, never evaluated) -> that model."""
     if model is None:
         return LuGre()
     if isinstance(model, str):
         from . import get  # the registry of jaxfric.models (no cycle: called at construction)
 
-        return get(model)
+        if "(" not in model:
+            return get(model)
+        return _from_repr(model)
     return model
+
+
+def _from_repr(text: str):
+    from .. import models as _models
+
+    try:
+        call = ast.parse(text.strip(), mode="eval").body
+        if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and not call.args):
+            raise ValueError
+        cls = getattr(_models, call.func.id, None)
+        kwargs = {kw.arg: ast.literal_eval(kw.value) for kw in call.keywords}
+    except (SyntaxError, ValueError):
+        raise ValueError(f"GreyBox: cannot read the physical model {text!r}") from None
+    if not (isinstance(cls, type) and issubclass(cls, AbstractPhysicalModel)):
+        raise ValueError(f"GreyBox: {call.func.id!r} is not a physical model of jaxfric.models")
+    return cls(**kwargs)
 
 
 def _coulomb_level(p: dict) -> Array:
