@@ -112,6 +112,31 @@ def test_harness_results_dir_rule(tmp_path):
     assert "/benchmarks/results/quick/" in ignored
 
 
+def test_harness_data_files_are_none_when_absent_and_never_downloaded(tmp_path, monkeypatch):
+    """Benchmarks skip cleanly without the real data: no file, no download, ``None``."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import _harness
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    from jaxfric import datasets
+
+    def no_download(*a, **k):
+        raise AssertionError("a benchmark tried to download")
+
+    monkeypatch.setattr(datasets, "_download", no_download)
+    for var in ("JAXFRIC_EMPS", "JAXFRIC_PNEUMATIC_DATA"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("JAXFRIC_DATA", str(tmp_path / "empty"))
+    monkeypatch.setattr(_harness, "SHARED_DATA", tmp_path / "none")
+    assert _harness.emps_file() is None
+    assert _harness.emps_file(tmp_path / "DATA_EMPS.mat") is None
+    assert _harness.pneumatic("O-ring", 3) is None
+    given = tmp_path / "DATA_EMPS.mat"
+    given.write_bytes(b"")
+    assert _harness.emps_file(given) == given  # an explicit path is the user's choice
+
+
 def _takes_quick(tree) -> bool:
     for node in ast.walk(tree):
         if isinstance(node, ast.Call):
