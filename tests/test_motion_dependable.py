@@ -285,3 +285,65 @@ def test_the_official_emps_script_reads_and_scores_any_emps_format_test_file(tmp
     with jax.enable_x64(True):
         score = fit.score(test, init_window=20)
     assert np.isfinite(score["rmse_mm"])
+
+
+def _rough(y, data):
+    """Residuals of Σ (y_i - c_i)² + a² sin²(w y_i): a bowl with a valley every π/w."""
+    c, a, w = data
+    return jnp.concatenate([y - c, a * jnp.sin(w * y)])
+
+
+def test_the_screen_takes_every_key_from_a_local_valley_to_the_global_minimum():
+    """Levenberg-Marquardt stops in the first valley of a rough cost; the screening stage
+    (MotionSearch.screen) reaches the global minimum from there whatever the key. The
+    reference minimum is a dense grid (the cost is separable)."""
+    from jaxfric.motion import MotionBudget
+    from jaxfric.motion._lm import levenberg_marquardt
+    from jaxfric.motion._pipeline import _Clock, screen_free_run
+
+    data = (jnp.array([1.0, -0.5]), 0.3, 15.0)
+    lo, hi = np.array([-4.0, -4.0]), np.array([4.0, 4.0])
+    grid = np.linspace(-4.0, 4.0, 400001)
+    best = sum(np.min((grid - c) ** 2 + 0.09 * np.sin(15.0 * grid) ** 2) for c in (1.0, -0.5))
+    with jax.enable_x64(True):
+        stuck = levenberg_marquardt(_rough, jnp.array([3.0, 2.5]), jnp.asarray(lo), jnp.asarray(hi), data,
+                                    max_steps=100)
+        assert stuck.f > 10 * best  # a local valley far above the minimum
+        for k in range(3):
+            stages = []
+            y, f = screen_free_run(MotionSearch(screen=16), _Clock(MotionBudget()), _rough, stuck.theta, stuck.f,
+                                   lo, hi, data, jax.random.key(k), jnp.float64, stages)
+            assert f == pytest.approx(best, rel=1e-6)
+            assert len(stages) == 16 and all(s["stage"] == "screen" for s in stages)
+            assert [s["best"] for s in stages] == sorted((s["best"] for s in stages), reverse=True)
+
+
+def test_every_key_recovers_the_drive_and_reports_each_starts_cost():
+    """Simulated Coulomb + viscous drive with known parameters: the search with the
+    screening stage recovers them from keys 0 and 1, and the fit lists every start's final
+    free-run cost (settings['motion']['starts'], best first)."""
+    search = MotionSearch(particles=10, generations=6, global_window=150, horizons=(300, None), steps=(10, 20),
+                          starts=2, least_squares_start=True, screen=3, screen_size=16, screen_steps=10)
+    costs = []
+    with jax.enable_x64(True):
+        for k in (0, 1):
+            fit = identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=k, mass=(0.5, 10.0), fit_offset=True,
+                                  search=search, dtype=jnp.float64)
+            assert fit.params["Fc"] == pytest.approx(TRUTH["Fc"], rel=1e-3)
+            assert fit.params["sigma2"] == pytest.approx(TRUTH["sigma2"], rel=1e-3)
+            assert fit.settings["motion"]["mass"] == pytest.approx(MASS, rel=1e-3)
+            assert fit.settings["motion"]["offset"] == pytest.approx(OFFSET, rel=1e-3)
+            starts = fit.settings["motion"]["starts"]
+            assert sorted(s["start"] for s in starts) == [0, 1, 2]  # 2 personal bests + least squares
+            assert [s["J"] for s in starts] == sorted(s["J"] for s in starts)
+            assert fit.metrics["cost"] <= starts[0]["J"] * (1 + 1e-9)  # polish and screen only go lower
+            assert sum(s["stage"] == "screen" for s in fit.stages) == 3
+            costs.append(fit.metrics["cost"])
+    assert costs[0] == pytest.approx(costs[1], rel=1e-3, abs=1e-9)
+
+
+def test_the_screen_settings_are_checked():
+    for bad in (MotionSearch(screen=-1), MotionSearch(screen_size=1), MotionSearch(screen_steps=0),
+                MotionSearch(screen_spread=0.0)):
+        with pytest.raises(ValueError, match="MotionSearch"):
+            bad.check()

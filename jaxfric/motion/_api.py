@@ -45,7 +45,7 @@ from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squa
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
 from ._lm import _res_jit
-from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search
+from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search, start_costs
 from ._residuals import motion_residuals, motion_train_velocity
 from ._shooting import schedule, shoot
 from ._step import friction_step
@@ -877,6 +877,7 @@ def identify_motion(
                            "search_names": list(model.param_names) + list(layout.names()),
                            "search_bounds": [lower.tolist(), upper.tolist()],
                            "y": [float(a) for a in y], "stopped": stopped,
+                           "starts": start_costs(stages) if solver is None else [],
                            "records": None if data is not None else
                            {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in va_records]},
                            "init_window": init_window},
