@@ -153,8 +153,7 @@ def ls_baseline_fit(data):
     p = model.fit_least_squares(data.velocity[:n], data.friction[:n])
     fit = Fit(model=model, theta=np.asarray(model.from_physical(**p)), velocity_scaler=None,
               friction_scaler=None, dt=data.dt, n_train=n, n_samples=data.n_samples, metrics={})
-    jaxfric.uncertainty.assess_fit(fit, data)
-    return fit
+    return jaxfric.uncertainty.assess_fit(fit, data)  # a new fit: fits are immutable
 
 
 def main(argv=None):
