@@ -358,10 +358,10 @@ show(fig, comparison="motion, held-back tail")
 # %% [markdown]
 # ### Choosing a model by validation
 #
-# `compare_motion` fits several models on the same data and ranks them by the error on the
-# held-back tail; a richer model that predicts worse than a simpler one raises an
-# `OverfitWarning`. Both models here are symmetric with a fitted offset, the form these data
-# need. A difference smaller than the position noise cannot be told apart from it, so the cell
+# `compare_motion` fits several models on the same data and ranks them by a judge, here the
+# error on the held-back tail (`judge="tail"`; the default judges many short free runs); a
+# richer model that predicts worse than a simpler one raises an `OverfitWarning`. Both models
+# here are symmetric with a fitted offset, the form these data need. A difference smaller than the position noise cannot be told apart from it, so the cell
 # picks the simplest model within that margin of the best, and says which.
 
 # %%
@@ -369,7 +369,7 @@ with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always", jf.motion.OverfitWarning)
     ranked = jf.motion.compare_motion(
         {"Coulomb": true, "Stribeck": models.Stribeck(v_eps=1e-3)}, data, key=0, mass=(0.5, 10.0),
-        fit_offset=True, dtype=jnp.float64,
+        fit_offset=True, dtype=jnp.float64, judge="tail",
         search=search if SMALL else jf.motion.MotionSearch(generations=10))
 display(Markdown(ranked.table()))
 for w in caught:

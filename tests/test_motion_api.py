@@ -263,7 +263,7 @@ def test_compare_motion_ranks_and_needs_validation():
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         out = compare_motion("coulomb,stribeck", rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=QUICK,
-                             dtype=jnp.float64, max_evals=40, progress=False)
+                             dtype=jnp.float64, max_evals=40, progress=False, judge="tail")
     scores = [out.fits[k].metrics["valid"]["rmse_mm"] for k in out.ranking]
     assert scores == sorted(scores)
     assert out.best is out.fits[out.ranking[0]]
