@@ -53,6 +53,20 @@ class History(eqx.Module):
         )
 
     @classmethod
+    def first(cls, size: int, num_evals, f_best) -> "History":
+        """``empty(size, f_best.dtype).record(num_evals, f_best)`` (the same arrays), written
+        directly: a run's first entry cannot fill a buffer of 2 or more, so it needs none
+        of `record`'s stride and compression logic, whose compiled copy it saved."""
+        if size < 2:
+            return cls.empty(size, jnp.result_type(f_best)).record(num_evals, f_best)
+        f_best = jnp.asarray(f_best)
+        evals = jnp.zeros((size,), count_dtype()).at[0].set(
+            jnp.asarray(num_evals).astype(count_dtype()))
+        f = jnp.full((size,), jnp.inf, f_best.dtype).at[0].set(f_best)
+        one = jnp.array(1, jnp.int32)
+        return cls(evals=evals, f=f, length=one, stride=one, counter=one)
+
+    @classmethod
     def from_arrays(cls, evals, f) -> "History":
         n = evals.shape[0]
         return cls(
@@ -222,6 +236,24 @@ def uniform_flat_each(keys, shape, dtype):
 def uniform_in_box(key, shape, lower, upper):
     """``U(lower, upper)`` of ``shape`` (`uniform_flat`)."""
     return lower + uniform_flat(key, shape, lower.dtype) * (upper - lower)
+
+
+class Drawn(eqx.Module):
+    """A run's ``key`` with the random numbers its start draws from it (``draws``),
+    computed beforehand by a program of their own (a solver's ``start_draws``).
+
+    [`jaxfric.minimise`][jaxfric.optim.minimise] passes it as the key of a solver that has
+    ``start_draws``: a swarm's first population (threefry, about a quarter of a small
+    solver program's machine code) then compiles once per solver and shape instead of
+    with every new objective (issue 47). The numbers are those the start would draw."""
+
+    key: Any
+    draws: Any
+
+
+def split_drawn(key):
+    """``(key, draws)`` of a [`Drawn`][jaxfric.optim._base.Drawn] key, ``(key, None)`` of a plain one."""
+    return (key.key, key.draws) if isinstance(key, Drawn) else (key, None)
 
 
 def result_from_f(f_best):

@@ -37,13 +37,16 @@ import jax.numpy as jnp
 
 from ._base import (
     RESULTS,
+    Drawn,
     History,
     Solution,
     check_positive_int,
+    split_drawn,
 )
-from .contract import AbstractSolver
+from .contract import AbstractGenerational, AbstractSolver
 from .optx_adapter import as_protocol
 from .rounds import drive, only_if, skipped
+from .swarm import AbstractSwarm
 
 
 class ChainState(eqx.Module):
@@ -61,6 +64,14 @@ class ChainState(eqx.Module):
         if self.key_impl is None:
             return self.key
         return jax.random.wrap_key_data(self.key, impl=self.key_impl)
+
+
+def _unfinished_at_start(solver) -> bool:
+    """Whether ``solver``'s first state is known, without running it, not to have finished:
+    a swarm or evosax strategy starts at generation 0 of at least one, with no stall
+    counted (a subclass with its own ``stopped`` rule is not assumed to)."""
+    return (isinstance(solver, AbstractGenerational)
+            and type(solver).stopped in (AbstractGenerational.stopped, AbstractSwarm.stopped))
 
 
 def _index(tree, i):
@@ -159,8 +170,21 @@ class AbstractChain(AbstractSolver):
                           pick(second_done, state.second_done), state.key, state.key_impl)
 
     # ------------------------------------------------------------ rounds protocol
-    def init_rounds(self, lower, upper, key, x0=None, objective=None):
+    def start_draws(self, lower, upper, key):
+        """What the start draws from ``key``: the stages' keys and the global solver's own
+        ``start_draws`` of its key (for a [`Drawn`][jaxfric.optim._base.Drawn] key)."""
         k_global, k_local = jax.random.split(key)
+        inner = getattr(self._global, "start_draws", None)
+        return k_global, k_local, None if inner is None else inner(lower, upper, k_global)
+
+    def init_rounds(self, lower, upper, key, x0=None, objective=None):
+        key, draws = split_drawn(key)
+        if draws is None:
+            k_global, k_local = jax.random.split(key)
+        else:
+            k_global, k_local, inner = draws
+            if inner is not None:
+                k_global = Drawn(k_global, inner)
         g = yield from self._global.init_rounds(lower, upper, k_global, x0, objective)
         typed = jnp.issubdtype(k_local.dtype, jax.dtypes.prng_key)
         impl = str(jax.random.key_impl(k_local)) if typed else None
@@ -173,6 +197,11 @@ class AbstractChain(AbstractSolver):
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
                                        (local_shape.second, local_shape.second_done))
         state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], raw, impl)
+        if _unfinished_at_start(self._global):
+            # the switch would change nothing (its batches are not needed): leaving it
+            # out keeps a second copy of the local start, and its objective call, out of
+            # the compiled program (issue 47)
+            return state
         return (yield from self._switch(lower, upper, state, objective))
 
     def step_rounds(self, lower, upper, state, stage=0, objective=None):

@@ -27,10 +27,11 @@ import numpy as np
 
 from .. import _xla
 from . import checkpoint as ckpt
-from ._base import Solution, check_positive_int
-from .loop import NO_STOP, _begin, _chunk, blank_carry
+from ._base import Drawn, Solution, check_positive_int
+from .chained import AbstractChain
+from .loop import NO_STOP, _begin, _chunk, _finish, blank_carry
 from .rounds import compiled_start
-from .optx_adapter import as_protocol
+from .optx_adapter import OptxMinimiser, as_protocol
 from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
 from .progress import Chunks, TqdmProgress
 from .sharding import Layout, resolve_devices, shard_keys
@@ -82,6 +83,57 @@ def _closing(sink):
             close()
 
 
+# ------------------------------------------------------------------ the end
+def _no_objective(y, args):
+    raise TypeError("the solution of a run does not call the objective")
+
+
+def objective_free(proto, flat, args):
+    """``(flat, args)`` for `_finish`: the objective and its data left out where no part
+    of ``proto`` evaluates it in its ``solution`` (an optimistix minimiser may), so one
+    compiled `_finish` serves every objective of the same shapes."""
+    def free(p):
+        if isinstance(p, AbstractChain):
+            return free(p._global) and free(p._local)
+        return not isinstance(p, OptxMinimiser)
+
+    if not free(proto):
+        return flat, args
+    return type(flat)(_no_objective, flat.treedef, flat.shapes, flat.layout), None
+
+
+def _finisher(proto, flat, lower, upper, args, options, batched: bool):
+    """``carry -> Solution`` (a batch of carries when ``batched``): `_finish`, compiled
+    apart from the objective where `objective_free` allows."""
+    flat, args = objective_free(proto, flat, args)
+    program = _xla.filter_jit(_finish_many if batched else _finish, options)
+    return lambda carry: program(proto, flat, lower, upper, args, carry)
+
+
+def _finish_many(proto, flat, lower, upper, args, carries):
+    return jax.vmap(lambda c: _finish(proto, flat, lower, upper, args, c))(carries)
+
+
+# ---------------------------------------------------------------- the start's draws
+def _start_draws(proto, lower, upper, key):
+    return proto.start_draws(lower, upper, key)
+
+
+def _start_draws_many(proto, lower, upper, keys):
+    return jax.vmap(lambda k: proto.start_draws(lower, upper, k))(keys)
+
+
+def _drawn(proto, lower, upper, key, options, batched: bool = False):
+    """``key`` as a [`Drawn`][jaxfric.optim._base.Drawn] key (a batch of them when ``batched``) where
+    ``proto`` has ``start_draws``: its start's random numbers made by a program of their
+    own, which does not depend on the objective, so a new objective's program leaves them
+    out (issue 47); else ``key`` as it is."""
+    if getattr(proto, "start_draws", None) is None:
+        return key
+    program = _xla.filter_jit(_start_draws_many if batched else _start_draws, options)
+    return Drawn(key, program(proto, lower, upper, key))
+
+
 # ------------------------------------------------------------------ the chunks
 class _Signature:
     """The arguments of `_begin` compared by structure, shapes and dtypes (what its
@@ -102,28 +154,37 @@ class _Signature:
         return isinstance(other, _Signature) and self.key == other.key
 
 
+def _blank_of(like, impl, batch):
+    if batch is not None:
+        like = jtu.tree_map(lambda x: jax.ShapeDtypeStruct((batch, *x.shape), x.dtype)
+                            if isinstance(x, jax.ShapeDtypeStruct) else x, like)
+    return blank_carry(like, impl)
+
+
 @functools.lru_cache(maxsize=32)
-def _cached_like(sig: _Signature):
-    return eqx.filter_eval_shape(_begin, *sig.args)
+def _cached_blank(sig: _Signature, impl, batch):
+    # JAX arrays are immutable and the chunk does not donate its carry, so one blank
+    # serves every call of the same signature: putting its ~20 zero arrays on the device
+    # took about a third of a short run's time outside XLA (issue 47)
+    return _blank_of(eqx.filter_eval_shape(_begin, *sig.args), impl, batch)
 
 
 def _blank(proto, flat, lower, upper, args, key, x0, warm, batch: int | None = None):
     """The unused carry of a chunk that starts the run (`blank_carry`), with a leading
     axis of ``batch`` runs when given; ``key`` is one run's key."""
     begin_args = (proto, flat, lower, upper, args, key, x0, warm)
+    impl = jax.random.key_impl(key)
     try:
-        like = _cached_like(_Signature(begin_args))
+        sig = _Signature(begin_args)
+        hash(impl)
     except TypeError:
-        like = eqx.filter_eval_shape(_begin, *begin_args)
-    if batch is not None:
-        like = jtu.tree_map(lambda x: jax.ShapeDtypeStruct((batch, *x.shape), x.dtype)
-                            if isinstance(x, jax.ShapeDtypeStruct) else x, like)
-    return blank_carry(like, jax.random.key_impl(key))
+        return _blank_of(eqx.filter_eval_shape(_begin, *begin_args), impl, batch)
+    return _cached_blank(sig, impl, batch)
 
 
-def _chunked(call, blank, display=None, checkpoint=None):
-    """Run ``call(carry, fresh, stop_at) -> (carry, solution, report)`` (the compiled
-    `_chunk`, or its batch over keys) to the end and return the solution.
+def _chunked(call, finish, blank, display=None, checkpoint=None):
+    """Run ``call(carry, fresh, stop_at) -> (carry, report)`` (the compiled `_chunk`, or
+    its batch over keys) to the end and return ``finish(carry)``, the solution.
 
     Without a display or a checkpoint that is one call. With a display the run goes in
     chunks of ``Chunks`` steps and the host reports each
@@ -148,7 +209,7 @@ def _chunked(call, blank, display=None, checkpoint=None):
             stop = min(stop, done + min(lengths))
         if next_save is not None:
             stop = min(stop, next_save)
-        carry, sol, rep = call(carry, np.asarray(fresh), np.asarray(stop, np.int32))
+        carry, rep = call(carry, np.asarray(fresh), np.asarray(stop, np.int32))
         fresh = False
         rep = jax.device_get(rep)
         finished = bool(np.all(rep.done))
@@ -165,13 +226,13 @@ def _chunked(call, blank, display=None, checkpoint=None):
                 saved = steps
             next_save = steps + every
         if finished or stop == NO_STOP:
-            return sol
+            return finish(carry)
         done = stop
 
 
 def _run_many(proto, flat, lower, upper, args, keys, x0, carries, fresh, stop_at,
               batching="vmap"):
-    """`_chunk` for every key: ``(carries, solutions, reports)`` with a leading axis."""
+    """`_chunk` for every key: ``(carries, reports)`` with a leading axis."""
     def run(key, carry):
         return _chunk(proto, flat, lower, upper, args, key, x0, None, carry, fresh, stop_at)
 
@@ -207,6 +268,8 @@ def _platform(layout: Layout | None) -> str:
 
 
 def _unravel_solution(sol: Solution, flat: _Flat, batched: bool) -> Solution:
+    if flat.shapes == (tuple(sol.value.shape[-1:]),) and jtu.treedef_is_leaf(flat.treedef):
+        return sol  # bounds of one vector: the value is already in their shape
     value = jax.vmap(flat.unravel)(sol.value) if batched else flat.unravel(sol.value)
     return eqx.tree_at(lambda s: s.value, sol, value)
 
@@ -329,15 +392,17 @@ def minimise(
         resume = _resume(proto, flat, lower, upper, args, key, x0, warm, Path(checkpoint),
                          checkpoint_every)
     program = _xla.filter_jit(_chunk, options)
+    drawn = _drawn(proto, lower, upper, key, options)
 
     def call(carry, fresh, stop_at):
-        return program(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at)
+        return program(proto, flat, lower, upper, args, drawn, x0, warm, carry, fresh, stop_at)
 
     sink = _display(progress, proto)
     with _closing(sink):
         display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
         blank = _blank(proto, flat, lower, upper, args, key, x0, warm)
-        sol = jax.block_until_ready(_chunked(call, blank, display, resume))
+        finish = _finisher(proto, flat, lower, upper, args, options, batched=False)
+        sol = jax.block_until_ready(_chunked(call, finish, blank, display, resume))
     return _unravel_solution(sol, flat, batched=False)
 
 
@@ -385,15 +450,17 @@ def minimise_many(
     mode = _batching(batching, proto, layout)
     keys, n = shard_keys(keys, layout)
     program = _xla.filter_jit(_run_many, options)
+    drawn = _drawn(proto, lower, upper, keys, options, batched=True)
 
     def call(carries, fresh, stop_at):
-        return program(proto, flat, lower, upper, args, keys, x0, carries, fresh, stop_at, mode)
+        return program(proto, flat, lower, upper, args, drawn, x0, carries, fresh, stop_at, mode)
 
     sink = _display(progress, proto)
     with _closing(sink):
         display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
         blank = _blank(proto, flat, lower, upper, args, keys[0], x0, None, keys.shape[0])
-        sol = jax.block_until_ready(_chunked(call, blank, display))
+        finish = _finisher(proto, flat, lower, upper, args, options, batched=True)
+        sol = jax.block_until_ready(_chunked(call, finish, blank, display))
     if keys.shape[0] != n:
         sol = jax.tree_util.tree_map(lambda a: a[:n], sol)
     return _unravel_solution(sol, flat, batched=True)

@@ -60,7 +60,8 @@ def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
     state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
     cap = proto.steps_for(lower.shape[0])
     size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
-    history = _record(proto, state, History.empty(size, lower.dtype))
+    _, f = proto.best(state)
+    history = History.first(size, proto.num_evals(state), jnp.asarray(f).astype(lower.dtype))
     return _strong(Carry(state, history, jnp.array(0, jnp.int32)))
 
 
@@ -127,15 +128,23 @@ def _report(proto, carry: Carry) -> Report:
 
 
 def _chunk(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at):
-    """[`jaxfric.minimise`][jaxfric.optim.minimise]'s one program: the start when
-    ``fresh`` (a boolean array; ``carry`` is then a ``blank_carry``),
+    """[`jaxfric.minimise`][jaxfric.optim.minimise]'s program that calls the objective:
+    the start when ``fresh`` (a boolean array; ``carry`` is then a ``blank_carry``),
     else ``carry``; then steps until done or ``carry.steps == stop_at``. Returns
-    ``(carry, solution, report)``."""
+    ``(carry, report)``; `_finish` makes the solution of the last carry."""
     carry = jax.lax.cond(
         fresh, lambda: _begin(proto, flat, lower, upper, args, key, x0, warm),
         lambda: _strong(carry))
     carry = _strong(_loop(proto, flat, lower, upper, args, carry, stop_at))
-    return carry, _end(proto, flat, lower, upper, args, carry), _report(proto, carry)
+    return carry, _report(proto, carry)
+
+
+def _finish(proto, flat, lower, upper, args, carry) -> Solution:
+    """The solution of a run's last carry, a program of its own: it never calls the
+    objective (unless an optimistix minimiser's ``postprocess`` does), so the driver
+    compiles it without one (``driver.objective_free``) once per solver and problem shape, and a
+    new objective compiles only `_chunk` (issue 47)."""
+    return _end(proto, flat, lower, upper, args, carry)
 
 
 def _run(proto, flat, lower, upper, args, key, x0, carry=None, warm=None, stop_at=None):

@@ -49,6 +49,8 @@ from ._base import (
     check_range,
     count_dtype,
     safe_value,
+    split_drawn,
+    uniform_flat,
     uniform_in_box,
 )
 from .contract import AbstractSolver
@@ -408,10 +410,18 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return unravel(state.simplex[0]), state.aux, stats
 
     # ----------------------------------------------------------- jaxfric protocol
+    def start_draws(self, lower, upper, key):
+        """What the start draws from ``key`` without a ``y0``: ``U(0, 1)`` per coordinate
+        (for a [`Drawn`][jaxfric.optim._base.Drawn] key; the numbers of `uniform_in_box`)."""
+        return uniform_flat(key, lower.shape, lower.dtype)
+
     def init_rounds(self, lower, upper, key, x0=None, objective=None, options=None):
         """The first simplex around ``x0`` (a uniform draw in the box without one);
         ``options``: ``{"initial_step": ...}`` (see [`start_options`][jaxfric.optim.NelderMead.start_options])."""
-        if x0 is None:
+        key, drawn = split_drawn(key)
+        if x0 is None and drawn is not None:
+            x0 = lower + drawn * (upper - lower)
+        elif x0 is None:
             x0 = uniform_in_box(key, lower.shape, lower, upper)
         elif x0.ndim != 1:
             raise ValueError("Nelder–Mead takes one start y0, not a population")

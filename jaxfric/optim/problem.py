@@ -5,6 +5,7 @@ driver ([`jaxfric.optim.driver`][jaxfric.optim.driver]) and ask/tell call them."
 
 from __future__ import annotations
 
+import functools
 import numbers
 from typing import Any, Callable
 
@@ -276,6 +277,13 @@ def check_start(y0, treedef, shapes, lower, upper, agents: int | None):
     return x0[0] if x0.shape[0] == 1 and not agents else x0
 
 
+@functools.lru_cache(maxsize=256)
+def _int_key(seed: int, impl: str):
+    """``jax.random.key(seed)`` (JAX's default implementation ``impl``), made once per seed (an eager dispatch per call cost a
+    short run about a millisecond; a key is immutable, so sharing one is safe)."""
+    return jax.random.key(seed)
+
+
 def check_key(key, name="key", batch=False):
     """One key (an int seed is accepted, as [`jaxfric.identify`][jaxfric.identification.identify] does) or, with
     ``batch``, a non-empty batch of keys; else ``ValueError`` naming the problem."""
@@ -285,7 +293,7 @@ def check_key(key, name="key", batch=False):
         if batch:
             raise ValueError(f"{name} must be a batch of keys, e.g. "
                              f"jax.random.split(jax.random.key({int(key)}), 8), not an int")
-        return jax.random.key(int(key))
+        return _int_key(int(key), jax.config.jax_default_prng_impl)
     try:
         k = jnp.asarray(key)
     except TypeError:

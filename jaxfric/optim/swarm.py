@@ -24,6 +24,7 @@ from ._base import (
     check_positive_int,
     check_range,
     count_dtype,
+    split_drawn,
     uniform_flat_each,
 )
 from .contract import AbstractGenerational
@@ -71,13 +72,22 @@ def update_bests(state: SwarmState, x, f) -> SwarmState:
     )
 
 
-def first_population(key, num, lower, upper, vmax, x0=None):
-    """Positions ~ U(box), velocities ~ U(±Vmax); the rows of ``x0`` (one start, or a
-    ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``,
-    ``key`` as raw words (``jax.random.key_data``)."""
+def first_draws(key, num, lower):
+    """The first population's numbers: ``U(0, 1)`` for the positions and the velocities,
+    ``(num, D)`` each, and the run's key after them as raw words. A pure function of
+    ``key`` and the shapes (no objective): ``start_draws``."""
     kx, kv, key = jax.random.split(key, 3)
     # positions from kx and velocities from kv, drawn as one generator (uniform_flat_each)
     ux, uv = uniform_flat_each(jnp.stack([kx, kv]), (num, lower.shape[0]), lower.dtype)
+    return ux, uv, jax.random.key_data(key)
+
+
+def first_population(key, num, lower, upper, vmax, x0=None, draws=None):
+    """Positions ~ U(box), velocities ~ U(±Vmax); the rows of ``x0`` (one start, or a
+    ``(k, D)`` initial population) replace the first agents. Returns ``(x, v, key)``,
+    ``key`` as raw words (``jax.random.key_data``). ``draws``: `first_draws` of ``key``,
+    made beforehand."""
+    ux, uv, key = first_draws(key, num, lower) if draws is None else draws
     x = lower + ux * (upper - lower)
     if x0 is not None:
         x0 = jnp.atleast_2d(jnp.clip(x0, lower, upper))
@@ -85,7 +95,7 @@ def first_population(key, num, lower, upper, vmax, x0=None):
     v = -vmax + uv * (vmax - -vmax)
     # the state keeps the key's raw words (all counter_seed reads), so a Solution holds
     # plain arrays only
-    return x, v, jax.random.key_data(key)
+    return x, v, key
 
 
 def swarm_from(x, v, f, key) -> SwarmState:
@@ -157,9 +167,14 @@ class AbstractSwarm(AbstractGenerational):
         check_range("vmax_fraction", self.vmax_fraction, 0.0, lo_open=True)
 
     # ------------------------------------------------------------------ generators
+    def start_draws(self, lower, upper, key):
+        """What the start draws from ``key`` (`first_draws`), for a [`Drawn`][jaxfric.optim._base.Drawn] key."""
+        return first_draws(key, self.num_agents, lower)
+
     def first(self, lower, upper, key, x0=None) -> Rounds:
+        key, draws = split_drawn(key)
         x, v, key = first_population(key, self.num_agents, lower, upper,
-                                     self.vmax(lower, upper), x0)
+                                     self.vmax(lower, upper), x0, draws)
         f = yield x
         return self._started(swarm_from(x, v, f, key))
 
