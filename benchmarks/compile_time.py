@@ -12,6 +12,10 @@ trivial NumPy objective, by ask/tell (one seed, or several seeds in one run with
 
     python benchmarks/compile_time.py            # results/compile_time.{md,csv}
     python benchmarks/compile_time.py --quick    # results/quick/
+
+The first table (issue 47) runs every solver and chain on 2-D to 30-D (``--dims``), each
+(function, dimension) a new objective, beside SciPy's differential evolution and
+pycma's whole-run times on the same functions: a benchmarking user's cost per problem.
     python benchmarks/compile_time.py --cache DIR  # JAX's persistent compilation cache
                                    # (a user option) in an empty DIR: one process fills
                                    # it, the next reads it; results/compile_time_cache.*
@@ -82,9 +86,86 @@ def solvers(quick: bool) -> dict:
     try:
         import evosax  # noqa: F401
         out["Evosax CMA_ES"] = jf.Evosax("CMA_ES", num_generations=g)
+        out["CMA-ES->NM"] = jf.cmaes_nm(num_generations=g, nm_max_steps=10 * g)
     except ImportError:
         pass
     return out
+
+
+#: the peers of the per-dimension table: whole runs of a user's default call
+PEERS = ("SciPy DE", "pycma")
+
+#: the per-dimension table's functions (each has a NumPy twin for the peers)
+DIM_FUNCTIONS = ["sphere", "rosenbrock", "rastrigin", "ackley"]
+
+
+def _numpy_function(name: str):
+    """The test function ``name`` on a batch of rows in NumPy (checked against jaxfric's)."""
+    def rastrigin(X):
+        return 10.0 * X.shape[1] + np.sum(X * X - 10.0 * np.cos(2 * np.pi * X), axis=1)
+
+    def rosenbrock(X):
+        return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
+
+    def ackley(X):
+        n = X.shape[1]
+        return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / n))
+                - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / n) + 20.0 + np.e)
+
+    fns = {"sphere": lambda X: np.sum(X * X, axis=1), "rastrigin": rastrigin,
+           "rosenbrock": rosenbrock, "ackley": ackley}
+    return fns[name]
+
+
+def peer_run(label: str, name: str, n: int, seed: int) -> dict:
+    """One whole run of a peer on the box [-2, 2]^n, as a user calls it: SciPy's
+    ``differential_evolution`` with its defaults but a vectorised NumPy objective
+    (``vectorized=True``, ``updating="deferred"``), or pycma's ``fmin2`` with its defaults,
+    the box as its bounds, a start drawn in the box, σ0 = 1 and ``maxfevals = 1000·n``
+    (its own default, ~1e3·(n+5)²/√λ, runs minutes at 30-D)."""
+    f_batch = _numpy_function(name)
+    probe = np.random.default_rng(1).uniform(-2, 2, (3, n))
+    ref = np.asarray(jax.vmap(F.get(name).fn)(jax.numpy.asarray(probe)))
+    np.testing.assert_allclose(f_batch(probe), ref, rtol=1e-9, atol=1e-9)
+    bounds = [(-2.0, 2.0)] * n
+    c0, t0 = time.process_time(), time.perf_counter()
+    if label == "SciPy DE":
+        import scipy.optimize
+
+        res = scipy.optimize.differential_evolution(
+            lambda X: f_batch(np.asarray(X).T), bounds, seed=seed, vectorized=True,
+            updating="deferred")
+        f, evals = float(res.fun), int(res.nfev)
+    else:
+        import cma
+
+        x0 = np.random.default_rng(seed).uniform(-2, 2, n)
+        x, es = cma.fmin2(lambda x: float(f_batch(np.asarray(x)[None])[0]), x0, 1.0,
+                          {"bounds": [-2.0, 2.0], "verbose": -9, "seed": seed + 1,
+                           "maxfevals": 1000 * n})
+        f, evals = float(es.result.fbest), int(es.result.evaluations)
+    whole, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"first_s": whole, "second_s": whole, "cpu_s": cpu, "compile_s": 0.0,
+            "trace_s": 0.0, "lower_s": 0.0, "programs": 0, "f": f, "evals": evals}
+
+
+def measure_dims(label: str, functions, dims, quick: bool) -> list[dict]:
+    """Every (function, dimension) of ``label`` (a solver, or a peer) in this process."""
+    rows = []
+    with jax.enable_x64(True):
+        if label in PEERS:
+            for n in dims:
+                for i, name in enumerate(functions):
+                    rows.append({"function": name, "dim": n, **peer_run(label, name, n, i)})
+            return rows
+        jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
+                    (-np.ones(2), np.ones(2)), key=0)  # JAX's own first-use costs
+        solver = solvers(quick)[label]
+        for n in dims:
+            for i, name in enumerate(functions):
+                rows.append({"function": name, "dim": n,
+                             **measure_compile(solver, name, n, key=i)})
+    return rows
 
 
 def fresh_objective(name: str):
@@ -98,13 +179,15 @@ def measure_compile(solver, name: str, n: int, key: int) -> dict:
     bounds = (-2.0 * np.ones(n), 2.0 * np.ones(n))
     _seen.clear()
     _programs.clear()
+    c0, t0 = time.process_time(), time.perf_counter()
+    sol = jax.block_until_ready(jf.minimise(fn, solver, bounds, key=key))
+    first, cpu = time.perf_counter() - t0, time.process_time() - c0
+    row = {"first_s": first, "cpu_s": cpu,
+           **{k: _seen.get(k, 0.0) for k in ("trace_s", "lower_s", "compile_s")},
+           "programs": int(_seen.get("programs", 0)), "compiled": " ".join(_programs),
+           "f": float(sol.f), "evals": int(sol.stats["num_evals"])}
     t0 = time.perf_counter()
-    jf.minimise(fn, solver, bounds, key=key)
-    first = time.perf_counter() - t0
-    row = {"first_s": first, **{k: _seen.get(k, 0.0) for k in ("trace_s", "lower_s", "compile_s")},
-           "programs": int(_seen.get("programs", 0)), "compiled": " ".join(_programs)}
-    t0 = time.perf_counter()
-    jf.minimise(fn, solver, bounds, key=key + 1)
+    jax.block_until_ready(jf.minimise(fn, solver, bounds, key=key + 1))
     row["second_s"] = time.perf_counter() - t0
     return row
 
@@ -165,8 +248,16 @@ def callback_ms(solver, n: int, seeds: int) -> tuple[float, int]:
     return 1e3 * (time.perf_counter() - t0) / calls[0], calls[0]
 
 
-def measure(label: str, functions, dim: int, seeds: int) -> dict:
-    """Every measurement of one solver, in this process (``--one``)."""
+def measure(label: str, functions, dim: int, seeds: int, dims=None) -> dict:
+    """Every measurement of one solver, in this process (``--one``): with ``dims`` the
+    per-dimension table's rows (and, for the ask/tell solvers, the host-call costs)."""
+    if dims:
+        rows = measure_dims(label, DIM_FUNCTIONS[:2] if len(functions) < len(FUNCTIONS)
+                            else DIM_FUNCTIONS, dims, len(functions) < len(FUNCTIONS))
+        if label in PEERS:
+            return {"rows": rows, "asks": []}
+        return {"rows": rows, "asks": measure(label, functions, dim, seeds)["asks"]
+                if label in ASK_TELL and seeds else []}
     with jax.enable_x64(True):
         jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
                     (-np.ones(2), np.ones(2)), key=0)  # JAX's own first-use costs
@@ -197,7 +288,7 @@ def _in_subprocess(label, a, pythonpath=None) -> dict:
     if pythonpath:
         env["PYTHONPATH"] = os.pathsep.join([pythonpath, str(HERE)])
     cmd = [sys.executable, str(HERE / "compile_time.py"), "--one", label, "--dim", str(a.dim),
-           "--seeds", str(a.seeds)] + (["--quick"] if a.quick else []) + (
+           "--seeds", str(a.seeds), "--dims", a.dims] + (["--quick"] if a.quick else []) + (
            ["--cache", a.cache] if a.cache else []) + (["--no-asktell"] if a.no_asktell else [])
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if done.returncode:
@@ -272,7 +363,11 @@ def demo_twice(label: str, cache: Path, work: Path, pythonpath=None, quick=True)
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_output_arguments(p)
-    p.add_argument("--dim", type=int, default=5)
+    p.add_argument("--dim", type=int, default=5, help="dimension of the ask/tell part "
+                   "(and of the single-dimension table, with --dims '')")
+    p.add_argument("--dims", default=None,
+                   help="comma-separated dimensions of the per-dimension table (default "
+                        "2,5,10,30; --quick: 2,5); '' for the single-dimension table")
     p.add_argument("--seeds", type=int, default=4,
                    help="keys of the minimise_many recipe and of ask/tell with keys=")
     p.add_argument("--cache", default=None, help="JAX persistent compilation cache folder")
@@ -296,8 +391,12 @@ def main():
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     functions = FUNCTIONS[:2] if a.quick else FUNCTIONS
+    if a.dims is None:  # the cache's measurements keep their single dimension
+        a.dims = "" if a.cache else "2,5" if a.quick else "2,5,10,30"
+    dims = [int(d) for d in a.dims.split(",") if d]
     if a.one:
-        print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds)))
+        print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds,
+                                 dims)))
         return
     out = results_dir(a.out, quick=a.quick)
     if a.cache:  # the first process fills the cache, the second reads it
@@ -309,26 +408,32 @@ def main():
     else:
         versions = {"this": None}
     rows, summary, asks = [], [], []
-    labels = a.solvers.split(",") if a.solvers else list(solvers(a.quick))
+    labels = a.solvers.split(",") if a.solvers else list(solvers(a.quick)) + (
+        list(PEERS) if dims else [])
     for label in labels:
         pooled = collections.defaultdict(list)
         for r in range(a.repeat):
             for version, path in versions.items():
+                if label in PEERS and version != next(iter(versions)):
+                    continue  # a peer does not depend on jaxfric's version
                 got = _in_subprocess(label, a, path)
                 pooled[version] += got["rows"]
                 rows += [{"version": version, "solver": label, "dim": a.dim, "round": r, **x}
                          for x in got["rows"]]
                 asks += [{"version": version, "solver": label, **x} for x in got["asks"]]
-        for version, per in pooled.items():
-            med = lambda k: statistics.median(r[k] for r in per)  # noqa: E731
-            summary.append({
-                "version": version, "solver": label, "runs": len(per),
-                "first_s": med("first_s"),
-                "second_s": med("second_s"), "trace_s": med("trace_s"),
-                "lower_s": med("lower_s"), "compile_s": med("compile_s"),
-                "programs": int(med("programs")),
-            })
-            print(summary[-1], flush=True)
+        for version, got_rows in pooled.items():
+            for n in (dims or [None]):
+                per = [r for r in got_rows if n is None or r.get("dim") == n]
+                med = lambda k: statistics.median(r[k] for r in per)  # noqa: E731
+                summary.append({
+                    "version": version, "solver": label,
+                    **({"dim": n} if n is not None else {}), "runs": len(per),
+                    "first_s": med("first_s"), "cpu_s": med("cpu_s"),
+                    "second_s": med("second_s"), "trace_s": med("trace_s"),
+                    "lower_s": med("lower_s"), "compile_s": med("compile_s"),
+                    "programs": int(med("programs")),
+                })
+                print(summary[-1], flush=True)
     demo = []
     if a.cache and not a.no_demo:
         import tempfile
@@ -353,16 +458,21 @@ def main():
     baseline = (f"`baseline`: the library in {a.baseline}, measured in turn with `this` "
                 "(each solver in a fresh process, one after the other). "
                 if a.baseline else "")
-    text = "\n\n".join([
-        "# Compilation per new objective",
-        f"{a.note}\n\njax {jax.__version__}, float64, {a.dim} parameters, medians over "
+    if dims:
+        heading = _dims_text(summary, dims, a, load, fmt)
+    else:
+        heading = [
+            f"{a.note}\n\njax {jax.__version__}, float64, {a.dim} parameters, medians over "
         f"{len(functions)} test functions ({', '.join(functions)}) × {a.repeat} round(s) "
         f"(`runs`), each a new Python function; load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}; "
         f"persistent cache: {a.cache or 'off'}. {baseline}Seconds: the first call (a new "
         "objective), the second (same objective, another key: the run alone), and the "
         "first call's tracing, lowering and XLA compilation as JAX reports them "
         "(`jax.monitoring`); `programs`: XLA compilations in the first call.",
-        markdown_table(summary, fmt=fmt),
+        markdown_table(summary, fmt=fmt)]
+    text = "\n\n".join([
+        "# Compilation per new objective",
+        *heading,
         "An objective outside JAX, in float32 (a NumPy sphere, compiled run reused): "
         "milliseconds per host call (an ask, or a `pure_callback` call) and host calls per "
         f"run, by ask/tell (one seed, and {a.seeds} in one run with `keys=`) and by the "
@@ -374,6 +484,41 @@ def main():
     ])
     (out / f"{stem}.md").write_text(text + "\n")
     print(text)
+
+
+def _dims_text(summary, dims, a, load, fmt) -> list[str]:
+    """The per-dimension table, its verdict on issue 47's target, and what was measured."""
+    g = 20 if a.quick else 200
+    lines = [
+        f"{a.note}\n\njax {jax.__version__}, float64, on [-2, 2]^n; each (function, n) a new "
+        f"Python function, so every first call compiles; medians over {len(DIM_FUNCTIONS[:2] if a.quick else DIM_FUNCTIONS)} "
+        f"functions ({', '.join(DIM_FUNCTIONS[:2] if a.quick else DIM_FUNCTIONS)}) × {a.repeat} round(s) "
+        f"(`runs`); load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} "
+        "(2 cores shared with other work: wall times carry the load, `cpu_s` much less). "
+        f"Budgets: PSO {g} generations, MAPSO {g // 2}, Nelder–Mead at most {10 * g} steps, "
+        f"CMA-ES {g} generations, the chains the same stages. `first_s`: wall seconds of a "
+        "new objective's first `minimise` (compilation and run); `cpu_s`: the process's CPU "
+        "seconds in it (XLA compiles on several threads); `second_s`: the same objective "
+        "again, another key (the run alone); `trace_s`/`lower_s`/`compile_s`: JAX's compile "
+        "events in the first call; `programs`: XLA compilations in it (a solver's objective-free "
+        "`_finish` compiles once per solver and shape, with the first function only). Peers "
+        "(whole runs, no compilation): SciPy's `differential_evolution` with its defaults and "
+        "a vectorised NumPy objective; pycma's `fmin2` with its defaults, σ0 = 1 and at most "
+        "1000·n evaluations.",
+        markdown_table(summary, fmt=fmt),
+    ]
+    small = [d for d in dims if 2 <= d <= 10]
+    for version in dict.fromkeys(r["version"] for r in summary):
+        for label in ("PSO->NM", "MAPSO-NMDS"):
+            per = [r for r in summary if r["version"] == version and r["solver"] == label
+                   and r.get("dim") in small]
+            if per:
+                first = statistics.median(r["first_s"] for r in per)
+                cpu = statistics.median(r["cpu_s"] for r in per)
+                lines.append(f"- {version}, {label}, {min(small)}-D to {max(small)}-D: median "
+                             f"first call {first:.2f} s wall, {cpu:.2f} s CPU (issue 47's "
+                             "target: ≤ 1 s)")
+    return lines
 
 
 def _demo_text(demo, a, fmt) -> list[str]:

@@ -14,6 +14,13 @@ Writes ``speed_optim.md`` and ``speed_optim.csv`` to ``--out``.
     python benchmarks/speed_optim.py
     python benchmarks/speed_optim.py --dtype float64
     python benchmarks/speed_optim.py --function ackley   # writes speed_optim_ackley.md
+    python benchmarks/speed_optim.py --dtype float64 --short   # speed_optim_short.md
+
+``--short`` times the short runs a benchmarking user makes instead (issue 47): one default
+``minimise`` call each, PSO at ``--short-generations`` (100 and 300) and MAPSO at 100,
+against pyswarms at the same generations, and splits each call's time into the call's
+fixed cost (a one-generation call), the objective alone on the run's evaluations (the
+ceiling), and the rest (the solver's own work per generation).
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ import argparse
 import csv
 import functools
 import logging
+import os
 import platform
 import statistics
 import sys
@@ -53,6 +61,10 @@ def main(argv=None):
     p.add_argument("--out", default=None,
                    help="output folder (default benchmarks/results)")
     p.add_argument("--tag", default="", help="suffix for the output files (e.g. gpu)")
+    p.add_argument("--short", action="store_true",
+                   help="the short default runs (speed_optim_short.md) instead")
+    p.add_argument("--short-generations", default="100,300",
+                   help="PSO's generations in --short (MAPSO runs the first)")
     a = p.parse_args(argv)
     x64 = a.dtype == "float64"
     if x64:
@@ -74,6 +86,8 @@ def main(argv=None):
     with jax.enable_x64(True):  # the NumPy version must be the same function
         ref = np.asarray(jax.vmap(lambda x: obj(x, None))(jnp.asarray(probe, jnp.float64)))
     np.testing.assert_allclose(f_batch(probe), ref, rtol=1e-9, atol=1e-9)
+    if a.short:
+        return short_runs(a, lo, hi, obj, f_batch, x64)
     cases: list[Case] = []
 
     def add(label, once):
@@ -253,6 +267,132 @@ def main(argv=None):
     (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     del jnp
+
+
+def short_runs(a, lo, hi, obj, f_batch, x64):
+    """Issue 47's short runs: one default ``minimise`` call each against pyswarms at the
+    same generations, and where each call's time goes (see the module docstring)."""
+    import jax.numpy as jnp
+    import pyswarms as ps
+
+    import jaxfric as jf
+
+    side = int(round(a.agents**0.5))
+    dt = np.dtype(a.dtype)
+    gens = [int(g) for g in a.short_generations.split(",")]
+    runs = [("PSO", g) for g in gens] + [("MAPSO", gens[0])]
+    cases: list[Case] = []
+
+    def solver(name, g):
+        return (jf.PSO(num_particles=a.agents, num_generations=g) if name == "PSO"
+                else jf.MAPSO(lattice_size=side, num_generations=g))
+
+    def jax_once(s):
+        def once(r):
+            sol = jax.block_until_ready(jf.minimise(obj, s, (lo, hi), key=1000 + r))
+            return int(sol.stats["num_evals"]), np.asarray([sol.f])
+        return once
+
+    def pyswarms_once(g):
+        def once(r):
+            opt = ps.single.GlobalBestPSO(
+                a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
+                bounds=(lo.astype(float), hi.astype(float)),
+                velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]))
+            return a.agents * (g + 1), np.array([opt.optimize(f_batch, g, verbose=False)[0]])
+        return once
+
+    f_pop = jax.vmap(lambda x: obj(x, None))
+
+    @functools.partial(jax.jit, compiler_options=jf.compiler_options("solver") or None)
+    def objective_alone(X):
+        return jax.lax.scan(lambda c, x: (c + jnp.min(f_pop(x)), None), jnp.zeros((), dt), X)[0]
+
+    def objective_once(evals):
+        batches = max(evals // a.agents, 1)
+        pts = jnp.asarray(np.random.default_rng(3).uniform(lo, hi, (batches, a.agents, a.dim)), dt)
+
+        def once(r):
+            return batches * a.agents, np.array([float(objective_alone(pts))])
+        return once
+
+    for name, g in runs:
+        s = solver(name, g)
+        cases.append(Case(f"jaxfric {name}, {g} generations", jax_once(s), x64=x64,
+                          meta={"kind": "run", "name": name, "g": g}))
+        cases.append(Case(f"jaxfric {name}, 1 generation (the call's fixed cost)",
+                          jax_once(solver(name, 1)), x64=x64,
+                          meta={"kind": "fixed", "name": name, "g": g}))
+        cases.append(Case(f"objective alone, {name} {g} generations' evaluations",
+                          objective_once(s.evaluations()), x64=x64,
+                          meta={"kind": "ceiling", "name": name, "g": g}))
+    for g in sorted({g for _, g in runs}):
+        cases.append(Case(f"{PYSWARMS}, {g} generations", pyswarms_once(g),
+                          meta={"kind": "peer", "g": g}))
+    logging.disable(logging.CRITICAL)
+    try:
+        run_round_robin(cases, a.repeats)
+    finally:
+        logging.disable(logging.NOTSET)
+    peer = {c.meta["g"]: c for c in cases if c.meta["kind"] == "peer"}
+    rows, split = [], []
+    for c in cases:
+        evals = c.results[0][0]
+        ref = peer[c.meta["g"]]
+        rows.append(dict(implementation=c.label, evals=evals, seconds=c.median,
+                         evals_per_s=evals / c.median,
+                         ratio_vs_pyswarms=statistics.median(_round_ratios(c, ref)),
+                         ratio_min=min(_round_ratios(c, ref)), ratio_max=max(_round_ratios(c, ref)),
+                         first_s=c.first))
+    for c in cases:
+        if c.meta["kind"] != "run":
+            continue
+        same = {d.meta["kind"]: d for d in cases if d.meta.get("name") == c.meta["name"]
+                and d.meta["g"] == c.meta["g"]}
+        total, fixed, ceil = c.median, same["fixed"].median, same["ceiling"].median
+        split.append(f"{c.label}: {1e3 * total:.1f} ms a call = {1e3 * fixed:.1f} ms the call's "
+                     f"fixed cost (a 1-generation call: Python, checks, dispatch, the start) + "
+                     f"{1e3 * ceil:.1f} ms the objective alone on the run's evaluations + "
+                     f"{1e3 * max(total - fixed - ceil, 0.0):.1f} ms the solver's own work; "
+                     f"{statistics.median(_round_ratios(c, peer[c.meta['g']])):.2f}× pyswarms' "
+                     f"evaluations per second, the ceiling "
+                     f"{c.results[0][0] / (fixed + ceil) / (peer[c.meta['g']].results[0][0] / peer[c.meta['g']].median):.2f}× "
+                     "with no solver work at all")
+    out = results_dir(a.out)
+    stem = "speed_optim_short" + (f"_{a.tag}" if a.tag else "")
+    with open(out / f"{stem}.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    dev = jax.devices()[0]
+    load = os.getloadavg()
+    lines = [
+        "# Short runs: one default `minimise` call each",
+        "",
+        f"{a.dim}-D {a.function}, {a.agents} agents, {a.dtype}, the default call "
+        "(`jf.minimise(fn, jf.PSO(num_particles=100, num_generations=G), bounds, key=k)`, "
+        "a new key each round, the program compiled by the warm-up) as a benchmarking user "
+        f"makes it, against pyswarms' GlobalBestPSO at the same generations. {a.repeats} timed "
+        "rounds after a warm-up, every row once per round in turn; s: the median over rounds; "
+        "× pyswarms: evaluations per second over pyswarms' at the same generations in the same "
+        "round, median (lowest–highest). The 1-generation rows are the call's fixed cost; the "
+        "objective-alone rows evaluate the run's points in batches of 100, compiled as the "
+        "solvers are (no run can be faster).",
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores shared "
+        f"with other work (load average {load[0]:.1f} at the end), device {dev.device_kind}, "
+        f"jax {jax.__version__}. Re-run: `python benchmarks/speed_optim.py --dtype {a.dtype} --short`.",
+        "",
+        "| implementation | evals | s (median) | evals/s | × pyswarms | first call s |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['implementation']} | {r['evals']} | {r['seconds']:.4f} | "
+                     f"{r['evals_per_s']:.3g} | {r['ratio_vs_pyswarms']:.2f} "
+                     f"({r['ratio_min']:.2f}–{r['ratio_max']:.2f}) | {r['first_s']:.2f} |")
+    lines += ["", "Where a call's time goes (medians):", ""] + [f"- {x}" for x in split]
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def _round_ratios(case: Case, peer: Case) -> list[float]:
