@@ -289,6 +289,7 @@ def _in_subprocess(label, a, pythonpath=None) -> dict:
         env["PYTHONPATH"] = os.pathsep.join([pythonpath, str(HERE)])
     cmd = [sys.executable, str(HERE / "compile_time.py"), "--one", label, "--dim", str(a.dim),
            "--seeds", str(a.seeds), "--dims", a.dims] + (["--quick"] if a.quick else []) + (
+           ["--functions", a.functions] if a.functions else []) + (
            ["--cache", a.cache] if a.cache else []) + (["--no-asktell"] if a.no_asktell else [])
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if done.returncode:
@@ -382,6 +383,9 @@ def main():
     p.add_argument("--stem", default=None, help="result file stem (default compile_time)")
     p.add_argument("--no-demo", action="store_true",
                    help="with --cache: leave out `jaxfric demo --quick` run twice")
+    p.add_argument("--functions", default=None,
+                   help=f"comma-separated functions of the per-dimension table (default "
+                        f"{','.join(DIM_FUNCTIONS)}; --quick: the first two)")
     p.add_argument("--one", default=None, help=argparse.SUPPRESS)
     a = p.parse_args()
     command = "python benchmarks/compile_time.py " + shlex.join(sys.argv[1:])
@@ -394,6 +398,8 @@ def main():
     if a.dims is None:  # the cache's measurements keep their single dimension
         a.dims = "" if a.cache else "2,5" if a.quick else "2,5,10,30"
     dims = [int(d) for d in a.dims.split(",") if d]
+    if a.functions:
+        DIM_FUNCTIONS[:] = a.functions.split(",")
     if a.one:
         print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds,
                                  dims)))
