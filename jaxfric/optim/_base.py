@@ -252,7 +252,7 @@ class Drawn(eqx.Module):
 
 
 def split_drawn(key):
-    """``(key, draws)`` of a [`Drawn`][jaxfric.optim._base.Drawn] key, ``(key, None)`` of a plain one."""
+    """``(key, draws)`` of a ``Drawn`` key, ``(key, None)`` of a plain one."""
     return (key.key, key.draws) if isinstance(key, Drawn) else (key, None)
 
 

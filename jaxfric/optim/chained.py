@@ -172,7 +172,7 @@ class AbstractChain(AbstractSolver):
     # ------------------------------------------------------------ rounds protocol
     def start_draws(self, lower, upper, key):
         """What the start draws from ``key``: the stages' keys and the global solver's own
-        ``start_draws`` of its key (for a [`Drawn`][jaxfric.optim._base.Drawn] key)."""
+        ``start_draws`` of its key (for a ``Drawn`` key)."""
         k_global, k_local = jax.random.split(key)
         inner = getattr(self._global, "start_draws", None)
         return k_global, k_local, None if inner is None else inner(lower, upper, k_global)

@@ -124,7 +124,7 @@ def _start_draws_many(proto, lower, upper, keys):
 
 
 def _drawn(proto, lower, upper, key, options, batched: bool = False):
-    """``key`` as a [`Drawn`][jaxfric.optim._base.Drawn] key (a batch of them when ``batched``) where
+    """``key`` as a ``Drawn`` key (a batch of them when ``batched``) where
     ``proto`` has ``start_draws``: its start's random numbers made by a program of their
     own, which does not depend on the objective, so a new objective's program leaves them
     out (issue 47); else ``key`` as it is."""

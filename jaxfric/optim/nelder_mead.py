@@ -412,7 +412,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
     # ----------------------------------------------------------- jaxfric protocol
     def start_draws(self, lower, upper, key):
         """What the start draws from ``key`` without a ``y0``: ``U(0, 1)`` per coordinate
-        (for a [`Drawn`][jaxfric.optim._base.Drawn] key; the numbers of `uniform_in_box`)."""
+        (for a ``Drawn`` key; the numbers of `uniform_in_box`)."""
         return uniform_flat(key, lower.shape, lower.dtype)
 
     def init_rounds(self, lower, upper, key, x0=None, objective=None, options=None):

@@ -168,7 +168,7 @@ class AbstractSwarm(AbstractGenerational):
 
     # ------------------------------------------------------------------ generators
     def start_draws(self, lower, upper, key):
-        """What the start draws from ``key`` (`first_draws`), for a [`Drawn`][jaxfric.optim._base.Drawn] key."""
+        """What the start draws from ``key`` (`first_draws`), for a ``Drawn`` key."""
         return first_draws(key, self.num_agents, lower)
 
     def first(self, lower, upper, key, x0=None) -> Rounds:
