@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ..models import AbstractFrictionModel, Elman, Scaler, elman_hidden
+from ..models import AbstractFrictionModel, Elman, Scaler, elman_hidden, time_loop
 from ._data import Record
 
 
@@ -214,22 +214,10 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
 
 
 def _time_loop(model, step, init, xs, reverse=False):
-    """``lax.scan(step, init, xs, reverse=reverse)`` over time: ``(final carry, outputs)``.
-
-    Unrolled as the model says, else not on the CPU and
-    `ACCELERATOR_UNROLL` times elsewhere. Not unrolled on
-    the CPU because, with ``(T, N·K)`` arrays scanned over, an unroll of 2 made the
-    reverse loop 20× slower for 8 networks.
-    """
-    from ..models import ACCELERATOR_UNROLL
-
-    def scan_with(k):
-        return lambda c, x: jax.lax.scan(step, c, x, unroll=k, reverse=reverse)
-
-    if model.unroll is not None:
-        return scan_with(model.unroll)(init, xs)
-    return jax.lax.platform_dependent(init, xs, cpu=scan_with(1),
-                                      default=scan_with(ACCELERATOR_UNROLL))
+    """``(final carry, outputs)`` of ``step`` over time (`jaxfric.models.time_loop`),
+    unrolled as the model says, else not on the CPU: with ``(T, N·K)`` arrays scanned
+    over, an unroll of 2 made the reverse loop 20× slower for 8 networks."""
+    return time_loop(step, init, xs, 1, model.unroll, reverse)
 
 
 def search_dtype(dtype=None):

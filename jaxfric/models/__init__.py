@@ -24,7 +24,7 @@ from ._base import AbstractFrictionModel, Unidentifiable, check_theta, friction_
 from ._box import DEFAULT_RANGES, RANGE_FLOORS, SearchBox, data_ranges, widened
 from ._physical import AbstractPhysicalModel, add_offset, by_direction, stribeck_curve
 from ._scaling import Scaler
-from ._scan import ACCELERATOR_UNROLL, time_scan
+from ._scan import ACCELERATOR_UNROLL, time_loop, time_scan
 from .elman import Elman, ElmanFull, elman_hidden
 from .gms import GMS
 from .greybox import GreyBox
@@ -55,6 +55,7 @@ __all__ = [
     "RANGE_FLOORS",
     "add_offset",
     "by_direction",
+    "time_loop",
     "time_scan",
     "widened",
     "check_theta",

@@ -37,19 +37,24 @@ import jax.numpy as jnp
 ACCELERATOR_UNROLL = 32
 
 
-def time_scan(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = None):
-    """``lax.scan(step, init, xs)`` over time: unrolled ``unroll`` times if given,
-    else ``cpu_unroll`` on the CPU and `ACCELERATOR_UNROLL` elsewhere.
-    Returns the stacked outputs only."""
+def time_loop(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = None, reverse: bool = False):
+    """``lax.scan(step, init, xs, reverse=reverse)`` over time: ``(final carry, stacked
+    outputs)``, unrolled ``unroll`` times if given, else ``cpu_unroll`` on the CPU and
+    `ACCELERATOR_UNROLL` elsewhere."""
 
     def scan_with(k):
-        return lambda c, x: jax.lax.scan(step, c, x, unroll=k)[1]
+        return lambda c, x: jax.lax.scan(step, c, x, unroll=k, reverse=reverse)
 
     if unroll is not None:
         return scan_with(unroll)(init, xs)
     return jax.lax.platform_dependent(
         init, xs, cpu=scan_with(cpu_unroll), default=scan_with(ACCELERATOR_UNROLL)
     )
+
+
+def time_scan(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = None):
+    """`time_loop` forwards, returning the stacked outputs only."""
+    return time_loop(step, init, xs, cpu_unroll, unroll)[1]
 
 
 def linear_recurrence_sequential(decay, gain, z0):
