@@ -49,7 +49,7 @@ def test_emps_like_lugre_warns_with_evidence(tmp_path):
     fit = _fit(model, v, sigma0=1e9, sigma1=300.0, sigma2_pos=170.0, sigma2_neg=240.0, Fc_pos=17.0,
                Fc_neg=23.0, Fs_pos=17.1, Fs_neg=69.0, vs=1.3e-4, F_off=7.0)
     with pytest.warns(PlausibilityWarning) as rec:
-        assess_fit(fit, (v, np.zeros_like(v), DT))
+        fit = assess_fit(fit, (v, np.zeros_like(v), DT))
     found = {d["rule"]: d for d in fit.diagnostics["implausible"]}
     assert set(found) == {"stribeck_spike", "offset_asymmetric", "presliding_unvisited"}
     assert found["stribeck_spike"]["name"] == "Fs_neg"
@@ -79,7 +79,7 @@ def test_identifiable_fits_do_not_warn(model, params):
     fit = _fit(model, v, **params)
     with warnings.catch_warnings():
         warnings.simplefilter("error", PlausibilityWarning)
-        assess_fit(fit, (v, np.zeros_like(v), DT))
+        fit = assess_fit(fit, (v, np.zeros_like(v), DT))
     assert fit.diagnostics["implausible"] == []
 
 

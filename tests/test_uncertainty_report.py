@@ -28,9 +28,9 @@ def test_report_shows_intervals_band_coverage_and_warnings(tmp_path):
         strib = models.Stribeck()
         bad = Fit(model=strib, theta=np.asarray(strib.from_physical(Fc=20.0, Fs=80.0, vs=1e-4, sigma2=200.0)),
                   velocity_scaler=None, friction_scaler=None, dt=dt, n_train=2400, n_samples=n, metrics={})
-        assess_fit(good, data)
+        good = assess_fit(good, data)
         with pytest.warns(PlausibilityWarning, match="Stribeck peak"):
-            assess_fit(bad, data)
+            bad = assess_fit(bad, data)
         report.write_report(tmp_path, data, {"coulomb": good, "stribeck": bad}, title="t", save_models=False)
     md = (tmp_path / "report.md").read_text()
     res = json.loads((tmp_path / "results.json").read_text())["models"]

@@ -39,7 +39,7 @@ def flagged_fit():
                   n_samples=v.size, metrics={},
                   diagnostics={"unidentifiable": [f"{m}: {m.reason}" for m in model.unidentifiable(v[:n])]})
         with pytest.warns(PlausibilityWarning, match="So F_off is not identifiable from these data"):
-            assess_fit(fit, data)
+            fit = assess_fit(fit, data)
         assert fit.uncertainty is not None  # computed here, in float64
     return fit, data
 
