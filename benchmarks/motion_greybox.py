@@ -136,7 +136,7 @@ def run(path, folds, names, quick, on_row, grey=None):
             if name.startswith("greybox"):
                 b = float(fit.model.correction_bound(fit.theta))
                 extra = {"bound_N": b, "net_v_norm": float(
-                    sum(abs(x) for x in fit.params["net_v"]))}
+                    sum(abs(float(v)) for k, v in fit.params.items() if k.startswith("net_v[")))}
             rows.append({"fold": fold, "split": where, "model": label(name, grey),
                          "num_params": int(fit.metrics["num_params"]), "seconds": secs,
                          **score_row(fit, train, held), **extra})

@@ -247,30 +247,48 @@ class GreyBox(AbstractFrictionModel):
         return theta[..., :k], net
 
     def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
-        """The physical model's parameters (SI), ``net_vscale`` [m/s] and the network's
-        blocks ``net_w``, ``net_r``, ``net_b``, ``net_alpha``, ``net_c0``, ``net_v``
-        (each ``(..., N)``, dimensionless)."""
-        theta_p, net = self._split(theta)
-        out = dict(self.physical.to_physical(theta_p))
-        out.update({f"net_{k}": x for k, x in net.items()})
-        return out
+        """The physical model's parameters (SI), ``net_vscale`` [m/s] and every network
+        weight by name (``net_w[0]``, ..., ``net_v[N-1]``; dimensionless), each of shape
+        ``theta.shape[:-1]``: the `_coords` entries."""
+        return {c[1]: x for c, x in zip(self._coords, self._ordered(self._coord_values(theta)))}
+
+    def _ordered(self, values: dict) -> list:
+        return [values[c[1]] for c in self._coords]
 
     def from_physical(self, **params) -> Array:
-        """Inverse of [`to_physical`][jaxfric.models.GreyBox.to_physical]."""
-        phys = {k: v for k, v in params.items() if not k.startswith("net_")}
-        theta_p = self.physical.from_physical(**phys)
-        need = ["net_vscale"] + [f"net_{k}" for k in NET_BLOCKS]
-        missing = [k for k in need if k not in params]
-        if missing:
-            raise ValueError(f"GreyBox.from_physical is missing {missing}")
+        """Inverse of [`to_physical`][jaxfric.models.GreyBox.to_physical] (the same keywords)."""
+        names = [c[1] for c in self._coords]
+        missing = [k for k in names if k not in params]
+        extra = [k for k in params if k not in names]
+        if missing or extra:
+            raise ValueError(f"GreyBox.from_physical needs exactly the names of to_physical; "
+                             f"missing {missing[:4]}{'...' if len(missing) > 4 else ''}, unexpected {extra}")
+        theta_p = self.physical.from_physical(**{k: params[k] for k in self.physical.physical_names})
         cols = [theta_p, jnp.log10(jnp.asarray(params["net_vscale"]))[..., None]]
-        for blk in NET_BLOCKS:
-            x = jnp.asarray(params[f"net_{blk}"])
-            if x.shape[-1:] != (self.hidden,):
-                raise ValueError(f"net_{blk} must have last axis {self.hidden}, got shape {x.shape}")
-            cols.append(x)
+        cols += [jnp.asarray(params[k])[..., None] for k in names[len(self.physical._coords) + 1:]]
+        cols = [jnp.asarray(c) for c in cols]
         dtype = jnp.result_type(*cols, jnp.float32)
-        return jnp.concatenate([c.astype(dtype) for c in cols], axis=-1)
+        shape = jnp.broadcast_shapes(*(c.shape[:-1] for c in cols))
+        return jnp.concatenate([jnp.broadcast_to(c.astype(dtype), shape + c.shape[-1:]) for c in cols], axis=-1)
+
+    @property
+    def _coords(self) -> tuple[tuple[str, str, str], ...]:
+        """``(search name, physical name, kind)`` of every entry of ``theta``, as the physical
+        models list them (for the uncertainty code): the physical model's, ``net_vscale``
+        (log10) and one linear entry per network weight (``net_w[0]``, ...)."""
+        net = tuple((f"net_{blk}[{j}]", f"net_{blk}[{j}]", "linear")
+                    for blk in NET_BLOCKS for j in range(self.hidden))
+        return tuple(self.physical._coords) + (("log10_net_vscale", "net_vscale", "log10"),) + net
+
+    def _coord_values(self, theta: ArrayLike) -> dict[str, Array]:
+        """The physical value of every `_coords` entry, keyed by its physical name."""
+        theta_p, net = self._split(theta)
+        out = dict(self.physical._coord_values(theta_p))
+        out["net_vscale"] = net["vscale"]
+        for blk in NET_BLOCKS:
+            for j in range(self.hidden):
+                out[f"net_{blk}[{j}]"] = net[blk][..., j]
+        return out
 
     def correction_bound(self, theta: ArrayLike) -> Array:
         """B [N] = ``bound`` times the Coulomb level of ``theta``'s physical part: the
