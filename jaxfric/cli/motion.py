@@ -4,7 +4,7 @@ Reads a CSV with a force column (or a drive voltage and ``--force-gain``) and a 
 column, identifies each ``--model`` inside the mechanics with
 [`jaxfric.identify_motion`][jaxfric.motion.identify_motion], and writes a report folder: ``motion.md`` (position
 RMSE [mm] and FIT %, free run and k-step, per model, ranked by the held-back block's
-free-run RMSE, [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s rule), ``models/<model>.npz`` (load
+free-run RMSE: [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s ``judge="tail"``, not its default), ``models/<model>.npz`` (load
 with [`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``. Progress bars
 are shown unless ``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
 """
