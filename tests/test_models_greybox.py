@@ -199,6 +199,12 @@ def test_options_are_checked_and_the_default_search_starts_from_the_physical_fit
     with jax.enable_x64(True):
         theta = model.initial_guess(_velocity(), 20.0 * np.sign(_velocity()))
         back = model.from_physical(**model.to_physical(theta))
+    # no two hidden units of the start are each other's negatives (they would stay so)
+    start = models.GreyBox(hidden=4).network_start()  # [log10 vscale, w(4), r(4), b(4), ...]
+    pairs = np.stack([start[1:5], start[9:13]], axis=-1)
+    for i in range(4):
+        for j in range(4):
+            assert i == j or not np.allclose(pairs[i], -pairs[j]), (i, j)
     np.testing.assert_allclose(np.asarray(back), theta, rtol=1e-12, atol=1e-12)
 
 

@@ -215,7 +215,8 @@ class GreyBox(AbstractFrictionModel):
     def initial_guess(self, velocity: ArrayLike, friction: ArrayLike, box=None) -> np.ndarray:
         """The physical model's initial guess with the network *off*: output weights ``v = 0``
         (so the friction is exactly the physical model's), input weights spread over
-        ``[-1, 1]·weight_bound/2`` (so the gradient in ``v`` is not zero), ``r = c0 = 0``,
+        ``[-1, 1]·weight_bound/2`` and biases ``0.5`` (so the gradient in ``v`` is not zero and
+        no two units mirror each other), ``r = c0 = 0``,
         ``α = alpha_max / 2``, the velocity scale at the top of its range (with a data-centred
         box the record's top speed, so the units start unsaturated)."""
         box = self.search_box(box, velocity, friction)
@@ -229,7 +230,9 @@ class GreyBox(AbstractFrictionModel):
         box = self.search_box(box)
         n = self.hidden
         spread = np.linspace(-1.0, 1.0, n) if n > 1 else np.ones(1)
-        blocks = {"w": 0.5 * self.weight_bound * spread, "r": np.zeros(n), "b": 0.5 * spread[::-1], "alpha": np.full(n, 0.5 * self.alpha_max),
+        # b the same for all units: with b_j = -b_{N-1-j} the units j and N-1-j would be each
+        # other's negatives (tanh is odd) and stay so under the gradient, halving the network
+        blocks = {"w": 0.5 * self.weight_bound * spread, "r": np.zeros(n), "b": np.full(n, 0.5), "alpha": np.full(n, 0.5 * self.alpha_max),
                   "c0": np.zeros(n), "v": np.zeros(n)}
         vscale = np.log10(box["vs"][1])  # the box's top: the record's top speed when data-centred
         return np.concatenate([[vscale]] + [np.asarray(blocks[k], np.float64) for k in NET_BLOCKS])
