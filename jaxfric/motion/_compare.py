@@ -37,7 +37,8 @@ class OverfitWarning(UserWarning):
 @dataclasses.dataclass
 class MotionComparison:
     """Fits of [`compare_motion`][jaxfric.motion.compare_motion]. ``fits``: name -> [`MotionFit`][jaxfric.motion.MotionFit] in the order
-    given; ``ranking``: names from the lowest validation RMSE; ``overfit``: ``(richer,
+    given; ``ranking``: names from the lowest judge's score (``scores``; the validation RMSE
+    for ``judge="tail"``); ``overfit``: ``(richer,
     simpler)`` pairs where the richer model validates worse."""
 
     fits: dict
@@ -49,7 +50,7 @@ class MotionComparison:
 
     @property
     def best(self):
-        """The fit with the lowest validation free-run RMSE."""
+        """The fit the judge ranks first."""
         return self.fits[self.ranking[0]]
 
     @property
@@ -137,9 +138,10 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
             if fr.metrics["num_params"] > fs.metrics["num_params"] and \
                     scores[rich] > (1.0 + OVERFIT_MARGIN) * scores[simple]:
                 overfit.append((rich, simple))
+    worse = "predicts the validation data worse" if judge == "tail" else f"is judged worse ({judge!r} judge)"
     for rich, simple in overfit:
         warnings.warn(
-            f"{rich} ({fits[rich].metrics['num_params']} parameters) predicts the validation data worse "
+            f"{rich} ({fits[rich].metrics['num_params']} parameters) {worse} "
             f"than {simple} ({fits[simple].metrics['num_params']}): {scores[rich]:.4g} mm against "
             f"{scores[simple]:.4g} mm free-run RMSE; prefer the simpler model unless it fails elsewhere",
             OverfitWarning, stacklevel=stacklevel + 1)
