@@ -37,6 +37,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ._base import AbstractFrictionModel, Unidentifiable
 from ._box import DEFAULT_RANGES, SearchBox, data_ranges
 from ._physical import AbstractPhysicalModel
+from .elman import elman_hidden
 from .lugre import LuGre
 
 __all__ = ["GreyBox"]
@@ -314,7 +315,7 @@ class GreyBox(AbstractFrictionModel):
     def network_step(self, net: dict, c: Array, u: Array) -> tuple[Array, Array]:
         """One sample of the network: ``(h_k, c_k+1)`` from context ``c_k`` and scaled input
         ``u_k`` (broadcasting over leading axes)."""
-        h = jnp.tanh(net["w"] * u + net["r"] * c + net["b"])
+        h = elman_hidden(u, c, net["w"], net["r"], net["b"])  # §2.2's hidden layer
         return h, net["alpha"] * c + (1.0 - net["alpha"]) * h
 
     def correction(self, level: Array, net: dict, h: Array) -> Array:
