@@ -136,3 +136,18 @@ def test_the_judge_table_counts_the_measured_rows():
     ens = [r for r in rows if r["model"] != "baseline"]
     better = sum(float(r["unseen_ensemble"]) < 0.99 * float(r["unseen"]) for r in ens)
     assert f"| chosen member | {len(ens)} | {better} |" in RESULTS.read_text()
+
+
+def test_the_short_judges_window_is_a_duration():
+    """The default window is SHORT_WINDOW_S = 2 s of samples at any rate (256 at the rig
+    proxy's 128 Hz, where it was measured; 2 000 at EMPS's 1 kHz); a given window is a
+    number of samples, checked."""
+    from jaxfric.motion._compare import SHORT_WINDOW_S, short_window
+
+    assert SHORT_WINDOW_S == 2.0
+    assert short_window(1 / 128) == 256 and short_window(1e-3) == 2000
+    assert short_window(0.5) == 22  # never shorter than the initial-state window + 2
+    assert short_window(1e-3, 300) == 300
+    for bad in (21, 2.5, True):
+        with pytest.raises(ValueError, match="window must be an integer"):
+            short_window(1e-3, bad)

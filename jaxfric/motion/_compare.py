@@ -149,9 +149,22 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
 
 
 JUDGES = ("tail", "blocked", "short")
-#: Samples per window of the ``"short"`` judge (`short_runs_score`): 2 s at 128 Hz, the
-#: rig proxy's rate (benchmarks/results/motion_judge.md).
-SHORT_WINDOW = 256
+#: Seconds per window of the ``"short"`` judge (`short_runs_score`): measured as 256 samples
+#: at the rig proxy's 128 Hz (benchmarks/results/motion_judge.md); on the EMPS estimation
+#: file (1 kHz) 256-sample windows ranked the least-squares baseline first and 2 s windows
+#: ranked LuGre, GMS, Coulomb, then the baseline (docs/motion.md).
+SHORT_WINDOW_S = 2.0
+
+
+def short_window(dt: float, window=None, init_window: int = DEFAULT_INIT_WINDOW) -> int:
+    """Samples per window of the short judge: ``window`` when given (an integer
+    ``>= init_window + 2``), else `SHORT_WINDOW_S` seconds at sample time ``dt``."""
+    if window is None:
+        return max(int(init_window) + 2, int(round(SHORT_WINDOW_S / float(dt))))
+    if isinstance(window, bool) or not isinstance(window, numbers.Integral) or \
+            not isinstance(init_window, numbers.Integral) or window < init_window + 2:
+        raise ValueError(f"window must be an integer >= init_window + 2 = {init_window + 2}, got {window!r}")
+    return int(window)
 
 
 def _pooled_rmse(metrics) -> float:
@@ -185,7 +198,7 @@ def blocked_score(model, records, folds: int, *, key, mass, init_window=DEFAULT_
     return _pooled_rmse(model_m), _pooled_rmse(base_m)
 
 
-def short_runs_score(fit, records, window: int = SHORT_WINDOW, init_window: int = DEFAULT_INIT_WINDOW) -> float:
+def short_runs_score(fit, records, window: int | None = None, init_window: int = DEFAULT_INIT_WINDOW) -> float:
     """Many short free runs of ``fit`` over ``records``: each record cut into consecutive
     windows of ``window`` samples (a shorter rest at the end dropped), each window simulated
     from its own first ``init_window`` samples ([`MotionFit.score`][jaxfric.motion.MotionFit.score]) and scored on
@@ -193,7 +206,7 @@ def short_runs_score(fit, records, window: int = SHORT_WINDOW, init_window: int 
     (inf when a window diverges). No refit: it measures how the fitted dynamics carry a
     state over a short horizon, across every kind of motion the records hold, without the
     drift of one long free run."""
-    window, init_window = int(window), int(init_window)
+    window, init_window = short_window(records[0].dt, window, init_window), int(init_window)
     metrics = []
     for r in records:
         r = _as_motion_data(r)
@@ -228,7 +241,7 @@ def _as_records(value) -> list:
 
 
 def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds: int = 3,
-                   window: int = SHORT_WINDOW, **kwargs) -> MotionComparison:
+                   window: int | None = None, **kwargs) -> MotionComparison:
     """Fit each of ``models`` (names or instances, or a mapping label -> model) with
     [`identify_motion`][jaxfric.motion.identify_motion] on the same data, key and options, rank them by the
     judge and warn ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model with more search
@@ -249,8 +262,8 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
       samples): ``folds`` more fits per model, and every block is scored on motion its fit
       never saw.
 
-    ``window``: samples per window of the short judge (default `SHORT_WINDOW`, 256); a
-    shorter rest at the end of a record is not scored. The table shows the judge's score beside the validation RMSE, and the baseline's under
+    ``window``: samples per window of the short judge (default ``None``: `SHORT_WINDOW_S`
+    = 2 s of samples, 256 at 128 Hz, 2 000 at 1 kHz); a shorter rest at the end of a record is not scored. The table shows the judge's score beside the validation RMSE, and the baseline's under
     the same judge. benchmarks/results/motion_judge.md measures how often each judge's
     choice predicts new excitation.
     """
@@ -259,9 +272,7 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     if isinstance(folds, bool) or not isinstance(folds, numbers.Integral) or folds < 2:
         raise ValueError(f"folds must be an integer >= 2, got {folds!r}")
     init_window = kwargs.get("init_window", DEFAULT_INIT_WINDOW)
-    if isinstance(window, bool) or not isinstance(window, numbers.Integral) or \
-            not isinstance(init_window, numbers.Integral) or window < init_window + 2:
-        raise ValueError(f"window must be an integer >= init_window + 2 = {init_window + 2}, got {window!r}")
+    short_window(1.0, window, init_window)  # a bad window fails here, before any fit
     if isinstance(models, str):
         models = [m for m in models.split(",") if m.strip()]
     items = dict(models) if isinstance(models, dict) else {
@@ -275,6 +286,7 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     if judge == "short":  # every record, whole: checked before any fit
         everything = [_as_motion_data(data)] if data is not None else \
             _as_records(kwargs["train"]) + _as_records(kwargs["valid"])
+        window = short_window(everything[0].dt, window, init_window)
         if max(r.n_samples for r in everything) < window:
             raise ValueError(f"the short-runs judge needs a record of at least window={window} samples, "
                              f"the longest has {max(r.n_samples for r in everything)}")
