@@ -259,8 +259,13 @@ class LazyUncertainty:
     def __init__(self, value=None, source=None):
         self._value, self._source, self.error = value, source, None
 
+    @property
+    def pending(self) -> bool:
+        """Whether a computation waits for its first use."""
+        return self._value is None and self._source is not None
+
     def value(self):
-        if self._value is None and self._source is not None:
+        if self.pending:
             compute, self._source = self._source, None
             try:
                 self._value = compute()

@@ -320,7 +320,7 @@ def test_identify_attaches_uncertainty_and_plausibility(rig_velocity, tmp_path):
                            nelder_mead=NelderMead(max_steps=200, max_evals=200))
         fit = identify(model, (v, f, 1 / 128), key=0, solver=solver)
         assert fit.diagnostics["implausible"] == []
-        assert fit._uncertainty is None          # not computed until asked
+        assert fit._uncertainty.pending          # not computed until asked
         iv = fit.intervals()
         assert iv["Fc"][0] < FC < iv["Fc"][1]
         fit.save(tmp_path / "f.npz")
