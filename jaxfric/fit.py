@@ -43,6 +43,7 @@ from .covariance import DEFAULT_LEVEL, ParameterUncertainty, _check_level
 from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
+from .problem import AbstractProblem, ForceBalanceProblem, rollout
 from .records import same_sample_time
 
 __all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "LazyUncertainty", "ResamplingWarning", "load_fit"]
@@ -228,23 +229,10 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     scale the input, roll out, unscale the output (``scalers = (velocity, friction)``
     [`Scaler`][jaxfric.models.Scaler] pair, or ``(None, None)`` for SI-unit models). Computed in
     ``theta``'s dtype. ``inputs``: the ``(C, T)`` measured channels of a model with
-    ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others."""
+    ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others. The checks, then
+    [`jaxfric.problem.rollout`][jaxfric.problem.rollout]."""
     theta = jnp.asarray(theta)
     return rollout(model, theta, scalers, _check_velocity(velocity, theta.dtype), _check_dt(dt), inputs)
-
-
-def rollout(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=None) -> jax.Array:
-    """[`predict`][jaxfric.fit.predict] without its checks of the velocity and ``dt``, so that both may be
-    traced (the parameter uncertainty's compiled linearisation calls it)."""
-    dtype = theta.dtype
-    v = jnp.asarray(velocity, dtype)
-    dt = jnp.asarray(dt, dtype)
-    if inputs is not None and model.input_names:
-        inputs = jnp.asarray(inputs, dtype)
-    if model.needs_scaling:
-        sv, sf = scalers
-        return sf.unscale(model.simulate(theta, sv.scale(v), dt, inputs))
-    return model.simulate(theta, v, dt, inputs)
 
 
 class LazyUncertainty:
@@ -388,6 +376,13 @@ class Fit:
         args["uncertainty"] = self._uncertainty
         args.update(changes)
         return type(self)(**args)
+
+    @classmethod
+    def problem(cls) -> AbstractProblem:
+        """The problem this kind of fit solves ([`jaxfric.problem.AbstractProblem`][jaxfric.problem.AbstractProblem]): how
+        its data, search coordinates, residuals and score are read. A force-balance fit's is
+        [`jaxfric.problem.ForceBalanceProblem`][jaxfric.problem.ForceBalanceProblem]; a subclass solving another names its own."""
+        return ForceBalanceProblem()
 
     # ---------------------------------------------------------- uncertainty
     @property

@@ -5,29 +5,25 @@ The residual vector r(θ) of each kind of fit, its Jacobian J = ∂r/∂θ at θ
 Newey–West, block bootstrap) applied to them; the plausibility rules; what the report
 and CLI show.
 
-Each kind of fit says how its residuals are built ([`FitKind`][jaxfric.uncertainty.FitKind]): a force-balance
-[`jaxfric.Fit`][jaxfric.fit.Fit] here (friction prediction minus measured friction), a
-[`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit] in [`jaxfric.motion`][jaxfric.motion] (simulated minus measured
-position), which registers it with [`register_fit_kind`][jaxfric.uncertainty.register_fit_kind]. A record type defined
-above this module ([`jaxfric.identification.RecordSet`][jaxfric.identification.RecordSet]) registers how to read its
-training records with [`register_training_records`][jaxfric.uncertainty.register_training_records]. Both are looked up along the
-class's MRO, and registered by the module that defines the class, so the registration
-has run whenever an instance exists; this module imports nothing above it.
+Each fit names its problem ([`Fit.problem`][jaxfric.fit.Fit.problem], a
+[`jaxfric.problem.AbstractProblem`][jaxfric.problem.AbstractProblem]), which says how its residuals are built: a
+force-balance [`jaxfric.Fit`][jaxfric.fit.Fit] (friction prediction minus measured friction,
+[`jaxfric.problem.ForceBalanceProblem`][jaxfric.problem.ForceBalanceProblem]), a [`jaxfric.motion.MotionFit`][jaxfric.motion.MotionFit] (simulated
+minus measured position, [`jaxfric.motion.MotionProblem`][jaxfric.motion.MotionProblem]). This module asks the fit, so it
+imports neither ``identification`` nor ``motion``, and looks nothing up.
 
 The linearisation (r, J, the physical values and their Jacobian) is one compiled XLA
 program (`_linearise`), not some thirty small ones run op by op. Its residual
-function is a pytree (`_ForceBalance`, an ``eqx.Module``): the records are its
-array leaves, traced inputs of the program, and only the model's configuration, the
-training lengths and the dtypes are static, so a second fit of the same model on
-records of the same lengths reuses the compiled program.
+function is a pytree (an ``eqx.Module``): the records are its array leaves, traced
+inputs of the program, and only the model's configuration, the training lengths and
+the dtypes are static, so a second fit of the same model on records of the same
+lengths reuses the compiled program.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import warnings
-from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -40,10 +36,8 @@ from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_
                          MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level, _check_methods,
                          andrews_bandwidth, block_bootstrap_covariance, correlation_text, hac_covariance,
                          interval_text, jacobian_covariance, number_text)
-from .fit import (NOT_IDENTIFIABLE_MEANING, Fit, _check_dt, _velocity_np, diagnostic_flags, grouped_reasons,
-                  parameter_verdicts, rollout)
+from .fit import NOT_IDENTIFIABLE_MEANING, Fit, diagnostic_flags, grouped_reasons, parameter_verdicts
 from .plausibility import check_plausibility, warn_implausible
-from .records import FrictionData, as_channel
 
 __all__ = [
     "METHODS",
@@ -59,169 +53,15 @@ __all__ = [
 ]
 
 
-# ----------------------------------------------------------------------- fit kinds
-@dataclasses.dataclass(frozen=True)
-class Residuals:
-    """A fit's training residuals r(y) (``fn``: ``(p,) -> (n,)``) in its search
-    coordinates ``y`` (linearised at ``y``), the lengths of the independent ``segments``
-    r is made of (no Newey–West lag crosses one), the ``unit`` of r, and per coordinate
-    its physical ``names``, ``kinds`` (``"log10"``, ``"linear"``, ...) and search box.
-
-    ``fn`` is best a pytree callable (an ``eqx.Module`` or ``jax.tree_util.Partial``)
-    holding the records as array leaves: its compiled linearisation is then shared by
-    every fit with equal static parts (model configuration, lengths) and array shapes.
-    A plain closure works too, compiled afresh on each call (its captured arrays are
-    constants of the program, and the closure is not kept alive by a cache)."""
-
-    fn: Callable
-    y: Any
-    segments: tuple[int, ...]
-    unit: str
-    names: tuple[str, ...]
-    kinds: tuple[str, ...]
-    lower: np.ndarray
-    upper: np.ndarray
-
-
-@dataclasses.dataclass(frozen=True)
-class FitKind:
-    """How the uncertainty code reads one class of fit: ``residuals(fit, data)`` gives its
-    [`Residuals`][jaxfric.uncertainty.Residuals] over the training data, ``train_velocity(fit, data)`` the
-    training velocity the plausibility rules look at."""
-
-    residuals: Callable[[Any, Any], Residuals]
-    train_velocity: Callable[[Any, Any], np.ndarray]
-
-
-_FIT_KINDS: dict[type, FitKind] = {}
-_TRAINING_RECORDS: dict[type, Callable[[Any], tuple]] = {}
-
-
-def register_fit_kind(fit_type: type, kind: FitKind) -> None:
-    """Use ``kind`` for fits of ``fit_type`` and its subclasses (unless they register
-    their own)."""
-    _FIT_KINDS[fit_type] = kind
-
-
-def register_training_records(data_type: type, records: Callable[[Any], tuple]) -> None:
-    """Read the training records of a force-balance fit's data of ``data_type`` with
-    ``records(data)``: records ([`jaxfric.FrictionData`][jaxfric.rig.FrictionData]) whose first ``n_train``
-    samples trained the fit."""
-    _TRAINING_RECORDS[data_type] = records
-
-
-def _registered(registry: dict, obj):
-    return next((registry[c] for c in type(obj).__mro__ if c in registry), None)
-
-
-def _fit_kind(fit) -> FitKind:
-    kind = _registered(_FIT_KINDS, fit)
-    if kind is None:
+def _problem(fit):
+    """The fit's problem (it says how the fit's residuals are built)."""
+    if not isinstance(fit, Fit):
         raise TypeError(f"no parameter uncertainty for a {type(fit).__name__}: not a jaxfric fit")
-    return kind
+    return fit.problem()
 
 
 def _coords(model):
     return tuple(model._coords)
-
-
-# ----------------------------------------------------------------------- force balance
-def _training_windows(fit, data) -> tuple:
-    """The records a force-balance fit was trained on, each with its training length."""
-    records = _registered(_TRAINING_RECORDS, data)
-    if records is not None:
-        return tuple(records(data))
-    if isinstance(data, (list, tuple)) and data and not _is_triplet(data):
-        return tuple(_one_record(d) for d in data)  # a list of records, each trained on whole
-    return (_one_record(data, fit.n_train),)
-
-
-def _friction_residuals(fit, data) -> Residuals:
-    """Prediction minus measured friction over the training samples the fit was made on,
-    each record run from its own initial state (`_ForceBalance`)."""
-    if "motion" in fit.settings:
-        raise ValueError("a motion fit read as a force-balance Fit (load_fit): read it with "
-                         "jaxfric.motion.load_motion_fit for its uncertainty")
-    model = fit.model
-    records = []
-    for r in _training_windows(fit, data):
-        x = model.inputs_from(r, r.velocity.shape[0])
-        records.append((_velocity_np(r.velocity), np.asarray(r.friction)[: r.n_train],
-                        None if x is None else np.asarray(x)))
-    resid = _ForceBalance(model=model, scalers=(fit.velocity_scaler, fit.friction_scaler),
-                          dt=np.asarray(_check_dt(fit.dt), np.float64), records=tuple(records),
-                          n_train=tuple(int(r[1].shape[0]) for r in records))
-    lower, upper = (np.asarray(b, np.float64) for b in model.bounds(fit.box))
-    return Residuals(fn=resid, y=fit.theta, segments=resid.n_train, unit="friction [N]",
-                     names=tuple(c[1] for c in _coords(model)), kinds=tuple(c[2] for c in _coords(model)),
-                     lower=lower, upper=upper)
-
-
-class _ForceBalance(eqx.Module):
-    """r(θ) of a force-balance fit: [`jaxfric.fit.predict`][jaxfric.fit.predict] of each record minus its
-    measured friction over the first ``n_train`` samples, concatenated. The records
-    (velocity, friction, input channels), the scalers and ``dt`` are array leaves, so
-    traced inputs of the compiled linearisation; the model (its static configuration)
-    and the lengths are its static part."""
-
-    model: Any
-    scalers: tuple
-    dt: np.ndarray
-    records: tuple  # ((velocity, training friction, inputs or None), ...)
-    n_train: tuple[int, ...] = eqx.field(static=True)
-
-    def __call__(self, theta):
-        out = [rollout(self.model, theta, self.scalers, v, self.dt, x)[:n] - jnp.asarray(f, theta.dtype)
-               for (v, f, x), n in zip(self.records, self.n_train)]
-        return jnp.concatenate(out)
-
-
-def _friction_train_velocity(fit, data) -> np.ndarray:
-    return np.concatenate([np.asarray(r.velocity)[: r.n_train] for r in _training_windows(fit, data)])
-
-
-def _one_record(data, n_train: int | None = None):
-    """A record a force-balance fit was trained on (a ``(velocity, friction, dt)`` tuple or
-    a FrictionData), with its first ``n_train`` samples (default: all) as the training
-    window."""
-    if _is_triplet(data):
-        v, f, _ = data
-        rec = None
-    elif isinstance(data, FrictionData):
-        v, f, rec = data.velocity, data.friction, data
-    else:
-        raise ValueError("data must be the fit's training record (FrictionData or (velocity, friction, dt)), "
-                         f"a list of training records, or a RecordSet; got {type(data).__name__}")
-    v, f = as_channel("velocity", v), as_channel("friction", f)
-    n_train = v.shape[0] if n_train is None else n_train
-    if v.shape != f.shape or v.shape[0] < n_train:
-        raise ValueError(f"the record ({v.shape[0]} velocity, {f.shape[0]} friction samples) does not hold "
-                         f"the fit's {n_train} training samples")
-
-    return _Window(v, f, int(n_train), rec)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Window:
-    """A record's velocity, friction and training length; other attributes (a Cylinder's
-    chamber pressures) come from the record it was read from, if any."""
-
-    velocity: np.ndarray
-    friction: np.ndarray
-    n_train: int
-    source: Any = None
-
-    def __getattr__(self, name):
-        if name == "source":  # not set yet (copying): no recursion
-            raise AttributeError(name)
-        return getattr(self.source, name)
-
-
-def _is_triplet(data) -> bool:
-    return isinstance(data, tuple) and len(data) == 3 and np.ndim(data[2]) == 0
-
-
-register_fit_kind(Fit, FitKind(residuals=_friction_residuals, train_velocity=_friction_train_velocity))
 
 
 # ----------------------------------------------------------------------- uncertainty
@@ -290,13 +130,13 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
     """
     methods = _check_methods(method)
     _check_level(level)
-    kind = _fit_kind(fit)
+    problem = _problem(fit)
     if fit.model.needs_scaling:
         raise ValueError(f"{type(fit.model).__name__} is a black-box network: its weights have no "
                          "physical meaning, so no parameter intervals (use keys=K for an ensemble band)")
     if "block_bootstrap" in methods and key is None:
         raise ValueError("method 'block_bootstrap' needs key= (a PRNG key or int seed)")
-    res = kind.residuals(fit, data)
+    res = problem.residuals(fit, data)
     resid, segs, kinds = res.fn, res.segments, res.kinds
     theta = jnp.asarray(res.y, jnp.asarray(fit.theta).dtype)
     r, jac, estimate, d = (np.asarray(a, np.float64) for a in _linearise_once(resid, fit.model, kinds, theta))
@@ -352,7 +192,7 @@ def assess_fit(fit, data):
     Returns the fit with both (a new one: a fit is immutable), ``fit`` itself for a network."""
     if fit.model.needs_scaling:
         return fit
-    velocity = _fit_kind(fit).train_velocity(fit, data)
+    velocity = _problem(fit).train_velocity(fit, data)
     found = check_plausibility(fit.model, fit.params, velocity, fit.dt)
     warn_implausible(fit.model, found, stacklevel=4)
     # the computation reads the model, parameters and scalers, which the new fit shares

@@ -30,10 +30,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..problem import TrainingRecords
 from ..records import (DEFAULT_TRAIN_FRACTION, MIN_VALID_SAMPLES, FrictionData, as_channel,
                        check_sample_time, split_count)
 from ..rig.simulator import RigRecord
-from ..uncertainty import register_training_records
 
 #: The one record type; identification code calls it a record.
 Record = FrictionData
@@ -185,8 +185,9 @@ def _record_list(x, what: str) -> list[tuple[str, object]]:
 
 
 @dataclasses.dataclass(frozen=True)
-class RecordSet:
-    """The checked records of one identification (see the module docstring).
+class RecordSet(TrainingRecords):
+    """The checked records of one identification (see the module docstring): a
+    [`jaxfric.problem.TrainingRecords`][jaxfric.problem.TrainingRecords].
 
     ``records`` are in the order given: the training records first, then the
     validation records (or one ``"split"`` record). All share one sample time.
@@ -203,6 +204,7 @@ class RecordSet:
 
     @property
     def train_records(self) -> tuple[Record, ...]:
+        """The records with training samples (the first ``n_train`` of each)."""
         return tuple(r for r in self.records if r.n_train > 0)
 
     @property
@@ -280,5 +282,3 @@ def as_records(data=None, train=None, valid=None) -> RecordSet:
         )
     return rs
 
-
-register_training_records(RecordSet, lambda records: records.train_records)

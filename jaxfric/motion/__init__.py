@@ -10,13 +10,15 @@
 * [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
   with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one,
   the least-squares baseline as a row, and a judge (the held-back tail, or blocked folds);
+* [`MotionProblem`][jaxfric.motion.MotionProblem] — the motion problem of [`jaxfric.problem`][jaxfric.problem] (a motion fit's
+  search coordinates, training records, residuals and score);
 * [`BaselineWarning`][jaxfric.motion.BaselineWarning] — a fit worse than the least-squares Coulomb + viscous + offset
   baseline on its own training data.
 """
 
 from .._warnings import BaselineWarning
-from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, baseline_motion_fit, identify_motion,
-                   load_motion_fit, motion_metrics)
+from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
+                   identify_motion, load_motion_fit, motion_metrics)
 from ._compare import MotionComparison, OverfitWarning, compare_motion, rank_fits
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
@@ -42,6 +44,7 @@ __all__ = [
     "GMSStep",
     "MotionData",
     "MotionFit",
+    "MotionProblem",
     "baseline_motion_fit",
     "StaticStep",
     "friction_step",

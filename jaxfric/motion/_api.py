@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import numbers
 import warnings
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -37,16 +38,17 @@ from ..identification.stages import solver_stages as _stages
 from ..metrics import friction_metrics
 from ..models import GreyBox, Scaler
 from ..optim import AbstractSolver, minimise
+from ..problem import AbstractProblem, Residuals, SearchCoordinates
 from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_sample_time,
                        same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
-from ..uncertainty import FitKind, assess_fit, register_fit_kind
+from ..uncertainty import assess_fit
 from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search, start_costs
-from ._residuals import motion_residuals, motion_train_velocity
+from ._residuals import motion_coordinates, motion_residuals, motion_train_velocity, training_lengths
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
@@ -262,6 +264,11 @@ class MotionFit(Fit):
         return cls(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None, friction_scaler=None,
                    dt=dt, n_train=n_train, n_samples=n_samples, metrics={},
                    settings={**extra, "motion": {**motion, **extra.get("motion", {})}})
+
+    @classmethod
+    def problem(cls) -> "MotionProblem":
+        """[`MotionProblem`][jaxfric.motion.MotionProblem]: how a motion fit's data, coordinates, residuals and score are read."""
+        return MotionProblem()
 
     @property
     def mechanics(self) -> dict:
@@ -530,9 +537,32 @@ class MotionFit(Fit):
         return f"MotionFit({type(self.model).__name__}, mass {self.mass:.4g} kg{tail})"
 
 
-register_fit_kind(MotionFit, FitKind(
-    residuals=lambda fit, data: motion_residuals(fit, _as_motion_data(data)),
-    train_velocity=lambda fit, data: motion_train_velocity(fit, _as_motion_data(data))))
+class MotionProblem(AbstractProblem):
+    """Friction identified inside the mechanics from force and position alone (§13.2): a
+    [`MotionFit`][jaxfric.motion.MotionFit]'s search vector is its model's θ then the mechanics it
+    identified, its residuals the simulated minus the measured positions (and/or velocities)
+    over the training window, its score [`MotionFit.score`][jaxfric.motion.MotionFit.score] (headline: RMSE [mm]).
+    ``data``: the [`MotionData`][jaxfric.motion.MotionData] (or ``(force, position, dt)``) the fit was
+    trained on, its first ``fit.n_train`` samples (several training records concatenated)."""
+
+    metric: ClassVar[str] = "rmse_mm"
+
+    def coordinates(self, fit) -> SearchCoordinates:
+        return motion_coordinates(fit)
+
+    def training_records(self, fit, data) -> tuple:
+        data = _as_motion_data(data)
+        cuts = np.cumsum((0,) + (training_lengths(fit) or (fit.n_train,)))
+        return tuple(data.window(int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:]))
+
+    def residuals(self, fit, data) -> Residuals:
+        return motion_residuals(fit, _as_motion_data(data))
+
+    def train_velocity(self, fit, data) -> np.ndarray:
+        return motion_train_velocity(fit, _as_motion_data(data))
+
+    def score(self, fit, record) -> dict:
+        return fit.score(record)
 
 
 _simulate_jit = eqx.filter_jit(simulate_motion)

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..uncertainty import Residuals
+from ..problem import Residuals, SearchCoordinates
 from ._forward import motion_prediction
 from ._layout import Layout
 from ._step import friction_step
@@ -24,39 +24,24 @@ from ._step import friction_step
 MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v0": ("v0", "linear")}
 
 
-def motion_residuals(fit, data) -> Residuals:
-    """Simulation residuals of a motion fit over its training window of ``data`` (a
-    [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData]): free-run position and/or velocity, each divided
-    by its standard deviation for ``error="both"``; k-step positions for a k-step fit;
-    each training record run from its own start for a fit on whole records."""
+def _layout(fit) -> tuple[Layout, list]:
+    """Where the fit's search vector puts its mechanics, and their search names."""
     mech = fit.settings["motion"]
-    n = fit.n_train
     names = list(mech.get("search_names") or [])
     extra = names[fit.model.num_params:]
     layout = Layout(fit.model.num_params, "log10_mass" in extra, "offset" in extra, "v0" in extra)
     if layout.names() != tuple(extra) or "y" not in mech or len(mech["y"]) != len(names):
         raise ValueError(f"motion fit with search coordinates {names} not understood by the "
                          f"uncertainty code (mechanics it knows: {sorted(MECHANICS)})")
-    # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
-    records = (mech.get("records") or {}).get("train")
-    error, horizon = mech.get("error", "position"), mech.get("horizon")
-    if records is not None and (sum(records) != n or error != "position" or horizon is not None):
-        raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
-    x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
-    resid = MotionResiduals(
-        step=friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler)),
-        layout=layout, error=error,
-        horizon=None if horizon is None else int(horizon),
-        records=None if records is None else tuple(int(r) for r in records),
-        mass=np.asarray(float(mech["mass"]), np.float64), dt=np.asarray(float(fit.dt), np.float64),
-        force=np.asarray(data.net_force[:n]), x=x, v=v,
-        scale=np.asarray([np.std(x), max(np.std(v), 1e-300)], np.float64))
-    unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
-    if horizon is not None:
-        unit = f"{int(horizon)}-step position [m]"
-    segs = (n,) if error != "both" or horizon is not None else (n, n)
-    if records is not None:
-        segs = tuple(records)
+    return layout, extra
+
+
+def motion_coordinates(fit) -> SearchCoordinates:
+    """A motion fit's search vector (the model's coordinates, then the mechanics it
+    identified) with their names, kinds and box (the mechanics' box as searched; unbounded
+    when the fit did not record it)."""
+    mech = fit.settings["motion"]
+    _, extra = _layout(fit)
     coords = tuple(fit.model._coords)
     lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
     if extra:
@@ -67,10 +52,49 @@ def motion_residuals(fit, data) -> Residuals:
         else:  # bounds of the mechanics were not recorded: treat them as unbounded
             lower = np.concatenate([lower, np.full(len(extra), -np.inf)])
             upper = np.concatenate([upper, np.full(len(extra), np.inf)])
-    return Residuals(fn=resid, y=np.asarray(mech["y"], np.float64), segments=segs, unit=unit,
-                     names=tuple(c[1] for c in coords) + tuple(MECHANICS[e][0] for e in extra),
-                     kinds=tuple(c[2] for c in coords) + tuple(MECHANICS[e][1] for e in extra),
-                     lower=lower, upper=upper)
+    return SearchCoordinates(y=np.asarray(mech["y"], np.float64),
+                             names=tuple(c[1] for c in coords) + tuple(MECHANICS[e][0] for e in extra),
+                             kinds=tuple(c[2] for c in coords) + tuple(MECHANICS[e][1] for e in extra),
+                             lower=lower, upper=upper)
+
+
+def motion_residuals(fit, data) -> Residuals:
+    """Simulation residuals of a motion fit over its training window of ``data`` (a
+    [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData]): free-run position and/or velocity, each divided
+    by its standard deviation for ``error="both"``; k-step positions for a k-step fit;
+    each training record run from its own start for a fit on whole records."""
+    mech = fit.settings["motion"]
+    n = fit.n_train
+    layout, _ = _layout(fit)
+    # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
+    records = training_lengths(fit)
+    error, horizon = mech.get("error", "position"), mech.get("horizon")
+    if records is not None and (sum(records) != n or error != "position" or horizon is not None):
+        raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
+    x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
+    resid = MotionResiduals(
+        step=friction_step(fit.model, (fit.velocity_scaler, fit.friction_scaler)),
+        layout=layout, error=error,
+        horizon=None if horizon is None else int(horizon),
+        records=records,
+        mass=np.asarray(float(mech["mass"]), np.float64), dt=np.asarray(float(fit.dt), np.float64),
+        force=np.asarray(data.net_force[:n]), x=x, v=v,
+        scale=np.asarray([np.std(x), max(np.std(v), 1e-300)], np.float64))
+    unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
+    if horizon is not None:
+        unit = f"{int(horizon)}-step position [m]"
+    segs = (n,) if error != "both" or horizon is not None else (n, n)
+    if records is not None:
+        segs = tuple(records)
+    return Residuals.at(motion_coordinates(fit), resid, segs, unit)
+
+
+def training_lengths(fit) -> tuple[int, ...] | None:
+    """The lengths of the whole training records a fit on several records
+    (``identify_motion(train=[...])``) was made on, concatenated in its data; ``None`` for
+    a fit on one split record."""
+    records = (fit.settings["motion"].get("records") or {}).get("train")
+    return None if records is None else tuple(int(r) for r in records)
 
 
 class MotionResiduals(eqx.Module):
