@@ -151,3 +151,78 @@ def test_the_short_judges_window_is_a_duration():
     for bad in (21, 2.5, True):
         with pytest.raises(ValueError, match="window must be an integer"):
             short_window(1e-3, bad)
+
+
+def _loop_window_scores(fit, records, window, init=20):
+    """The reference: one ``fit.score`` call per consecutive window (the judge's protocol
+    written as the per-window loop it replaced)."""
+    return [fit.score(r.window(a, a + window), init) for r in records
+            for a in range(0, r.n_samples - window + 1, window)]
+
+
+def _given(name):
+    from jaxfric.motion import MotionFit
+
+    params = {"lugre": dict(sigma0=1e5, sigma1=300.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=0.01),
+              "gms": dict(k1=1e5, k2=2e5, k3=4e5, alpha1=0.3, alpha2=0.3, alpha3=0.4, C=20.0, Fc=12.0,
+                          Fs=15.0, vs=0.01, sigma2=60.0)}[name]
+    return MotionFit.given(models.get(name), params, mass=2.4, offset=2.5, dt=1e-3)
+
+
+@pytest.mark.parametrize("name", ["lugre", "gms", "baseline"])
+def test_short_runs_score_equals_a_loop_of_score_calls(name):
+    """All windows in one vmapped free run give what one ``fit.score`` per window gives:
+    the same initial state from each window's first 20 positions, the same dynamics, per
+    window and pooled, across records of different lengths (rests dropped)."""
+    from jaxfric.motion._compare import _pooled_rmse, baseline_fit, window_scores
+
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        recs = [_record(700), _record(950).window(50)]  # 2 + 3 windows of 300, rests of 100 and 0
+        fit = baseline_fit(compare_motion(["coulomb"], recs[0], key=0, mass=2.5, search=QUICK, judge="tail",
+                                          dtype=jnp.float64).best) if name == "baseline" else _given(name)
+        got = window_scores(fit, recs, 300)
+        ref = _loop_window_scores(fit, recs, 300)
+        assert len(got) == len(ref) == 5
+        for g, r in zip(got, ref):
+            assert g["n"] == 280
+            for k in ("rmse_mm", "fit_percent", "max_abs_mm"):
+                assert g[k] == pytest.approx(r[k], rel=1e-9, abs=1e-12)
+        pooled = np.sqrt(np.mean([r["rmse_mm"] ** 2 for r in ref]))
+        assert short_runs_score(fit, recs, 300) == pytest.approx(pooled, rel=1e-9)
+        assert _pooled_rmse(got) == pytest.approx(pooled, rel=1e-9)
+
+
+def test_a_window_whose_run_is_not_finite_makes_the_short_score_inf():
+    """Opposite force spikes of 1e300 N in the second of five windows on a mass of 1e-300
+    kg (past MotionData's checks): that window's run is not finite, as in the loop of
+    ``fit.score`` calls, the other windows are unchanged, and the judge says inf."""
+    import dataclasses
+
+    from jaxfric.motion._compare import window_scores
+
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        recs = [_record(700), _record(950).window(50)]
+        fit = _given("lugre")
+        fit = fit.replace(settings={**fit.settings, "motion": {**fit.mechanics, "mass": 1e-300}})
+        force = recs[0].force.copy()
+        force[450:452] = [1e300, -1e300]
+        broken = [dataclasses.replace(recs[0], force=force), recs[1]]
+        got = window_scores(fit, broken, 300)
+        ref = _loop_window_scores(fit, broken, 300)
+        assert [np.isfinite(g["rmse_mm"]) for g in got] == [np.isfinite(r["rmse_mm"]) for r in ref] \
+            == [True, False, True, True, True]
+        assert [g["rmse_mm"] for i, g in enumerate(got) if i != 1] == \
+            pytest.approx([r["rmse_mm"] for i, r in enumerate(ref) if i != 1], rel=1e-9)
+        assert short_runs_score(fit, broken, 300) == np.inf
+        assert np.isfinite(short_runs_score(fit, recs, 300))
+
+
+def test_short_runs_score_checks_the_sample_time():
+    from jaxfric.motion._compare import window_scores
+
+    fit = _given("lugre")
+    with pytest.raises(ValueError, match="sample time"):
+        window_scores(fit, [_record(700, dt=2e-3)], 300)
+    assert window_scores(fit, [_record(200)], 300) == []

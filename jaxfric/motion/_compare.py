@@ -22,10 +22,15 @@ import math
 import numbers
 import warnings
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from ._api import DEFAULT_INIT_WINDOW, _as_motion_data, _split, identify_motion
+from ..records import SAMPLE_TIME_RTOL, same_sample_time
+from ._api import DEFAULT_INIT_WINDOW, _as_motion_data, _init_window, _split, identify_motion, motion_metrics
 from ._baseline import BASELINE_LABEL
+from ._forward import simulate_motion
 
 __all__ = ["MotionComparison", "OverfitWarning", "compare_motion", "short_runs_score"]
 
@@ -198,6 +203,51 @@ def blocked_score(model, records, folds: int, *, key, mass, init_window=DEFAULT_
     return _pooled_rmse(model_m), _pooled_rmse(base_m)
 
 
+@eqx.filter_jit
+def _window_runs(step, theta, mass, force, dt, x0, v0, state0):
+    """Free-run positions of K equal windows in one compiled call: `simulate_motion`
+    vmapped over ``force`` ``(K, T)``, ``x0``, ``v0`` ``(K,)`` and the friction states
+    (leading axis K). Returns ``(K, T)``."""
+    def run(f, x, v, s):
+        return simulate_motion(step, theta, mass, f, dt, x, v, s)["x"]
+
+    return jax.vmap(run)(force, x0, v0, state0)
+
+
+def window_scores(fit, records, window: int, init_window: int = DEFAULT_INIT_WINDOW) -> list[dict]:
+    """[`MotionFit.score`][jaxfric.motion.MotionFit.score] of every window of ``window``
+    samples of ``records`` (consecutive, a shorter rest at the end dropped), in order: the
+    same initial-state rule ([`MotionFit.initial_state`][jaxfric.motion.MotionFit.initial_state]
+    on each window's first ``init_window`` positions) and the same free run
+    (`simulate_motion`, §13.2, from sample ``init_window - 1``), all windows in one
+    vmapped, compiled call instead of one call per window. Each entry is
+    [`motion_metrics`][jaxfric.motion.motion_metrics] of samples ``init_window`` onward plus
+    ``"n"``, the samples scored."""
+    n = _init_window(init_window)
+    if window <= n:
+        raise ValueError(f"init_window={n} leaves nothing to simulate in a window of {window} samples")
+    heads, forces, targets = [], [], []
+    for r in records:
+        r = _as_motion_data(r)
+        if not same_sample_time(r.dt, fit.dt):
+            raise ValueError(f"the record's sample time {r.dt} s differs from the fit's {fit.dt} s "
+                             f"by more than {SAMPLE_TIME_RTOL:g} relative: resample it to the fit's rate")
+        force = r.net_force - fit.offset
+        for a in range(0, r.n_samples - window + 1, window):
+            heads.append(fit.initial_state(r.position[a:a + n], n))
+            forces.append(force[a + n - 1:a + window])
+            targets.append(r.position[a + n:a + window])
+    if not heads:
+        return []
+    theta = jnp.asarray(fit.theta)
+    x_hat = _window_runs(fit.friction_step(), theta, fit.mass, jnp.asarray(np.stack(forces), theta.dtype),
+                         fit.dt, jnp.asarray([h["x0"] for h in heads], theta.dtype),
+                         jnp.asarray([h["v0"] for h in heads], theta.dtype),
+                         jax.tree_util.tree_map(lambda *s: jnp.stack(s), *[h["state0"] for h in heads]))
+    x_hat = np.asarray(x_hat, np.float64)[:, 1:]  # the run starts at sample n - 1; scored from n
+    return [{**motion_metrics(x, xh), "n": window - n} for x, xh in zip(targets, x_hat)]
+
+
 def short_runs_score(fit, records, window: int | None = None, init_window: int = DEFAULT_INIT_WINDOW) -> float:
     """Many short free runs of ``fit`` over ``records``: each record cut into consecutive
     windows of ``window`` samples (a shorter rest at the end dropped), each window simulated
@@ -205,13 +255,17 @@ def short_runs_score(fit, records, window: int | None = None, init_window: int =
     the rest. Returns the pooled free-run RMSE [mm], ``sqrt(sum_w n_w rmse_w^2 / sum_w n_w)``
     (inf when a window diverges). No refit: it measures how the fitted dynamics carry a
     state over a short horizon, across every kind of motion the records hold, without the
-    drift of one long free run."""
+    drift of one long free run.
+
+    All windows run in one vmapped, compiled free run (`window_scores`), equal to a loop of
+    ``fit.score`` calls (1e-9 relative in float64, tests/test_motion_judge.py). On the EMPS
+    estimation file (12 windows of 2 000 samples, float64, a fresh process, median of 3 on
+    2 shared CPUs) the first call for a LuGre fit took 10.5 s as that loop (each window's
+    start recompiled the free run) and 2.6 s in one call; for the baseline 5.5 s and 1.3 s;
+    a repeated call 0.2 s and 0.05 s.
+    """
     window, init_window = short_window(records[0].dt, window, init_window), int(init_window)
-    metrics = []
-    for r in records:
-        r = _as_motion_data(r)
-        for a in range(0, r.n_samples - window + 1, window):
-            metrics.append({**fit.score(r.window(a, a + window), init_window), "n": window - init_window})
+    metrics = window_scores(fit, records, window, init_window)
     if not metrics:
         raise ValueError(f"no record holds a whole window of {window} samples for the short-runs judge")
     if not all(math.isfinite(m["rmse_mm"]) for m in metrics):
