@@ -204,14 +204,14 @@ def ask_tell_ms(solver, n: int, seeds: int = 1) -> tuple[float, int]:
 
     def drive(seed):
         key = jax.random.key(seed)
-        st = (solver.ask_init(lo, hi, key) if seeds == 1 else
-              solver.ask_init(lo, hi, keys=jax.random.split(key, seeds)))
+        st = (jf.ask_init(solver, lo, hi, key) if seeds == 1 else
+              jf.ask_init(solver, lo, hi, keys=jax.random.split(key, seeds)))
         asks = 0
-        while not solver.ask_done(st):
-            X, st = solver.ask(st)
+        while not jf.ask_done(st):
+            X, st = jf.ask(st)
             X = np.asarray(X)
             f = _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1])
-            st = solver.tell(st, X, f)
+            st = jf.tell(st, X, f)
             asks += 1
         return asks
 

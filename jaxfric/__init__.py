@@ -33,6 +33,8 @@ _LAZY = {
     "MAPSO": ".optim", "MAPSONMDS": ".optim", "PSO": ".optim", "RESULTS": ".optim",
     "History": ".optim", "NelderMead": ".optim", "Solution": ".optim", "mapso_nmds": ".optim",
     "minimise": ".optim", "minimise_many": ".optim", "chain": ".optim",
+    "ask_init": ".optim", "ask": ".optim", "tell": ".optim", "ask_done": ".optim",
+    "ask_result": ".optim",
     "Evosax": ".optim", "cmaes_nm": ".optim",
     "FrictionData": ".rig",
 }
@@ -75,6 +77,10 @@ __all__ = [
     "RESULTS",
     "Solution",
     "Stribeck",
+    "ask",
+    "ask_done",
+    "ask_init",
+    "ask_result",
     "chain",
     "compensation",
     "compare_motion",
@@ -98,4 +104,5 @@ __all__ = [
     "rig",
     "sweep",
     "sweeps",
+    "tell",
 ]

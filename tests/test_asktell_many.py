@@ -26,13 +26,13 @@ def separable_np(X):
 
 def _drive(solver, objective=separable_np):
     """Drive ``solver`` with ``KEYS`` by ask/tell; the solution and every batch asked."""
-    st = solver.ask_init(LO, HI, keys=KEYS)
+    st = jf.ask_init(solver, LO, HI, keys=KEYS)
     asked = []
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
         asked.append(np.array(X))
-        st = solver.tell(st, X, objective(X))
-    return solver.ask_result(st), asked
+        st = jf.tell(st, X, objective(X))
+    return jf.ask_result(st), asked
 
 
 _BATCHES = []  # the host batches of the latest _recipe run
@@ -95,12 +95,12 @@ def test_an_ask_is_a_host_call_of_the_pure_callback_recipe(solver):
 def test_best_so_far_is_per_seed():
     """Before the run ends, ask_result is each seed's best row told so far, and
     ``num_told`` counts the values told per seed."""
-    st = PSO.ask_init(LO, HI, keys=KEYS)
-    X, st = PSO.ask(st)
+    st = jf.ask_init(PSO, LO, HI, keys=KEYS)
+    X, st = jf.ask(st)
     f = separable_np(X)
-    st = PSO.tell(st, X, f)
+    st = jf.tell(st, X, f)
     assert st.num_told == X.shape[1]
-    part = PSO.ask_result(st)
+    part = jf.ask_result(st)
     best = np.argmin(f, axis=1)
     np.testing.assert_array_equal(part.f, f[np.arange(S), best])
     np.testing.assert_array_equal(part.value, X[np.arange(S), best])
@@ -109,19 +109,19 @@ def test_best_so_far_is_per_seed():
 
 def test_ask_init_and_tell_refuse_what_does_not_fit():
     with pytest.raises(ValueError, match="not both"):
-        PSO.ask_init(LO, HI, jax.random.key(0), keys=KEYS)
+        jf.ask_init(PSO, LO, HI, jax.random.key(0), keys=KEYS)
     with pytest.raises(ValueError, match="key= .* or keys="):
-        PSO.ask_init(LO, HI)
+        jf.ask_init(PSO, LO, HI)
     with pytest.raises(ValueError, match="batch of keys"):
-        PSO.ask_init(LO, HI, keys=jax.random.key(0))
-    st = PSO.ask_init(LO, HI, keys=KEYS)
-    X, st = PSO.ask(st)
+        jf.ask_init(PSO, LO, HI, keys=jax.random.key(0))
+    st = jf.ask_init(PSO, LO, HI, keys=KEYS)
+    X, st = jf.ask(st)
     with pytest.raises(ValueError, match="one fitness value per candidate"):
-        PSO.tell(st, X, separable_np(X).reshape(-1))   # (S * k,), not (S, k)
+        jf.tell(st, X, separable_np(X).reshape(-1))   # (S * k,), not (S, k)
     with pytest.raises(ValueError, match="one fitness value per candidate"):
-        PSO.tell(st, X, separable_np(X)[0])            # one seed's values
+        jf.tell(st, X, separable_np(X)[0])            # one seed's values
     with pytest.raises(ValueError, match="the batch ask returned"):
-        PSO.tell(st, X[0], separable_np(X[0]))
+        jf.tell(st, X[0], separable_np(X[0]))
 
 
 def test_an_abandoned_run_of_several_seeds_ends():
@@ -129,9 +129,9 @@ def test_an_abandoned_run_of_several_seeds_ends():
     (one value per seed and row) and its worker thread leaves the compiled run."""
     import gc
 
-    st = PSO.ask_init(LO, HI, keys=KEYS)
-    X, st = PSO.ask(st)
-    st = PSO.tell(st, X, separable_np(X))
+    st = jf.ask_init(PSO, LO, HI, keys=KEYS)
+    X, st = jf.ask(st)
+    st = jf.tell(st, X, separable_np(X))
     channel = st._run.channel  # not the run: dropping that is what abandons it
     del st, X
     gc.collect()

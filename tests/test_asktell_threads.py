@@ -18,18 +18,18 @@ def _solver():
 
 
 def test_a_finished_run_has_joined_its_thread():
-    st = _solver().ask_init(np.full(2, -1.0), np.full(2, 1.0), jax.random.key(0))
+    st = jf.ask_init(_solver(), np.full(2, -1.0), np.full(2, 1.0), jax.random.key(0))
     run = st._run
-    while not _solver().ask_done(st):
-        X, st = _solver().ask(st)
-        st = _solver().tell(st, X, [_sphere(x) for x in np.asarray(X)])
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
+        st = jf.tell(st, X, [_sphere(x) for x in np.asarray(X)])
     assert not run.thread.is_alive()
     assert run.token not in asktell._CHANNELS
 
 
 def test_interpreter_exit_stops_an_open_run():
-    st = _solver().ask_init(np.full(2, -1.0), np.full(2, 1.0), jax.random.key(1))
-    X, st = _solver().ask(st)
+    st = jf.ask_init(_solver(), np.full(2, -1.0), np.full(2, 1.0), jax.random.key(1))
+    X, st = jf.ask(st)
     run = st._run
     assert run.thread.is_alive() and run.token in asktell._CHANNELS
     asktell._abandon_all()          # what atexit runs
@@ -50,12 +50,12 @@ def test_a_float64_run_keeps_float64_on_xla_callback_threads():
         return jax.numpy.sum((y - shift) ** 2)
 
     with jax.enable_x64(True):
-        st = solver.ask_init(lo, hi, 3)
-        while not solver.ask_done(st):
-            X, st = solver.ask(st)
+        st = jf.ask_init(solver, lo, hi, 3)
+        while not jf.ask_done(st):
+            X, st = jf.ask(st)
             assert X.dtype == np.float64
-            st = solver.tell(st, X, np.sum((np.asarray(X) - shift) ** 2, axis=1))
-        sol = solver.ask_result(st)
+            st = jf.tell(st, X, np.sum((np.asarray(X) - shift) ** 2, axis=1))
+        sol = jf.ask_result(st)
         ref = jf.minimise(fn, solver, (lo, hi), key=3)
     np.testing.assert_array_equal(sol.value, ref.value)
     assert int(sol.stats["num_evals"]) == int(ref.stats["num_evals"]) == 25 * 11

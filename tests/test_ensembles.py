@@ -49,7 +49,8 @@ def test_cpu_layout_maps_large_swarms_and_chains_and_batches_small_network_swarm
         pytest.skip("the layout rule under test is the CPU's")
     big = jf.MAPSO(lattice_size=8, num_generations=2)  # the default ENN swarm: 64 agents
     small = jf.MAPSO(lattice_size=3, num_generations=2)  # 9 agents
-    assert big.population_size() >= stages.CPU_BATCH_SATURATION > small.population_size()
+    assert (big.capabilities(3).population_size >= stages.CPU_BATCH_SATURATION
+            > small.capabilities(3).population_size)
     assert stages.ensemble_batching(Elman(neurons=3), big) == "map"
     assert stages.ensemble_batching(Elman(neurons=3), small) == "vmap"
     assert stages.ensemble_batching(LuGre(), small) == "map"

@@ -66,13 +66,13 @@ def test_ask_tell_from_python_follows_the_compiled_run(solver):
     visits for the same key: the same best point, value and evaluation count."""
     key = jax.random.key(4)
     ref = jf.minimise(separable, solver, (LO, HI), args=SEP, key=key)
-    st = solver.ask_init(LO, HI, key)
+    st = jf.ask_init(solver, LO, HI, key)
     asked = 0
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
         asked += X.shape[0]
-        st = solver.tell(st, X, separable_np(X))
-    sol = solver.ask_result(st)
+        st = jf.tell(st, X, separable_np(X))
+    sol = jf.ask_result(st)
     assert asked == int(ref.stats["num_evals"]) == int(sol.stats["num_evals"])
     np.testing.assert_allclose(sol.value, ref.value, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(sol.f, ref.f, rtol=1e-5, atol=1e-7)
@@ -85,10 +85,10 @@ def test_ask_tell_compiles_the_run_once(run_cache_size):
     solver = jf.MAPSO(lattice_size=3, num_generations=4, sl_generations=2)
     sizes = []
     for seed in (1, 2):
-        st, per_run = solver.ask_init(LO, HI, jax.random.key(seed)), 0
-        while not solver.ask_done(st):
-            X, st = solver.ask(st)
-            st = solver.tell(st, X, separable_np(X))
+        st, per_run = jf.ask_init(solver, LO, HI, jax.random.key(seed)), 0
+        while not jf.ask_done(st):
+            X, st = jf.ask(st)
+            st = jf.tell(st, X, separable_np(X))
             per_run += 1
         assert per_run == 1 + 4 * (2 + 2)
         sizes.append(run_cache_size())
@@ -100,14 +100,14 @@ def test_an_abandoned_ask_tell_run_does_not_block_the_next():
     import gc
 
     solver = jf.PSO(num_particles=6, num_generations=8)
-    st = solver.ask_init(LO, HI, jax.random.key(2))
-    X, st = solver.ask(st)
-    st = solver.tell(st, X, separable_np(X))
+    st = jf.ask_init(solver, LO, HI, jax.random.key(2))
+    X, st = jf.ask(st)
+    st = jf.tell(st, X, separable_np(X))
     stale = st
-    X, st = solver.ask(st)
-    st = solver.tell(st, X, separable_np(X))
+    X, st = jf.ask(st)
+    st = jf.tell(st, X, separable_np(X))
     with pytest.raises(ValueError, match="already told"):
-        solver.tell(stale, X, separable_np(X))
+        jf.tell(stale, X, separable_np(X))
     del st, stale
     gc.collect()
     key = jax.random.key(3)
@@ -148,21 +148,21 @@ def test_scan_request_is_one_loop_compiled_and_relayed():
 
 def test_tell_refuses_the_wrong_number_of_values():
     pso = jf.PSO(num_particles=6, num_generations=8)
-    st = pso.ask_init(LO, HI, jax.random.key(0))
-    X, st = pso.ask(st)
+    st = jf.ask_init(pso, LO, HI, jax.random.key(0))
+    X, st = jf.ask(st)
     with pytest.raises(ValueError, match="one fitness value per candidate"):
-        pso.tell(st, X, np.zeros(3))
+        jf.tell(st, X, np.zeros(3))
 
 
 def _drive(solver, key, objective):
     """Drive ``solver`` by ask/tell; returns the solution and the batch sizes asked."""
-    st = solver.ask_init(LO, HI, key)
+    st = jf.ask_init(solver, LO, HI, key)
     sizes = []
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
         sizes.append(X.shape[0])
-        st = solver.tell(st, X, objective(X))
-    return solver.ask_result(st), sizes
+        st = jf.tell(st, X, objective(X))
+    return jf.ask_result(st), sizes
 
 
 # The sequential rule with two starts on MAPSO-NMDS, the batched trial points on a
@@ -207,12 +207,13 @@ def test_ask_tell_drives_nelder_mead_alone():
 # beside the next test: the two share the small programs that build evosax strategies
 def test_evosax_answers_the_population_capability():
     """Evosax's population_size keyword no longer hides the contract's
-    population_size(): a population-based strategy takes an initial population, a
+    capabilities().population_size: a population-based strategy takes an initial population, a
     distribution-based one a single start (before, both raised TypeError)."""
     pytest.importorskip("evosax")
     pop = np.array([[1.0, 1.0], [0.0, 0.0], [2.0, -1.0]], np.float32)
     de = jf.Evosax("DE", population_size=6, num_generations=2)
-    assert de.population_size() == 6 and jf.Evosax("CMA_ES").population_size() is None
+    assert (de.capabilities(2).population_size == 6
+            and jf.Evosax("CMA_ES").capabilities(2).population_size is None)
     sol = jf.minimise(sphere, de, (LO, HI), key=0, y0=pop)
     assert float(np.asarray(sol.history.f)[0]) < 1e-12  # the optimum, through the unit-box map
     sol = jf.minimise(sphere, jf.Evosax("CMA_ES", num_generations=2), (LO, HI), key=0,
@@ -247,10 +248,10 @@ def test_ask_tell_takes_an_objective_jax_cannot_trace():
         jax.jit(simulator)(jnp.zeros(2))
     solver = jf.chain(jf.PSO(num_particles=8, num_generations=8),
                       jf.NelderMead(max_steps=120, batched_trials=True))
-    st = solver.ask_init(LO, HI, 0)
-    X, st = solver.ask(st)
-    st_nan = solver.tell(st, X, np.full(X.shape[0], np.nan))
-    assert float(solver.ask_result(st_nan).f) == np.inf  # NaN never becomes a best
+    st = jf.ask_init(solver, LO, HI, 0)
+    X, st = jf.ask(st)
+    st_nan = jf.tell(st, X, np.full(X.shape[0], np.nan))
+    assert float(jf.ask_result(st_nan).f) == np.inf  # NaN never becomes a best
     sol, sizes = _drive(solver, 0, lambda X: [simulator(x) for x in np.asarray(X)])
     assert int(sol.stats["num_evals"]) == sum(sizes)
     np.testing.assert_allclose(sol.value, [0.5, -0.25], atol=1e-3)
@@ -259,23 +260,23 @@ def test_ask_tell_takes_an_objective_jax_cannot_trace():
 
 def test_ask_tell_refuses_what_was_not_asked_for():
     solver = jf.chain(jf.PSO(num_particles=4, num_generations=1), jf.NelderMead(max_steps=3))
-    st = solver.ask_init(LO, HI, jax.random.key(0))
-    X, st = solver.ask(st)
+    st = jf.ask_init(solver, LO, HI, jax.random.key(0))
+    X, st = jf.ask(st)
     with pytest.raises(ValueError, match="one fitness value per candidate"):
-        solver.tell(st, X, np.zeros(X.shape[0] + 1))
+        jf.tell(st, X, np.zeros(X.shape[0] + 1))
     with pytest.raises(ValueError, match="the batch ask returned"):
-        solver.tell(st, X[:2], np.zeros(2))
+        jf.tell(st, X[:2], np.zeros(2))
     done = st
-    while not solver.ask_done(done):
-        X, done = solver.ask(done)
-        done = solver.tell(done, X, separable_np(X))
-    assert int(solver.ask_result(done).stats["num_steps"]) == 1 + 3  # G, then NM's cap
+    while not jf.ask_done(done):
+        X, done = jf.ask(done)
+        done = jf.tell(done, X, separable_np(X))
+    assert int(jf.ask_result(done).stats["num_steps"]) == 1 + 3  # G, then NM's cap
     with pytest.raises(ValueError, match="finished"):
-        solver.ask(done)
+        jf.ask(done)
     with pytest.raises(ValueError, match="ask/tell cannot drive BFGS"):
-        jf.chain(jf.PSO(), optx.BFGS(rtol=1e-6, atol=1e-6)).ask_init(LO, HI, 0)
+        jf.ask_init(jf.chain(jf.PSO(), optx.BFGS(rtol=1e-6, atol=1e-6)), LO, HI, 0)
     with pytest.raises(ValueError, match="1-D lower and upper"):
-        solver.ask_init(np.zeros((2, 2)), np.ones((2, 2)), 0)
+        jf.ask_init(solver, np.zeros((2, 2)), np.ones((2, 2)), 0)
 
 
 @pytest.mark.parametrize("build, match", [
@@ -518,3 +519,31 @@ def test_gradient_stage_has_its_own_labelled_bar():
     text = out.getvalue()
     assert "(gradient)" in text and "Nelder" not in text
     assert "25/25" in text and "/50" not in text.split("(gradient)")[-1]  # ended early at 100 %
+
+
+def test_the_contract_is_small_and_knows_nothing_of_ask_tell():
+    """Issue 46 item 3: at most 8 methods on AbstractSolver (the five abstract ones,
+    check, solution and the one capabilities record), and ask/tell a driver beside
+    minimise that the contract does not import. Dunders are left out of the count:
+    ``__check_init__`` is equinox's construction hook (it runs ``check``), and the rest
+    (``__init__``, ``__eq__``, ...) is dataclass machinery no caller names."""
+    import ast
+    from pathlib import Path
+
+    from jaxfric.optim import contract
+
+    methods = [k for k, v in vars(AbstractSolver).items()
+               if not k.startswith("__") and (callable(v) or isinstance(v, property))]
+    assert len(methods) <= 8, methods
+    assert set(AbstractSolver.__abstractmethods__) == {
+        "init_rounds", "step_rounds", "finished", "best", "num_evals"}
+    tree = ast.parse(Path(contract.__file__).read_text())
+    imported = {(n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
+    assert not any("asktell" in name for name in imported), imported
+    for name in ("ask_init", "ask", "tell", "ask_done", "ask_result", "check_ask_tell"):
+        assert not hasattr(jf.PSO(), name), name
+    # the chain's fields are abstract variables, which a subclass must give
+    assert {"global_solver", "local_solver", "num_starts",
+            "simplex_from_swarm"} <= jf.optim.AbstractChain.__abstractvars__

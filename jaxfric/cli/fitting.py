@@ -179,14 +179,15 @@ def _describe(s, model) -> str:
 
     if isinstance(s, MAPSONMDS):
         nm = s.nelder_mead.max_evals
-        nm_text = f"<= {nm} evaluations" if nm is not None else f"<= {s.nelder_mead.steps_for(model.num_params)} steps"
+        nm_text = (f"<= {nm} evaluations" if nm is not None else
+                   f"<= {s.nelder_mead.capabilities(model.num_params).max_steps} steps")
         return (f"MAPSO ({s.mapso.lattice_size}x{s.mapso.lattice_size} agents, G = {s.mapso.num_generations}) "
                 f"-> Nelder-Mead ({nm_text})")
     if isinstance(s, MAPSO):
         return f"MAPSO ({s.lattice_size}x{s.lattice_size} agents, G = {s.num_generations})"
     if isinstance(s, PSO):
         return f"PSO ({s.num_particles} particles, G = {s.num_generations})"
-    return f"Nelder-Mead (<= {s.steps_for(model.num_params)} steps)"
+    return f"Nelder-Mead (<= {s.capabilities(model.num_params).max_steps} steps)"
 
 
 class LazyBar:
@@ -228,7 +229,7 @@ def progress_bar(solver, model, desc: str, paper: bool = False, refine=None):
         return None
     method = "paper" if paper else "jaxfric"
     s = default_solver(model, method) if solver is None else solver
-    total, local_total = s.progress_totals()
+    total, local_total = s.capabilities(model.num_params).progress_totals
     gradient_total = FAST_REFINE_STEPS if refine is None and fast_pipeline(model, method) else None
     return LazyBar(total, local_total, desc, gradient_total)
 

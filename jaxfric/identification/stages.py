@@ -275,9 +275,9 @@ def ensemble_batching(model: AbstractFrictionModel, solver: AbstractSolver) -> s
     """
     if jax.default_backend() != "cpu":
         return "vmap"
-    size = solver.population_size()
-    small_swarm = (size is not None and size < CPU_BATCH_SATURATION
-                   and solver.num_stages() == 1)
+    caps = solver.capabilities(model.num_params)
+    small_swarm = (caps.population_size is not None and caps.population_size < CPU_BATCH_SATURATION
+                   and caps.num_stages == 1)
     return "vmap" if model.needs_scaling and small_swarm else "map"
 
 

@@ -1,5 +1,6 @@
 """Derivative-free optimisers: PSO, MAPSO, Nelder–Mead, two-stage chains (MAPSO–NMDS),
-one driver (``minimise``, ``minimise_many``) and the step protocol they share."""
+one driver (``minimise``, ``minimise_many``; ask/tell from Python beside it) and the
+solver contract they share."""
 
 from ._base import RESULTS, History, Solution
 from .chained import AbstractChain, Chain, ChainState, chain
@@ -11,8 +12,15 @@ from .nelder_mead import NelderMead, NelderMeadState
 from .optx_adapter import OptxMinimiser, OptxState
 from .progress import RecordingProgress, TqdmProgress
 from .pso import PSO
-from .asktell import AskTellState
-from .contract import AbstractGenerational, AbstractSolver
+from .asktell import AskTellState, ask, ask_done, ask_init, ask_result, tell
+from .contract import (
+    AbstractGenerational,
+    AbstractLocal,
+    AbstractSolver,
+    AbstractStaged,
+    AbstractStartDraws,
+    Capabilities,
+)
 from .rounds import Batch, Scan
 from .swarm import AbstractSwarm, SwarmState
 
@@ -20,10 +28,14 @@ __all__ = [
     "RESULTS",
     "AbstractChain",
     "AbstractGenerational",
+    "AbstractLocal",
     "AbstractSolver",
+    "AbstractStaged",
+    "AbstractStartDraws",
     "AbstractSwarm",
     "AskTellState",
     "Batch",
+    "Capabilities",
     "Chain",
     "Evosax",
     "EvosaxState",
@@ -42,8 +54,13 @@ __all__ = [
     "RecordingProgress",
     "TqdmProgress",
     "SwarmState",
+    "ask",
+    "ask_done",
+    "ask_init",
+    "ask_result",
     "chain",
     "cmaes_nm",
     "minimise",
     "minimise_many",
+    "tell",
 ]

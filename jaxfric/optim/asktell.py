@@ -10,17 +10,20 @@ evaluation counts and stage switches, for every solver that evaluates in
 batches (PSO, MAPSO, Evosax, Nelder–Mead, chains of them), and compiles what
 ``minimise`` compiles, once per solver and problem shape::
 
-    st = solver.ask_init(lower, upper, key)
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)                      # (k, n) points
-        st = solver.tell(st, X, [simulate(x) for x in np.asarray(X)])
-    solution = solver.ask_result(st)                # what minimise returns
+    st = jf.ask_init(solver, lower, upper, key)
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)                          # (k, n) points
+        st = jf.tell(st, X, [simulate(x) for x in np.asarray(X)])
+    solution = jf.ask_result(st)                    # what minimise returns
 
-Several seeds in one run: ``ask_init(lower, upper, keys=keys)`` with a batch of ``S``
+These are functions beside ``minimise``, not methods of the solver: the solver contract
+([`AbstractSolver`][jaxfric.optim.AbstractSolver]) does not know of them.
+
+Several seeds in one run: ``ask_init(solver, lower, upper, keys=keys)`` with a batch of ``S``
 keys runs the keys side by side as ``minimise_many(..., keys=keys, batching="vmap")``
 does (``vmap`` of the same run, on one device). Every ask then carries every seed's
 batch, ``X`` of shape ``(S, k, n)`` (block ``s`` is seed ``s``), [`tell`][jaxfric.optim.asktell.tell] takes
-values of shape ``(S, k)``, and [`result`][jaxfric.optim.asktell.result] is ``minimise_many``'s batched
+values of shape ``(S, k)``, and [`ask_result`][jaxfric.optim.asktell.ask_result] is ``minimise_many``'s batched
 [`Solution`][jaxfric.optim.Solution]. Under ``vmap`` every seed is asked on every step: a seed that has
 finished, and the branch of a Nelder–Mead step a seed does not take (``vmap`` computes
 both sides of a conditional), still has its rows asked, and their values are
@@ -55,6 +58,7 @@ import numpy as np
 from .. import _xla
 from ._base import History, Solution, result_from_f
 from .loop import NO_STOP, _run
+from .optx_adapter import as_protocol
 from .problem import _Flat, check_key, check_start, prepare_bounds
 
 #: Open runs by token: the compiled objective finds its run through the token it gets
@@ -247,10 +251,19 @@ def _abandon_all():
             channel.thread.join(_EXIT_JOIN_S)
 
 
-def start(solver, lower, upper, key=None, x0=None, keys=None) -> AskTellState:
-    """Start a run of ``solver`` (already checked) on the 1-D box ``[lower, upper]``: one
-    seed (``key``), or one run of several seeds side by side (``keys``, a batch of
-    keys as [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] takes them); exactly one of the two."""
+def ask_init(solver, lower, upper, key=None, x0=None, *, keys=None) -> AskTellState:
+    """Start a run of ``solver`` driven from Python (a jaxfric solver, or an optimistix
+    minimiser as [`jaxfric.minimise`][jaxfric.optim.minimise] takes it, which ask/tell refuses:
+    it evaluates by itself). ``lower`` / ``upper``: 1-D bounds (their dtype is the
+    search dtype, as in [`jaxfric.minimise`][jaxfric.optim.minimise]); ``key``: a PRNG key or an
+    int seed; ``x0``: an optional start (swarms: or an initial population).
+
+    ``keys`` instead of ``key``: a batch of ``S`` PRNG keys, as
+    [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] takes them. The seeds then run side by side in one
+    run (``minimise_many``'s ``batching="vmap"``): every ask carries every seed's
+    batch, so one host call evaluates them all. Exactly one of ``key`` and ``keys``."""
+    solver = as_protocol(solver)
+    solver.check()
     if key is not None and keys is not None:
         raise ValueError("ask_init takes key= (one seed) or keys= (a batch of keys, "
                          "several seeds in one run), not both")
@@ -269,8 +282,11 @@ def start(solver, lower, upper, key=None, x0=None, keys=None) -> AskTellState:
     else:
         key = check_key(keys, "keys", batch=True)
         seeds = int(key.shape[0])
+    caps = solver.capabilities(int(lo.shape[0]))
+    if caps.ask_tell_refused is not None:
+        raise ValueError(caps.ask_tell_refused)
     if x0 is not None:
-        x0 = check_start(np.asarray(x0), treedef, shapes, lo, hi, solver.population_size())
+        x0 = check_start(np.asarray(x0), treedef, shapes, lo, hi, caps.population_size)
     run = _Run(solver, lo, hi, key, x0, seeds)
     return AskTellState(run, run.next_event(), 0)
 
@@ -324,19 +340,19 @@ def _keep_best(run: "_Run", X, f):
     run.best_f[better] = f[seeds, i][better]
 
 
-def done(st: AskTellState) -> bool:
+def ask_done(st: AskTellState) -> bool:
     """Whether the run has finished (by the rule the compiled run stops on)."""
     return st._event[0] == "done"
 
 
-def result(st: AskTellState) -> Solution:
+def ask_result(st: AskTellState) -> Solution:
     """The run's [`Solution`][jaxfric.optim.Solution] (flat ``value``) once it has finished, as
     [`jaxfric.minimise`][jaxfric.optim.minimise] gives it (a run of several seeds: as
     ``minimise_many(..., batching="vmap")`` gives it, every field with a leading axis
     of the seeds). Before, the best row told so far, per seed in a run of several seeds;
     there, rows whose values the run later discards count too, so it may be better than
     the final ``f``, and ``stats["num_evals"]`` is the values told per seed."""
-    if done(st):
+    if ask_done(st):
         return st._event[1]
     run = st._run
     if run.num_evals == 0:
@@ -352,4 +368,4 @@ def result(st: AskTellState) -> Solution:
                     stats={"num_evals": evals}, history=history)
 
 
-__all__ = ["AskTellState", "ask", "done", "result", "start", "tell"]
+__all__ = ["AskTellState", "ask", "ask_done", "ask_init", "ask_result", "tell"]

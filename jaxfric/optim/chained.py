@@ -12,23 +12,23 @@ stage's step while in the other. With ``num_starts = k`` the local solver is res
 from the ``k`` best personal bests of a swarm, one run after another, and the best
 refined point wins (multi-start local stage).
 
-Every chain has ``ask``/``tell`` ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]), for an objective outside
-JAX: during the global stage ``ask`` returns the population (and a swarm's further
+Every chain can be driven by ask/tell ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]), for an objective
+outside JAX: during the global stage ``ask`` returns the population (and a swarm's further
 batches), then Nelder–Mead's first simplex (``n + 1`` points, one per start), then the
 trial points of each step, one at a time (a shrink: ``n``) under the sequential rule or
 four at once with ``NelderMead(batched_trials=True)``. The switch to the local stage
 follows the compiled run's rule, and the evaluation counts are exact::
 
     solver = chain(PSO(num_generations=50), NelderMead())
-    st = solver.ask_init(lower, upper, 0)
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)
-        st = solver.tell(st, X, np.array([simulate(x) for x in np.asarray(X)]))
-    solution = solver.ask_result(st)   # minimise(fn, solver, ..., key=0) for a JAX fn
+    st = jf.ask_init(solver, lower, upper, 0)
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
+        st = jf.tell(st, X, np.array([simulate(x) for x in np.asarray(X)]))
+    solution = jf.ask_result(st)   # minimise(fn, solver, ..., key=0) for a JAX fn
 """
 
-from __future__ import annotations
-
+# No ``from __future__ import annotations`` here: equinox recognises ``eqx.AbstractVar``
+# only in an evaluated annotation (a string one silently becomes a plain field).
 from typing import Any
 
 import equinox as eqx
@@ -43,7 +43,15 @@ from ._base import (
     check_positive_int,
     split_drawn,
 )
-from .contract import AbstractGenerational, AbstractSolver
+from .contract import (
+    AbstractGenerational,
+    AbstractLocal,
+    AbstractSolver,
+    AbstractStaged,
+    AbstractStartDraws,
+    Capabilities,
+    progress_of,
+)
 from .optx_adapter import as_protocol
 from .rounds import drive, only_if, skipped
 from .swarm import AbstractSwarm
@@ -82,11 +90,14 @@ def _put(tree, i, leaf_tree):
     return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
 
 
-class AbstractChain(AbstractSolver):
+class AbstractChain(AbstractStaged, AbstractStartDraws):
     """A global solver followed by a local one (see the module docstring)."""
 
-    # global_solver, local_solver, num_starts, simplex_from_swarm: fields of Chain;
-    # MAPSONMDS names the first two mapso and nelder_mead
+    # fields of Chain; MAPSONMDS names the first two mapso and nelder_mead (properties)
+    global_solver: eqx.AbstractVar[Any]
+    local_solver: eqx.AbstractVar[Any]
+    num_starts: eqx.AbstractVar[int]
+    simplex_from_swarm: eqx.AbstractVar[bool]
 
     @property
     def _global(self) -> AbstractSolver:
@@ -109,34 +120,38 @@ class AbstractChain(AbstractSolver):
         self._local.check()
         check_positive_int("num_starts", self.num_starts)
         if self.num_starts > 1:
-            agents = self._global.population_size()
-            if agents is None:
+            if not isinstance(self._global, AbstractSwarm):  # starts from personal bests
                 raise ValueError("num_starts > 1 needs a swarm (PSO, MAPSO) as the global solver")
+            agents = self._global.num_agents
             if self.num_starts > agents:
                 raise ValueError(
                     f"num_starts ({self.num_starts}) exceeds the number of agents ({agents})")
 
-    def check_ask_tell(self):
-        self._global.check_ask_tell()
-        self._local.check_ask_tell()
+    def capabilities(self, n: int) -> Capabilities:
+        g, loc = self._global.capabilities(n), self._local.capabilities(n)
 
-    def population_size(self):
-        return self._global.population_size()
+        def total(a, b):
+            return None if a is None or b is None else a + self.num_starts * b
+
+        return Capabilities(
+            population_size=g.population_size, num_stages=2,
+            max_steps=total(g.max_steps, loc.max_steps),
+            max_evaluations=total(g.max_evaluations, loc.max_evaluations),
+            progress_totals=(g.progress_totals[0], loc.progress_totals[1]),
+            ask_tell_refused=g.ask_tell_refused or loc.ask_tell_refused)
 
     # ------------------------------------------------------------------ stages
-    def num_stages(self) -> int:
-        return 2
-
     def stage(self, state):
         return state.stage
 
     def _local_options(self, lower, upper, g):
         """The local stage's first step sized from the spread of the global stage's
-        personal bests (``simplex_from_swarm``; see the local solver's
-        [`start_options`][jaxfric.optim.AbstractSolver.start_options])."""
-        bests = self._global.personal_bests(g) if self.simplex_from_swarm else None
-        if bests is None:
+        personal bests (``simplex_from_swarm``, a swarm then a local solver; see the local
+        solver's [`start_options`][jaxfric.optim.AbstractLocal.start_options])."""
+        if not (self.simplex_from_swarm and isinstance(self._global, AbstractSwarm)
+                and isinstance(self._local, AbstractLocal)):
             return None
+        bests = self._global.personal_bests(g)
         return self._local.start_options(jnp.std(bests[0], axis=0), lower, upper)
 
     def _starts(self, g):
@@ -174,8 +189,9 @@ class AbstractChain(AbstractSolver):
         """What the start draws from ``key``: the stages' keys and the global solver's own
         ``start_draws`` of its key (for a ``Drawn`` key)."""
         k_global, k_local = jax.random.split(key)
-        inner = getattr(self._global, "start_draws", None)
-        return k_global, k_local, None if inner is None else inner(lower, upper, k_global)
+        inner = (self._global.start_draws(lower, upper, k_global)
+                 if isinstance(self._global, AbstractStartDraws) else None)
+        return k_global, k_local, inner
 
     def init_rounds(self, lower, upper, key, x0=None, objective=None):
         key, draws = split_drawn(key)
@@ -258,7 +274,7 @@ class AbstractChain(AbstractSolver):
                                       self._global.finished(state.first)[1])
         i, _, _ = self._local_best(state)
         best_local = _index(state.second, i)
-        local_steps = jnp.where(state.stage == 1, self._local.progress(best_local)[1], 0)
+        local_steps = jnp.where(state.stage == 1, progress_of(self._local, best_local)[1], 0)
         return Solution(
             value=x, f=f, result=result,
             stats={
@@ -270,26 +286,13 @@ class AbstractChain(AbstractSolver):
             history=History.empty(1, f.dtype), state=state,
         )
 
-    def steps_for(self, n: int) -> int | None:
-        g, loc = self._global.steps_for(n), self._local.steps_for(n)
-        return None if g is None or loc is None else g + self.num_starts * loc
-
-    def max_evaluations(self, n: int):
-        g, loc = self._global.max_evaluations(n), self._local.max_evaluations(n)
-        return None if g is None or loc is None else g + self.num_starts * loc
-
     def progress(self, state):
-        _, g_step = self._global.progress(state.first)
+        _, g_step = progress_of(self._global, state.first)
         i = self._current(state)
-        _, l_step = self._local.progress(_index(state.second, i))
+        _, l_step = progress_of(self._local, _index(state.second, i))
         # the step that switched stages is the global stage's last generation
         local = (state.stage == 1) & ((l_step > 0) | jnp.all(state.second_done))
         return local.astype(jnp.int32), jnp.where(local, l_step, g_step)
-
-    def progress_totals(self):
-        g, _ = self._global.progress_totals()
-        _, loc = self._local.progress_totals()
-        return g, loc
 
     def continued(self, state):
         raise ValueError("a finished two-stage run cannot be continued; warm-start its "

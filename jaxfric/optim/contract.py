@@ -1,19 +1,62 @@
 """The one solver contract (docs/solvers.md): [`AbstractSolver`][jaxfric.optim.AbstractSolver], whose start and
-steps are evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]), and
-[`AbstractGenerational`][jaxfric.optim.AbstractGenerational] for population solvers that run a number of generations."""
+steps are evaluation rounds ([`jaxfric.optim.rounds`][jaxfric.optim.rounds]), with one capabilities record
+([`Capabilities`][jaxfric.optim.Capabilities]); and the nominal kinds a capability that is
+really a type is written as: [`AbstractGenerational`][jaxfric.optim.AbstractGenerational] (population
+solvers that run a number of generations), [`AbstractLocal`][jaxfric.optim.AbstractLocal]
+(local solvers from one start), [`AbstractStaged`][jaxfric.optim.AbstractStaged] (solvers of several
+stages: the chains) and [`AbstractStartDraws`][jaxfric.optim.AbstractStartDraws] (a start whose
+random numbers can be drawn apart from the objective). The driver, the loop and the chains
+read the record or test these types, never ``hasattr``.
+
+ask/tell is no part of the contract: it is a driver beside [`jaxfric.minimise`][jaxfric.optim.minimise]
+([`jaxfric.optim.asktell`][jaxfric.optim.asktell]) that runs any solver's rounds."""
 
 from __future__ import annotations
 
 import abc
+import dataclasses
 from typing import Any, Callable
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from . import asktell
 from ._base import History, Solution, result_from_f
 from .rounds import Rounds
+
+
+@dataclasses.dataclass(frozen=True)
+class Capabilities:
+    """What a solver can do and costs on ``n`` parameters
+    ([`AbstractSolver.capabilities`][jaxfric.optim.AbstractSolver.capabilities]); every field has the
+    default of a plain one-stage solver that takes one start.
+
+    Attributes:
+        population_size: agents of a population solver (a start ``y0`` may then be an
+            initial population of up to this many rows); ``None``: one start.
+        num_stages: stages run one after another (a two-stage chain has 2, and is an
+            [`AbstractStaged`][jaxfric.optim.AbstractStaged]); the loop runs each in a ``while_loop`` of its
+            own, so batched runs never pay for one stage's step while in another.
+        max_steps: the step cap, most steps of a run (``None``: none known); sizes the
+            history.
+        max_evaluations: most objective evaluations of a run (``None``: unknown), checked
+            by the driver against the evaluation counter's range before running.
+        batches_runs: whether [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] should, on one CPU, run
+            several keys side by side (``vmap``: ``True``, for steps that are batches of one
+            size) rather than one after another (``lax.map``: ``False``, for conditional
+            batches, whose branches ``vmap`` turns into selects that compute both sides).
+        progress_totals: (global generations, local step cap) for a progress display.
+        ask_tell_refused: ``None`` where ask/tell ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]) can drive the
+            solver, else why not (``ask_init`` raises ``ValueError`` with it).
+    """
+
+    population_size: int | None = None
+    num_stages: int = 1
+    max_steps: int | None = None
+    max_evaluations: int | None = None
+    batches_runs: bool = True
+    progress_totals: tuple[int | None, int | None] = (None, None)
+    ask_tell_refused: str | None = None
 
 
 class AbstractSolver(eqx.Module):
@@ -25,13 +68,16 @@ class AbstractSolver(eqx.Module):
     * [`best`][jaxfric.optim.AbstractSolver.best]: ``(x, f)``, the best point so far and its (NaN-safe) value;
     * [`num_evals`][jaxfric.optim.AbstractSolver.num_evals]: the objective evaluations spent so far.
 
-    Everything else is an optional capability with a default: the driver, the loop and
-    the chains ask these, never the solver's type. ``ask``/``tell`` (from Python) come
-    from the required methods. Every method is pure and traceable; ``lower`` and
-    ``upper`` are 1-D arrays of one floating dtype (the driver flattens pytree bounds)
-    and the state is a pytree of arrays (what a checkpoint stores). The loop
-    ([`jaxfric.optim.loop`][jaxfric.optim.loop]) records ``best(state)[1]`` against ``num_evals(state)``
-    after every step and reports [`progress`][jaxfric.optim.AbstractSolver.progress].
+    With defaults: [`check`][jaxfric.optim.AbstractSolver.check] (the hyperparameters),
+    [`solution`][jaxfric.optim.AbstractSolver.solution] (the run's end) and
+    [`capabilities`][jaxfric.optim.AbstractSolver.capabilities], one record of every number and
+    flag the driver, the loop and the chains read. Those are all of the contract's eight
+    methods; what a solver of one kind has beyond them (personal bests, a stage, a
+    warm start, progress) comes with that kind's base class (module docstring). Every
+    method is pure and traceable; ``lower`` and ``upper`` are 1-D arrays of one floating
+    dtype (the driver flattens pytree bounds) and the state is a pytree of arrays (what a
+    checkpoint stores). The loop ([`jaxfric.optim.loop`][jaxfric.optim.loop]) records ``best(state)[1]``
+    against ``num_evals(state)`` after every step.
 
     The names differ from optimistix's ``init / step / terminate / postprocess`` on
     purpose: [`NelderMead`][jaxfric.optim.NelderMead] is both a jaxfric solver and an
@@ -70,7 +116,7 @@ class AbstractSolver(eqx.Module):
     def num_evals(self, state) -> Array:
         """Objective evaluations spent so far."""
 
-    # ---------------------------------------------------------- optional capabilities
+    # ------------------------------------------------------------- with defaults
     def check(self) -> None:
         """Raise ``ValueError`` on invalid hyperparameters. Run on construction
         (``__check_init__``) and again by [`jaxfric.minimise`][jaxfric.optim.minimise] before any tracing."""
@@ -81,103 +127,10 @@ class AbstractSolver(eqx.Module):
         return Solution(value=x, f=f, result=result, stats={"num_evals": self.num_evals(state)},
                         history=History.empty(1, f.dtype), state=state)
 
-    def population_size(self) -> int | None:
-        """Agents of a population solver (a start ``y0`` may then be an initial
-        population of up to this many rows); ``None``: the solver takes one start."""
-        return None
-
-    def personal_bests(self, state) -> tuple[Array, Array] | None:
-        """``(X, f)``: each agent's best point and value, for a population solver (a
-        chain then starts its local stage from the best of them); ``None`` otherwise."""
-        return None
-
-    def start_options(self, spread, lower, upper) -> dict | None:
-        """Options for a local run started where a population of per-coordinate
-        standard deviation ``spread`` converged, passed to [`init_rounds`][jaxfric.optim.AbstractSolver.init_rounds] as
-        ``options=`` (``None``: this solver takes none)."""
-        return None
-
-    def steps_for(self, n: int) -> int | None:
-        """The step cap: most steps of a run on ``n`` parameters (``None``: none known)."""
-        return None
-
-    def max_evaluations(self, n: int) -> int | None:
-        """The evaluation cap: most objective evaluations of a run on ``n`` parameters
-        (``None`` if unknown), checked by the driver against the evaluation counter's
-        range before running."""
-        return None
-
-    def num_stages(self) -> int:
-        """Stages run one after another (a two-stage [`chain`][jaxfric.optim.chain]
-        has 2). The loop runs each in a loop of its own, so batched runs never pay for
-        one stage's step while in another."""
-        return 1
-
-    def stage(self, state) -> Array:
-        """The stage ``state`` is in (``0 .. num_stages() − 1``)."""
-        return jnp.array(0, jnp.int32)
-
-    def batches_runs(self) -> bool:
-        """Whether [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] should, on one CPU, run several keys side
-        by side (``vmap``: ``True``, for solvers whose steps are batches of the same size)
-        rather than one after another (``lax.map``: ``False``, for a solver with
-        conditional batches, whose branches ``vmap`` turns into selects that compute
-        both sides)."""
-        return True
-
-    def continued(self, state):
-        """``state`` of a finished run, ready to go on under this solver's (larger)
-        budget (``minimise(..., warm_start=solution)``)."""
-        return state
-
-    def progress(self, state) -> tuple[Array, Array]:
-        """``(phase, step)`` for a progress display: phase 0 a global (swarm) stage,
-        phase 1 a local (Nelder–Mead) stage; ``step`` counts within the phase."""
-        return jnp.array(0, jnp.int32), jnp.array(0, jnp.int32)
-
-    def progress_totals(self) -> tuple[int | None, int | None]:
-        """(global generations, local step cap) for a progress display."""
-        return None, None
-
-    def check_ask_tell(self) -> None:
-        """Raise ``ValueError`` if ``ask``/``tell`` cannot drive this solver."""
-
-    # ------------------------------------------------------------------- ask / tell
-    def ask_init(self, lower, upper, key=None, x0=None, *, keys=None) -> asktell.AskTellState:
-        """Start a run driven from Python ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]). ``lower`` /
-        ``upper``: 1-D bounds (their dtype is the search dtype, as in
-        [`jaxfric.minimise`][jaxfric.optim.minimise]); ``key``: a PRNG key or an int seed; ``x0``: an
-        optional start (swarms: or an initial population).
-
-        ``keys`` instead of ``key``: a batch of ``S`` PRNG keys, as
-        [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] takes them. The seeds then run side by side in one
-        run (``minimise_many``'s ``batching="vmap"``): every ask carries every seed's
-        batch, so one host call evaluates them all. Exactly one of ``key`` and ``keys``."""
-        self.check()
-        self.check_ask_tell()
-        return asktell.start(self, lower, upper, key, x0, keys=keys)
-
-    def ask(self, st: asktell.AskTellState):
-        """``(X, st)``: the points (rows) whose values [`tell`][jaxfric.optim.AbstractSolver.tell] needs next, ``(k, n)``;
-        with ``keys``, ``(S, k, n)``, block ``s`` for seed ``s``."""
-        return asktell.ask(st)
-
-    def tell(self, st: asktell.AskTellState, X, f) -> asktell.AskTellState:
-        """Give the values ``f`` of the rows ``X`` returned by [`ask`][jaxfric.optim.AbstractSolver.ask] (NaN and inf
-        count as the worst value), of shape ``(k,)``, or ``(S, k)`` with ``keys``; returns
-        the state asking for the next batch."""
-        return asktell.tell(st, X, f)
-
-    def ask_done(self, st: asktell.AskTellState) -> bool:
-        """Whether the run has finished (by the rule the compiled run stops on)."""
-        return asktell.done(st)
-
-    def ask_result(self, st: asktell.AskTellState) -> Solution:
-        """The [`Solution`][jaxfric.optim.Solution] (flat ``value``): what [`jaxfric.minimise`][jaxfric.optim.minimise] returns
-        for the same key once the run has finished (with ``keys``: what
-        ``minimise_many(..., batching="vmap")`` returns); before, the best point told so
-        far (per seed, see [`jaxfric.optim.asktell.result`][jaxfric.optim.asktell.result])."""
-        return asktell.result(st)
+    def capabilities(self, n: int) -> Capabilities:
+        """The [`Capabilities`][jaxfric.optim.Capabilities] of a run on ``n`` parameters (plain Python
+        values, known before tracing)."""
+        return Capabilities()
 
 
 class AbstractGenerational(AbstractSolver):
@@ -206,11 +159,81 @@ class AbstractGenerational(AbstractSolver):
     def num_evals(self, state):
         return state.num_evals
 
-    def steps_for(self, n: int) -> int:
-        return self.num_generations
+    def capabilities(self, n: int) -> Capabilities:
+        return Capabilities(max_steps=self.num_generations,
+                            progress_totals=(self.num_generations, None))
 
-    def progress(self, state):
+    def progress(self, state) -> tuple[Array, Array]:
+        """``(phase, step)`` for a progress display: phase 0 (a global stage), the generation."""
         return jnp.array(0, jnp.int32), state.generation
 
-    def progress_totals(self):
-        return self.num_generations, None
+    def continued(self, state):
+        """``state`` of a finished run, ready to go on under this solver's (larger)
+        budget (``minimise(..., warm_start=solution)``)."""
+        return state
+
+
+class AbstractLocal(AbstractSolver):
+    """A local solver run from one start (Nelder–Mead, an optimistix minimiser through
+    [`OptxMinimiser`][jaxfric.optim.OptxMinimiser]): its state counts ``num_steps``, and a chain may size its
+    first step from where a population converged."""
+
+    def start_options(self, spread, lower, upper) -> dict | None:
+        """Options for a run started where a population of per-coordinate standard
+        deviation ``spread`` converged, passed to [`init_rounds`][jaxfric.optim.AbstractSolver.init_rounds] as
+        ``options=`` (``None``: none)."""
+        return None
+
+    def progress(self, state) -> tuple[Array, Array]:
+        """``(phase, step)`` for a progress display: phase 1 (a local stage), the step."""
+        return jnp.array(1, jnp.int32), state.num_steps
+
+
+class AbstractStaged(AbstractSolver):
+    """A solver of several stages run one after another (a chain: global, then local;
+    [`Capabilities.num_stages`][jaxfric.optim.Capabilities] of them). The loop runs stage ``s`` while
+    [`stage`][jaxfric.optim.AbstractStaged.stage] says the state is in it."""
+
+    @abc.abstractmethod
+    def stage(self, state) -> Array:
+        """The stage ``state`` is in (``0 .. num_stages − 1``)."""
+
+    @abc.abstractmethod
+    def progress(self, state) -> tuple[Array, Array]:
+        """``(phase, step)`` for a progress display (phase 0 global, 1 local)."""
+
+    def continued(self, state):
+        """A finished run of several stages is not continued (each stage has its own budget)."""
+        raise ValueError("a finished run of several stages cannot be continued")
+
+
+class AbstractStartDraws(AbstractSolver):
+    """A solver whose start draws its random numbers from the key alone: ``start_draws``
+    makes them by a program of their own, and [`jaxfric.minimise`][jaxfric.optim.minimise] passes them in
+    with the key (``Drawn``), so a new objective's program leaves them out (issue 47)."""
+
+    @abc.abstractmethod
+    def start_draws(self, lower, upper, key):
+        """What the start draws from ``key`` (a pure function of it and the shapes)."""
+
+
+# ------------------------------------------------------- the kinds, for the loop
+def stage_of(solver: AbstractSolver, state):
+    """The stage ``state`` is in: [`AbstractStaged.stage`][jaxfric.optim.AbstractStaged.stage], else 0."""
+    return solver.stage(state) if isinstance(solver, AbstractStaged) else 0
+
+
+def progress_of(solver: AbstractSolver, state) -> tuple[Array, Array]:
+    """``(phase, step)`` for a progress display (phase 0 a global stage, 1 a local one):
+    the solver kind's own ``progress``, zeros for a solver of none of those kinds."""
+    if isinstance(solver, (AbstractGenerational, AbstractLocal, AbstractStaged)):
+        return solver.progress(state)
+    return jnp.array(0, jnp.int32), jnp.array(0, jnp.int32)
+
+
+def continued(solver: AbstractSolver, state):
+    """``state`` of a finished run, ready to go on under ``solver``'s budget (a warm
+    start): the kind's own ``continued``, else ``state`` as it is."""
+    if isinstance(solver, (AbstractGenerational, AbstractStaged)):
+        return solver.continued(state)
+    return state

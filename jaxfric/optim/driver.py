@@ -29,6 +29,7 @@ from .. import _xla
 from . import checkpoint as ckpt
 from ._base import Drawn, Solution, check_positive_int
 from .chained import AbstractChain
+from .contract import AbstractStartDraws, continued
 from .loop import NO_STOP, _begin, _chunk, _finish, blank_carry
 from .rounds import compiled_start
 from .optx_adapter import OptxMinimiser, as_protocol
@@ -52,16 +53,16 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
     _check_output(flat, lower, args)
     check_budget(proto, lower.shape[0])
     x0 = None if y0 is None else check_start(y0, treedef, shapes, lower, upper,
-                                             proto.population_size())
+                                             proto.capabilities(lower.shape[0]).population_size)
     return proto, flat, lower, upper, x0
 
 
 # ---------------------------------------------------------------------- progress
-def _display(progress, proto):
-    """The host display for ``progress=`` (``None``: no display)."""
+def _display(progress, proto, n: int):
+    """The host display for ``progress=`` (``None``: no display) of a run on ``n`` parameters."""
     if progress is None or progress is False:
         return None
-    total, local_total = proto.progress_totals()
+    total, local_total = proto.capabilities(n).progress_totals
     if progress is True:
         return TqdmProgress(total, local_total)
     if callable(progress):
@@ -125,10 +126,10 @@ def _start_draws_many(proto, lower, upper, keys):
 
 def _drawn(proto, lower, upper, key, options, batched: bool = False):
     """``key`` as a ``Drawn`` key (a batch of them when ``batched``) where
-    ``proto`` has ``start_draws``: its start's random numbers made by a program of their
+    ``proto`` is an ``AbstractStartDraws``: its start's random numbers made by a program of their
     own, which does not depend on the objective, so a new objective's program leaves them
     out (issue 47); else ``key`` as it is."""
-    if getattr(proto, "start_draws", None) is None:
+    if not isinstance(proto, AbstractStartDraws):
         return key
     program = _xla.filter_jit(_start_draws_many if batched else _start_draws, options)
     return Drawn(key, program(proto, lower, upper, key))
@@ -244,7 +245,7 @@ def _run_many(proto, flat, lower, upper, args, keys, x0, carries, fresh, stop_at
 BATCHING = ("auto", "vmap", "map")
 
 
-def _batching(batching, proto, layout: Layout | None) -> str:
+def _batching(batching, proto, layout: Layout | None, n: int) -> str:
     """``"vmap"`` or ``"map"`` for [`minimise_many`][jaxfric.optim.minimise_many] (see its docstring)."""
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {BATCHING}, got {batching!r}")
@@ -259,7 +260,7 @@ def _batching(batching, proto, layout: Layout | None) -> str:
         # every branch; on one CPU running the keys in turn is faster (docs/solvers.md).
         # Swarms batch their evaluations well, so they keep vmap.
         one_cpu = layout is None and _platform(layout) == "cpu"
-        return "map" if one_cpu and not proto.batches_runs() else "vmap"
+        return "map" if one_cpu and not proto.capabilities(n).batches_runs else "vmap"
     return batching
 
 
@@ -287,7 +288,7 @@ def _warm_state(warm_start, proto, flat, lower, upper, args, key, x0):
             "type, population size, number of parameters or dtype); continue a run with the "
             "same kind of solver, only a larger budget"
         )
-    return proto.continued(state)
+    return continued(proto, state)
 
 
 def _resume(proto, flat, lower, upper, args, key, x0, warm, path: Path, every: int):
@@ -397,9 +398,10 @@ def minimise(
     def call(carry, fresh, stop_at):
         return program(proto, flat, lower, upper, args, drawn, x0, warm, carry, fresh, stop_at)
 
-    sink = _display(progress, proto)
+    sink = _display(progress, proto, lower.shape[0])
     with _closing(sink):
-        display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
+        display = None if sink is None else (sink, Chunks(
+            proto.capabilities(lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, key, x0, warm)
         finish = _finisher(proto, flat, lower, upper, args, options, batched=False)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display, resume))
@@ -447,7 +449,7 @@ def minimise_many(
     keys = check_key(keys, "keys", batch=True)
     layout = resolve_devices(devices)
     options = _xla.resolve(compiler_options, "solver", _platform(layout))
-    mode = _batching(batching, proto, layout)
+    mode = _batching(batching, proto, layout, lower.shape[0])
     keys, n = shard_keys(keys, layout)
     program = _xla.filter_jit(_run_many, options)
     drawn = _drawn(proto, lower, upper, keys, options, batched=True)
@@ -455,9 +457,10 @@ def minimise_many(
     def call(carries, fresh, stop_at):
         return program(proto, flat, lower, upper, args, drawn, x0, carries, fresh, stop_at, mode)
 
-    sink = _display(progress, proto)
+    sink = _display(progress, proto, lower.shape[0])
     with _closing(sink):
-        display = None if sink is None else (sink, Chunks(proto.progress_totals()[0]))
+        display = None if sink is None else (sink, Chunks(
+            proto.capabilities(lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, keys[0], x0, None, keys.shape[0])
         finish = _finisher(proto, flat, lower, upper, args, options, batched=True)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display))

@@ -85,6 +85,7 @@ constructing [`Evosax`][jaxfric.optim.Evosax] raises ``ImportError`` naming that
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import Any
@@ -97,7 +98,7 @@ import numpy as np
 from ._base import check_positive_int, check_range, count_dtype, uniform_flat
 from .chained import Chain
 from .nelder_mead import NelderMead
-from .contract import AbstractGenerational
+from .contract import AbstractGenerational, Capabilities
 from .rounds import Rounds
 
 INSTALL_HINT = 'pip install -e ".[evosax]"'
@@ -318,7 +319,7 @@ class Evosax(AbstractGenerational):
     """
 
     strategy: Any
-    # not named population_size: that is the solver contract's capability (a method)
+    # not named population_size: that is the capabilities record's field (see capabilities)
     pop_size: int | None
     num_generations: int
     std_init: float | None
@@ -367,11 +368,16 @@ class Evosax(AbstractGenerational):
             return self.pop_size
         return 4 + int(math.floor(3 * math.log(n))) if self.distribution_based else 25
 
-    def population_size(self) -> int | None:
-        """``P`` of a population-based strategy, whatever the dimension (a start ``y0``
-        may then hold up to ``P`` rows); ``None`` for a distribution-based one, which
-        takes one start (its first mean)."""
-        return None if self.distribution_based else self.population(1)
+    def capabilities(self, n: int) -> Capabilities:
+        """``population_size``: ``P`` of a population-based strategy (a start ``y0`` may
+        then hold up to ``P`` rows), ``None`` for a distribution-based one, which takes
+        one start (its first mean). ``batches_runs`` only without restarts: with them a
+        vmapped step runs every population size's ask and tell, so on one CPU
+        [`minimise_many`][jaxfric.optim.minimise_many] runs keys in turn."""
+        return dataclasses.replace(
+            super().capabilities(n),
+            population_size=None if self.distribution_based else self.population(1),
+            max_evaluations=self.evaluations(n), batches_runs=self.restarts == 0)
 
     def evaluations(self, n: int) -> int:
         """Exact objective evaluations of a run on ``n`` parameters."""
@@ -399,11 +405,6 @@ class Evosax(AbstractGenerational):
                     f"restarts need a distribution-based strategy (CMA_ES, Sep_CMA_ES, SNES, "
                     f"...); {self.strategy.__name__} keeps a population (use restarts=0)")
             _check_restartable(self.strategy, self.population(2), self.strategy_kwargs)
-
-    def batches_runs(self) -> bool:
-        """With restarts, a vmapped step runs every population size's ask and tell, so
-        on one CPU [`minimise_many`][jaxfric.optim.minimise_many] runs keys in turn."""
-        return self.restarts == 0
 
     def _es(self, lower):
         n = lower.shape[0]
@@ -613,9 +614,6 @@ class Evosax(AbstractGenerational):
 
     def best(self, state):
         return state.x_best, state.f_best
-
-    def max_evaluations(self, n: int) -> int:
-        return self.evaluations(n)
 
 
 def cmaes_nm(*, population_size: int | None = None, num_generations: int = 1000,

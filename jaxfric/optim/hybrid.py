@@ -13,15 +13,15 @@ arrive as one flat set of keywords (the CLI, ``identify``'s budgets), as
 [`cmaes_nm`][jaxfric.optim.cmaes_nm] is for CMA-ES → Nelder–Mead. It returns a
 [`MAPSONMDS`][jaxfric.optim.MAPSONMDS], never another type, so neither is deprecated.
 
-Like every chain it can be driven from Python by ``ask``/``tell`` (an objective outside
-JAX, see [`jaxfric.optim.rounds`][jaxfric.optim.rounds])::
+Like every chain it can be driven from Python by ask/tell (an objective outside JAX,
+see [`jaxfric.optim.asktell`][jaxfric.optim.asktell])::
 
     solver = mapso_nmds(num_generations=100)
-    st = solver.ask_init(lower, upper, jax.random.key(0))
-    while not solver.ask_done(st):
-        X, st = solver.ask(st)            # the lattice, self-learning, then simplex points
-        st = solver.tell(st, X, simulate_rows(X))
-    best = solver.ask_result(st)          # = minimise(...) for the same key
+    st = jf.ask_init(solver, lower, upper, jax.random.key(0))
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)                # the lattice, self-learning, then simplex points
+        st = jf.tell(st, X, simulate_rows(X))
+    best = jf.ask_result(st)              # = minimise(...) for the same key
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 two-stage case)::
 
     state = start()                            # init_rounds, evaluated in the program
-    for stage in range(num_stages()):          # a chain: global, then local
+    for stage in range(num_stages):            # a chain: global, then local
         while not finished(state) and stage(state) == stage:
             state = step(state, stage)         # step_rounds, evaluated in the program
             record history
@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._base import NO_STEP_CAP, History, Solution
+from .contract import progress_of, stage_of
 from .rounds import compiled_start, compiled_step
 
 
@@ -58,7 +59,7 @@ def _strong(tree):
 
 def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
     state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
-    cap = proto.steps_for(lower.shape[0])
+    cap = proto.capabilities(lower.shape[0]).max_steps
     size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
     _, f = proto.best(state)
     history = History.first(size, proto.num_evals(state), jnp.asarray(f).astype(lower.dtype))
@@ -83,10 +84,10 @@ def blank_carry(like, impl):
 
 def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at) -> Carry:
     """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
-    for s in range(proto.num_stages()):
+    for s in range(proto.capabilities(lower.shape[0]).num_stages):
         def cond(c, s=s):
             done, _ = proto.finished(c.state)
-            return ~done & (proto.stage(c.state) == s) & (c.steps < stop_at)
+            return ~done & (stage_of(proto, c.state) == s) & (c.steps < stop_at)
 
         def body(c, s=s):
             state = compiled_step(proto, flat, lower, upper, args, c.state, s)
@@ -111,7 +112,7 @@ NO_STOP = 2**31 - 1
 
 class Report(eqx.Module):
     """Where a chunked run stands after a chunk, for the host: the progress phase and
-    step ([`AbstractSolver.progress`][jaxfric.optim.AbstractSolver.progress]), the
+    step (``contract.progress_of``), the
     evaluations, the best value, and whether the run has finished."""
 
     phase: Any
@@ -122,7 +123,7 @@ class Report(eqx.Module):
 
 
 def _report(proto, carry: Carry) -> Report:
-    phase, step = proto.progress(carry.state)
+    phase, step = progress_of(proto, carry.state)
     done, _ = proto.finished(carry.state)
     return Report(phase, step, proto.num_evals(carry.state), proto.best(carry.state)[1], done)
 

@@ -53,7 +53,7 @@ from ._base import (
     uniform_flat,
     uniform_in_box,
 )
-from .contract import AbstractSolver
+from .contract import AbstractLocal, AbstractStartDraws, Capabilities
 from .rounds import Batch, drive, relay, skipped
 
 _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
@@ -110,7 +110,7 @@ def _no_aux(rounds):
     return relay(rounds, answer=lambda f: (f, None))
 
 
-class NelderMead(optx.AbstractMinimiser, AbstractSolver):
+class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
     """Nelder–Mead simplex minimiser (``docs/algorithms.md §5``), usable two ways:
 
     * ``jaxfric.minimise(fn, NelderMead(), bounds, key=key, y0=y0)`` (a jaxfric solver:
@@ -192,7 +192,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         of the box."""
         return {"initial_step": jnp.maximum(spread, 1e-3 * self.initial_step * (upper - lower))}
 
-    def steps_for(self, n: int) -> int:
+    def _step_cap(self, n: int) -> int:
+        """Most steps of a run on ``n`` parameters (``max_steps``, or 200·n per (re)start)."""
         if self.max_steps is not None:
             return self.max_steps
         return 200 * n * (1 + self.restarts)
@@ -437,7 +438,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         """optimistix's rule: [`terminate`][jaxfric.optim.NelderMead.terminate]'s test, or the step cap reached
         (``nonlinear_max_steps_reached``)."""
         done, result = self.terminate(None, None, None, None, state, None)
-        capped = state.num_steps >= self.steps_for(state.simplex.shape[-1])
+        capped = state.num_steps >= self._step_cap(state.simplex.shape[-1])
         stop = done | (result != RESULTS.successful) | capped
         result = RESULTS.where((result == RESULTS.successful) & ~done,
                                RESULTS.nonlinear_max_steps_reached, result)
@@ -463,17 +464,10 @@ class NelderMead(optx.AbstractMinimiser, AbstractSolver):
         return Solution(value=x, f=f, result=result, stats=stats,
                         history=History.empty(1, f.dtype), state=state)
 
-    def max_evaluations(self, n: int) -> int:
-        worst = (n + 1) + self.steps_for(n) * (n + 2)  # a shrink costs n + 2
+    def capabilities(self, n: int) -> Capabilities:
+        worst = (n + 1) + self._step_cap(n) * (n + 2)  # a shrink costs n + 2
         if self.max_evals is not None:
             worst = min(worst, self.max_evals + n + 2)
-        return worst
-
-    def batches_runs(self) -> bool:
-        return False  # its trial points and shrinks are conditional batches
-
-    def progress(self, state):
-        return jnp.array(1, jnp.int32), state.num_steps
-
-    def progress_totals(self):
-        return None, self.max_steps
+        # batches_runs: its trial points and shrinks are conditional batches
+        return Capabilities(max_steps=self._step_cap(n), max_evaluations=worst,
+                            batches_runs=False, progress_totals=(None, self.max_steps))

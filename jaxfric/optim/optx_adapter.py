@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ._base import RESULTS, History, Solution, count_dtype, safe_value, uniform_in_box
-from .contract import AbstractSolver
+from .contract import AbstractLocal, AbstractSolver, Capabilities
 
 _TAGS = frozenset()
 
@@ -48,7 +48,7 @@ def _all_finite(y):
     return jnp.all(jnp.isfinite(y))
 
 
-class OptxMinimiser(AbstractSolver):
+class OptxMinimiser(AbstractLocal):
     """Adapter: ``minimiser`` (a foreign ``optx.AbstractMinimiser``) as a jaxfric solver.
 
     Args:
@@ -65,28 +65,27 @@ class OptxMinimiser(AbstractSolver):
                 f"{type(self.minimiser).__name__} is a jaxfric solver: pass it to minimise "
                 "or chain directly, not through OptxMinimiser")
 
-    def steps_for(self, n: int) -> int:
+    def _step_cap(self) -> int:
         return self.steps if self.steps is not None else DEFAULT_STEPS
 
-    def progress_totals(self):
-        return None, self.steps
-
-    def batches_runs(self) -> bool:
-        return False  # its steps branch on the iterate; vmap would compute every branch
+    def capabilities(self, n: int) -> Capabilities:
+        # batches_runs: its steps branch on the iterate; vmap would compute every branch
+        return Capabilities(max_steps=self._step_cap(), batches_runs=False,
+                            progress_totals=(None, self.steps),
+                            ask_tell_refused=self._refusal())
 
     def _options(self, lower, upper, extra=None):
         return {"lower": lower, "upper": upper, **(extra or {})}
 
-    def check_ask_tell(self):
-        self._objective(None)
-
-    def _objective(self, objective):
-        if objective is None:
-            raise ValueError(
-                f"ask/tell cannot drive {type(self.minimiser).__name__}: it evaluates its "
+    def _refusal(self) -> str:
+        return (f"ask/tell cannot drive {type(self.minimiser).__name__}: it evaluates its "
                 "objective itself (one point at a time, or with gradients); ask/tell drives "
                 "solvers that evaluate in batches: PSO, MAPSO, Evosax, NelderMead and chains "
                 "of them")
+
+    def _objective(self, objective):
+        if objective is None:
+            raise ValueError(self._refusal())
         return objective
 
     def _terminate(self, y, opts, inner, objective):
@@ -125,7 +124,7 @@ class OptxMinimiser(AbstractSolver):
         yield  # a generator with no batches: the minimiser evaluates by itself
 
     def finished(self, state):
-        capped = state.num_steps >= self.steps_for(state.y.shape[-1])
+        capped = state.num_steps >= self._step_cap()
         stop = state.done | (state.result != RESULTS.successful) | capped
         result = RESULTS.where(
             (state.result == RESULTS.successful) & ~state.done,
@@ -146,9 +145,6 @@ class OptxMinimiser(AbstractSolver):
 
     def num_evals(self, state):
         return state.extra_evals
-
-    def progress(self, state):
-        return jnp.array(1, jnp.int32), state.num_steps
 
 
 def as_protocol(solver) -> AbstractSolver:

@@ -14,7 +14,7 @@ is evaluated or counted and the generator receives ``+inf`` values. An inner loo
   objective on the whole batch (a conditional one under ``lax.cond``), a [`Scan`][jaxfric.optim.Scan]
   one ``lax.scan``;
 * [`compiled_start`][jaxfric.optim.rounds.compiled_start] / [`compiled_step`][jaxfric.optim.rounds.compiled_step] are a solver's start and step so run;
-* [`ask`][jaxfric.optim.AbstractSolver.ask] / ``tell`` drive the same compiled
+* [`ask`][jaxfric.optim.asktell.ask] / ``tell`` drive the same compiled
   run from Python, one needed batch per call ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]).
 """
 

@@ -5,7 +5,7 @@ A swarm writes one generation as evaluation *rounds* ([`jaxfric.optim.rounds`][j
 Python generator that yields each batch of candidates it needs evaluated and receives
 their fitness back (``f = yield X``). The compiled run feeds it the objective,
 evaluated on the whole batch at once;
-[`ask`][jaxfric.optim.AbstractSolver.ask] / ``tell`` feed it values
+[`ask`][jaxfric.optim.asktell.ask] / ``tell`` feed it values
 computed anywhere (a simulator outside JAX), one batch per call. The same code therefore
 defines both, and a run driven by ``ask``/``tell`` visits the points
 [`jaxfric.minimise`][jaxfric.optim.minimise] visits for the same key.
@@ -13,6 +13,7 @@ defines both, and a run driven by ``ask``/``tell`` visits the points
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import equinox as eqx
@@ -27,7 +28,7 @@ from ._base import (
     split_drawn,
     uniform_flat_each,
 )
-from .contract import AbstractGenerational
+from .contract import AbstractGenerational, AbstractStartDraws, Capabilities
 from .rounds import Rounds
 
 
@@ -105,7 +106,7 @@ def swarm_from(x, v, f, key) -> SwarmState:
                       num_evals=jnp.array(x.shape[0], count_dtype()), key=key)
 
 
-class AbstractSwarm(AbstractGenerational):
+class AbstractSwarm(AbstractGenerational, AbstractStartDraws):
     """A population solver: a fixed number of generations, optionally stopped early.
 
     Subclasses give ``num_agents``, ``vmax``, ``draw`` (generation ``i``'s random
@@ -135,10 +136,13 @@ class AbstractSwarm(AbstractGenerational):
     def num_agents(self) -> int:
         raise NotImplementedError
 
-    def population_size(self) -> int:
-        return self.num_agents
+    def capabilities(self, n: int) -> Capabilities:
+        return dataclasses.replace(super().capabilities(n), population_size=self.num_agents,
+                                   max_evaluations=self.evaluations())
 
     def personal_bests(self, state: SwarmState):
+        """``(X, f)``: each agent's best point and value (a chain starts its local stage
+        from the best of them)."""
         return state.pbest, state.pbest_f
 
     def vmax(self, lower, upper):
@@ -215,9 +219,6 @@ class AbstractSwarm(AbstractGenerational):
 
     def best(self, state):
         return state.gbest, state.gbest_f
-
-    def max_evaluations(self, n: int) -> int:
-        return self.evaluations()
 
     def continued(self, state: SwarmState) -> SwarmState:
         """A finished run's state, ready to run on under this solver's budget (warm
