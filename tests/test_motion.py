@@ -268,7 +268,7 @@ def test_cli_identify_motion(tmp_path):
     np.savetxt(path, np.c_[np.arange(600) * 1e-3, u / 10, x], delimiter=",", header="t,volt,x", comments="")
     rc = main(["identify-motion", str(path), "--force-col", "volt", "--force-gain", "10", "--x-col", "x",
                "--time-col", "t", "--mass", "2.5", "--model", "coulomb", "--quick", "--quiet",
-               "--no-cache", "--out", str(tmp_path / "r")])
+               "--window", "0.2", "--no-cache", "--out", str(tmp_path / "r")])  # 0.6 s: 3 windows
     assert rc == 0
     assert (tmp_path / "r" / "models" / "coulomb.npz").exists()
     assert "valid RMSE [mm]" in (tmp_path / "r" / "motion.md").read_text()
@@ -295,7 +295,7 @@ def test_cli_identify_motion_resamples_irregular_stamps_and_takes_a_position_uni
     capsys.readouterr()
     rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x_mm", "--x-unit", "mm",
                "--time-col", "t", "--mass", "2.5", "--model", "coulomb", "--quick", "--quiet",
-               "--no-cache", "--out", str(tmp_path / "r")])
+               "--window", "0.2", "--no-cache", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
     assert rc == 0, err
     assert "jaxfric: warning: time stamps are irregular" in err and "resampled linearly onto a uniform grid" in err

@@ -279,7 +279,7 @@ def test_cli_ranks_models_by_validation_and_takes_a_budget(tmp_path, capsys):
                comments="")
     rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet",
-               "--x64", "--max-evals", "40", "--no-cache", "--out", str(tmp_path / "r")])
+               "--x64", "--max-evals", "40", "--window", "0.25", "--no-cache", "--out", str(tmp_path / "r")])
     assert rc == 0, capsys.readouterr().err
     text = (tmp_path / "r" / "motion.md").read_text()
     assert "| rank | model | parameters |" in text

@@ -193,13 +193,79 @@ def test_cli_prints_the_ranking_with_the_baseline_and_writes_results_json(tmp_pa
     out = tmp_path / "r"
     rc = main(["identify-motion", str(_csv(tmp_path)), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb", "--quick", "--quiet", "--no-cache",
-               "--out", str(out)])
+               "--window", "0.25", "--out", str(out)])  # 800 samples at 1024 Hz: 3 windows of 256
     printed = capsys.readouterr().out
     assert rc == 0
     assert "| rank | model |" in printed and BASELINE_LABEL in printed
     results = json.loads((out / "results.json").read_text())
     assert [r["model"] for r in results["ranking"]] == ["coulomb", BASELINE_LABEL]
     assert results["float64"] is True and "held-back" in results["split"]
+
+
+def _loop_short_score(fit, rec, window, init=20):
+    """The short judge written as its definition: one ``fit.score`` per consecutive window
+    of the whole record, the RMSE pooled over the (equal) windows."""
+    errs = [fit.score(rec.window(a, a + window), init)["rmse_mm"]
+            for a in range(0, rec.n_samples - window + 1, window)]
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+@pytest.mark.slow
+def test_cli_ranks_by_the_short_judge_by_default_and_by_the_tail_on_request(tmp_path, capsys):
+    """identify-motion's default judge is the library's, ``short``: 2 s windows of the whole
+    record (2 048 samples at 1 024 Hz), the fits and the baseline ranked by the pooled RMSE
+    of their free runs, each from its window's first 20 samples; results.json holds the
+    judge, its scores and the baseline's row; ``--judge tail`` ranks by the held-back
+    block; a record shorter than the window is refused before any fit."""
+    from jaxfric.cli import main
+    from jaxfric.motion import load_motion_fit
+    from jaxfric.motion._compare import baseline_fit
+
+    n = 4200  # 4.1 s: two whole windows of 2 s, a rest of 104 samples not scored
+    path = _csv(tmp_path, n)
+    rec = _record(n, dt=2.0**-10)
+    cmd = ["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t", "--mass-range",
+           "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet", "--no-cache"]
+    assert main([*cmd, "--out", str(tmp_path / "short")]) == 0
+    printed = capsys.readouterr().out
+    results = json.loads((tmp_path / "short" / "results.json").read_text())
+    judge = results["judge"]
+    assert judge["name"] == "short" and judge["window_samples"] == 2048 and judge["windows"] == 2
+    assert judge["window_s"] == pytest.approx(2.0) and judge["init_window"] == 20
+    rows = results["ranking"]
+    assert [r["model"] for r in rows[:2]] == sorted(judge["scores"], key=judge["scores"].get)
+    assert rows[-1]["model"] == BASELINE_LABEL and rows[-1]["rank"] is None
+    with jax.enable_x64(True):
+        for r in rows[:2]:
+            fit = load_motion_fit(tmp_path / "short" / "models" / f"{r['model']}.npz")
+            ref = _loop_short_score(fit, rec, 2048)
+            assert judge["scores"][r["model"]] == pytest.approx(ref, rel=1e-9)
+            assert r["judge_rmse_mm"] == pytest.approx(ref, rel=1e-9)
+            assert r["beats_baseline"] == (ref < judge["baseline"])
+        base = _loop_short_score(baseline_fit(fit), rec, 2048)
+    assert judge["baseline"] == pytest.approx(base, rel=1e-9)
+    assert rows[-1]["judge_rmse_mm"] == pytest.approx(base, rel=1e-9)
+    md = (tmp_path / "short" / "motion.md").read_text()
+    assert "short RMSE [mm]" in printed and "short RMSE [mm]" in md and "`--judge short`" in md
+
+    assert main([*cmd, "--judge", "tail", "--out", str(tmp_path / "tail")]) == 0
+    results = json.loads((tmp_path / "tail" / "results.json").read_text())
+    rows = results["ranking"]
+    assert results["judge"]["name"] == "tail"
+    valid = [r["valid_rmse_mm"] for r in rows[:2]]
+    assert valid == sorted(valid) and [r["judge_rmse_mm"] for r in rows[:2]] == valid
+    assert results["judge"]["scores"] == {r["model"]: r["valid_rmse_mm"] for r in rows[:2]}
+    assert results["judge"]["baseline"] == rows[-1]["valid_rmse_mm"] == rows[-1]["judge_rmse_mm"]
+    md = (tmp_path / "tail" / "motion.md").read_text()
+    assert "short RMSE" not in md and "`--judge tail`" in md
+
+    capsys.readouterr()
+    short = _csv(tmp_path, 800)  # 0.78 s
+    assert main([cmd[0], str(short), *cmd[2:], "--out", str(tmp_path / "none")]) != 0
+    assert "pass a shorter --window S or --judge tail" in capsys.readouterr().err
+    assert main([cmd[0], str(short), *cmd[2:], "--window", "0.01", "--out", str(tmp_path / "none")]) != 0
+    assert "window must be an integer >= init_window + 2" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
 
 
 QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
@@ -345,5 +411,73 @@ def test_every_key_recovers_the_drive_and_reports_each_starts_cost():
 def test_the_screen_settings_are_checked():
     for bad in (MotionSearch(screen=-1), MotionSearch(screen_size=1), MotionSearch(screen_steps=0),
                 MotionSearch(screen_spread=0.0)):
+        with pytest.raises(ValueError, match="MotionSearch"):
+            bad.check()
+
+
+class _Swarm:
+    """A stand-in swarm: its personal bests and its final positions."""
+
+    def __init__(self, pbest, x):
+        self.pbest, self.x = pbest, x
+
+    def personal_bests(self, state):
+        return self.pbest, None
+
+
+def test_the_free_run_starts_are_the_swarms_points_of_lowest_whole_cost():
+    """free_run_ranked ranks the swarm's personal bests and final positions by the cost
+    itself (here the rough bowl, recomputed in NumPy) and skips points already taken."""
+    from types import SimpleNamespace
+
+    from jaxfric.motion import MotionBudget
+    from jaxfric.motion._pipeline import _Clock, free_run_ranked
+
+    data = (jnp.array([1.0, -0.5]), 0.3, 15.0)
+    rng = np.random.default_rng(3)
+    pbest, x = rng.uniform(-2, 2, (6, 2)), rng.uniform(-2, 2, (6, 2))
+    pool = np.vstack([pbest, x])
+    ref = np.sum((pool - [1.0, -0.5]) ** 2 + 0.09 * np.sin(15.0 * pool) ** 2, axis=1)
+    order = np.argsort(ref)
+    swarm = _Swarm(pbest, x)
+    sol = SimpleNamespace(state=swarm)
+    lo, hi = np.array([-4.0, -4.0]), np.array([4.0, 4.0])
+    with jax.enable_x64(True):
+        stages, clock = [], _Clock(MotionBudget())
+        got = free_run_ranked(MotionSearch(free_run_starts=3), clock, swarm, sol, _rough, data, [], lo, hi,
+                              jnp.float64, stages)
+        np.testing.assert_array_equal(np.array(got), pool[order[:3]])
+        assert stages[0]["stage"] == "rank" and stages[0]["J"] == pytest.approx(ref[order[0]], rel=1e-12)
+        assert clock.evals == 12
+        # the lowest point is already a start: the next three come instead
+        got = free_run_ranked(MotionSearch(free_run_starts=3), _Clock(MotionBudget()), swarm, sol, _rough, data,
+                              [pool[order[0]] + 1e-6], lo, hi, jnp.float64, [])
+        np.testing.assert_array_equal(np.array(got), pool[order[1:4]])
+
+
+def test_the_screen_cycle_returns_to_the_first_spread():
+    """At the minimum nothing lower is found: the spread grows 4x a round, and with
+    screen_cycle=3 it returns to screen_spread after three rounds."""
+    from jaxfric.motion import MotionBudget
+    from jaxfric.motion._pipeline import _Clock, screen_free_run
+
+    def bowl(y, c):
+        return jnp.concatenate([y - c, jnp.ones(1, y.dtype)])  # minimum J = 1 at y = c
+
+    c = jnp.array([0.3, -0.2])
+    lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    with jax.enable_x64(True):
+        for cycle, want in ((0, [1, 4, 16, 64, 256, 1024]), (3, [1, 4, 16, 1, 4, 16])):
+            stages = []
+            y, f = screen_free_run(MotionSearch(screen=6, screen_size=8, screen_steps=5, screen_cycle=cycle),
+                                   _Clock(MotionBudget()), bowl, np.asarray(c), 1.0, lo, hi, c,
+                                   jax.random.key(0), jnp.float64, stages)
+            assert f == 1.0
+            np.testing.assert_allclose([s["spread"] for s in stages], 0.1 * np.array(want), rtol=1e-12)
+
+
+def test_the_free_run_settings_are_checked():
+    for bad in (MotionSearch(free_run_starts=-1), MotionSearch(free_run_starts=True), MotionSearch(screen_cycle=-1),
+                MotionSearch(screen_cycle=1.5)):
         with pytest.raises(ValueError, match="MotionSearch"):
             bad.check()

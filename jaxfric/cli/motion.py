@@ -2,11 +2,18 @@
 
 Reads a CSV with a force column (or a drive voltage and ``--force-gain``) and a position
 column, identifies each ``--model`` inside the mechanics with
-[`jaxfric.identify_motion`][jaxfric.motion.identify_motion], and writes a report folder: ``motion.md`` (position
-RMSE [mm] and FIT %, free run and k-step, per model, ranked by the held-back block's
-free-run RMSE: [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s ``judge="tail"``, not its default), ``models/<model>.npz`` (load
-with [`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``. Progress bars
-are shown unless ``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
+[`jaxfric.identify_motion`][jaxfric.motion.identify_motion] (trained on the leading
+``--train-fraction``), ranks the fits and the least-squares baseline by a judge, prints the
+ranking and writes a report folder: ``motion.md`` (position RMSE [mm] and FIT %, free run
+and k-step, per model, the judge's score), ``results.json`` (the ranking's rows, the judge
+and its scores), ``models/<model>.npz`` (load with
+[`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``.
+
+``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s: ``short`` (the default, as the
+library's) free-runs every ``--window`` seconds of the whole record (2 s by default) from
+its own first 20 samples and pools the RMSE (`jaxfric.motion._compare.short_runs_score`);
+``tail`` ranks by the held-back block's free-run RMSE. Progress bars are shown unless
+``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
       --mass-range 50,200 --offset --model coulomb,stribeck,lugre,gms
   jaxfric identify-motion rig.csv --force-col force --x-col x --time-col t --mass 120 --quick
+  jaxfric identify-motion rig.csv --force-col force --x-col x --dt 0.01 --mass 120 --judge tail
 """
 
 
@@ -68,6 +76,12 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--neurons", type=positive_int, default=10, help="hidden neurons of an Elman network")
     f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
                    help="leading fraction of the record used for estimation; the rest validates")
+    f.add_argument("--judge", choices=("short", "tail"), default="short",
+                   help="how the fits are ranked: 'short' (compare_motion's default) pools the free-run "
+                        "RMSE of every --window seconds of the whole record, each run from its own first "
+                        "20 samples; 'tail' the held-back block's free-run RMSE")
+    f.add_argument("--window", type=positive_float, default=None, metavar="S",
+                   help="seconds per window of the short judge (default 2; the record must hold one)")
     f.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
     f.add_argument("--max-time", type=positive_float, default=None, metavar="S",
                    help="budget per model: wall seconds; the search then stops with the best so far")
@@ -111,6 +125,42 @@ def _data(args):
     return data
 
 
+def _judge_window(args, data):
+    """Samples per window of the short judge (``None`` for ``--judge tail``); a UserError
+    when the record holds no whole window."""
+    if args.judge != "short":
+        return None
+    from jaxfric.motion._compare import SHORT_WINDOW_S, short_window
+
+    seconds = SHORT_WINDOW_S if args.window is None else args.window
+    try:
+        window = short_window(data.dt, None if args.window is None else round(seconds / data.dt))
+    except ValueError as e:
+        raise UserError(f"--window {seconds:g} s: {e} (at the record's {data.dt:g} s per sample)") from None
+    if data.n_samples < window:
+        raise UserError(f"the short judge's window of {seconds:g} s ({window} samples) is longer than the "
+                        f"record ({data.n_samples} samples, {data.n_samples * data.dt:.4g} s): pass a shorter "
+                        "--window S or --judge tail")
+    return window
+
+
+def _judge(args, fits, data, window, say):
+    """The short judge's scores of the fits and of the least-squares baseline over the
+    whole record (``None`` for ``--judge tail``): ``{"name", "window_samples", "window_s",
+    "init_window", "windows", "scores": name -> mm, "baseline": mm}``."""
+    if window is None:
+        return None
+    from jaxfric.motion._api import DEFAULT_INIT_WINDOW
+    from jaxfric.motion._compare import baseline_fit, short_runs_score
+
+    say(f"judging by short free runs: {data.n_samples // window} windows of {window} samples")
+    scores = {name: short_runs_score(fit, [data], window) for name, fit in fits.items()}
+    base = short_runs_score(baseline_fit(next(iter(fits.values()))), [data], window)
+    return {"name": "short", "window_samples": window, "window_s": window * data.dt,
+            "init_window": DEFAULT_INIT_WINDOW, "windows": data.n_samples // window, "scores": scores,
+            "baseline": base}
+
+
 def cmd_identify_motion(args, argv) -> int:
     """Identify each model inside the mechanics and write the report folder."""
     import jax.numpy as jnp
@@ -124,6 +174,7 @@ def cmd_identify_motion(args, argv) -> int:
 
     say = _say(args)
     data = _data(args)
+    window = _judge_window(args, data)  # a record too short for the judge fails before any fit
     out = _prepare_out(args.out)
     (out / "models").mkdir(exist_ok=True)
     mass = args.mass if args.mass is not None else args.mass_range
@@ -156,9 +207,13 @@ def cmd_identify_motion(args, argv) -> int:
         if fit.settings["motion"].get("stopped"):
             say(f"{name}: the search stopped at its budget ({fit.settings['motion']['stopped']})")
         print(fit.summary())
+    judge = _judge(args, fits, data, window, say)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OverfitWarning)
-        ranked = rank_fits(fits)
+        if judge is None:
+            ranked = rank_fits(fits)
+        else:
+            ranked = rank_fits(fits, scores=judge["scores"], judge="short", baseline_score=judge["baseline"])
     for w in caught:  # said even under --quiet: it changes which model to use
         print(f"jaxfric: warning: {w.message}", file=sys.stderr, flush=True)
     table = ranked.table()
@@ -168,17 +223,28 @@ def cmd_identify_motion(args, argv) -> int:
              + ", ".join(f"{name} {fits[name].metrics['valid_kstep']['rmse_mm']:.4g}" for name in ranked.ranking),
              "", "Wall time per model [s]: "
              + ", ".join(f"{name} {fits[name].timings['total_s']:.1f}" for name in ranked.ranking)]
+    held = f"the last {100 * (1 - args.train_fraction):.0f} % of the record"
+    if judge is None:
+        ranked_by = (f"Ranked by the held-back block's free-run RMSE (`--judge tail`: {held}, simulated "
+                     "from the state at its start). The held-back block shares the training record's "
+                     "excitation: it ranks models, it does not measure how they predict new motion")
+    else:
+        ranked_by = (f"Ranked by many short free runs (`--judge short`, the default): the whole record cut "
+                     f"into {judge['windows']} windows of {judge['window_s']:.4g} s ({window} samples), each "
+                     f"simulated from its own first {judge['init_window']} samples, the RMSE pooled (the "
+                     f"last column; the windows include the training part). The valid RMSE is the held-back "
+                     f"block's ({held}) free run. Both share the record's excitation: neither is new motion")
     md = ["# jaxfric identify-motion", "", f"Command: `jaxfric {' '.join(argv)}`", "",
-          "Ranked by the held-back block's free-run RMSE (the last "
-          f"{100 * (1 - args.train_fraction):.0f} % of the record, simulated from the state at its start). "
-          "The held-back block shares the training record's excitation: it ranks models, it does not "
-          "measure how they predict new motion (score a separate recording with "
+          f"{ranked_by} (score a separate recording with "
           "`jaxfric.load_motion_fit(path).score(record, init_window=20)`). The last row is the "
           "least-squares Coulomb + viscous + offset baseline on the same data and judge.", "",
           table, *kstep, "", "![free run](motion_free_run.png)", ""]
     print(table)
     results = {"command": ["jaxfric", *argv], "split": "held-back block (last "
                f"{100 * (1 - args.train_fraction):.0f} % of {args.file})", "ranking": ranked.rows(),
+               "judge": judge if judge is not None else {"name": "tail", "scores": {
+                   name: fits[name].metrics["valid"]["rmse_mm"] for name in ranked.ranking},
+                   "baseline": first.metrics["baseline"]["valid"]["rmse_mm"]},
                "float64": bool(args.x64)}
     KEPT.add(atomic_write_text(out / "results.json", json.dumps(jsonable(results), indent=2)))
     KEPT.add(atomic_write_text(out / "motion.md", "\n".join(md)))
