@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import inspect
 import json
 import os
@@ -39,6 +40,7 @@ import statistics
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import jax
@@ -196,22 +198,35 @@ def _numpy_sphere(X):
     return np.sum(np.asarray(X, np.float64) ** 2, axis=1)
 
 
+def _ask_tell_api(solver):
+    """ask/tell of the library measured: the functions beside ``minimise``
+    (``jf.ask_init(solver, ...)``), or a version's solver methods (before issue 46 item 3);
+    ``None`` where it has neither (a version whose NelderMead has no ask/tell)."""
+    if hasattr(jf, "ask_init"):
+        return types.SimpleNamespace(
+            ask_init=functools.partial(jf.ask_init, solver), ask=jf.ask, tell=jf.tell,
+            ask_done=jf.ask_done)
+    return solver if hasattr(solver, "ask_init") else None
+
+
 def ask_tell_ms(solver, n: int, seeds: int = 1) -> tuple[float, int]:
     """Milliseconds per ask of one ask/tell run told a NumPy sphere's values, after a
     first run has compiled the program; and the asks of a run. ``seeds`` > 1: one run of
     that many keys (``ask_init(..., keys=)``), each ask carrying every seed's batch."""
     lo, hi = np.full(n, -2.0, np.float32), np.full(n, 2.0, np.float32)
 
+    api = _ask_tell_api(solver)
+
     def drive(seed):
         key = jax.random.key(seed)
-        st = (jf.ask_init(solver, lo, hi, key) if seeds == 1 else
-              jf.ask_init(solver, lo, hi, keys=jax.random.split(key, seeds)))
+        st = (api.ask_init(lo, hi, key) if seeds == 1 else
+              api.ask_init(lo, hi, keys=jax.random.split(key, seeds)))
         asks = 0
-        while not jf.ask_done(st):
-            X, st = jf.ask(st)
+        while not api.ask_done(st):
+            X, st = api.ask(st)
             X = np.asarray(X)
             f = _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1])
-            st = jf.tell(st, X, f)
+            st = api.tell(st, X, f)
             asks += 1
         return asks
 
@@ -266,8 +281,9 @@ def measure(label: str, functions, dim: int, seeds: int, dims=None) -> dict:
                 for i, name in enumerate(functions)]
     asks = []
     if label in ASK_TELL and seeds:  # in float32, JAX's default
-        if hasattr(solver, "ask_init"):  # a version whose NelderMead has no ask/tell
-            many = "keys" in inspect.signature(solver.ask_init).parameters
+        api = _ask_tell_api(solver)
+        if api is not None:  # None: a version whose NelderMead has no ask/tell
+            many = "keys" in inspect.signature(api.ask_init).parameters
             for k in (1, seeds) if many else (1,):  # keys=: several seeds in one run
                 ms, n_asks = ask_tell_ms(solver, dim, k)
                 asks.append({"route": "ask/tell", "seeds": k, "ms_per_host_call": ms,
