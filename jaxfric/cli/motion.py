@@ -11,7 +11,7 @@ and its scores), ``models/<model>.npz`` (load with
 
 ``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s: ``short`` (the default, as the
 library's) free-runs every ``--window`` seconds of the whole record (2 s by default) from
-its own first 20 samples and pools the RMSE (`jaxfric.motion._compare.short_runs_score`);
+its own first 20 samples and pools the RMSE ([`jaxfric.motion.short_runs_score`][jaxfric.motion.short_runs_score]);
 ``tail`` ranks by the held-back block's free-run RMSE. Progress bars are shown unless
 ``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
 """
@@ -130,7 +130,7 @@ def _judge_window(args, data):
     when the record holds no whole window."""
     if args.judge != "short":
         return None
-    from jaxfric.motion._compare import SHORT_WINDOW_S, short_window
+    from jaxfric.motion import SHORT_WINDOW_S, short_window
 
     seconds = SHORT_WINDOW_S if args.window is None else args.window
     try:
@@ -150,8 +150,7 @@ def _judge(args, fits, data, window, say):
     "init_window", "windows", "scores": name -> mm, "baseline": mm}``."""
     if window is None:
         return None
-    from jaxfric.motion._api import DEFAULT_INIT_WINDOW
-    from jaxfric.motion._compare import baseline_fit, short_runs_score
+    from jaxfric.motion import DEFAULT_INIT_WINDOW, baseline_fit, short_runs_score
 
     say(f"judging by short free runs: {data.n_samples // window} windows of {window} samples")
     scores = {name: short_runs_score(fit, [data], window) for name, fit in fits.items()}

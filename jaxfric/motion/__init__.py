@@ -9,7 +9,8 @@
   the default search ([`MotionSearch`][jaxfric.motion.MotionSearch]) with a budget (``max_evals``, ``max_time``);
 * [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
   with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one,
-  the least-squares baseline as a row, and a judge (the held-back tail, or blocked folds);
+  the least-squares baseline as a row, and a judge (by default many short free runs,
+  [`short_runs_score`][jaxfric.motion.short_runs_score] over windows of [`SHORT_WINDOW_S`][jaxfric.motion.SHORT_WINDOW_S]; or the held-back tail, or blocked folds);
 * [`MotionProblem`][jaxfric.motion.MotionProblem] — the motion problem of [`jaxfric.problem`][jaxfric.problem] (a motion fit's
   search coordinates, training records, residuals and score);
 * [`BaselineWarning`][jaxfric.motion.BaselineWarning] — a fit worse than the least-squares Coulomb + viscous + offset
@@ -19,7 +20,8 @@
 from .._warnings import BaselineWarning
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
                    identify_motion, load_motion_fit, motion_metrics)
-from ._compare import MotionComparison, OverfitWarning, compare_motion, rank_fits
+from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, compare_motion, rank_fits,
+                       short_runs_score, short_window)
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
@@ -34,6 +36,10 @@ __all__ = [
     "OverfitWarning",
     "compare_motion",
     "rank_fits",
+    "SHORT_WINDOW_S",
+    "baseline_fit",
+    "short_runs_score",
+    "short_window",
     "advance_motion",
     "motion_start",
     "default_search",
