@@ -29,7 +29,7 @@ from .. import _xla
 from . import checkpoint as ckpt
 from ._base import Drawn, Solution, check_positive_int
 from .chained import AbstractChain
-from .contract import AbstractStartDraws, continued
+from .contract import AbstractStartDraws, capabilities_of, continued
 from .loop import NO_STOP, _begin, _chunk, _finish, blank_carry
 from .rounds import compiled_start
 from .optx_adapter import OptxMinimiser, as_protocol
@@ -53,7 +53,7 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
     _check_output(flat, lower, args)
     check_budget(proto, lower.shape[0])
     x0 = None if y0 is None else check_start(y0, treedef, shapes, lower, upper,
-                                             proto.capabilities(lower.shape[0]).population_size)
+                                             capabilities_of(proto, lower.shape[0]).population_size)
     return proto, flat, lower, upper, x0
 
 
@@ -62,7 +62,7 @@ def _display(progress, proto, n: int):
     """The host display for ``progress=`` (``None``: no display) of a run on ``n`` parameters."""
     if progress is None or progress is False:
         return None
-    total, local_total = proto.capabilities(n).progress_totals
+    total, local_total = capabilities_of(proto, n).progress_totals
     if progress is True:
         return TqdmProgress(total, local_total)
     if callable(progress):
@@ -170,9 +170,34 @@ def _cached_blank(sig: _Signature, impl, batch):
     return _blank_of(eqx.filter_eval_shape(_begin, *sig.args), impl, batch)
 
 
+@functools.lru_cache(maxsize=None)
+def _stand_in(dtype: str):
+    """An objective returning a ``dtype`` zero: the shapes of a run's carry follow from
+    the objective's output type alone."""
+    def stand_in(y, args):
+        return jnp.zeros((), dtype)
+
+    return stand_in
+
+
+def _shapes_only(proto, flat, lower, args):
+    """``(flat, args)`` for `_blank`: the objective replaced by a stand-in of the same
+    output type (and no ``args``) where no part of ``proto`` keeps more of it than
+    its values (`objective_free`), so a new objective of the same shapes finds its blank
+    carry made (tracing the start again for it cost a fifth of a chain's first call,
+    issue 47)."""
+    if objective_free(proto, flat, args)[0] is flat:
+        return flat, args
+    out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+    if getattr(out, "weak_type", False):
+        return flat, args
+    return type(flat)(_stand_in(str(out.dtype)), flat.treedef, flat.shapes, flat.layout), None
+
+
 def _blank(proto, flat, lower, upper, args, key, x0, warm, batch: int | None = None):
     """The unused carry of a chunk that starts the run (`blank_carry`), with a leading
     axis of ``batch`` runs when given; ``key`` is one run's key."""
+    flat, args = _shapes_only(proto, flat, lower, args)
     begin_args = (proto, flat, lower, upper, args, key, x0, warm)
     impl = jax.random.key_impl(key)
     try:
@@ -260,7 +285,7 @@ def _batching(batching, proto, layout: Layout | None, n: int) -> str:
         # every branch; on one CPU running the keys in turn is faster (docs/solvers.md).
         # Swarms batch their evaluations well, so they keep vmap.
         one_cpu = layout is None and _platform(layout) == "cpu"
-        return "map" if one_cpu and not proto.capabilities(n).batches_runs else "vmap"
+        return "map" if one_cpu and not capabilities_of(proto, n).batches_runs else "vmap"
     return batching
 
 
@@ -401,7 +426,7 @@ def minimise(
     sink = _display(progress, proto, lower.shape[0])
     with _closing(sink):
         display = None if sink is None else (sink, Chunks(
-            proto.capabilities(lower.shape[0]).progress_totals[0]))
+            capabilities_of(proto, lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, key, x0, warm)
         finish = _finisher(proto, flat, lower, upper, args, options, batched=False)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display, resume))
@@ -460,7 +485,7 @@ def minimise_many(
     sink = _display(progress, proto, lower.shape[0])
     with _closing(sink):
         display = None if sink is None else (sink, Chunks(
-            proto.capabilities(lower.shape[0]).progress_totals[0]))
+            capabilities_of(proto, lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, keys[0], x0, None, keys.shape[0])
         finish = _finisher(proto, flat, lower, upper, args, options, batched=True)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display))

@@ -239,6 +239,10 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         return x_ok & f_ok
 
     def _restart_due(self, state):
+        if self.restarts == 0:
+            # never (static): the restart's convergence test and fresh simplex stay out
+            # of the compiled step (issue 47); restarts_left is 0 throughout such a run
+            return jnp.asarray(False)
         return (
             self._converged(state)
             & (state.restarts_left > 0)
@@ -338,9 +342,11 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         aux_new = _tree_select(take_2, aux_2, aux_r)
 
         # A shrink and a restart both replace every vertex but the best: one batch of n.
-        fresh = best[None] + jnp.diag(self._first_steps(best, lower, upper, options))
         shrunk = best[None] + sigma * (S[1:] - best[None])
-        pts = jnp.clip(jnp.where(restart, fresh, shrunk), lower[None], upper[None])
+        if self.restarts:
+            fresh = best[None] + jnp.diag(self._first_steps(best, lower, upper, options))
+            shrunk = jnp.where(restart, fresh, shrunk)
+        pts = jnp.clip(shrunk, lower[None], upper[None])
 
         f_p, aux_p = yield Batch(pts, shrink | restart, split=False)
 
@@ -465,9 +471,10 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
                         history=History.empty(1, f.dtype), state=state)
 
     def capabilities(self, n: int) -> Capabilities:
-        worst = (n + 1) + self._step_cap(n) * (n + 2)  # a shrink costs n + 2
+        cap = self._step_cap(n)
+        worst = (n + 1) + cap * (n + 2)  # a shrink costs n + 2
         if self.max_evals is not None:
             worst = min(worst, self.max_evals + n + 2)
         # batches_runs: its trial points and shrinks are conditional batches
-        return Capabilities(max_steps=self._step_cap(n), max_evaluations=worst,
+        return Capabilities(max_steps=cap, max_evaluations=worst,
                             batches_runs=False, progress_totals=(None, self.max_steps))
