@@ -57,6 +57,7 @@ import numpy as np
 
 from .. import _xla
 from ._base import History, Solution, result_from_f
+from .contract import capabilities_of
 from .loop import NO_STOP, _run
 from .optx_adapter import as_protocol
 from .problem import _Flat, check_key, check_start, prepare_bounds
@@ -282,7 +283,7 @@ def ask_init(solver, lower, upper, key=None, x0=None, *, keys=None) -> AskTellSt
     else:
         key = check_key(keys, "keys", batch=True)
         seeds = int(key.shape[0])
-    caps = solver.capabilities(int(lo.shape[0]))
+    caps = capabilities_of(solver, int(lo.shape[0]))
     if caps.ask_tell_refused is not None:
         raise ValueError(caps.ask_tell_refused)
     if x0 is not None:

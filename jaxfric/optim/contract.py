@@ -217,7 +217,25 @@ class AbstractStartDraws(AbstractSolver):
         """What the start draws from ``key`` (a pure function of it and the shapes)."""
 
 
-# ------------------------------------------------------- the kinds, for the loop
+# ------------------------------------------- for the driver, the loop and the chains
+#: The last record asked for: ``(solver, n, capabilities)``. A call of ``minimise`` asks
+#: two or three times for the same solver, and a script often calls it again and again
+#: with one solver object; a solver is immutable, so the record of the same object and
+#: ``n`` is the same record. (Every ``capabilities`` call creates equinox's bound-method
+#: modules, about 500 Python calls for a PSO and 1,500 for a chain.)
+_LAST: list = [None]
+
+
+def capabilities_of(solver: AbstractSolver, n: int) -> Capabilities:
+    """``solver.capabilities(n)``, remembered for the last solver object asked."""
+    last = _LAST[0]
+    if last is not None and last[0] is solver and last[1] == n:
+        return last[2]
+    caps = solver.capabilities(n)
+    _LAST[0] = (solver, n, caps)
+    return caps
+
+
 def stage_of(solver: AbstractSolver, state):
     """The stage ``state`` is in: [`AbstractStaged.stage`][jaxfric.optim.AbstractStaged.stage], else 0."""
     return solver.stage(state) if isinstance(solver, AbstractStaged) else 0

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._base import NO_STEP_CAP, History, Solution
-from .contract import progress_of, stage_of
+from .contract import capabilities_of, progress_of, stage_of
 from .rounds import compiled_start, compiled_step
 
 
@@ -59,7 +59,7 @@ def _strong(tree):
 
 def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
     state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
-    cap = proto.capabilities(lower.shape[0]).max_steps
+    cap = capabilities_of(proto, lower.shape[0]).max_steps
     size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
     _, f = proto.best(state)
     history = History.first(size, proto.num_evals(state), jnp.asarray(f).astype(lower.dtype))
@@ -84,7 +84,7 @@ def blank_carry(like, impl):
 
 def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at) -> Carry:
     """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
-    for s in range(proto.capabilities(lower.shape[0]).num_stages):
+    for s in range(capabilities_of(proto, lower.shape[0]).num_stages):
         def cond(c, s=s):
             done, _ = proto.finished(c.state)
             return ~done & (stage_of(proto, c.state) == s) & (c.steps < stop_at)

@@ -16,6 +16,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ._base import count_dtype
+from .contract import capabilities_of
 from .sharding import Layout
 
 
@@ -227,7 +228,7 @@ def _check_output(flat, lower, args):
 def check_budget(solver, n: int):
     """The evaluation counter must hold the budget of ``solver``'s run on ``n`` parameters."""
     top = int(jnp.iinfo(count_dtype()).max)
-    most = solver.capabilities(n).max_evaluations
+    most = capabilities_of(solver, n).max_evaluations
     if most is not None and most > top:
         raise ValueError(
             f"this run may take {most:,} objective evaluations, more than the {count_dtype()} "

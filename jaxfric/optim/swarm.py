@@ -13,7 +13,6 @@ defines both, and a run driven by ``ask``/``tell`` visits the points
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import equinox as eqx
@@ -137,8 +136,9 @@ class AbstractSwarm(AbstractGenerational, AbstractStartDraws):
         raise NotImplementedError
 
     def capabilities(self, n: int) -> Capabilities:
-        return dataclasses.replace(super().capabilities(n), population_size=self.num_agents,
-                                   max_evaluations=self.evaluations())
+        G = self.num_generations  # AbstractGenerational's, with the population's two
+        return Capabilities(population_size=self.num_agents, max_steps=G,
+                            max_evaluations=self.evaluations(), progress_totals=(G, None))
 
     def personal_bests(self, state: SwarmState):
         """``(X, f)``: each agent's best point and value (a chain starts its local stage
