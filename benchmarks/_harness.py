@@ -6,12 +6,16 @@
   :func:`add_output_arguments` adds ``--quick`` and ``--out`` with that rule.
 * :class:`Case` / :func:`run_round_robin` — time implementations side by side, in turn,
   medians over rounds, so load from other processes on a shared machine hits all alike.
-* :func:`write_csv` / :func:`markdown_table` — result rows as CSV and as a Markdown table.
+* :func:`write_csv` / :func:`read_csv` / :func:`markdown_table` / :func:`write_report` —
+  result rows as CSV (and back, to merge runs) and as a Markdown table; a report's ``.md``
+  and ``.csv`` in one call. :func:`command` is the command line a report's header quotes,
+  :func:`cell` / :func:`spread` format its cells, :func:`timed` measures wall and CPU time.
 * Start-up: importing this module puts the checkout's ``jaxfric`` first on ``sys.path``;
   :func:`x64` switches a script to float64 (the script's choice: the library never does);
   :func:`emps_file` / :func:`pneumatic` find the real data (``jaxfric.datasets``' folders,
-  no download) or return ``None`` so a script can say so and skip; :func:`machine` is
-  the one-line machine description every report starts with.
+  no download) or return ``None`` so a script can say so and skip (:func:`skipped`);
+  :func:`friction_record` is the record of ``--record rig|emps|oring``; :func:`machine`
+  is the one-line machine description every report starts with.
 
 A script starts with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under
 ``jaxfric bench`` the folder is not on ``sys.path``) and then imports from here.
@@ -24,6 +28,7 @@ import csv
 import io
 import os
 import platform
+import shlex
 import statistics
 import sys
 import time
@@ -96,6 +101,42 @@ def pneumatic(seal: str = "O-ring", bar: int = 3, folder=None):
     return None
 
 
+def friction_record(record: str, data_dir=None):
+    """``(FrictionData or None, description)`` of ``--record``: ``rig`` (the simulated rig,
+    key 0, 1600/400), ``emps`` (the EMPS estimation file at 1 kHz, the benchmark's recipe,
+    80 % training) or ``oring`` (the pneumatic O-ring at 3 bar, 80 % training); ``data_dir``
+    holds ``DATA_EMPS.mat`` or ``pneumatic_seal_friction/``. ``None`` with the reason when absent."""
+    import jax
+
+    from jaxfric import rig
+
+    if record == "rig":
+        return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
+    if record == "emps":
+        path = emps_file(data_dir and Path(data_dir) / "DATA_EMPS.mat")
+        if path is None:
+            return None, "no EMPS file (pass --data-dir or set JAXFRIC_DATA)"
+        return (rig.emps_friction_data(rig.load_emps(path)),
+                "EMPS estimation file at 1 kHz (DATA_EMPS.mat, the benchmark's recipe, IDIM-LS mass, 80 % training)")
+    rec = pneumatic("O-ring", 3, data_dir)
+    if rec is None:
+        return None, "no O-ring_3bar.csv (pass --data-dir or set JAXFRIC_DATA)"
+    return rec[1].with_split(0.8), "pneumatic O-ring_3bar.csv (jaxfric.datasets.pneumatic pipeline)"
+
+
+def skipped(name: str, why: str) -> int:
+    """Say on stderr that ``name`` wrote nothing and why (its data is absent); exit status 0."""
+    print(f"{name}: {why}; skipped, nothing written.", file=sys.stderr)
+    return 0
+
+
+def command(script: str, argv=None) -> str:
+    """``python benchmarks/<script> ARGS``, the command line a report quotes (``argv``, else
+    this process's arguments)."""
+    argv = sys.argv[1:] if argv is None else argv
+    return " ".join([f"python benchmarks/{script}", *map(shlex.quote, argv)])
+
+
 def results_dir(out=None, *, quick: bool = False) -> Path:
     """The output folder: ``out`` if given, else ``results/quick/`` or ``results/`` (created)."""
     path = Path(out) if out is not None else (QUICK_RESULTS if quick else RESULTS)
@@ -152,7 +193,50 @@ def run_round_robin(cases: list[Case], rounds: int) -> None:
             c.results.append(res)
 
 
+def timed(fn):
+    """``(fn(), wall seconds, process CPU seconds)``."""
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
 # --------------------------------------------------------------------------- tables
+def cell(spec: str = ".4g", none: str = "") -> Callable[[object], str]:
+    """A table-cell formatter: floats with ``format(v, spec)``, ``None`` as ``none``, else ``str``."""
+    return lambda v: none if v is None else (format(v, spec) if isinstance(v, float) else str(v))
+
+
+def spread(values, digits: int = 3) -> str:
+    """``mean (min–max)`` of the values that are not ``None``; the value alone for one, – for none."""
+    import numpy as np
+
+    a = np.asarray([v for v in values if v is not None], float)
+    if a.size == 0:
+        return "–"
+    return f"{a.mean():.{digits}f}" if a.size == 1 else f"{a.mean():.{digits}f} ({a.min():.{digits}f}–{a.max():.{digits}f})"
+
+
+def _value(text: str):
+    if text in ("True", "False"):
+        return text == "True"
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def read_csv(path: Path, *, parse: bool = True) -> list[dict]:
+    """The rows of a CSV :func:`write_csv` wrote (none if absent); ``parse``: numbers and
+    booleans as such, else every cell as text (a rewrite then keeps it to the character)."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        return [{k: _value(v) if parse else v for k, v in row.items()} for row in csv.DictReader(f)]
+
+
 def _columns(rows) -> list[str]:
     keys: list[str] = []
     for r in rows:
@@ -184,3 +268,15 @@ def markdown_table(rows, columns: list[str] | None = None, *, headers: list[str]
     for r in rows:
         lines.append("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |")
     return "\n".join(lines)
+
+
+def write_report(out: Path, stem: str, text, rows=None, *, float_format: str = ".6g", echo: bool = True) -> Path:
+    """``<out>/<stem>.md`` (``text``: a string or a list of lines) and, with ``rows``,
+    ``<stem>.csv`` (:func:`write_csv`); ``echo``: print the page. Returns the ``.md`` path."""
+    if rows is not None:
+        write_csv(rows, Path(out) / f"{stem}.csv", float_format=float_format)
+    text = "\n".join(text) if isinstance(text, (list, tuple)) else text
+    path = Path(out) / f"{stem}.md"
+    path.write_text(text.rstrip("\n") + "\n")
+    print(text if echo else f"wrote {path}")
+    return path
