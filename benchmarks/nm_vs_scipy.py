@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, machine, results_dir, write_csv  # noqa: E402
+from _harness import add_output_arguments, machine, results_dir, write_report  # noqa: E402
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -125,8 +125,6 @@ def main(argv=None):
                              "median_evals": med_ev, "median_f": float(np.median(f)), "worst_f": float(np.max(f))})
                 print(f"{name:10s} n={n:2d} {label:36s} solved {ok:2d}/{a.starts}  median evals {med_ev:8.0f}  "
                       f"median f {np.median(f):.1e}", flush=True)
-    out = results_dir(a.out, quick=a.quick)
-    write_csv(rows, out / "nm_vs_scipy.csv", float_format="")
     lines = [
         "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
         "",
@@ -140,8 +138,7 @@ def main(argv=None):
     for r in rows:
         lines.append(f"| {r['function']} | {r['n']} | {r['solver']} | {r['solved']}/{r['starts']} | "
                      f"{r['median_evals']:.0f} | {r['median_f']:.1e} | {r['worst_f']:.1e} |")
-    (out / "nm_vs_scipy.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'nm_vs_scipy.md'}")
+    write_report(results_dir(a.out, quick=a.quick), "nm_vs_scipy", lines, rows, float_format="", echo=False)
 
 
 if __name__ == "__main__":
