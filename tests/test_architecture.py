@@ -60,13 +60,14 @@ def test_imports_go_down():
 
 #: Inside ``jaxfric.optim`` a module imports only modules listed before it (module-level
 #: and function-level imports alike), so the package has no import circle: the pieces
-#: every solver shares, the checks of a problem, the evaluation rounds and the loop that
-#: compiles them, ask/tell over that loop, the solver contract, the solvers, the chains,
-#: then the one driver that runs them all.
-OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "problem", "rounds",
-               "loop", "asktell", "contract",
-               "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "chained", "hybrid",
-               "evosax_adapter", "driver", "__init__"]
+#: every solver shares, the evaluation rounds, the solver contract (which knows nothing of
+#: ask/tell), the checks of a problem, the loop that compiles the rounds, the solvers,
+#: ask/tell over the loop (a driver beside ``minimise``), the chains, then the one driver
+#: that runs them all.
+OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "rounds", "contract",
+               "problem", "loop",
+               "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "asktell", "chained",
+               "hybrid", "evosax_adapter", "driver", "__init__"]
 
 
 def _imported_modules(path: Path, package: str):
