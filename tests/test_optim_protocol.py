@@ -547,3 +547,15 @@ def test_the_contract_is_small_and_knows_nothing_of_ask_tell():
     # the chain's fields are abstract variables, which a subclass must give
     assert {"global_solver", "local_solver", "num_starts",
             "simplex_from_swarm"} <= jf.optim.AbstractChain.__abstractvars__
+
+
+def test_a_64_bit_run_after_a_32_bit_run_of_the_same_problem():
+    """The blank carry kept per problem shape is kept per counter dtype too: under
+    jax.enable_x64 the counters are int64 while the bounds' arrays are as before (a
+    float32 search), and the 32-bit blank failed the run's cond on dtypes."""
+    solver = jf.PSO(num_particles=4, num_generations=2)
+    a = jf.minimise(separable, solver, (LO, HI), args=SEP, key=0, dtype=np.float32)
+    with jax.enable_x64(True):
+        b = jf.minimise(separable, solver, (LO, HI), args=SEP, key=0, dtype=np.float32)
+    assert a.stats["num_evals"].dtype == jnp.int32 and b.stats["num_evals"].dtype == jnp.int64
+    np.testing.assert_array_equal(a.value, b.value)

@@ -27,7 +27,7 @@ import numpy as np
 
 from .. import _xla
 from . import checkpoint as ckpt
-from ._base import Drawn, Solution, check_positive_int
+from ._base import Drawn, Solution, check_positive_int, count_dtype
 from .chained import AbstractChain
 from .contract import AbstractStartDraws, capabilities_of, continued
 from .loop import NO_STOP, _begin, _chunk, _finish, blank_carry
@@ -163,10 +163,12 @@ def _blank_of(like, impl, batch):
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_blank(sig: _Signature, impl, batch):
+def _cached_blank(sig: _Signature, impl, batch, counts: str):
     # JAX arrays are immutable and the chunk does not donate its carry, so one blank
     # serves every call of the same signature: putting its ~20 zero arrays on the device
-    # took about a third of a short run's time outside XLA (issue 47)
+    # took about a third of a short run's time outside XLA (issue 47). ``counts``, the
+    # counters' dtype (int64 under jax.enable_x64), is part of the key: the signature's
+    # arrays are the same in both modes, the carry's counters are not
     return _blank_of(eqx.filter_eval_shape(_begin, *sig.args), impl, batch)
 
 
@@ -205,7 +207,7 @@ def _blank(proto, flat, lower, upper, args, key, x0, warm, batch: int | None = N
         hash(impl)
     except TypeError:
         return _blank_of(eqx.filter_eval_shape(_begin, *begin_args), impl, batch)
-    return _cached_blank(sig, impl, batch)
+    return _cached_blank(sig, impl, batch, str(count_dtype()))
 
 
 def _chunked(call, finish, blank, display=None, checkpoint=None):
