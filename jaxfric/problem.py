@@ -109,6 +109,9 @@ class AbstractProblem(eqx.Module):
 
     #: The key of [`score`][jaxfric.problem.AbstractProblem.score]'s headline entry (lower is better).
     metric: ClassVar[str]
+    #: How that entry is named in a message, and its unit.
+    metric_label: ClassVar[str]
+    metric_unit: ClassVar[str]
 
     @abc.abstractmethod
     def coordinates(self, fit) -> SearchCoordinates:
@@ -159,6 +162,8 @@ class ForceBalanceProblem(AbstractProblem):
     training records (each trained on whole), or a [`TrainingRecords`][jaxfric.problem.TrainingRecords]."""
 
     metric: ClassVar[str] = "mse_percent"
+    metric_label: ClassVar[str] = "free-run MSE"
+    metric_unit: ClassVar[str] = "%"
 
     def coordinates(self, fit) -> SearchCoordinates:
         model = fit.model

@@ -38,7 +38,7 @@ from processes import jax_subprocess
 import jaxfric as jf
 from jaxfric import models, rig
 from jaxfric.fit import Fit
-from jaxfric.identification import stages as identify_api
+from jaxfric import pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 # the driver module (every compiled optimiser run goes through its _run / _run_many)
@@ -75,7 +75,7 @@ def guarded(monkeypatch):
     """No compiled optimiser run and no identify → minimise call may happen."""
     monkeypatch.setattr(minimise_module, "_chunk", _forbidden)
     monkeypatch.setattr(minimise_module, "_run_many", _forbidden)
-    monkeypatch.setattr(identify_api, "minimise", _forbidden)
+    monkeypatch.setattr(pipeline, "minimise", _forbidden)
     Evaluations.count = 0
     yield
     assert Evaluations.count == 0, "the objective was evaluated before the error"

@@ -255,7 +255,7 @@ def test_a_parameter_stopped_by_its_range_is_flagged():
 
 def test_model_options_as_keywords_reach_the_model(monkeypatch):
     """``identify("elman", ..., neurons=2)`` builds a 2-neuron network (seen by the optimiser)."""
-    from jaxfric.identification import stages
+    from jaxfric import pipeline  # where identify's global search calls minimise
 
     seen = {}
 
@@ -266,7 +266,7 @@ def test_model_options_as_keywords_reach_the_model(monkeypatch):
         seen["model"] = cost.model
         raise Stop
 
-    monkeypatch.setattr(stages, "minimise", capture)
+    monkeypatch.setattr(pipeline, "minimise", capture)
     v, f, _ = coulomb_record(0.0, 200)
     with pytest.raises(Stop):
         identify("elman", (v, f, DT), key=0, neurons=2)

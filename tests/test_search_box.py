@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import jaxfric as jf
-from jaxfric.identification import BoundWarning, stages
+from jaxfric import pipeline
+from jaxfric.identification import BoundWarning
 from jaxfric._timing import Stopwatch
 from jaxfric.models import DEFAULT_RANGES, GMS, Coulomb, Cylinder, LuGre, SearchBox
 
@@ -75,7 +76,7 @@ def test_a_bad_box_is_refused_before_any_computation(monkeypatch, box, words):
     def forbidden(*args, **kwargs):
         raise AssertionError("the optimiser ran")
 
-    monkeypatch.setattr(stages, "minimise", forbidden)
+    monkeypatch.setattr(pipeline, "minimise", forbidden)  # identify's global search
     v, f, _ = coulomb_record()
     f_before = f.copy()
     with pytest.raises(ValueError) as info:

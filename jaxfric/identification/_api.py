@@ -46,27 +46,17 @@ from ._data import as_record, as_records  # noqa: F401  (re-exported: _api.as_re
 from ._objective import search_dtype
 from ._refine import GradientRefinement, as_refinement
 from .._timing import Stopwatch
-# The underscored names stay importable from here for jaxfric.motion, the CLI and the
-# benchmarks.
-from .stages import (  # noqa: F401
-    as_key as _as_key,
-    as_member_keys as _as_keys,
+from ..pipeline import check_solver
+from .stages import (
     box_stage,
     check_theta0,
-    ensemble_summary as _ensemble_summary,
     fit_stage,
     global_stage,
     gradient_stage,
-    history as _history,
-    key_record as _key_record,
     objective_stage,
-    record_inputs as _record_inputs,
-    record_metrics as _record_metrics,
     records_stage,
     resolve_keys,
-    solver_stages as _stages,
-    stage_mse as _stage_mse,
-    warn_if_divergent as _warn_if_divergent,
+    warn_if_divergent as _warn_if_divergent,  # noqa: F401  (tests: _api._warn_if_divergent)
 )
 
 #: Defaults applied when a model is given by *name* (explicit options win).
@@ -374,10 +364,4 @@ def _plan(model: AbstractFrictionModel, method: str, solver, refine):
         solver = default_solver(model, method)
     if refine is None and fast:
         refine = GradientRefinement(method="bfgs", max_steps=FAST_REFINE_STEPS)
-    if not isinstance(solver, AbstractSolver):
-        raise ValueError(
-            f"solver must be a jaxfric solver (MAPSONMDS, MAPSO, PSO, NelderMead), "
-            f"got {type(solver).__name__}"
-        )
-    solver.check()
-    return solver, as_refinement(refine, model.num_params), head
+    return check_solver(solver), as_refinement(refine, model.num_params), head

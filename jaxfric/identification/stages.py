@@ -11,8 +11,9 @@ docs/algorithms.md §11. ``identify`` is this sequence::
 
 Every stage takes and returns plain values (a [`RecordSet`][jaxfric.identification.RecordSet], a [`Bounds`][jaxfric.identification.stages.Bounds],
 an [`Objective`][jaxfric.identification.stages.Objective], a [`jaxfric.Solution`][jaxfric.optim.Solution], a `RefineOutcome`), so each
-can be run and tested alone, and another pipeline (``identify_motion``) can use the
-ones it shares.
+can be run and tested alone. The stages ``identify_motion`` runs too (keys, the global
+search, member selection, the run's record) are [`jaxfric.pipeline`][jaxfric.pipeline]'s; these are
+the force balance's own.
 
 Ensembles (``keys=K``): the global stage runs the K members in one
 [`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call (on a CPU mostly one after another, member i then
@@ -26,7 +27,6 @@ networks' K rollouts share each time loop; there member ``i`` equals the run wit
 from __future__ import annotations
 
 import dataclasses
-import numbers
 import warnings
 from typing import Any
 
@@ -39,17 +39,18 @@ from .. import _xla
 from ..fit import Fit, model_config, model_name, predict
 from ..metrics import friction_metrics
 from ..models import AbstractFrictionModel
-from ..optim import AbstractSolver, Solution, minimise, minimise_many
+from ..optim import AbstractSolver, Solution
+from ..pipeline import Keys, best_member, global_search, history, key_record, solver_stages
+from ..pipeline import resolve_keys  # noqa: F401  (the key stage, with identify's: stages.resolve_keys)
 from ._data import Record, RecordSet, as_records
 from ._diagnostics import BoundWarning, FrictionSignWarning, friction_sign, on_bound, unidentifiable
-from ._objective import CostData, OutputErrorCost, cost_data, fit_scalers
+from ._objective import OutputErrorCost, cost_data, fit_scalers
 from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, RefineOutcome, refine_impl, refine_many, result_name
 from .._timing import Stopwatch
 
 __all__ = [
     "Bounds",
-    "Keys",
     "Objective",
     "box_stage",
     "ensemble_batching",
@@ -59,7 +60,6 @@ __all__ = [
     "objective_stage",
     "records_stage",
     "refine_batching",
-    "resolve_keys",
 ]
 
 
@@ -143,75 +143,6 @@ def check_theta0(model: AbstractFrictionModel, theta0, bounds: Bounds):
     return theta0
 
 
-# --------------------------------------------------------------------- keys
-@dataclasses.dataclass(frozen=True)
-class Keys:
-    """The keys of one identification: ``key`` for one run, or ``members`` (a batch of
-    K typed keys) for an ensemble; ``seed`` is the int seed when one was given."""
-
-    key: Any
-    seed: int | None
-    members: Any = None
-
-    @property
-    def size(self) -> int | None:
-        return None if self.members is None else int(self.members.shape[0])
-
-
-def as_key(key):
-    """``(JAX PRNG key, int seed or None)`` from a key or an int seed."""
-    if key is None:
-        raise ValueError("key is required: pass jax.random.key(seed) (or an int seed)")
-    if isinstance(key, numbers.Integral) and not isinstance(key, bool):
-        return jax.random.key(int(key)), int(key)
-    k = jnp.asarray(key)
-    typed = jnp.issubdtype(k.dtype, jax.dtypes.prng_key)
-    if not ((typed and k.shape == ()) or (k.dtype == jnp.uint32 and k.shape == (2,))):
-        raise ValueError(
-            f"key must be one JAX PRNG key (jax.random.key(seed)) or an int seed, got "
-            f"{'a batch of keys of shape ' + str(k.shape) if typed else repr(key)}"
-        )
-    return key, None
-
-
-def as_member_keys(key, keys):
-    """The members' keys of ``identify(..., keys=K)``: ``K`` keys split from ``key``, or
-    the given batch. Returns ``(typed key batch, K)``."""
-    if isinstance(keys, numbers.Integral) and not isinstance(keys, bool):
-        if keys < 1:
-            raise ValueError(f"keys must be a number of members >= 1 or a batch of keys, got {keys}")
-        return jax.random.split(as_key(key)[0], int(keys)), int(keys)
-    if key is not None:
-        raise ValueError("give key= (one run, or the root of keys=K) or a batch keys=[...], not both")
-    k = jnp.asarray(keys)
-    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key) and k.ndim == 1 and k.shape[0] >= 1:
-        return k, int(k.shape[0])
-    if k.dtype == jnp.uint32 and k.ndim == 2 and k.shape[1] == 2 and k.shape[0] >= 1:
-        return jax.random.wrap_key_data(k), int(k.shape[0])
-    raise ValueError(
-        "keys must be a number of members K (split from key=) or a 1-D batch of JAX PRNG keys "
-        f"(jax.random.split(key, K)), got {keys!r}"
-    )
-
-
-def resolve_keys(key, keys=None) -> Keys:
-    """[`Keys`][jaxfric.identification.stages.Keys] from ``identify``'s ``key=`` and ``keys=`` (checked)."""
-    if keys is None:
-        key, seed = as_key(key)
-        return Keys(key=key, seed=seed)
-    seed = key if isinstance(key, numbers.Integral) and not isinstance(key, bool) else None
-    members, _ = as_member_keys(key, keys)
-    return Keys(key=None, seed=seed, members=members)
-
-
-def key_record(key):
-    """``(key data as a list, key implementation name or None)`` for a fit's record."""
-    k = jnp.asarray(key)
-    if jnp.issubdtype(k.dtype, jax.dtypes.prng_key):
-        return np.asarray(jax.random.key_data(k)).ravel().tolist(), str(jax.random.key_impl(k))
-    return np.asarray(k).ravel().tolist(), None
-
-
 # ---------------------------------------------------------------- objective
 @dataclasses.dataclass(frozen=True)
 class Objective:
@@ -289,23 +220,13 @@ def global_stage(objective: Objective, solver: AbstractSolver, bounds: Bounds, k
     ensemble (``batching`` as there; default [`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]). Returns the
     solution (fields with a leading member axis for an ensemble) and its
     ``{"compile_s", "run_s"}``."""
-    lower, upper = bounds.lower, bounds.upper
-    with Stopwatch() as sw:
-        if keys.members is None:
-            sol = minimise(objective.cost, solver, (lower, upper), args=objective.data_global,
-                           key=keys.key, y0=theta0, dtype=dtype, progress=progress,
-                           compiler_options=compiler_options)
-        else:
-            if batching is None:
-                # one member: "map" runs exactly the single run's program
-                batching = ("map" if keys.size == 1
-                            else ensemble_batching(objective.cost.model, solver))
-            sol = minimise_many(objective.cost, solver, (lower, upper), keys=keys.members,
-                                args=objective.data_global, y0=theta0, dtype=dtype,
-                                progress=progress, compiler_options=compiler_options,
-                                batching=batching)
-        sol = jax.block_until_ready(sol)
-    return sol, {"compile_s": sw.compile_s, "run_s": sw.run_s}
+    if batching is None:
+        # one member: "map" runs exactly the single run's program
+        batching = ("map" if keys.members is None or keys.size == 1
+                    else ensemble_batching(objective.cost.model, solver))
+    return global_search(objective.cost, objective.data_global, bounds.lower, bounds.upper, solver, keys,
+                         theta0=theta0, dtype=dtype, progress=progress,
+                         compiler_options=compiler_options, batching=batching)
 
 
 # ----------------------------------------------------------- gradient stage
@@ -353,28 +274,6 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
 
 
 # ------------------------------------------------------------------ the fit
-def solver_stages(sol, solver) -> list[dict]:
-    """``Fit.stages`` rows of a solver run: each stage's J and evaluations."""
-    stats = {k: int(v) if np.issubdtype(np.asarray(v).dtype, np.integer) else float(v)
-             for k, v in sol.stats.items()}
-    if "f_global" in stats:
-        n_global = stats["num_evals_global"]
-        # the chain's own global stage (MAPSO, PSO, Evosax, ...), not always MAPSO
-        g_name = type(solver.global_solver).__name__.lower()
-        return [
-            {"stage": g_name, "J": stats["f_global"], "num_evals": n_global},
-            {"stage": "nelder_mead", "J": float(sol.f), "num_evals": stats["num_evals"] - n_global},
-        ]
-    return [{"stage": type(solver).__name__.lower(), "J": float(sol.f),
-             "num_evals": stats["num_evals"]}]
-
-
-def history(sol) -> dict[str, np.ndarray]:
-    """The best-so-far J against evaluations of a solver run."""
-    n = int(sol.history.length)
-    return {"evals": np.asarray(sol.history.evals)[:n], "f": np.asarray(sol.history.f)[:n]}
-
-
 def _window_metrics(y_hat, record: Record) -> dict:
     """§6 metrics in newtons on the training, validation and whole record (free run
     over the whole record, so the validation window continues the training state)."""
@@ -520,7 +419,7 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
     thetas = jnp.atleast_2d(sol.value if refined is None else refined.theta)
     f_final = jnp.atleast_1d(sol.f if refined is None else refined.f)
     f_np = np.asarray(f_final, np.float64)
-    best = int(np.argmin(np.where(np.isfinite(f_np), f_np, np.inf)))
+    best = best_member(f_np)
     sol_best = jax.tree_util.tree_map(lambda a: a[best], sol) if ensemble else sol
     stages = solver_stages(sol_best, solver)
     theta_opt = sol_best.value

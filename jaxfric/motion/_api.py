@@ -17,27 +17,21 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
-import warnings
 from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
-from .._warnings import BaselineWarning
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
-from ..identification.stages import as_key as _as_key
-from ..identification.stages import as_member_keys
-from ..identification.stages import history as _history
-from ..identification.stages import key_record as _key_record
-from ..identification.stages import solver_stages as _stages
 from ..metrics import friction_metrics
 from ..models import GreyBox, Scaler
-from ..optim import AbstractSolver, minimise
+from ..optim import AbstractSolver
+from ..pipeline import (ENSEMBLE_DROP, best_member, baseline_stage, check_solver, global_search, history,
+                        kept_members, key_record, resolve_keys, solver_stages)
 from ..problem import AbstractProblem, Residuals, SearchCoordinates
 from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_sample_time,
                        same_sample_time, split_count)
@@ -546,6 +540,8 @@ class MotionProblem(AbstractProblem):
     trained on, its first ``fit.n_train`` samples (several training records concatenated)."""
 
     metric: ClassVar[str] = "rmse_mm"
+    metric_label: ClassVar[str] = "free-run RMSE"
+    metric_unit: ClassVar[str] = "mm"
 
     def coordinates(self, fit) -> SearchCoordinates:
         return motion_coordinates(fit)
@@ -768,7 +764,7 @@ def identify_motion(
     """
     if keys is not None:
         options = {name: value for name, value in locals().items() if name not in ("model", "data", "key", "keys")}
-        return _ensemble(model, data, key, keys, options)
+        return _ensemble(model, data, resolve_keys(key, keys).members, options)
     with Stopwatch() as total:
         tr_records, va_records, data, n_train = _records(data, train, valid)
         if error not in ERRORS:
@@ -810,10 +806,9 @@ def identify_motion(
         if model.needs_scaling:
             scalers = (Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
         if solver is not None:
-            if not isinstance(solver, AbstractSolver):
-                raise ValueError(f"solver must be a jaxfric solver, got {type(solver).__name__}")
-            solver.check()
-        key, seed = _as_key(key)
+            check_solver(solver)
+        run_keys = resolve_keys(key)
+        key, seed = run_keys.key, run_keys.seed
         dtype = search_dtype(dtype)
 
         layout = Layout(model.num_params, mass_range is not None, bool(fit_offset), bool(fit_v0))
@@ -863,10 +858,10 @@ def identify_motion(
         est = least_squares(tr_records, mass0 if mass_range is None else None)
         with Stopwatch() as sw:
             if solver is not None:
-                sol = jax.block_until_ready(minimise(cost, solver, (lower, upper), args=free, key=key,
-                                                     dtype=dtype, progress=progress))
+                sol, _ = global_search(cost, free, lower, upper, solver, run_keys, dtype=dtype,
+                                       progress=progress)
                 y = np.asarray(sol.value)
-                stages = _stages(sol, solver)
+                stages = solver_stages(sol, solver)
             else:
                 extra, y0, before = [], None, []
                 if search.least_squares_start and not legacy_cost:
@@ -888,13 +883,13 @@ def identify_motion(
         y = np.asarray(y, np.float64)
         j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)
         theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
-        key_data, key_impl = _key_record(key)
+        key_data, key_impl = key_record(key)
         n_tr_total = sum(r.n_samples for r in tr_records)
         n_all = n if data is not None else n_tr_total + sum(r.n_samples for r in va_records)
         fit = MotionFit(
             model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
             dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
-            history=_history(sol) if sol is not None else {"evals": np.zeros(0), "f": np.zeros(0)},
+            history=history(sol),
             solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
             timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
             settings={
@@ -920,36 +915,24 @@ def identify_motion(
         base = _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window)
         # the fit above only simulates for its metrics; the one returned carries them
         fit = fit.replace(
-            metrics={**metrics, "num_params": int(y.size), "cost": j_final,
-                     "baseline": {w: base.metrics[w] for w in ("train", "valid") if w in base.metrics}},
+            metrics={**metrics, "num_params": int(y.size), "cost": j_final},
             settings={**fit.settings, "motion": {**fit.mechanics, "baseline": {
                 "M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}}})
-        _warn_if_worse(fit)
+        fit = baseline_stage(fit, base, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
         data = data if data is not None else _concatenated(tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**fit.timings, "total_s": total.wall_s})
 
 
-#: Ensemble members whose training free-run RMSE exceeds this factor times the best
-#: member's are dropped from the ensemble's prediction (and listed in ``fit.ensemble``).
-ENSEMBLE_DROP = 1.5
-
-
-def kept_members(train_rmse) -> list:
-    """Indices of the members whose training RMSE is finite and at most
-    `ENSEMBLE_DROP` times the best one's."""
-    train = np.asarray(train_rmse, np.float64)
-    best = np.min(np.where(np.isfinite(train), train, np.inf))
-    return [i for i in range(train.size) if np.isfinite(train[i]) and train[i] <= ENSEMBLE_DROP * best]
-
-
-def _ensemble(model, data, key, keys, options) -> MotionFit:
-    """``identify_motion(..., keys=K)``: every member in turn (same shapes: compiled once)."""
-    members, count = as_member_keys(key, keys)
+def _ensemble(model, data, members, options) -> MotionFit:
+    """``identify_motion(..., keys=K)``: every member in turn (same shapes: compiled once);
+    the best member and those kept by their training free-run RMSE
+    ([`jaxfric.pipeline.best_member`][jaxfric.pipeline.best_member], [`kept_members`][jaxfric.pipeline.kept_members])."""
+    count = int(members.shape[0])
     with Stopwatch() as total:
         fits = [identify_motion(model, data, key=members[i], **options) for i in range(count)]
         train = np.array([f.metrics["train"]["rmse_mm"] for f in fits])
-        best = int(np.argmin(np.where(np.isfinite(train), train, np.inf)))
+        best = best_member(train)
         kept = kept_members(train)
         fit = fits[best].replace(ensemble={
             "theta": np.stack([f.theta for f in fits]), "mass": [f.mass for f in fits],
@@ -957,7 +940,7 @@ def _ensemble(model, data, key, keys, options) -> MotionFit:
             "train_rmse_mm": train.tolist(),
             "valid_rmse_mm": [f.metrics["valid"]["rmse_mm"] if "valid" in f.metrics else None for f in fits],
             "best": best, "kept": kept, "dropped": [i for i in range(count) if i not in kept],
-            "keys": [_key_record(members[i])[0] for i in range(count)],
+            "keys": [key_record(members[i])[0] for i in range(count)],
         })
         tr_records, va_records, whole, n_train = _records(data, options["train"], options["valid"])
         metrics = {**fit.metrics, "ensemble": fit.ensemble_metrics(whole, n_train, tr_records, va_records)}
@@ -999,20 +982,9 @@ def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, in
     return fit.replace(metrics=fit.evaluate_records(tr_records, va_records, init_window))
 
 
-#: A fit counts as worse than the baseline when its training RMSE exceeds the baseline's
-#: by more than this fraction.
-BASELINE_MARGIN = 1e-3
-
-
-def _warn_if_worse(fit) -> None:
-    """[`BaselineWarning`][jaxfric.motion.BaselineWarning] when ``fit`` simulates its training data worse than the baseline."""
-    mine, base = fit.metrics["train"]["rmse_mm"], fit.metrics["baseline"]["train"]["rmse_mm"]
-    if not mine <= (1.0 + BASELINE_MARGIN) * base:
-        warnings.warn(
-            f"the {fit.settings['model_name']} fit simulates its training data worse than the "
-            f"{BASELINE_LABEL}: free-run RMSE {mine:.4g} mm against {base:.4g} mm; the search did "
-            "not reach its optimum or the model cannot express the baseline: use the baseline, "
-            "another key or more starts (MotionSearch(starts=...))", BaselineWarning, stacklevel=3)
+#: What a fit worse than the baseline should try ([`jaxfric.pipeline.warn_if_worse`][jaxfric.pipeline.warn_if_worse]).
+BASELINE_ADVICE = ("the search did not reach its optimum or the model cannot express the baseline: use the "
+                   "baseline, another key or more starts (MotionSearch(starts=...))")
 
 
 def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) -> float:
