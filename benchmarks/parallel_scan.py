@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import Case, add_output_arguments, markdown_table, results_dir, run_round_robin, write_csv  # noqa: E402
+from _harness import Case, add_output_arguments, cell, markdown_table, results_dir, run_round_robin, write_report  # noqa: E402
 
 
 def _device() -> str:
@@ -125,18 +125,14 @@ def main(argv=None) -> int:
     chunks = [None if c == "none" else int(c) for c in args.chunks.split(",") if c]
     for T in ([500] if args.quick else [int(x) for x in args.motion.split(",") if x]):
         rows += motion_cases(T, rounds, [None, 128] if args.quick else [c for c in chunks if c is None or c < T])
-    name = "parallel_scan" + (f"_{args.tag}" if args.tag else "")
-    write_csv(rows, out / f"{name}.csv")
-    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
     text = [f"# Parallel-in-time (DEER) against the sequential scan ({_device()})", "",
             "`python benchmarks/parallel_scan.py" + (" --quick" if args.quick else "")
             + (f" --tag {args.tag}" if args.tag else "") + "`; jitted, compile excluded, medians of "
             f"{rounds} round-robin rounds. `fell_back`: Newton did not converge in 100 iterations and "
             "the sequential scan answered (its time is then included). `max_rel_diff`: largest "
             "difference of the outputs (Elman) or of x and v (motion), relative to their largest "
-            "magnitude.", "", markdown_table(rows, fmt=fmt), ""]
-    (out / f"{name}.md").write_text("\n".join(text))
-    print("\n".join(text))
+            "magnitude.", "", markdown_table(rows, fmt=cell(".3g")), ""]
+    write_report(out, "parallel_scan" + (f"_{args.tag}" if args.tag else ""), text, rows)
     return 0
 
 

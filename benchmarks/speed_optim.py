@@ -26,11 +26,8 @@ ceiling), and the rest (the solver's own work per generation).
 from __future__ import annotations
 
 import argparse
-import csv
 import functools
 import logging
-import os
-import platform
 import statistics
 import sys
 from pathlib import Path
@@ -39,12 +36,58 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import Case, results_dir, run_round_robin  # noqa: E402
+from _harness import Case, machine, results_dir, run_round_robin, write_report, x64 as enable_x64  # noqa: E402
 from baselines import NUMPY_BATCH  # noqa: E402
 
 PYSWARMS = "pyswarms GlobalBestPSO (numpy)"
 OBJECTIVE = "objective alone, jaxfric's compilation (the ceiling)"
 SCIPY_NM = "scipy Nelder-Mead (adaptive)"
+
+
+def pyswarms_once(a, lo, hi, f_batch, generations):
+    """``once(r)``: one pyswarms GlobalBestPSO run (c1 = c2 = 2, w = 0.7, velocities
+    clamped to 0.2 box widths) of ``generations``: ``(evaluations, [best f])``."""
+    import pyswarms as ps
+
+    def once(r):
+        opt = ps.single.GlobalBestPSO(
+            a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
+            bounds=(lo.astype(float), hi.astype(float)), velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]))
+        return a.agents * (generations + 1), np.array([opt.optimize(f_batch, generations, verbose=False)[0]])
+    return once
+
+
+def objective_once(a, lo, hi, obj, f_batch, evals, numpy=False):
+    """``once(r)``: the objective alone on ``evals`` fresh points, batch by batch (``a.agents``
+    a batch) as a single run evaluates them, compiled with the solvers' options — no run that
+    calls it can do more evaluations per second — or, ``numpy``, NumPy's twin (pyswarms' side).
+    Vmapped runs evaluate larger batches, which XLA may vectorise otherwise."""
+    import jax.numpy as jnp
+
+    import jaxfric as jf
+
+    dt = np.dtype(a.dtype)
+    batches = max(evals // a.agents, 1)
+    points = jnp.asarray(np.random.default_rng(3).uniform(lo, hi, (batches, a.agents, a.dim)), dt)
+    if numpy:
+        points = np.asarray(points)
+        return lambda r: (batches * a.agents, np.array([sum(f_batch(x).min() for x in points)]))
+    f_pop = jax.vmap(lambda x: obj(x, None))
+
+    @functools.partial(jax.jit, compiler_options=jf.compiler_options("solver") or None)
+    def alone(X):
+        return jax.lax.scan(lambda c, x: (c + jnp.min(f_pop(x)), None), jnp.zeros((), dt), X)[0]
+
+    return lambda r: (batches * a.agents, np.array([float(alone(points))]))
+
+
+def timed_rounds(cases: list[Case], rounds: int) -> None:
+    """:func:`_harness.run_round_robin` with pyswarms' per-run log silenced."""
+    logging.disable(logging.CRITICAL)
+    try:
+        run_round_robin(cases, rounds)
+    finally:
+        logging.disable(logging.NOTSET)
 
 
 def main(argv=None):
@@ -68,7 +111,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     x64 = a.dtype == "float64"
     if x64:
-        jax.config.update("jax_enable_x64", True)
+        enable_x64()
     import jax.numpy as jnp
     import scipy.optimize
 
@@ -155,41 +198,13 @@ def main(argv=None):
 
         add(f"evosax PSO, {a.seeds} seeds vmapped", evosax_once)
 
-    import pyswarms as ps
-
-    def pyswarms_once(r):
-        opt = ps.single.GlobalBestPSO(
-            a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
-            bounds=(lo.astype(float), hi.astype(float)), velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]),
-        )
-        best = opt.optimize(f_batch, a.generations, verbose=False)[0]
-        return a.agents * (a.generations + 1), np.array([best])
-
-    add(PYSWARMS, pyswarms_once)
-
-    # The objective alone on as many fresh points as one PSO run evaluates, batch by batch
-    # as a single run evaluates them, compiled as the solvers are: no single run that calls
-    # it can do more evaluations per second, so its ratio to pyswarms caps the single-run
-    # rows (Ackley's float64 cosines, ~16 ns each with fresh arguments, dominate both
-    # sides). Vmapped runs evaluate larger batches, which XLA may vectorise otherwise.
-    # NumPy's twin for comparison.
-    points = jnp.asarray(np.random.default_rng(3).uniform(lo, hi, (a.generations + 1, a.agents, a.dim)), dt)
-    f_pop = jax.vmap(lambda x: obj(x, None))
-
-    @functools.partial(jax.jit, compiler_options=jf.compiler_options("solver") or None)
-    def objective_alone(X):
-        return jax.lax.scan(lambda c, x: (c + jnp.min(f_pop(x)), None), jnp.zeros((), dt), X)[0]
-
-    def objective_once(r):
-        return points.shape[0] * points.shape[1], np.array([float(objective_alone(points))])
-
-    points_np = np.asarray(points)
-
-    def numpy_objective_once(r):
-        return points_np.shape[0] * points_np.shape[1], np.array([sum(f_batch(x).min() for x in points_np)])
-
-    add(OBJECTIVE, objective_once)
-    add("objective alone, NumPy (pyswarms's side)", numpy_objective_once)
+    add(PYSWARMS, pyswarms_once(a, lo, hi, f_batch, a.generations))
+    # The objective alone on as many points as one PSO run evaluates caps the single-run
+    # rows' ratio to pyswarms (Ackley's float64 cosines, ~16 ns each with fresh arguments,
+    # dominate both sides).
+    evals = a.agents * (a.generations + 1)
+    add(OBJECTIVE, objective_once(a, lo, hi, obj, f_batch, evals))
+    add("objective alone, NumPy (pyswarms's side)", objective_once(a, lo, hi, obj, f_batch, evals, numpy=True))
     add("jaxfric Nelder-Mead", jax_once(nm))
     x0 = np.random.default_rng(0).uniform(lo, hi)
     opts = dict(maxfev=a.nm_evals, maxiter=10 * a.nm_evals, xatol=0.0, fatol=0.0, adaptive=True)
@@ -201,11 +216,7 @@ def main(argv=None):
 
     add(SCIPY_NM, scipy_once)
 
-    logging.disable(logging.CRITICAL)  # pyswarms logs every run
-    try:
-        run_round_robin(cases, a.repeats)
-    finally:
-        logging.disable(logging.NOTSET)
+    timed_rounds(cases, a.repeats)
     by = {c.label: c for c in cases}
     rows = []
     for c in cases:
@@ -229,15 +240,8 @@ def main(argv=None):
     ceiling = by[OBJECTIVE]
     ratios.append(f"ceiling: the objective alone (XLA) over pyswarms (evals/s): "
                   f"{_spread(_round_ratios(ceiling, by[PYSWARMS]))}; no single run can exceed it")
-    out = results_dir(a.out)
-    out.mkdir(parents=True, exist_ok=True)
     stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
             + (f"_{a.tag}" if a.tag else ""))
-    with open(out / f"{stem}.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    dev = jax.devices()[0]
     lines = [
         "# Optimiser throughput against peers",
         "",
@@ -250,8 +254,7 @@ def main(argv=None):
         "swarm rows (different coefficients; evosax's PSO is unbounded, with per-particle "
         "coefficients).",
         "",
-        f"Machine: {platform.processor() or platform.machine()}, device {dev.device_kind} "
-        f"({jax.default_backend()}), jax {jax.__version__}, Python {sys.version.split()[0]}. "
+        f"Machine: {machine()}, device {jax.devices()[0].device_kind}. "
         f"Re-run: `python benchmarks/speed_optim.py{' --dtype float64' if a.dtype == 'float64' else ''}`.",
         "",
         "| implementation | evals | s (median) | evals/s | × peer | compile s | best f |",
@@ -264,21 +267,15 @@ def main(argv=None):
             f"{r['compile_s']:.1f} | {r['best_f']:.3g} |"
         )
     lines += [""] + [f"- {r}" for r in ratios]
-    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    del jnp
+    write_report(results_dir(a.out), stem, lines, rows, float_format="")
 
 
 def short_runs(a, lo, hi, obj, f_batch, x64):
     """Issue 47's short runs: one default ``minimise`` call each against pyswarms at the
     same generations, and where each call's time goes (see the module docstring)."""
-    import jax.numpy as jnp
-    import pyswarms as ps
-
     import jaxfric as jf
 
     side = int(round(a.agents**0.5))
-    dt = np.dtype(a.dtype)
     gens = [int(g) for g in a.short_generations.split(",")]
     runs = [("PSO", g) for g in gens] + [("MAPSO", gens[0])]
     cases: list[Case] = []
@@ -293,29 +290,6 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
             return int(sol.stats["num_evals"]), np.asarray([sol.f])
         return once
 
-    def pyswarms_once(g):
-        def once(r):
-            opt = ps.single.GlobalBestPSO(
-                a.agents, a.dim, options={"c1": 2.0, "c2": 2.0, "w": 0.7},
-                bounds=(lo.astype(float), hi.astype(float)),
-                velocity_clamp=(-0.2 * (hi - lo)[0], 0.2 * (hi - lo)[0]))
-            return a.agents * (g + 1), np.array([opt.optimize(f_batch, g, verbose=False)[0]])
-        return once
-
-    f_pop = jax.vmap(lambda x: obj(x, None))
-
-    @functools.partial(jax.jit, compiler_options=jf.compiler_options("solver") or None)
-    def objective_alone(X):
-        return jax.lax.scan(lambda c, x: (c + jnp.min(f_pop(x)), None), jnp.zeros((), dt), X)[0]
-
-    def objective_once(evals):
-        batches = max(evals // a.agents, 1)
-        pts = jnp.asarray(np.random.default_rng(3).uniform(lo, hi, (batches, a.agents, a.dim)), dt)
-
-        def once(r):
-            return batches * a.agents, np.array([float(objective_alone(pts))])
-        return once
-
     for name, g in runs:
         s = solver(name, g)
         cases.append(Case(f"jaxfric {name}, {g} generations", jax_once(s), x64=x64,
@@ -324,16 +298,12 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
                           jax_once(solver(name, 1)), x64=x64,
                           meta={"kind": "fixed", "name": name, "g": g}))
         cases.append(Case(f"objective alone, {name} {g} generations' evaluations",
-                          objective_once(s.evaluations()), x64=x64,
+                          objective_once(a, lo, hi, obj, f_batch, s.evaluations()), x64=x64,
                           meta={"kind": "ceiling", "name": name, "g": g}))
     for g in sorted({g for _, g in runs}):
-        cases.append(Case(f"{PYSWARMS}, {g} generations", pyswarms_once(g),
+        cases.append(Case(f"{PYSWARMS}, {g} generations", pyswarms_once(a, lo, hi, f_batch, g),
                           meta={"kind": "peer", "g": g}))
-    logging.disable(logging.CRITICAL)
-    try:
-        run_round_robin(cases, a.repeats)
-    finally:
-        logging.disable(logging.NOTSET)
+    timed_rounds(cases, a.repeats)
     peer = {c.meta["g"]: c for c in cases if c.meta["kind"] == "peer"}
     rows, split = [], []
     for c in cases:
@@ -358,14 +328,7 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
                      f"evaluations per second, the ceiling "
                      f"{c.results[0][0] / (fixed + ceil) / (peer[c.meta['g']].results[0][0] / peer[c.meta['g']].median):.2f}× "
                      "with no solver work at all")
-    out = results_dir(a.out)
     stem = "speed_optim_short" + (f"_{a.tag}" if a.tag else "")
-    with open(out / f"{stem}.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    dev = jax.devices()[0]
-    load = os.getloadavg()
     lines = [
         "# Short runs: one default `minimise` call each",
         "",
@@ -379,9 +342,8 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
         "objective-alone rows evaluate the run's points in batches of 100, compiled as the "
         "solvers are (no run can be faster).",
         "",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores shared "
-        f"with other work (load average {load[0]:.1f} at the end), device {dev.device_kind}, "
-        f"jax {jax.__version__}. Re-run: `python benchmarks/speed_optim.py --dtype {a.dtype} --short`.",
+        f"Machine: {machine()} (at the end), device {jax.devices()[0].device_kind}. "
+        f"Re-run: `python benchmarks/speed_optim.py --dtype {a.dtype} --short`.",
         "",
         "| implementation | evals | s (median) | evals/s | × pyswarms | first call s |",
         "|---|---|---|---|---|---|",
@@ -391,8 +353,7 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
                      f"{r['evals_per_s']:.3g} | {r['ratio_vs_pyswarms']:.2f} "
                      f"({r['ratio_min']:.2f}–{r['ratio_max']:.2f}) | {r['first_s']:.2f} |")
     lines += ["", "Where a call's time goes (medians):", ""] + [f"- {x}" for x in split]
-    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(results_dir(a.out), stem, lines, rows, float_format="")
 
 
 def _round_ratios(case: Case, peer: Case) -> list[float]:
