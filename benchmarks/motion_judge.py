@@ -33,27 +33,24 @@ summary to ``motion_judge.md``. x64 is switched on here (benchmarks choose it).
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import sys
 import time
 from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import (add_output_arguments, cell, markdown_table, read_csv, results_dir, write_csv,  # noqa: E402
+                      write_report, x64)
 
-jax.config.update("jax_enable_x64", True)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
+x64()
+import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxfric import rig  # noqa: E402
-from jaxfric.motion import MotionData, identify_motion, load_motion_fit, motion_metrics  # noqa: E402
-from jaxfric.motion._compare import baseline_fit, blocked_score, short_runs_score  # noqa: E402
-
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
+from jaxfric.motion import (MotionData, baseline_fit, identify_motion, load_motion_fit, motion_metrics,  # noqa: E402
+                            short_runs_score)
+from jaxfric.motion._compare import blocked_score  # noqa: E402
 
 FS, N = 128.0, 2000
 INIT = 20
@@ -236,15 +233,7 @@ def rescore(rows, folder) -> list:
     return rows
 
 
-def _fmt(v) -> str:
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-
-def _read(path):
-    if not path.exists():
-        return []
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
+_fmt = cell(".4g")
 
 
 def main(argv=None):
@@ -260,7 +249,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     out = results_dir(a.out, quick=a.quick)
     csv_path = out / "motion_judge.csv"
-    rows = _read(csv_path)
+    rows = read_csv(csv_path, parse=False)
     done = {int(r["key"]) for r in rows if r["model"] == BASE}
     if a.rescore is not None:
         rows = rescore(rows, a.rescore)
@@ -288,8 +277,7 @@ def main(argv=None):
             markdown_table(judges), "", "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
             "## Ensemble average against its members on unseen excitation (pooled free-run RMSE [mm])", "",
             markdown_table(ensemble_summary(ens), fmt=_fmt), "", markdown_table(ens, fmt=_fmt), ""]
-    (out / "motion_judge.md").write_text("\n".join(text))
-    print("\n".join(text))
+    write_report(out, "motion_judge", text)
 
 
 if __name__ == "__main__":

@@ -29,12 +29,11 @@ import argparse
 import importlib.util
 import math
 import os
-import platform
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench table1`
-from _harness import results_dir, write_csv, x64  # noqa: E402
+from _harness import machine, read_csv, results_dir, write_csv, x64  # noqa: E402
 
 x64()
 import jax  # noqa: E402
@@ -218,20 +217,9 @@ def write_all(out, rows, curves, a, dims):
 
 def merge(a, out):
     """One table from the outputs of runs on disjoint dimensions (``--merge a,b``)."""
-    import csv
-
-    def num(v):
-        for t in (int, float):
-            try:
-                return t(v)
-            except ValueError:
-                pass
-        return v
-
     rows, curves = [], {}
     for d in a.merge.split(","):
-        with open(Path(d) / "table1.csv") as fh:
-            rows += [{k: num(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        rows += read_csv(Path(d) / "table1.csv")
         with np.load(Path(d) / "table1_curves.npz") as z:
             for k in z.files:
                 dim, fn, label = k.split("|", 2)
@@ -270,9 +258,7 @@ def write_md(path, rows, a, dims):
         "Std and variance: sample (n − 1). Time: one call per row (all runs), split into compilation "
         "(JAX's compile events) and the run of the whole batch; per run = batch / runs.",
         "",
-        f"Machine: {platform.processor() or platform.machine()}, {jax.device_count()} "
-        f"{jax.default_backend()} device(s), jax {jax.__version__}, jaxfric {jf.__version__}, "
-        f"Python {sys.version.split()[0]}; {os.cpu_count()} CPU(s) shared with other jobs, load average "
+        f"Machine: {machine()} (at the end); jaxfric {jf.__version__}; shared with other jobs, load average "
         f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py"
         + (" --quick" if a.quick else "")
         + (" --no-maga" if a.no_maga else "")
