@@ -268,7 +268,7 @@ def count_dtype():
     return jax.dtypes.canonicalize_dtype(jnp.int64)
 
 
-#: The step cap of a solver that gives none (``steps_for`` returns ``None``).
+#: The step cap of a solver that gives none (its ``Capabilities.max_steps`` is ``None``).
 NO_STEP_CAP = 2**31 - 1
 
 
