@@ -33,7 +33,8 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_csv  # noqa: E402
+from _harness import (add_output_arguments, cell, command, friction_record, machine, markdown_table,  # noqa: E402
+                      read_csv, results_dir, skipped, timed, write_csv, write_report)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -64,43 +65,10 @@ def parse(argv=None):
     return p.parse_args(argv)
 
 
-def _value(text: str):
-    if text in ("True", "False"):
-        return text == "True"
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return text
-
-
-def read_rows(path: Path) -> list[dict]:
-    """Rows of a CSV this script wrote, with numbers and booleans parsed (none if absent)."""
-    import csv
-
-    if not path.is_file():
-        return []
-    with path.open() as f:
-        return [{k: _value(v) for k, v in row.items()} for row in csv.DictReader(f)]
-
-
 def merge(old: list[dict], new: list[dict], keys: tuple[str, ...]) -> list[dict]:
     """``old`` with the rows of ``new`` added, a new row replacing an old one with the same ``keys``."""
     fresh = {tuple(r[k] for k in keys) for r in new}
     return [r for r in old if tuple(r[k] for k in keys) not in fresh] + new
-
-
-def load(args):
-    from jaxfric import rig
-
-    if args.record == "rig":
-        return rig.synthetic_friction_data(jax.random.key(0)), "simulated rig, key 0 (2000 samples, 128 Hz)"
-    path = emps_file(args.data_dir and Path(args.data_dir) / "DATA_EMPS.mat")
-    if path is None:
-        return None, "no EMPS file (pass --data-dir or set JAXFRIC_DATA)"
-    return (rig.emps_friction_data(rig.load_emps(path)),
-            "EMPS estimation file at 1 kHz (DATA_EMPS.mat, 24 741 samples, 80 % training)")
 
 
 def options(model: str, quick: bool) -> dict:
@@ -122,12 +90,6 @@ def options(model: str, quick: bool) -> dict:
                 "refine": GradientRefinement(max_steps=10), **kw}
     return {"solver": jf.mapso_nmds(lattice_size=3, num_generations=5, nm_max_steps=40, nm_max_evals=40),
             **kw}
-
-
-def timed(fn):
-    w, c = time.perf_counter(), time.process_time()
-    out = fn()
-    return out, time.perf_counter() - w, time.process_time() - c
 
 
 def _valid_mse(fit) -> float:
@@ -306,12 +268,7 @@ def stage_costs(model_name: str, data, k: int) -> list[dict]:
     return rows
 
 
-def _fmt(x) -> str:
-    return f"{x:.3g}" if isinstance(x, float) else str(x)
-
-
-def command() -> str:
-    return " ".join(["python benchmarks/ensembles.py"] + sys.argv[1:])
+_fmt = cell(".3g")
 
 
 def report(rows, floor, args, desc: str, runs: list[str], costs=()) -> str:
@@ -380,10 +337,9 @@ def report(rows, floor, args, desc: str, runs: list[str], costs=()) -> str:
 
 def main(argv=None):
     args = parse(argv)
-    data, desc = load(args)
+    data, desc = friction_record(args.record, args.data_dir)
     if data is None:
-        print(f"ensembles: {desc}; skipped, nothing written.", file=sys.stderr)
-        return 0
+        return skipped("ensembles", desc)
     out = results_dir(args.out, quick=args.quick)
     rows, floor, costs = [], [], []
     with warnings.catch_warnings():
@@ -413,22 +369,21 @@ def main(argv=None):
                         print(f"  {f['what']}, P={f['P']}: {f['us_per_candidate']:.1f} us per candidate",
                               flush=True)
     stem = f"ensembles_{args.record}" + (f"_{args.tag}" if args.tag else "")
-    runs = [f"`{command()}`" + (f": {args.note}" if args.note else "")]
+    runs = [f"`{command('ensembles.py')}`" + (f": {args.note}" if args.note else "")]
     notes = out / f"{stem}.runs"
     if args.append:
-        rows = merge(read_rows(out / f"{stem}.csv"), rows, ("model", "K"))
-        floor = merge(read_rows(out / f"{stem}_floor.csv"), floor, ("model", "what", "P"))
-        costs = merge(read_rows(out / f"{stem}_stages.csv"), costs, ("model", "K", "stage"))
+        rows = merge(read_csv(out / f"{stem}.csv"), rows, ("model", "K"))
+        floor = merge(read_csv(out / f"{stem}_floor.csv"), floor, ("model", "what", "P"))
+        costs = merge(read_csv(out / f"{stem}_stages.csv"), costs, ("model", "K", "stage"))
         runs = (notes.read_text().splitlines() if notes.is_file() else []) + runs
         rows.sort(key=lambda r: (str(r["model"]), int(r["K"])))
     notes.write_text("\n".join(runs) + "\n")
-    write_csv(rows, out / f"{stem}.csv")
+    write_csv(rows, out / f"{stem}.csv")  # before report(), which adds display columns to the rows
     if floor:
         write_csv(floor, out / f"{stem}_floor.csv")
     if costs:
         write_csv(costs, out / f"{stem}_stages.csv")
-    (out / f"{stem}.md").write_text(report(rows, floor, args, desc, runs, costs))
-    print(f"wrote {out / stem}.md")
+    write_report(out, stem, report(rows, floor, args, desc, runs, costs), echo=False)
     return 0
 
 
