@@ -31,8 +31,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _harness import (add_output_arguments, emps_file, machine, markdown_table, results_dir,  # noqa: E402
-                      write_csv, x64)
+from _harness import (add_output_arguments, cell, emps_file, machine, markdown_table, results_dir,  # noqa: E402
+                      skipped, write_report, x64)
 
 INIT = 20
 TRAIN = 0.7
@@ -83,18 +83,11 @@ def blocks(record, count=2):
 
 def baseline_fit(train):
     """The least-squares baseline (IDIM-LS on the training record) as a MotionFit."""
-    import numpy as np
-
-    from jaxfric.motion import MotionFit
-    from jaxfric.motion._baseline import baseline_model, least_squares
+    from jaxfric.motion import baseline_motion_fit
+    from jaxfric.motion._baseline import least_squares
 
     est = least_squares([train])
-    model = baseline_model()
-    theta = np.asarray(model.from_physical(Fc=max(est.Fc, 0.0), sigma2=max(est.Fv, 1e-12)), np.float64)
-    return MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=train.dt,
-                     n_train=train.n_samples, n_samples=train.n_samples, metrics={},
-                     settings={"model_name": "coulomb", "motion": {"mass": est.M, "offset": est.offset,
-                                                                   "v0": 0.0}})
+    return baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=train.dt, n_train=train.n_samples)
 
 
 def score_row(fit, train, held):
@@ -161,10 +154,7 @@ def table(rows, command, split_lines) -> str:
         "The held-out part shares the file's excitation: a weaker test than a new recording.", "",
         *split_lines, "",
     ]
-    def fmt(v):
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-    return "\n".join(head) + "\n" + markdown_table(rows, COLUMNS, fmt=fmt) + "\n"
+    return "\n".join(head) + "\n" + markdown_table(rows, COLUMNS, fmt=cell(".4g")) + "\n"
 
 
 def main(argv=None):
@@ -180,10 +170,8 @@ def main(argv=None):
     x64()
     path = emps_file(args.emps)
     if path is None:
-        print("DATA_EMPS.mat not found (set JAXFRIC_DATA or pass --emps): skipped")
-        return 0
+        return skipped("motion_greybox", "DATA_EMPS.mat not found (set JAXFRIC_DATA or pass --emps)")
     out = results_dir(args.out, quick=args.quick)
-    out.mkdir(parents=True, exist_ok=True)
     folds = [f.strip().upper() for f in args.folds.split(",") if f.strip()]
     names = [m.strip() for m in args.models.split(",") if m.strip()]
     for f in folds:
@@ -197,9 +185,8 @@ def main(argv=None):
         + (" --quick" if args.quick else "")
 
     def write(rows):
-        write_csv(rows, out / "motion_greybox.csv")
         splits = sorted({f"Fold {r['fold']}: {r['split']}." for r in rows})
-        (out / "motion_greybox.md").write_text(table(rows, command, splits))
+        write_report(out, "motion_greybox", table(rows, command, splits), rows, echo=False)
 
     grey = {k: getattr(args, k) for k in ("hidden", "bound", "ridge") if getattr(args, k) is not None}
     for k, v in grey.items():
