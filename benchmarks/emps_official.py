@@ -35,14 +35,13 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import add_output_arguments, emps_file, markdown_table, results_dir, write_csv, x64  # noqa: E402
+from _harness import add_output_arguments, cell, emps_file, markdown_table, results_dir, write_report, x64  # noqa: E402
 
 x64()
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxfric import models  # noqa: E402
-from jaxfric.motion import MotionData, MotionFit, MotionSearch, identify_motion  # noqa: E402
+from jaxfric.motion import MotionData, MotionFit, MotionSearch, baseline_motion_fit, identify_motion  # noqa: E402
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, emps_states, idim_ls, load_emps  # noqa: E402
 
 INIT_WINDOW = 20
@@ -75,22 +74,11 @@ def motion_data(path) -> MotionData:
         return MotionData.from_arrays(gtau * vir, qm, dt, cutoff=EMPS_CUTOFF_HZ)
 
 
-def fixed_fit(mass, fv, fc, offset, dt) -> MotionFit:
-    """A Coulomb + viscous + offset motion fit holding given parameters."""
-    return MotionFit.given(models.Coulomb(v_eps=1e-4), dict(Fc=fc, sigma2=fv), mass=mass, offset=offset, dt=dt)
-
-
 def least_squares_baseline(path, dt) -> MotionFit:
     """IDIM-LS (M, Fv, Fc, offset) on the whole estimation file, the benchmark's own recipe."""
     s = emps_states(load_emps(path))
     est = idim_ls(s["v"], s["a"], s["force"])
-    return fixed_fit(est.M, est.Fv, est.Fc, est.offset, dt), est
-
-
-def _cell(v) -> str:
-    if v is None:
-        return ""
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
+    return baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=dt), est
 
 
 def main(argv=None):
@@ -126,7 +114,7 @@ def main(argv=None):
     ls_fit, ls = least_squares_baseline(args.emps, est.dt)
     row(f"least squares Coulomb+viscous+offset (IDIM-LS here: M {ls.M:.2f}, Fv {ls.Fv:.1f}, "
         f"Fc {ls.Fc:.2f}, offset {ls.offset:.2f})", ls_fit, kind="baseline")
-    row("IDIM-LS published parameters", fixed_fit(IDIM["M"], IDIM["Fv"], IDIM["Fc"], IDIM["offset"], est.dt),
+    row("IDIM-LS published parameters", baseline_motion_fit(IDIM["M"], IDIM["Fc"], IDIM["Fv"], IDIM["offset"], dt=est.dt),
         kind="reference")
     search = MotionSearch(particles=6, generations=3, horizons=(None,), steps=(3,)) if args.quick else None
     for name in [m.strip() for m in args.models.split(",") if m.strip()]:
@@ -140,7 +128,6 @@ def main(argv=None):
         rows.append({"model": name, "kind": "published", "mass_kg": None, "offset_N": None,
                      "estimation_rmse_mm": None, "estimation_fit_percent": None, "test_rmse_mm": rmse,
                      "test_fit_percent": fitp, "seconds": None})
-    write_csv(rows, out / "emps_official.csv")
     md = ["# EMPS official forward task (benchmarks/emps_official.py)", "",
           f"Command: `python benchmarks/emps_official.py --test PATH{' --quick' if args.quick else ''} "
           f"--models {args.models}`", "",
@@ -149,9 +136,8 @@ def main(argv=None):
           "positions, friction state tracked along its slope) and are not scored. RMSE of qm in mm, "
           "FIT = 100 (1 - ||e|| / ||y - mean y||). 'estimation' = the same protocol on the training "
           "file itself. Times: wall seconds of the identify_motion call, compilation included.", "",
-          markdown_table(rows, fmt=_cell), ""]
-    (out / "emps_official.md").write_text("\n".join(md))
-    print("\n".join(md))
+          markdown_table(rows, fmt=cell()), ""]
+    write_report(out, "emps_official", md, rows)
     return 0
 
 
