@@ -132,8 +132,9 @@ def skipped(name: str, why: str) -> int:
 
 def command(script: str, argv=None) -> str:
     """``python benchmarks/<script> ARGS``, the command line a report quotes (``argv``, else
-    this process's arguments)."""
-    argv = sys.argv[1:] if argv is None else argv
+    this process's arguments; under ``jaxfric bench NAME ARGS``, ``ARGS``)."""
+    if argv is None:
+        argv = sys.argv[3:] if sys.argv[0].startswith("jaxfric bench") else sys.argv[1:]
     return " ".join([f"python benchmarks/{script}", *map(shlex.quote, argv)])
 
 
