@@ -434,18 +434,10 @@ class MotionFit(Fit):
         ``"records"`` lists each record's metrics."""
         out = {"records": {"train": [], "valid": []}, "init_window": int(init_window)}
         for kind, recs in (("train", train_records), ("valid", valid_records)):
-            xs, hats = [], []
-            for r in recs:
-                r = _as_motion_data(r)
-                if kind == "train":
-                    x, x_hat = r.position, self.simulate_from(r)["x"]
-                else:
-                    x, x_hat = r.position[init_window:], self.simulate(r, init_window=init_window)["x"][init_window:]
-                out["records"][kind].append(motion_metrics(x, x_hat))
-                xs.append(x)
-                hats.append(x_hat)
-            if recs:
-                out[kind] = motion_metrics(np.concatenate(xs), np.concatenate(hats))
+            runs = _record_runs([self], recs, kind == "train", init_window)
+            out["records"][kind] = [motion_metrics(x, x_hat) for x, x_hat in runs]
+            if runs:
+                out[kind] = motion_metrics(*(np.concatenate(a) for a in zip(*runs)))
         return out
 
     def member(self, i: int) -> "MotionFit":
@@ -486,18 +478,9 @@ class MotionFit(Fit):
             return {"train": motion_metrics(x[:n_train], tr), "valid": motion_metrics(x[n_train:], va)}
         out = {}
         for kind, recs in (("train", train_records), ("valid", valid_records)):
-            if not recs:
-                continue
-            xs, hats = [], []
-            for r in recs:
-                if kind == "train":
-                    xs.append(r.position)
-                    hats.append(np.mean([f.simulate_from(r)["x"] for f in fits], axis=0))
-                else:
-                    xs.append(r.position[init_window:])
-                    hats.append(np.mean([f.simulate(r, init_window=init_window)["x"][init_window:]
-                                         for f in fits], axis=0))
-            out[kind] = motion_metrics(np.concatenate(xs), np.concatenate(hats))
+            if recs:
+                runs = _record_runs(fits, recs, kind == "train", init_window)
+                out[kind] = motion_metrics(*(np.concatenate(a) for a in zip(*runs)))
         return out
 
     def summary(self) -> str:
@@ -529,6 +512,20 @@ class MotionFit(Fit):
         m = self.metrics.get("valid") or {}
         tail = f", valid RMSE {m['rmse_mm']:.4g} mm" if "rmse_mm" in m else ""
         return f"MotionFit({type(self.model).__name__}, mass {self.mass:.4g} kg{tail})"
+
+
+def _record_runs(fits, records, train: bool, init_window: int) -> list:
+    """Per record ``(measured positions, the fits' average free run)``: a training record
+    from its first sample ([`MotionFit.simulate_from`][jaxfric.motion.MotionFit.simulate_from]), a validation
+    record from its first ``init_window`` samples, scored on the rest."""
+    out = []
+    for r in map(_as_motion_data, records):
+        if train:
+            out.append((r.position, np.mean([f.simulate_from(r)["x"] for f in fits], axis=0)))
+        else:
+            out.append((r.position[init_window:], np.mean(
+                [f.simulate(r, init_window=init_window)["x"][init_window:] for f in fits], axis=0)))
+    return out
 
 
 class MotionProblem(AbstractProblem):
