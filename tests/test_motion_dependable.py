@@ -2,6 +2,7 @@
 run, the least-squares baseline beside every fit, one sample-time tolerance, and the
 command line's checks (docs/motion.md, docs/algorithms.md §13.2)."""
 
+import dataclasses
 import json
 import warnings
 
@@ -455,9 +456,9 @@ def test_the_free_run_starts_are_the_swarms_points_of_lowest_whole_cost():
         np.testing.assert_array_equal(np.array(got), pool[order[1:4]])
 
 
-def test_the_screen_cycle_returns_to_the_first_spread():
-    """At the minimum nothing lower is found: the spread grows 4x a round, and with
-    screen_cycle=3 it returns to screen_spread after three rounds."""
+def test_the_screen_widens_4x_after_each_round_that_finds_nothing_lower():
+    """At the minimum nothing lower is found: each round's spread (stage["spread"]) is 4x the
+    last one's, from screen_spread."""
     from jaxfric.motion import MotionBudget
     from jaxfric.motion._pipeline import _Clock, screen_free_run
 
@@ -467,17 +468,32 @@ def test_the_screen_cycle_returns_to_the_first_spread():
     c = jnp.array([0.3, -0.2])
     lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     with jax.enable_x64(True):
-        for cycle, want in ((0, [1, 4, 16, 64, 256, 1024]), (3, [1, 4, 16, 1, 4, 16])):
-            stages = []
-            y, f = screen_free_run(MotionSearch(screen=6, screen_size=8, screen_steps=5, screen_cycle=cycle),
-                                   _Clock(MotionBudget()), bowl, np.asarray(c), 1.0, lo, hi, c,
-                                   jax.random.key(0), jnp.float64, stages)
-            assert f == 1.0
-            np.testing.assert_allclose([s["spread"] for s in stages], 0.1 * np.array(want), rtol=1e-12)
+        stages = []
+        y, f = screen_free_run(MotionSearch(screen=5, screen_size=8, screen_steps=5, screen_spread=0.2),
+                               _Clock(MotionBudget()), bowl, np.asarray(c), 1.0, lo, hi, c,
+                               jax.random.key(0), jnp.float64, stages)
+        assert f == 1.0
+        np.testing.assert_allclose([s["spread"] for s in stages], 0.2 * 4.0 ** np.arange(5), rtol=1e-12)
 
 
 def test_the_free_run_settings_are_checked():
-    for bad in (MotionSearch(free_run_starts=-1), MotionSearch(free_run_starts=True), MotionSearch(screen_cycle=-1),
-                MotionSearch(screen_cycle=1.5)):
+    for bad in (MotionSearch(free_run_starts=-1), MotionSearch(free_run_starts=True),
+                MotionSearch(free_run_starts=1.5)):
         with pytest.raises(ValueError, match="MotionSearch"):
             bad.check()
+
+
+def test_free_run_starts_are_polished_beside_the_swarms_best():
+    """free_run_starts=1 adds one start (the swarm's point of lowest whole free-run cost) to
+    the same window-ranked starts: the winning start can only end lower, and every start's
+    final cost is listed."""
+    search = MotionSearch(particles=10, generations=6, global_window=150, horizons=(300, None), steps=(10, 20),
+                          starts=2, least_squares_start=True)
+    with jax.enable_x64(True):
+        fits = [identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=1, mass=(0.5, 10.0), fit_offset=True,
+                                search=dataclasses.replace(search, free_run_starts=k), dtype=jnp.float64) for k in (0, 1)]
+    plain, ranked = fits
+    assert "rank" not in [s["stage"] for s in plain.stages]
+    assert [s["stage"] for s in ranked.stages][:2] == ["pso", "rank"]
+    assert sorted(s["start"] for s in ranked.settings["motion"]["starts"]) == [0, 1, 2, 3]
+    assert ranked.metrics["cost"] <= plain.metrics["cost"] * (1 + 1e-12)
