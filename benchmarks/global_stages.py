@@ -29,7 +29,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, emps_file, machine, results_dir, write_csv  # noqa: E402
+from _harness import add_output_arguments, emps_file, machine, results_dir, write_report  # noqa: E402
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -125,8 +125,6 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
 
 
 def write(out: Path, rows, a):
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(rows, out / "global_stages.csv", float_format="")
     lines = [
         "# Global stages on the main job: MAPSO vs CMA-ES vs PSO, then the same Nelder–Mead",
         "",
@@ -169,7 +167,7 @@ def write(out: Path, rows, a):
             f"{mm([r['valid_mse_pct'] for r in rs], g3)} | {mm([r['train_mse_pct'] for r in rs], g3)} | "
             f"{mm([r['J_global'] for r in rs], g3)} | {mm([r['J'] for r in rs], g3)} | "
             f"{np.median([r['run_s'] for r in rs]):.1f} |")
-    (out / "global_stages.md").write_text("\n".join(lines) + "\n")
+    write_report(out, "global_stages", lines, rows, float_format="", echo=False)
 
 
 def main(argv=None):
@@ -194,8 +192,7 @@ def main(argv=None):
             for row in run(dname, data, model_name, range(a.keys),
                            (a.generations, a.enn_generations), a.nm_evals):
                 rows.append(row)
-                write(Path(a.out), rows, a)  # partial results survive an interruption
-    print(f"wrote {Path(a.out) / 'global_stages.md'}")
+                write(a.out, rows, a)  # partial results survive an interruption
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_csv, x64  # noqa: E402
+from _harness import add_output_arguments, emps_file, machine, markdown_table, results_dir, write_report, x64  # noqa: E402
 
 x64()
 import jax  # noqa: E402
@@ -205,7 +205,6 @@ def main(argv=None):
             iv_rows += interval_rows("EMPS", fit)
         emps_note = f"EMPS: {args.emps.name}, {data.n_samples} samples at {1 / data.dt:.4g} Hz, {split}."
 
-    write_csv(cov_rows + band_rows, out / "uncertainty.csv")
     ens_text = ("not run (--quick)" if ens is None else
                 f"LuGre, keys=8 on the rig: the members' min–max band (mean half-width "
                 f"{ens['half_width']:.3g} N) holds {ens['train']:.1%} of the training and "
@@ -225,8 +224,7 @@ def main(argv=None):
           "the band's width is set by model error.", "", markdown_table(band_rows), "",
           f"Ensemble min–max band: {ens_text}.", "", emps_note, "",
           "## 3. Intervals of the fits above", "", markdown_table(iv_rows), ""]
-    (out / "uncertainty.md").write_text("\n".join(md))
-    print("\n".join(md))
+    write_report(out, "uncertainty", md, cov_rows + band_rows)
 
 
 if __name__ == "__main__":
