@@ -21,13 +21,12 @@ from __future__ import annotations
 import argparse
 import collections
 import importlib.metadata
-import shlex
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, machine, markdown_table, results_dir, write_csv, x64  # noqa: E402
+from _harness import add_output_arguments, cell, command, machine, markdown_table, results_dir, write_report, x64  # noqa: E402
 
 x64()  # the script's choice: |f − f*| < 1e-5 needs it
 import jax  # noqa: E402
@@ -182,7 +181,6 @@ def main(argv=None):
     p.add_argument("--restarts", type=int, default=9, help="IPOP restarts (both IPOPs)")
     p.add_argument("--no-pycma", action="store_true")
     a = p.parse_args(argv)
-    command = " ".join(["python benchmarks/cmaes_restarts.py", *map(shlex.quote, sys.argv[1:])])
     dims = [2] if a.quick else [int(d) for d in a.dims.split(",")]
     budget_per_dim = 2000 if a.quick else a.budget
     probs = problems()
@@ -218,11 +216,10 @@ def main(argv=None):
 
     import cma  # noqa: F401  (its version, for the record)
 
-    write_csv(rows, out / "cmaes_restarts.csv")
-    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
+    fmt = cell(".3g")
     text = "\n\n".join([
         "# CMA-ES restarts (IPOP) beside pycma",
-        f"Command: `{command}` ({time.perf_counter() - t_start:.0f} s). Machine: {machine()} (at the end).",
+        f"Command: `{command('cmaes_restarts.py', argv)}` ({time.perf_counter() - t_start:.0f} s). Machine: {machine()} (at the end).",
         f"evosax {importlib.metadata.version('evosax')}, "
         f"pycma {sys.modules['cma'].__version__}, float64. {len(probs)} functions × D ∈ "
         f"{dims} × {a.seeds} seeds; budget {budget_per_dim}·D evaluations for every "
@@ -237,8 +234,7 @@ def main(argv=None):
         "Successful seeds per function and dimension:",
         markdown_table(per_function(rows, solvers), fmt=fmt),
     ])
-    (out / "cmaes_restarts.md").write_text(text + "\n")
-    print(text)
+    write_report(out, "cmaes_restarts", text, rows)
 
 
 if __name__ == "__main__":

@@ -31,8 +31,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import (Case, add_output_arguments, machine, markdown_table, results_dir,  # noqa: E402
-                      run_round_robin, write_csv)
+from _harness import (Case, add_output_arguments, cell, machine, markdown_table, results_dir,  # noqa: E402
+                      run_round_robin, write_report)
 from baselines import (elman_rollout_loop, elman_rollout_vectorised, lugre_numpy_hoisted,  # noqa: E402
                        lugre_numpy_per_step, lugre_python_loop)
 
@@ -139,7 +139,6 @@ def rows_of(measured: list[Case]) -> list[dict]:
 
 
 def report(rows: list[dict], quick: bool, wall: float) -> str:
-    fmt = lambda x: "-" if x is None else (f"{x:.3g}" if isinstance(x, float) else str(x))  # noqa: E731
     enn = [r for r in rows if r["model"] == "ENN" and r["implementation"].startswith("JAX simulate_batch")]
     met = [f"{r['dtype']}: {r['x NumPy vectorised']:.1f}× NumPy vectorised (target {TARGETS['NumPy vectorised']:g}×), "
            f"{r['x NumPy loop']:.0f}× the per-candidate loop (target {TARGETS['NumPy loop']:g}×)" for r in enn]
@@ -153,7 +152,7 @@ def report(rows: list[dict], quick: bool, wall: float) -> str:
         + (" --quick: fewer rounds, the loops on 8 (ENN) and 4 (LuGre) candidates, scaled." if quick else ""), "",
         f"Machine: {machine()}.", "",
         "Batched ENN rollout: " + "; ".join(met) + ".", "",
-        markdown_table(rows, fmt=fmt), ""])
+        markdown_table(rows, fmt=cell(".3g", "-")), ""])
 
 
 def main(argv=None) -> int:
@@ -166,11 +165,7 @@ def main(argv=None) -> int:
     run_round_robin(measured, 3 if a.quick else 15)
     rows = rows_of(measured)
     out = results_dir(a.out, quick=a.quick)
-    stem = "peers" + (f"_{a.tag}" if a.tag else "")
-    write_csv(rows, out / f"{stem}.csv")
-    text = report(rows, a.quick, time.perf_counter() - t0)
-    (out / f"{stem}.md").write_text(text)
-    print(text)
+    write_report(out, "peers" + (f"_{a.tag}" if a.tag else ""), report(rows, a.quick, time.perf_counter() - t0), rows)
     return 0
 
 
