@@ -328,9 +328,10 @@ def run_keys(path, names, count, quick, on_row=None, splits=("whole", "tail")):
 KEYS_NOTE = """Every row: `identify_motion(model, data, keys=[key(0), ..., key(K-1)], mass=(50, 200),
 fit_offset=True, dtype=float64)` with the default search (docs/motion.md: PSO on windows, then
 Levenberg-Marquardt on 5 000-sample shooting segments and on the whole free run, from 3 of the
-swarm's personal bests and the least-squares start, a 200-step polish of the lowest, then 8
-rounds of screening: 64 whole free-run costs around the best point per round, Levenberg-Marquardt
-from the lowest). Member i is the fit of key i. "whole
+swarm's personal bests, 2 more of its points ranked by their whole free-run cost and the
+least-squares start, a 200-step polish of the lowest, then 16 rounds of screening: 64 whole
+free-run costs around the best point per round, Levenberg-Marquardt from the lowest). Member i
+is the fit of key i. "whole
 file": trained on all 24 841 samples of DATA_EMPS.mat, training free-run RMSE [mm] from the
 first sample; "80 % / tail": trained on the first 19 873 samples, "tail" = the held-back last
 20 %, free run from the state at its start (the same excitation as the training part: it is

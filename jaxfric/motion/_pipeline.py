@@ -33,11 +33,13 @@ default pipeline therefore grows the simulation horizon:
    depends on the key; on the whole EMPS estimation file 8 rounds took the spread of the
    training free-run RMSE over keys 0–4 from 6.8 % to 2.2 % (Coulomb), 7.3 % to 6.4 %
    (Stribeck), 31 % to 25 % (LuGre) and 46 % to 39 % (GMS). With 16 rounds and 2
-   free-run-ranked starts (the default since issue 45) no GMS key ended higher and three
-   ended lower (1.885 1.693 2.206 2.370 2.369 mm against 1.885 2.480 2.617 2.370 2.587):
-   the lower optimum widened the spread to 40 %; GMS key 1's screen still lowered J at
-   round 15, GMS keys 3 and 4 sat in one valley (J 8.2e-4 against 4.2e-4) that no round
-   left. Coulomb: 2.772 2.735 2.804 2.743 2.793 mm (2.5 %), no key higher than with 8 rounds.
+   free-run-ranked starts (the default since issue 45; keys 0–4 one call each) no key of
+   any model ended higher: LuGre 2.090 2.072 2.088 2.170 2.154 mm (4.7 %; was 2.090 2.072
+   2.088 2.588 2.273), Coulomb 2.772 2.735 2.804 2.743 2.793 (2.5 %), Stribeck unchanged
+   (6.4 %: the least-squares start wins and no round moves it), GMS 1.885 1.693 2.206 2.370
+   2.369 (was 1.885 2.480 2.617 2.370 2.587; the lower optimum of key 1 widens the spread
+   to 40 %: its screen still lowered J at round 15, while keys 3 and 4 sat in one valley,
+   J 8.2e-4 against 4.2e-4, that no round left).
 
 Measured on the EMPS estimation split (80 % trains, ``benchmarks/motion.py``): the
 earlier default (MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of
