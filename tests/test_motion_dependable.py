@@ -13,7 +13,8 @@ import pytest
 
 from jaxfric import models
 from jaxfric._warnings import BaselineWarning
-from jaxfric.motion import MotionData, MotionSearch, compare_motion, friction_step, identify_motion, simulate_motion
+from jaxfric.motion import (MotionData, MotionSearch, baseline_motion_fit, compare_motion, friction_step,
+                            identify_motion, simulate_motion)
 from jaxfric.motion._baseline import BASELINE_LABEL, least_squares, least_squares_start
 from jaxfric.motion._layout import Layout
 from jaxfric.motion._pipeline import distinct_starts
@@ -348,7 +349,8 @@ def test_the_official_emps_script_reads_and_scores_any_emps_format_test_file(tmp
                                     "vir": (rec.force / emps_official.GTAU)[:, None]})
     test = emps_official.motion_data(tmp_path / "test.mat")
     assert not test.dt == 0.0009999840 and same_sample_time(test.dt, 0.0009999840)
-    fit = emps_official.fixed_fit(MASS, TRUTH["sigma2"], TRUTH["Fc"], OFFSET, 0.0009999840)
+    # the script builds its fixed fits (baseline, published IDIM-LS) with baseline_motion_fit
+    fit = baseline_motion_fit(MASS, TRUTH["Fc"], TRUTH["sigma2"], OFFSET, dt=0.0009999840)
     with jax.enable_x64(True):
         score = fit.score(test, init_window=20)
     assert np.isfinite(score["rmse_mm"])
