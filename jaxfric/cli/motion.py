@@ -150,11 +150,10 @@ def _judge(args, fits, data, window, say):
     "init_window", "windows", "scores": name -> mm, "baseline": mm}``."""
     if window is None:
         return None
-    from jaxfric.motion import DEFAULT_INIT_WINDOW, baseline_fit, short_runs_score
+    from jaxfric.motion import DEFAULT_INIT_WINDOW, short_judge
 
     say(f"judging by short free runs: {data.n_samples // window} windows of {window} samples")
-    scores = {name: short_runs_score(fit, [data], window) for name, fit in fits.items()}
-    base = short_runs_score(baseline_fit(next(iter(fits.values()))), [data], window)
+    scores, base = short_judge(fits, [data], window)
     return {"name": "short", "window_samples": window, "window_s": window * data.dt,
             "init_window": DEFAULT_INIT_WINDOW, "windows": data.n_samples // window, "scores": scores,
             "baseline": base}

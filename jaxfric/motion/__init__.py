@@ -21,7 +21,7 @@ from .._warnings import BaselineWarning
 from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
                    identify_motion, load_motion_fit, motion_metrics)
 from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, compare_motion, rank_fits,
-                       short_runs_score, short_window)
+                       short_judge, short_runs_score, short_window)
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
@@ -38,6 +38,7 @@ __all__ = [
     "rank_fits",
     "SHORT_WINDOW_S",
     "baseline_fit",
+    "short_judge",
     "short_runs_score",
     "short_window",
     "advance_motion",

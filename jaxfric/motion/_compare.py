@@ -273,6 +273,15 @@ def short_runs_score(fit, records, window: int | None = None, init_window: int =
     return _pooled_rmse(metrics)
 
 
+def short_judge(fits: dict, records, window: int | None = None,
+                init_window: int = DEFAULT_INIT_WINDOW) -> tuple[dict, float]:
+    """The short judge of named fits and of their least-squares baseline (`baseline_fit`
+    of the first fit): ``(scores, baseline score)``, each `short_runs_score` over
+    ``records`` [mm]."""
+    scores = {label: short_runs_score(fit, records, window, init_window) for label, fit in fits.items()}
+    return scores, short_runs_score(baseline_fit(next(iter(fits.values()))), records, window, init_window)
+
+
 def baseline_fit(fit):
     """The least-squares Coulomb + viscous + offset baseline of ``fit`` (its
     ``settings["motion"]["baseline"]``: ``M``, ``Fc``, ``Fv``, ``offset``) as a
@@ -348,8 +357,7 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     if judge == "tail":
         return rank_fits(fits, stacklevel=2)
     if judge == "short":
-        scores = {label: short_runs_score(fit, everything, window, init_window) for label, fit in fits.items()}
-        base = short_runs_score(baseline_fit(next(iter(fits.values()))), everything, window, init_window)
+        scores, base = short_judge(fits, everything, window, init_window)
         return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base)
     if data is not None:
         data = _as_motion_data(data)
