@@ -226,3 +226,49 @@ def test_minimise_many_batching_map_equals_single_runs():
     np.testing.assert_allclose(a.f, b.f, rtol=1e-6)
     with pytest.raises(ValueError, match="batching must be one of"):
         jf.minimise_many(quad, nm, BOUNDS, **run, batching="serial")
+
+
+def test_output_type_is_memoised_per_objective_and_signature(monkeypatch):
+    """A warm minimise does not trace the objective for its output type again (issue 47:
+    about 2 000 Python calls a call), a new args dtype is a new entry (the stand-in of the
+    blank carry takes the new output dtype), and an unhashable objective (an eqx.Module
+    holding an array) is traced every time and still runs."""
+    from jaxfric.optim import driver
+    from jaxfric.optim.problem import _Flat
+
+    real, traced = jax.eval_shape, []
+
+    def counting(f, *a, **k):
+        if isinstance(f, _Flat):
+            traced.append(f.fn)
+        return real(f, *a, **k)
+
+    monkeypatch.setattr(jax, "eval_shape", counting)
+
+    def fn(y, a):
+        return jnp.sum((y - 1.0) ** 2).astype(a.dtype) * a
+
+    solver = jf.PSO(num_particles=4, num_generations=2)
+    lo, hi = -np.ones(3, np.float32), np.ones(3, np.float32)
+    one = jf.minimise(fn, solver, (lo, hi), args=jnp.float32(1.0), key=0)
+    first = traced.count(fn)
+    again = jf.minimise(fn, solver, (lo, hi), args=jnp.float32(1.0), key=0)
+    assert traced.count(fn) == first
+    np.testing.assert_array_equal(np.asarray(one.value), np.asarray(again.value))
+    assert fn in driver._OUTPUT_TYPES
+    with jax.enable_x64(True):  # another args dtype: another output type, traced anew
+        wide = jf.minimise(fn, solver, (lo, hi), args=jnp.float64(1.0), key=0)
+    assert traced.count(fn) > first
+    assert wide.f.dtype == jnp.float64 and np.isfinite(float(wide.f))  # follows fn
+
+    class Shifted(eqx.Module):
+        shift: jax.Array
+
+        def __call__(self, y, a):
+            return jnp.sum((y - self.shift) ** 2)
+
+    shifted = Shifted(jnp.full(3, 0.5, jnp.float32))
+    for k in range(2):
+        sol = jf.minimise(shifted, solver, (lo, hi), key=k)
+        assert np.isfinite(float(sol.f))
+    assert sum(isinstance(f, Shifted) for f in traced) >= 2  # not cached, no error

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import weakref
 from pathlib import Path
 from typing import Any, Callable
 
@@ -182,6 +183,55 @@ def _stand_in(dtype: str):
     return stand_in
 
 
+#: ``fn -> {signature: output type}``: what `_output_type` found, per objective (weakly
+#: held, so a dropped objective takes its entries with it)
+_OUTPUT_TYPES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _output_key(flat, lower, args):
+    """What ``flat``'s output type depends on besides its function: the parameters'
+    structure, the search vector's shape and dtype, ``args``' structure, shapes and dtypes
+    (Python scalars by type) and JAX's float width; ``None`` where a leaf of ``args`` is
+    neither (then nothing is cached)."""
+    leaves, treedef = jtu.tree_flatten(args)
+    sig = []
+    for leaf in leaves:
+        if hasattr(leaf, "shape") and hasattr(leaf, "dtype"):
+            sig.append((tuple(leaf.shape), str(leaf.dtype), bool(getattr(leaf, "weak_type", False))))
+        elif isinstance(leaf, (bool, int, float, complex)):
+            sig.append(type(leaf))  # traced by eval_shape: only the type matters
+        else:
+            return None
+    key = (flat.treedef, flat.shapes, tuple(lower.shape), str(lower.dtype), treedef,
+           tuple(sig), str(jax.dtypes.canonicalize_dtype(np.float64)))
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _output_type(flat, lower, args):
+    """``jax.eval_shape`` of the objective on the search vector, memoised per objective and
+    `_output_key`: tracing it took about 2 000 Python calls of every warm ``minimise``
+    (issue 47). An objective that cannot be weakly referenced or hashed (an ``eqx.Module``
+    holding arrays, say) is traced every time."""
+    key, known = _output_key(flat, lower, args), None
+    try:
+        known = None if key is None else _OUTPUT_TYPES.get(flat.fn)
+    except TypeError:  # unhashable, or no weak reference to it
+        key = None
+    if known is not None and key in known:
+        return known[key]
+    out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+    if key is not None:
+        try:
+            _OUTPUT_TYPES.setdefault(flat.fn, {})[key] = out
+        except TypeError:
+            pass
+    return out
+
+
 def _shapes_only(proto, flat, lower, args):
     """``(flat, args)`` for `_blank`: the objective replaced by a stand-in of the same
     output type (and no ``args``) where no part of ``proto`` keeps more of it than
@@ -190,7 +240,7 @@ def _shapes_only(proto, flat, lower, args):
     issue 47)."""
     if objective_free(proto, flat, args)[0] is flat:
         return flat, args
-    out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+    out = _output_type(flat, lower, args)
     if getattr(out, "weak_type", False):
         return flat, args
     return type(flat)(_stand_in(str(out.dtype)), flat.treedef, flat.shapes, flat.layout), None
