@@ -84,6 +84,15 @@ def is_uniform(t: np.ndarray, rtol: float = 1e-3) -> bool:
     return bool(np.all(np.abs(d - med) <= rtol * med))
 
 
+def check_int(name: str, value, least: int = 1, most: int | None = None, unit: str = "") -> int:
+    """``value`` as an int in ``[least, most]`` (a bool is not an int); ``unit`` names it in the message."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not (
+            least <= value and (most is None or value <= most)):
+        span = f">= {least}" if most is None else f"in [{least}, {most}]"
+        raise ValueError(f"{name} must be a whole number {span}{unit}, got {value!r}")
+    return int(value)
+
+
 def check_positive(name: str, value, allow_zero: bool = False) -> float:
     try:
         v = float(value)

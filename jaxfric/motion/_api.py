@@ -33,7 +33,7 @@ from ..optim import AbstractSolver
 from ..pipeline import (ENSEMBLE_DROP, best_member, baseline_stage, check_solver, global_search, history,
                         kept_members, key_record, resolve_keys, solver_stages)
 from ..problem import AbstractProblem, Residuals, SearchCoordinates
-from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_sample_time,
+from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, check_int, check_sample_time,
                        same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import assess_fit
@@ -56,6 +56,7 @@ DEFAULT_INIT_WINDOW = 20
 #: Degree of the polynomial the initial-state rule fits to the window's positions.
 INIT_DEGREE = 2
 ERRORS = ("position", "velocity", "both")
+_CHANNELS = ("force", "position", "load", "velocity")
 
 
 def _series(name, values) -> np.ndarray:
@@ -119,9 +120,7 @@ class MotionData:
     def window(self, start: int, stop: int | None = None) -> "MotionData":
         """Samples ``[start, stop)`` as a record of their own (the velocity stays the one
         filtered over the whole record)."""
-        sl = slice(start, stop)
-        return dataclasses.replace(self, force=self.force[sl], position=self.position[sl],
-                                   load=self.load[sl], velocity=self.velocity[sl])
+        return dataclasses.replace(self, **{k: getattr(self, k)[start:stop] for k in _CHANNELS})
 
     @property
     def n_samples(self) -> int:
@@ -129,9 +128,7 @@ class MotionData:
 
 
 def _init_window(n) -> int:
-    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 2:
-        raise ValueError(f"init_window must be an integer >= 2 (samples), got {n!r}")
-    return int(n)
+    return check_int("init_window", n, 2, unit=" (samples)")
 
 
 def _as_motion_data(data) -> MotionData:
@@ -432,18 +429,13 @@ class MotionFit(Fit):
         first ``init_window`` samples ([`simulate`][jaxfric.motion.MotionFit.simulate] with ``init_window``), scored on
         the rest. ``"train"``/``"valid"`` pool the errors of all records of a kind;
         ``"records"`` lists each record's metrics."""
-        out = {"records": {"train": [], "valid": []}, "init_window": int(init_window)}
-        for kind, recs in (("train", train_records), ("valid", valid_records)):
-            runs = _record_runs([self], recs, kind == "train", init_window)
-            out["records"][kind] = [motion_metrics(x, x_hat) for x, x_hat in runs]
-            if runs:
-                out[kind] = motion_metrics(*(np.concatenate(a) for a in zip(*runs)))
-        return out
+        runs = _record_runs([self], train_records, valid_records, init_window)
+        return {"records": {k: [motion_metrics(*r) for r in rs] for k, rs in runs.items()},
+                "init_window": int(init_window), **_pooled_metrics(runs)}
 
     def member(self, i: int) -> "MotionFit":
         """Ensemble member ``i`` (``identify_motion(..., keys=K)``) as a fit of its own."""
-        if not self.ensemble or "mass" not in self.ensemble:
-            raise ValueError("this fit has no motion ensemble: identify_motion(..., keys=K) makes one")
+        self.ensemble_kept()  # a motion ensemble, or ValueError
         e = self.ensemble
         # the best member's uncertainty is not this member's: none
         return self.replace(
@@ -476,12 +468,7 @@ class MotionFit(Fit):
             tr = np.mean([f.simulate_from(data, 0, n_train)["x"] for f in fits], axis=0)
             va = np.mean([f.simulate_from(data, n_train)["x"] for f in fits], axis=0)
             return {"train": motion_metrics(x[:n_train], tr), "valid": motion_metrics(x[n_train:], va)}
-        out = {}
-        for kind, recs in (("train", train_records), ("valid", valid_records)):
-            if recs:
-                runs = _record_runs(fits, recs, kind == "train", init_window)
-                out[kind] = motion_metrics(*(np.concatenate(a) for a in zip(*runs)))
-        return out
+        return _pooled_metrics(_record_runs(fits, train_records, valid_records, init_window))
 
     def summary(self) -> str:
         lines = [f"{type(self.model).__name__} motion fit: {self.num_params} friction parameters, "
@@ -514,18 +501,22 @@ class MotionFit(Fit):
         return f"MotionFit({type(self.model).__name__}, mass {self.mass:.4g} kg{tail})"
 
 
-def _record_runs(fits, records, train: bool, init_window: int) -> list:
-    """Per record ``(measured positions, the fits' average free run)``: a training record
-    from its first sample ([`MotionFit.simulate_from`][jaxfric.motion.MotionFit.simulate_from]), a validation
-    record from its first ``init_window`` samples, scored on the rest."""
-    out = []
-    for r in map(_as_motion_data, records):
+def _record_runs(fits, train_records, valid_records, init_window: int) -> dict:
+    """``{"train": runs, "valid": runs}``, per record ``(measured positions, the fits' average
+    free run)``: a training record from its first sample ([`MotionFit.simulate_from`][jaxfric.motion.MotionFit.simulate_from]),
+    a validation record from its first ``init_window`` samples, scored on the rest."""
+    def run(r, train):
         if train:
-            out.append((r.position, np.mean([f.simulate_from(r)["x"] for f in fits], axis=0)))
-        else:
-            out.append((r.position[init_window:], np.mean(
-                [f.simulate(r, init_window=init_window)["x"][init_window:] for f in fits], axis=0)))
-    return out
+            return r.position, np.mean([f.simulate_from(r)["x"] for f in fits], axis=0)
+        return r.position[init_window:], np.mean(
+            [f.simulate(r, init_window=init_window)["x"][init_window:] for f in fits], axis=0)
+    return {kind: [run(r, kind == "train") for r in map(_as_motion_data, recs)]
+            for kind, recs in (("train", train_records), ("valid", valid_records))}
+
+
+def _pooled_metrics(runs: dict) -> dict:
+    """[`motion_metrics`][jaxfric.motion.motion_metrics] of each kind's records pooled (kinds with none left out)."""
+    return {k: motion_metrics(*(np.concatenate(a) for a in zip(*rs))) for k, rs in runs.items() if rs}
 
 
 class MotionProblem(AbstractProblem):
@@ -759,9 +750,11 @@ def identify_motion(
 
     Raises ``ValueError`` before any optimisation for bad data, split, mass, options.
     """
+    options = {name: value for name, value in locals().items() if name not in ("model", "data", "key", "keys")}
     if keys is not None:
-        options = {name: value for name, value in locals().items() if name not in ("model", "data", "key", "keys")}
         return _ensemble(model, data, resolve_keys(key, keys).members, options)
+    # a grey-box's physical fit: the same call, on the physical model (an instance: no model_options)
+    physical_options = dict(options, data=data, key=key, model_options=None)
     with Stopwatch() as total:
         tr_records, va_records, data, n_train = _records(data, train, valid)
         if error not in ERRORS:
@@ -770,17 +763,13 @@ def identify_motion(
         if legacy_cost and data is None:
             raise ValueError("k-step (horizon) and velocity costs take one record with a held-back block: "
                              "pass data and a train fraction below 1")
-        n = data.n_samples if data is not None else None
-        if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, numbers.Integral)
-                                    or not 1 <= horizon < n_train):
-            raise ValueError(f"horizon must be None (free run) or an int in [1, {n_train - 1}], got {horizon!r}")
-        if horizon is not None and error != "position":
-            raise ValueError("k-step costs use the position error only: pass error='position'")
-        if isinstance(metric_horizon, bool) or not isinstance(metric_horizon, numbers.Integral) \
-                or metric_horizon < 1:
-            raise ValueError(f"metric_horizon must be a positive integer, got {metric_horizon!r}")
+        if horizon is not None:
+            check_int("horizon", horizon, 1, n_train - 1, " (or None: the free run)")
+            if error != "position":
+                raise ValueError("k-step costs use the position error only: pass error='position'")
+        metric_horizon = check_int("metric_horizon", metric_horizon)
         if data is not None:  # a short held-back block gets a shorter k
-            metric_horizon = min(int(metric_horizon), n - n_train - 1)
+            metric_horizon = min(metric_horizon, data.n_samples - n_train - 1)
         init_window = _init_window(init_window)
         for i, r in enumerate(va_records):
             if r.n_samples <= init_window:
@@ -791,7 +780,7 @@ def identify_motion(
             raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
         mass0, mass_range = _mass_setting(mass)
         model = resolve_model(model, model_options)
-        given_search, search = search, (default_search(model) if search is None else search)
+        search = default_search(model) if search is None else search
         search.check()
         vt = np.concatenate([r.velocity for r in tr_records])
         ut = np.concatenate([r.net_force for r in tr_records])
@@ -799,55 +788,47 @@ def identify_motion(
         if f_level <= 0 or max(np.ptp(r.position) for r in tr_records) <= 0:
             raise ValueError("the training data have no force or no motion: nothing to identify")
         box = model.search_box(box, *((vt, ut) if data_bounds else ()))
-        scalers = (None, None)
-        if model.needs_scaling:
-            scalers = (Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
+        scalers = ((Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
+                   if model.needs_scaling else (None, None))
         if solver is not None:
             check_solver(solver)
         run_keys = resolve_keys(key)
         key, seed = run_keys.key, run_keys.seed
         dtype = search_dtype(dtype)
 
+        # the search vector: theta, then the mechanics identified (jaxfric.motion._layout)
         layout = Layout(model.num_params, mass_range is not None, bool(fit_offset), bool(fit_v0))
-        lower, upper = (list(b) for b in model.bounds(box))
+        rows = list(zip(*model.bounds(box)))
         if mass_range is not None:
-            lower.append(np.log10(mass_range[0]))
-            upper.append(np.log10(mass_range[1]))
+            rows.append((np.log10(mass_range[0]), np.log10(mass_range[1])))
         if fit_offset:
-            lo, hi = (-0.25 * f_level, 0.25 * f_level) if offset_range is None else offset_range
-            lower.append(float(lo))
-            upper.append(float(hi))
+            rows.append((-0.25 * f_level, 0.25 * f_level) if offset_range is None else offset_range)
         if fit_v0:
             vmax = 0.05 * float(np.max(np.abs(vt)))
-            lower.append(-vmax)
-            upper.append(vmax)
-        lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+            rows.append((-vmax, vmax))
+        lower, upper = (np.asarray(b, np.float64) for b in zip(*rows))
 
-        if legacy_cost:
+        if legacy_cost:  # one cost (k-step or velocity): one Levenberg-Marquardt stage on it
             x_tr, v_tr = tr_records[0].position, tr_records[0].velocity
-            free = {
-                "force": jnp.asarray(ut, dtype), "x": jnp.asarray(x_tr, dtype),
-                "v": jnp.asarray(v_tr, dtype), "dt": jnp.asarray(data.dt, dtype),
-                "mass": jnp.asarray(mass0, dtype),
-                "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
-                "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
-                "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers),
-            }
+            free = {"force": jnp.asarray(ut, dtype), "x": jnp.asarray(x_tr, dtype), "v": jnp.asarray(v_tr, dtype),
+                    "dt": jnp.asarray(data.dt, dtype), "mass": jnp.asarray(mass0, dtype),
+                    "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
+                    "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
+                    "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers)}
             residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
             cost, glob = residuals, free
-        else:
-            residuals = ShootingResiduals(model, layout)
-            cost = SumOfSquares(residuals)
-            free = _pooled(tr_records, dtype, scalers, mass0)
-            glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
-                           windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
-        if legacy_cost:  # one cost (k-step or velocity): one Levenberg-Marquardt stage on it
             search = MotionSearch(search.particles, search.generations, search.global_window, search.lead,
                                   (None,), (sum(search.steps),), search.rtol)
 
             def stage_data(h):
                 return free
         else:
+            residuals = ShootingResiduals(model, layout)
+            cost = SumOfSquares(residuals)
+            free = _pooled(tr_records, dtype, scalers, mass0)
+            glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
+                           windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
+
             def stage_data(h):
                 return free if h is None else _pooled(tr_records, dtype, scalers, mass0, segment=h,
                                                       lead=search.lead)
@@ -865,13 +846,7 @@ def identify_motion(
                     start = least_squares_start(model, est, vt, box, layout, lower, upper)
                     extra = [] if start is None else [start]
                 if isinstance(model, GreyBox):  # from its physical model's fit, correction off
-                    y0, before = _greybox_start(model, box, lower, upper, dict(
-                        data=data, train=train if data is not None else list(tr_records), key=key, mass=mass,
-                        valid=valid if data is not None else (list(va_records) or None), error=error,
-                        search=given_search,
-                        horizon=horizon, fit_offset=fit_offset, fit_v0=fit_v0, offset_range=offset_range,
-                        data_bounds=data_bounds, dtype=dtype, init_window=init_window,
-                        max_evals=max_evals, max_time=max_time, progress=progress))
+                    y0, before = _greybox_start(model, box, lower, upper, physical_options)
                 y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
                                                 global_data=glob, stage_data=stage_data,
                                                 key=key, dtype=dtype, progress=progress,
@@ -882,12 +857,11 @@ def identify_motion(
         theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
         key_data, key_impl = key_record(key)
         n_tr_total = sum(r.n_samples for r in tr_records)
-        n_all = n if data is not None else n_tr_total + sum(r.n_samples for r in va_records)
+        n_all = data.n_samples if data is not None else n_tr_total + sum(r.n_samples for r in va_records)
         fit = MotionFit(
             model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
             dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
-            history=history(sol),
-            solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
+            history=history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
             timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
             settings={
                 "model_name": model_name(model), "model_config": model_config(model),
@@ -905,11 +879,10 @@ def identify_motion(
                            "init_window": init_window},
             },
         )
-        if data is not None:
-            metrics = fit.evaluate(data, n_train, int(metric_horizon))
-        else:
-            metrics = fit.evaluate_records(tr_records, va_records, init_window)
-        base = _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window)
+        scoring = (data, n_train, metric_horizon, tr_records, va_records, init_window)
+        metrics = _scored(fit, *scoring)
+        base = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt, n_train=n_tr_total)
+        base = base.replace(metrics=_scored(base, *scoring))
         # the fit above only simulates for its metrics; the one returned carries them
         fit = fit.replace(
             metrics={**metrics, "num_params": int(y.size), "cost": j_final},
@@ -961,7 +934,7 @@ def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
     of ``box``) with the network's output weights at zero, where the grey-box *is* that fit;
     ``stages`` is one row for the physical fit, put before the grey-box's own."""
     phys = model.physical
-    fit = identify_motion(phys, box={k: box[k] for k in phys.box_keys}, **options)
+    fit = identify_motion(phys, **{**options, "box": {k: box[k] for k in phys.box_keys}})
     y = np.asarray(fit.settings["motion"]["y"], np.float64)
     y0 = np.concatenate([y[:phys.num_params], model.network_start(box), y[phys.num_params:]])
     row = {"stage": f"physical {type(phys).__name__} fit", "start": None, "J": fit.metrics["cost"],
@@ -970,13 +943,12 @@ def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
     return np.clip(y0, lower, upper), [row]
 
 
-def _baseline_fit(est, tr_records, va_records, data, n_train, metric_horizon, init_window) -> MotionFit:
-    """The least-squares baseline (`._baseline`) as a fit, scored like the fit."""
-    fit = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt,
-                              n_train=sum(r.n_samples for r in tr_records))
+def _scored(fit, data, n_train, metric_horizon, tr_records, va_records, init_window) -> dict:
+    """The metrics of ``fit`` ([`MotionFit.evaluate`][jaxfric.motion.MotionFit.evaluate] of the one record ``data``,
+    else [`MotionFit.evaluate_records`][jaxfric.motion.MotionFit.evaluate_records])."""
     if data is not None:
-        return fit.replace(metrics=fit.evaluate(data, n_train, int(metric_horizon)))
-    return fit.replace(metrics=fit.evaluate_records(tr_records, va_records, init_window))
+        return fit.evaluate(data, n_train, int(metric_horizon))
+    return fit.evaluate_records(tr_records, va_records, init_window)
 
 
 #: What a fit worse than the baseline should try ([`jaxfric.pipeline.warn_if_worse`][jaxfric.pipeline.warn_if_worse]).
@@ -997,8 +969,5 @@ def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) 
 
 def _concatenated(records) -> MotionData:
     """The training records end to end (for the plausibility check, which reads velocities)."""
-    first = records[0]
-    return dataclasses.replace(first, force=np.concatenate([r.force for r in records]),
-                               position=np.concatenate([r.position for r in records]),
-                               load=np.concatenate([r.load for r in records]),
-                               velocity=np.concatenate([r.velocity for r in records]))
+    return dataclasses.replace(records[0], **{k: np.concatenate([getattr(r, k) for r in records])
+                                              for k in _CHANNELS})
