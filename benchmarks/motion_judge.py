@@ -2,9 +2,10 @@
 
 Usage::
 
-    python benchmarks/motion_judge.py [--keys 5] [--members 3] [--quick] [--out DIR]
+    python benchmarks/motion_judge.py [--proxy rig|emps-blocked|pneumatic] [--keys 5] [--members 3]
+                                      [--quick] [--out DIR]
 
-The proxy: the simulated hydraulic rig (``jaxfric.rig``, true friction known, richer than
+``--proxy rig`` (default): the simulated hydraulic rig (``jaxfric.rig``, true friction known, richer than
 every candidate) driven by four excitation families of the same length and amplitude
 scale, each with its own sensor noise: ``sweep`` (a chirp), ``steps`` (trapezoidal strokes
 with dwells at standstill), ``multisine`` (four tones) and ``reversals`` (slow motion
@@ -27,7 +28,24 @@ Criteria, each computed from the training family alone (lower is better):
 A criterion's choice (the lowest, the baseline included) *succeeds* on a key when its
 unseen RMSE is within 10 % of the best candidate's and not above the baseline's. Rows go
 to ``motion_judge.csv`` as they come (a cut run leaves data; a rerun skips keys done), the
-summary to ``motion_judge.md``. x64 is switched on here (benchmarks choose it).
+summary to ``motion_judge.md``. ``main`` switches x64 on (benchmarks choose it).
+
+Two proxies on real data (the same criteria, rows and summary; ``judge_emps.*``,
+``judge_pneumatic.*``):
+
+* ``--proxy emps-blocked``: DATA_EMPS.mat cut into 3 contiguous blocks (`emps_blocks`); key
+  ``k`` trains Coulomb, Stribeck, LuGre and GMS (mass in [50, 200] kg, fitted offset) on
+  block ``k mod 3`` (80 % / tail as above) and scores them on the two other blocks, each
+  simulated from its own first 20 samples. ``--members 1``: no ``spread``.
+* ``--proxy pneumatic``: force balance (the friction is measured, the piston's velocity
+  drives the model). Key ``k`` is seal ``k`` of ``benchmarks/pressure_records.py``: Stribeck,
+  LuGre, GMS, ``Cylinder`` (each with an offset) and the least-squares asymmetric Coulomb +
+  viscous + offset baseline train on the first 80 % of the 1, 5 and 7 bar records; the truth
+  is MSE % on the 3 bar record. Criteria in MSE % of the training friction's variance:
+  ``tail`` (the 20 % tails, rolled out through the record), ``blocked`` (3 folds of the 80 %
+  parts), ``short`` (2 s windows of the whole records, each rolled out from the model's
+  initial state, scored from sample 20), ``spread`` (``tail`` plus the members' variance on
+  the tails), ``bic`` (``log sqrt(train MSE) + p log(n)/(2n)``). float32, `jaxfric.identify`'s default.
 """
 
 from __future__ import annotations
@@ -36,32 +54,38 @@ import argparse
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import (add_output_arguments, cell, markdown_table, read_csv, results_dir, write_csv,  # noqa: E402
-                      write_report, x64)
+from _harness import (add_output_arguments, cell, emps_file, markdown_table, pneumatic, read_csv,  # noqa: E402
+                      results_dir, skipped, write_csv, write_report, x64)
 
-x64()
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
+import jaxfric as jf  # noqa: E402
 from jaxfric import rig  # noqa: E402
+from jaxfric.metrics import friction_metrics  # noqa: E402
 from jaxfric.motion import (MotionData, baseline_fit, identify_motion, load_motion_fit, motion_metrics,  # noqa: E402
                             short_runs_score)
-from jaxfric.motion._compare import blocked_score  # noqa: E402
+from jaxfric.motion._compare import blocked_score, short_window  # noqa: E402
+from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps  # noqa: E402
 
 FS, N = 128.0, 2000
 INIT = 20
-SHORT = 256
+SHORT = None  # compare_motion's default window: 2 s (256 samples at 128 Hz, 2 000 at 1 kHz)
 MARGIN = 0.10
 CANDIDATES = {"stribeck": ("stribeck", None), "lugre": ("lugre", None), "gms": ("gms", None),
               "elman": ("elman", {"neurons": 10})}
+EMPS_CANDIDATES = {m: (m, None) for m in ("coulomb", "stribeck", "lugre", "gms")}
+PNEUMATIC_CANDIDATES = ("stribeck", "lugre", "gms", "cylinder")
 BASE = "baseline"
 CRITERIA = ("tail", "blocked", "short", "spread", "bic")
-#: The short-runs criterion at other window lengths, from saved fits (``--rescore``).
-WIDTHS = (128, 512)
+#: The short-runs criterion at other window lengths [s], from saved fits (``--rescore``).
+WIDTHS = (1.0, 4.0)
+STEMS = {"rig": "motion_judge", "emps-blocked": "judge_emps", "pneumatic": "judge_pneumatic"}
 
 
 def _strokes(t, period=6.0, peak=0.009, ramp=0.6, dwell=0.4):
@@ -93,6 +117,29 @@ def records(key: int, n=N) -> dict:
     return out
 
 
+def emps_blocks(path, blocks: int = 3) -> dict:
+    """DATA_EMPS.mat as ``blocks`` contiguous records ``block0``, ... (`MotionData.window` of the
+    whole file, whose velocity, for initial states only, is filtered over the whole file)."""
+    rec = load_emps(path)
+    data = MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
+    edges = [round(i * data.n_samples / blocks) for i in range(blocks + 1)]
+    return {f"block{i}": data.window(a, b) for i, (a, b) in enumerate(zip(edges[:-1], edges[1:]))}
+
+
+def setup(proxy, key, quick, emps=None) -> tuple:
+    """(records by name, the training record's name, candidates, identify_motion options)."""
+    if proxy == "rig":
+        recs, cands, opts = records(key), CANDIDATES, dict(mass=float(rig.Rig().cylinder.mass))
+    else:
+        recs, cands, opts = emps_blocks(emps), EMPS_CANDIDATES, dict(mass=(50.0, 200.0))
+    opts.update(fit_offset=True, dtype=jnp.float64)
+    if quick:
+        from jaxfric.motion import MotionSearch
+        opts["search"] = MotionSearch(particles=10, generations=5, horizons=(500, None), steps=(10, 20),
+                                      starts=1, least_squares_start=True)
+    return recs, list(recs)[key % len(recs)], cands, opts
+
+
 def pooled(rmses) -> float:
     """Pooled RMSE of equally long records: sqrt(mean rmse_i^2)."""
     r = np.asarray(rmses, np.float64)
@@ -110,21 +157,13 @@ def tail_spread(fit, rec, n_train) -> float:
     return float(1e3 * np.sqrt(np.mean(runs.var(axis=0))))
 
 
-def measure_key(key, members, quick, on_row, save=None):
-    recs = records(key)
-    names = list(recs)
-    train_name = names[key % len(names)]
+def measure_key(key, members, quick, on_row, save=None, proxy="rig", emps=None):
+    recs, train_name, candidates, opts = setup(proxy, key, quick, emps)
     rec = recs[train_name]
     unseen = {k: r for k, r in recs.items() if k != train_name}
     n_train = int(round(0.8 * rec.n_samples))
-    mass = float(rig.Rig().cylinder.mass)
-    opts = dict(mass=mass, fit_offset=True, dtype=jnp.float64)
-    if quick:
-        from jaxfric.motion import MotionSearch
-        opts["search"] = MotionSearch(particles=10, generations=5, horizons=(500, None), steps=(10, 20),
-                                      starts=1, least_squares_start=True)
     base = None
-    for label, (name, mopts) in CANDIDATES.items():
+    for label, (name, mopts) in candidates.items():
         t0 = time.perf_counter()
         fit = identify_motion(name, rec, key=key, keys=members, train=0.8, model_options=mopts, **opts)
         row = {"key": key, "train": train_name, "model": label, "params": fit.metrics["num_params"],
@@ -167,15 +206,15 @@ def _ens_score(fits, rec) -> float:
     return motion_metrics(rec.position[INIT:], x[INIT:])["rmse_mm"]
 
 
-def summarise(rows) -> tuple[list, list, list]:
+def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
     """(judge rows, ensemble rows, per-key choice rows) from the measured rows."""
     by_key = {}
     for r in rows:
         by_key.setdefault(int(r["key"]), []).append(r)
     done = {k: v for k, v in by_key.items() if any(r["model"] == BASE for r in v)}
     choices, judges = [], []
-    extra = [f"short_{w}" for w in WIDTHS]
-    for crit in CRITERIA + tuple(c for c in extra if all(r.get(c) not in (None, "") for r in rows)):
+    extra = sorted({c for r in rows for c in r if c.startswith("short_")}, key=lambda c: int(c[6:]))
+    for crit in criteria + tuple(c for c in extra if all(r.get(c) not in (None, "") for r in rows)):
         wins = never_worse = 0
         for k, rs in sorted(done.items()):
             pick = min(rs, key=lambda r: (float(r[crit]), r["model"]))
@@ -194,7 +233,7 @@ def summarise(rows) -> tuple[list, list, list]:
                        "not worse than baseline": never_worse})
     ens = []
     for r in rows:
-        if r["model"] == BASE or not r.get("unseen_members"):
+        if r["model"] == BASE or not r.get("unseen_members") or ";" not in str(r["unseen_members"]):
             continue
         mem = [float(x) for x in str(r["unseen_members"]).split(";")]
         ens.append({"key": int(r["key"]), "train": r["train"], "model": r["model"],
@@ -217,20 +256,93 @@ def ensemble_summary(ens) -> list:
     return out
 
 
-def rescore(rows, folder) -> list:
-    """Add ``short_<w>`` (w in `WIDTHS`) to every row from the fits saved in ``folder`` (no
-    refit), and check that the saved fits reproduce the ``short`` column."""
+def rescore(rows, folder, proxy="rig", emps=None) -> list:
+    """Add ``short_<samples>`` (`WIDTHS` seconds) to every row from the fits saved in
+    ``folder`` (no refit), and check that the saved fits reproduce the ``short`` column."""
     cache, worst = {}, 0.0
     for r in rows:
         key = int(r["key"])
-        recs = cache.setdefault(key, records(key))
+        recs = cache.setdefault(key if proxy == "rig" else 0, setup(proxy, key, False, emps)[0])
         rec = recs[r["train"]]
-        fit = load_motion_fit(folder / f"key{key}_{'stribeck' if r['model'] == BASE else r['model']}.npz")
+        first = next(iter(CANDIDATES if proxy == "rig" else EMPS_CANDIDATES))
+        fit = load_motion_fit(folder / f"key{key}_{first if r['model'] == BASE else r['model']}.npz")
         fit = baseline_fit(fit) if r["model"] == BASE else fit
         worst = max(worst, abs(short_runs(fit, rec) / float(r["short"]) - 1.0))
-        r.update({f"short_{w}": short_runs(fit, rec, w) for w in WIDTHS})
+        r.update({f"short_{round(w / rec.dt)}": short_runs(fit, rec, round(w / rec.dt)) for w in WIDTHS})
     print(f"saved fits reproduce the short column within {worst:.2e} relative", flush=True)
     return rows
+
+
+def _cut(d, a, b):
+    """Samples ``[a, b)`` of a FrictionData as a record of its own (all for training)."""
+    return d._view(slice(a, b), b - a)
+
+
+def _fitter(label, key, quick):
+    """``fit(records, members) -> (predictor, member predictors, parameters)``: `jaxfric.identify`
+    of ``label`` (with an offset) on whole records, or the least-squares baseline."""
+    if label == BASE:
+        from baselines import ls_coulomb_viscous
+
+        def ls(recs, members=1):
+            v, f = (np.concatenate([getattr(d, k) for d in recs]) for k in ("velocity", "friction"))
+            return (lambda d: ls_coulomb_viscous(np.r_[v, d.velocity], np.r_[f, d.friction], v.size)[0][v.size:]), [], 5
+        return ls
+    extra = {}
+    if quick:
+        from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
+        extra["solver"] = MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=5),
+                                    nelder_mead=NelderMead(max_steps=60, max_evals=60))
+
+    def run(fit):
+        return lambda d: np.asarray(fit.predict(d.velocity, inputs=np.stack([d.p1, d.p2])), np.float64)
+
+    def fit(recs, members=1):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # bounds and extrapolation: the scores say what matters here
+            f = jf.identify(label, train=list(recs), key=key, keys=members if members > 1 else None,
+                            model_options={"offset": True}, **extra)
+        mem = [run(f.replace(theta=th)) for th in np.asarray(f.ensemble["theta"])] if members > 1 else []
+        return run(f), mem, f.num_params
+    return fit
+
+
+def pneumatic_key(key, members, quick, on_row, folder=None, folds=3):
+    """The pneumatic proxy's rows of seal ``SEALS[key]`` (module docstring)."""
+    from pressure_records import SEALS, TRAIN_BAR, VALID_BAR
+    seal = SEALS[key % len(SEALS)]
+    full = [pneumatic(seal, b, folder)[1] for b in TRAIN_BAR]
+    held = pneumatic(seal, VALID_BAR, folder)[1]
+    cuts = [round(0.8 * d.n_samples) for d in full]
+    heads = [_cut(d, 0, n) for d, n in zip(full, cuts)]
+    blocks = [[_cut(h, round(i * h.n_samples / folds), round((i + 1) * h.n_samples / folds)) for i in range(folds)]
+              for h in heads]
+    width = short_window(full[0].dt)
+    windows = [_cut(d, a, a + width) for d in full for a in range(0, d.n_samples - width + 1, width)]
+    scale = 100.0 / float(np.var(np.concatenate([d.friction for d in heads])))
+
+    def mse(pairs):  # pooled MSE % of the training friction's variance
+        return scale * float(np.mean(np.concatenate([y - yh for y, yh in pairs]) ** 2))
+
+    for label in PNEUMATIC_CANDIDATES + (BASE,):
+        t0, fit = time.perf_counter(), _fitter(label, key, quick)
+        pred, mem, p = fit(heads, members)
+        runs = [pred(d) for d in full]
+        row = {"key": key, "train": seal, "model": label, "params": p,
+               "tail": mse([(d.friction[n:], y[n:]) for d, n, y in zip(full, cuts, runs)]),
+               "train_mse": mse([(d.friction[:n], y[:n]) for d, n, y in zip(full, cuts, runs)]),
+               "short": mse([(w.friction[INIT:], pred(w)[INIT:]) for w in windows])}
+        var = [np.var([m(d)[n:] for m in mem], axis=0) for d, n in zip(full, cuts)] if mem else [np.zeros(1)]
+        row["spread"] = row["tail"] + scale * float(np.mean(np.concatenate(var)))
+        row["bic"] = 0.5 * math.log(row["train_mse"]) + p * math.log(sum(cuts)) / (2 * sum(cuts))
+        pairs = []
+        for f in range(folds):
+            pf = fit([b for rec in blocks for i, b in enumerate(rec) if i != f])[0]
+            pairs += [(rec[f].friction[INIT:], pf(rec[f])[INIT:]) for rec in blocks]
+        row["blocked"] = mse(pairs)
+        row["unseen"] = float(friction_metrics(held.friction, pred(held))["mse_percent"])
+        row["seconds"] = time.perf_counter() - t0
+        on_row(row)
 
 
 _fmt = cell(".4g")
@@ -238,6 +350,8 @@ _fmt = cell(".4g")
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--proxy", choices=tuple(STEMS), default="rig")
+    p.add_argument("--data", default=None, help="DATA_EMPS.mat or the pneumatic_seal_friction folder")
     p.add_argument("--keys", type=int, default=5)
     p.add_argument("--start", type=int, default=0, help="first key (split a long run over processes)")
     p.add_argument("--members", type=int, default=3, help="ensemble members per fit (keys=K)")
@@ -247,12 +361,17 @@ def main(argv=None):
     p.add_argument("--summary-only", action="store_true", help="rebuild the tables from the CSV")
     add_output_arguments(p)
     a = p.parse_args(argv)
+    if a.proxy != "pneumatic":
+        x64()  # here, not at import (tests import the functions); force balance: float32 as pressure_records.py
     out = results_dir(a.out, quick=a.quick)
-    csv_path = out / "motion_judge.csv"
+    csv_path = out / f"{STEMS[a.proxy]}.csv"
+    emps = emps_file(a.data) if a.proxy == "emps-blocked" else None
+    if (a.proxy == "emps-blocked" and emps is None) or (a.proxy == "pneumatic" and pneumatic("NAPN", 3, a.data) is None):
+        return skipped(STEMS[a.proxy], f"no {a.proxy} data ({a.data or 'JAXFRIC_DATA, ../shared/data'})")
     rows = read_csv(csv_path, parse=False)
     done = {int(r["key"]) for r in rows if r["model"] == BASE}
     if a.rescore is not None:
-        rows = rescore(rows, a.rescore)
+        rows = rescore(rows, a.rescore, a.proxy, emps)
         write_csv(rows, csv_path)
     elif not a.summary_only:
         for key in range(a.start, a.keys):
@@ -265,12 +384,17 @@ def main(argv=None):
                 write_csv(rows, csv_path)
                 print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()}, flush=True)
 
-            measure_key(key, a.members, a.quick, on_row, a.save_fits)
-    judges, ens, choices = summarise(rows)
+            if a.proxy == "pneumatic":
+                pneumatic_key(key, a.members, a.quick, on_row, a.data)
+            else:
+                measure_key(key, a.members, a.quick, on_row, a.save_fits, a.proxy, emps)
+    judges, ens, choices = summarise(rows, CRITERIA if a.members > 1 else tuple(c for c in CRITERIA if c != "spread"))
     cmd = "python benchmarks/motion_judge.py" + (" --quick" if a.quick else "") + f" --keys {a.keys} --members {a.members}"
+    if a.proxy != "rig":
+        return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows, a.rescore)
     text = ["# Which judge predicts new excitation (rig proxy)", "",
             f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion at "
-            f"{' and '.join(map(str, WIDTHS))} samples from the saved fits, no refit). Free-run position RMSE [mm]; "
+            f"{' and '.join(str(round(w * FS)) for w in WIDTHS)} samples from the saved fits, no refit). Free-run position RMSE [mm]; "
             "`unseen`: pooled over the three families the fit never saw, each simulated from its first 20 samples. "
             "Module docstring: the proxy and the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
@@ -278,6 +402,26 @@ def main(argv=None):
             "## Ensemble average against its members on unseen excitation (pooled free-run RMSE [mm])", "",
             markdown_table(ensemble_summary(ens), fmt=_fmt), "", markdown_table(ens, fmt=_fmt), ""]
     write_report(out, "motion_judge", text)
+
+
+def real_report(out, proxy, cmd, judges, choices, rows, rescored):
+    """The report of a real-data proxy: criteria, choices, every candidate's unseen score."""
+    emps = proxy == "emps-blocked"
+    unit = "free-run position RMSE [mm]" if emps else "MSE % of the friction's variance"
+    head = (f"DATA_EMPS.mat in 3 contiguous blocks; key k trains on block k mod 3; `unseen`: {unit} pooled "
+            "over the two other blocks, each simulated from its own first 20 samples" if emps else
+            "pneumatic seals: key k trains seal k on the first 80 % of its 1, 5 and 7 bar records; `unseen`: "
+            f"{unit} of the held-out 3 bar record (criteria: {unit} of the training records)")
+    cmds = f"`{cmd}`" + (f", then `{cmd} --rescore FITS`" if rescored else "")
+    text = [f"# Which judge predicts new excitation ({proxy} proxy, real data)", "",
+            f"Command: {cmds}. {head}. Module docstring of benchmarks/motion_judge.py: the criteria.", "",
+            "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
+            markdown_table(judges), "", "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
+            f"## Every candidate ({unit}; `unseen` is the truth)", "",
+            markdown_table(rows, ["key", "train", "model", "params", "unseen"] + [j["criterion"] for j in judges] + ["seconds"],
+                           fmt=_fmt), ""]
+    write_report(out, STEMS[proxy], text)
+    return 0
 
 
 if __name__ == "__main__":
