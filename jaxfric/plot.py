@@ -107,6 +107,13 @@ def _legend_outside(ax, **kwargs):
                      **{"fontsize": 8, **kwargs})
 
 
+def _finish(ax, xlabel: str, ylabel: str, title: str, **legend) -> None:
+    """Axis labels, title, grid, and the legend beside the axes."""
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    ax.grid(alpha=0.3)
+    _legend_outside(ax, **legend)
+
+
 def _split_legend_note(data) -> str:
     n = _n_train(data)
     t = _time(data)
@@ -271,11 +278,7 @@ def plot_friction_velocity(data, fits=None, *, title: str | None = None, max_poi
                 ax.plot(v * scale, y_hat, lw=1.2, zorder=z, label=label, **look)
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.axvline(0.0, color="0.6", lw=0.6)
-    ax.set_xlabel(f"piston velocity [{unit}]")
-    ax.set_ylabel("friction force [N]")
-    ax.set_title(title or "Friction against velocity")
-    ax.grid(alpha=0.3)
-    _legend_outside(ax, markerscale=4)
+    _finish(ax, f"piston velocity [{unit}]", "friction force [N]", title or "Friction against velocity", markerscale=4)
     return fig
 
 
@@ -302,18 +305,10 @@ def plot_fit(fit, data, *, label: str | None = None, title: str | None = None) -
     look = {"ls": "-", **style(label)}
     ax_t.plot(t, y_hat, lw=1.0, label=f"estimated: {label}", **look)
     _mark_split(ax_t, data)
-    ax_t.set_xlabel("time [s]")
-    ax_t.set_ylabel("friction force [N]")
-    ax_t.set_title("MSE (normalised): " + ", ".join(parts))
-    ax_t.grid(alpha=0.3)
-    _legend_outside(ax_t)
+    _finish(ax_t, "time [s]", "friction force [N]", "MSE (normalised): " + ", ".join(parts))
     ax_v.plot(v * scale, y, ".", ms=1.5, color="0.35", label="measured")
     ax_v.plot(v * scale, y_hat, lw=0.8, label="estimated", **look)
-    ax_v.set_xlabel(f"piston velocity [{unit}]")
-    ax_v.set_ylabel("friction force [N]")
-    ax_v.set_title("against velocity")
-    ax_v.grid(alpha=0.3)
-    _legend_outside(ax_v, markerscale=4)
+    _finish(ax_v, f"piston velocity [{unit}]", "friction force [N]", "against velocity", markerscale=4)
     fig.suptitle(title or f"Measured and estimated friction: {label}")
     return fig
 
@@ -387,11 +382,7 @@ def plot_error(fits, data, *, labels: Sequence[str] | None = None, title: str | 
     ax.axhline(0.0, color="0.4", lw=0.6)
     _mark_split(ax, data)
     _scale_to_steady(ax, t, errors, _transient(y.size))
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("error  F - F_hat [N]")
-    ax.set_title(title or "Friction estimation error")
-    ax.grid(alpha=0.3)
-    _legend_outside(ax)
+    _finish(ax, "time [s]", "error  F - F_hat [N]", title or "Friction estimation error")
     return fig
 
 
@@ -429,14 +420,10 @@ def plot_models(fits, data, *, window: str = "valid", labels: Sequence[str] | No
         ax_f.plot(ts, y_hat, lw=1.1, zorder=4 if look == STYLES["baseline"] else 3, label=label, **look)
         ax_e.plot(ts, ys - y_hat, lw=0.9, label=f"{label}: MSE {_mse_percent(ys, y_hat):.3g} %", **look)
     ax_e.axhline(0.0, color="0.4", lw=0.6)
-    ax_f.set_ylabel("friction force [N]")
-    ax_e.set_ylabel("error  F - F_hat [N]")
-    ax_e.set_xlabel("time [s]")
-    ax_f.set_title(title or f"Measured friction and the models on the {name}")
-    ax_e.set_title(f"Error on the {name} (normalised MSE % in the legend)")
-    for ax in (ax_f, ax_e):
-        ax.grid(alpha=0.3)
-        _legend_outside(ax, markerscale=3)
+    _finish(ax_f, "", "friction force [N]", title or f"Measured friction and the models on the {name}",
+            markerscale=3)
+    _finish(ax_e, "time [s]", "error  F - F_hat [N]", f"Error on the {name} (normalised MSE % in the legend)",
+            markerscale=3)
     return fig
 
 
@@ -460,11 +447,7 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
     ax.plot(t, y, label="measured", **_MEASURED)
     ax.plot(t, y_hat, color=colour, lw=1.0, label=f"best member: {label}")
     _mark_split(ax, data)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("friction force [N]")
-    ax.set_title(title or f"Ensemble prediction band: {label}")
-    ax.grid(alpha=0.3)
-    _legend_outside(ax)
+    _finish(ax, "time [s]", "friction force [N]", title or f"Ensemble prediction band: {label}")
     return fig
 
 
