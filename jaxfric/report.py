@@ -198,13 +198,16 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _md(header, rows) -> list[str]:
+    """Markdown table lines: the header, its rule, one line per row (cells as text)."""
+    return (["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+            + ["| " + " | ".join(map(str, row)) + " |" for row in rows])
+
+
 def markdown_table(rows: list[dict]) -> str:
     """The comparison as a Markdown table."""
     cols = _columns(rows)
-    out = ["| " + " | ".join(h for h, _ in cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
-    for i in range(len(rows)):
-        out.append("| " + " | ".join(cells[i] for _, cells in cols) + " |")
-    return "\n".join(out)
+    return "\n".join(_md([h for h, _ in cols], zip(*(cells for _, cells in cols))))
 
 
 # ------------------------------------------------------------------ the report
@@ -375,6 +378,10 @@ def _ensemble(fit) -> dict | None:
     return None if not e else {k: v for k, v in e.items() if k != "theta"}
 
 
+def _g5(v) -> str:
+    return "-" if v is None else f"{v:.5g}"
+
+
 def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | None,
               extra_files: Mapping[str, str]) -> str:
     d, env = results["data"], results["environment"]
@@ -407,18 +414,16 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
         L += ["![convergence](convergence.png)", ""]
     for r in rows:
         m = results["models"][r["name"]]
-        L += [f"## {r['label']}", "", f"![{r['label']}](fit_{slug(r['name'])}.png)", "",
-              "| metric | train | valid | all |", "|---|---|---|---|"]
-        for key in ("mse_percent", "max_abs", "fit_percent", "rmse", "mse_scaled_percent", "r2"):
-            vals = [r["metrics"].get(w, {}).get(key) for w in WINDOWS]
-            L.append(f"| {key} | " + " | ".join("-" if v is None else f"{v:.5g}" for v in vals) + " |")
+        L += [f"## {r['label']}", "", f"![{r['label']}](fit_{slug(r['name'])}.png)", ""]
+        L += _md(("metric", "train", "valid", "all"), [
+            [key] + [_g5(r["metrics"].get(w, {}).get(key)) for w in WINDOWS]
+            for key in ("mse_percent", "max_abs", "fit_percent", "rmse", "mse_scaled_percent", "r2")])
         fit = fits[r["name"]]
         if m["records"]:
-            L += ["", "| record | role | samples | MSE % | MAX [N] | FIT % |", "|---|---|---|---|---|---|"]
-            for rec in m["records"]:
-                a = rec.get("all") or {}
-                cells = [("-" if a.get(k) is None else f"{a[k]:.5g}") for k in ("mse_percent", "max_abs", "fit_percent")]
-                L.append(f"| {rec['name']} | {rec['role']} | {rec['n_samples']} | " + " | ".join(cells) + " |")
+            L += [""] + _md(("record", "role", "samples", "MSE %", "MAX [N]", "FIT %"), [
+                [rec["name"], rec["role"], rec["n_samples"]]
+                + [_g5((rec.get("all") or {}).get(k)) for k in ("mse_percent", "max_abs", "fit_percent")]
+                for rec in m["records"]])
             L += ["", "Each record is rolled out from the model's initial state; the comparison table "
                   "pools the samples of the training and of the validation records."]
             for rec_name, fig in m["record_figures"].items():
@@ -436,9 +441,8 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
                   f"{e['best']}, the one with the lowest training cost"
                   + (f"; validation MSE % over the members {min(vm):.4g} to {max(vm):.4g}" if vm else "") + "."]
             if e.get("spread"):
-                L += ["", "| parameter | min | 5 % | median | 95 % | max |", "|---|---|---|---|---|---|"]
-                for k, sp in e["spread"].items():
-                    L.append(f"| {k} | " + " | ".join(f"{sp[q]:.5g}" for q in ("min", "p5", "median", "p95", "max")) + " |")
+                L += [""] + _md(("parameter", "min", "5 %", "median", "95 %", "max"), [
+                    [k] + [_g5(sp[q]) for q in ("min", "p5", "median", "p95", "max")] for k, sp in e["spread"].items()])
             band = f"band_{slug(r['name'])}.png"
             if band in results["figures"]:
                 L += ["", f"![ensemble band]({band})"]
@@ -452,9 +456,7 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
     for heading, body in results.get("sections", {}).items():
         L += [f"## {heading}", "", body.rstrip(), ""]
     if results["settings"]:
-        L += ["## Settings", "", "| setting | value |", "|---|---|"]
-        L += [f"| {k} | {v} |" for k, v in results["settings"].items()]
-        L.append("")
+        L += ["## Settings", ""] + _md(("setting", "value"), results["settings"].items()) + [""]
     if extra_files:
         L += ["## Other files", ""] + [f"- `{k}`: {v}" for k, v in extra_files.items()] + [""]
     L += ["## Reproduce", ""]
