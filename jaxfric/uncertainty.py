@@ -232,9 +232,7 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
             except ValueError:
                 y = None
             if y is not None:
-                f, n = np.asarray(data.friction), fit.n_train
-                out["band"] = {"train": coverage(f[:n], lo[:n], hi[:n]),
-                               "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None,
+                out["band"] = {**_window_coverage(fit, data, lo, hi),
                                "median_half_width_N": float(np.median(hi - lo) / 2),
                                "max_half_width_N": float(np.max(hi - lo) / 2)}
     return out
@@ -248,10 +246,14 @@ def _ensemble_band(fit, data) -> dict | None:
             lo, hi = fit.predict_band(data.velocity)
     except ValueError:
         return None
-    f, n = np.asarray(data.friction), fit.n_train
-    return {"members": len(fit.ensemble.get("J", [])), "train": coverage(f[:n], lo[:n], hi[:n]),
-            "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None,
+    return {"members": len(fit.ensemble.get("J", [])), **_window_coverage(fit, data, lo, hi),
             "mean_half_width_N": float(np.mean(hi - lo) / 2)}
+
+
+def _window_coverage(fit, data, lo, hi) -> dict:
+    """[`coverage`][jaxfric.uncertainty.coverage] of the measured friction on the training and validation windows."""
+    f, n = np.asarray(data.friction), fit.n_train
+    return {"train": coverage(f[:n], lo[:n], hi[:n]), "valid": coverage(f[n:], lo[n:], hi[n:]) if n < f.size else None}
 
 
 def report_markdown(summary: dict | None) -> list[str]:
