@@ -1,10 +1,7 @@
 """The result of [`jaxfric.identify`][jaxfric.identification.identify], and saving/loading it (docs/algorithms.md §6, §11 step 8).
 
-A [`Fit`][jaxfric.fit.Fit] holds everything needed to *use* an identified model — the model
-configuration, θ in search coordinates, the training-window scalers of §2.4 and
-the sample time — plus everything needed to *judge* it: metrics on the training
-window, the validation window and the whole record (§6), the optimiser's
-solution and history, the stage-by-stage cost, timings, the key and the settings.
+A [`Fit`][jaxfric.fit.Fit] holds everything needed to *use* an identified model (θ, the §2.4
+scalers, the sample time) and to *judge* it (the §6 metrics per window, the optimiser's record).
 
 File format (one ``.npz`` file, no pickles): member ``header`` holds UTF-8 JSON
 (``format``, ``format_version``, jaxfric version, model class and configuration,
@@ -14,13 +11,8 @@ their exact dtypes, so save → load → predict is bit-identical; a fit from
 ``identify(..., keys=K)`` adds ``ensemble_theta`` (K × n). [`load_fit`][jaxfric.fit.load_fit] refuses
 non-finite weights, scalers or sample time (they would predict NaN).
 
-Prediction is honest about its data ([`Fit.predict`][jaxfric.fit.Fit.predict], [`Fit.predict_at`][jaxfric.fit.Fit.predict_at]): one
-output sample per input sample; a sample time other than the fit's is resampled onto
-the fit's grid for every model whose output depends on it ([`ResamplingWarning`][jaxfric.fit.ResamplingWarning]);
-velocities outside the training range give an [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning]. Writes go through
-[`jaxfric.files.atomic_write`][jaxfric.files.atomic_write] (a temporary file in the target directory, then
-``os.replace``, with the user's usual permissions): a crash never leaves a half-written
-fit under the final name.
+Prediction is honest about its data ([`Fit.predict`][jaxfric.fit.Fit.predict], [`Fit.predict_at`][jaxfric.fit.Fit.predict_at]). Writes go
+through [`jaxfric.files.atomic_write`][jaxfric.files.atomic_write]: a crash never leaves a half-written fit.
 """
 
 from __future__ import annotations
@@ -44,7 +36,7 @@ from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
 from .problem import AbstractProblem, ForceBalanceProblem, rollout
-from .records import same_sample_time
+from .records import check_sample_time, same_sample_time
 
 __all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "LazyUncertainty", "ResamplingWarning", "load_fit"]
 
@@ -120,17 +112,6 @@ def _velocity_np(velocity) -> np.ndarray:
     if not np.all(np.isfinite(v)):
         raise ValueError("velocity holds NaN or inf")
     return v.astype(np.float64)
-
-
-def _check_velocity(velocity, dtype) -> jax.Array:
-    _velocity_np(velocity)
-    return jnp.asarray(velocity, dtype)
-
-
-def _check_dt(dt) -> float:
-    if not (np.ndim(dt) == 0 and np.isfinite(float(dt)) and float(dt) > 0.0):
-        raise ValueError(f"dt must be a positive, finite sample time in seconds, got {dt!r}")
-    return float(dt)
 
 
 def unidentifiable_names(texts) -> set[str]:
@@ -232,7 +213,8 @@ def predict(model: AbstractFrictionModel, theta, scalers, velocity, dt, inputs=N
     ``input_names`` (e.g. chamber pressures [Pa]); ignored by the others. The checks, then
     [`jaxfric.problem.rollout`][jaxfric.problem.rollout]."""
     theta = jnp.asarray(theta)
-    return rollout(model, theta, scalers, _check_velocity(velocity, theta.dtype), _check_dt(dt), inputs)
+    _velocity_np(velocity)
+    return rollout(model, theta, scalers, jnp.asarray(velocity, theta.dtype), check_sample_time(dt), inputs)
 
 
 class LazyUncertainty:
@@ -502,9 +484,7 @@ class Fit:
         give an [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning].
         """
         v = _velocity_np(velocity)
-        if dt is None:
-            dt = self.dt
-        dt = _check_dt(dt)
+        dt = check_sample_time(self.dt if dt is None else dt)
         if self.model.uses_dt and not same_sample_time(dt, self.dt):
             if inputs is not None:
                 raise ValueError(
@@ -550,10 +530,8 @@ class Fit:
             return predict(self.model, self.theta, scalers, jnp.asarray(v, dtype), self.dt)
         m = int(np.ceil((t[-1] - t[0]) / self.dt - 1e-9)) + 1
         if m > MAX_RESAMPLED_SAMPLES:
-            raise ValueError(
-                f"resampling this record onto the fit's sample time {self.dt:.6g} s needs {m} samples "
-                f"(> {MAX_RESAMPLED_SAMPLES}); pass a shorter record"
-            )
+            raise ValueError(f"resampling this record onto the fit's sample time {self.dt:.6g} s needs {m} "
+                             f"samples (> {MAX_RESAMPLED_SAMPLES}); pass a shorter record")
         step = float(np.median(steps))
         warnings.warn(
             f"the record's sample time ({step:.6g} s{'' if np.ptp(steps) <= 1e-6 * step else ', irregular'}) "
@@ -621,25 +599,14 @@ class Fit:
 
         uncertainty = self.uncertainty  # first, so a failure is in the diagnostics below
         out = {
-            "model": {
-                "class": type(self.model).__name__,
-                "name": model_name(self.model),
-                "config": model_config(self.model),
-                "param_names": list(self.model.param_names),
-            },
+            "model": {"class": type(self.model).__name__, "name": model_name(self.model),
+                      "config": model_config(self.model), "param_names": list(self.model.param_names)},
             "box": None if self.box is None else self.box.to_json(),
-            "num_params": self.num_params,
-            "dt": self.dt,
-            "n_train": self.n_train,
-            "n_samples": self.n_samples,
-            "scalers": {"velocity": scaler(self.velocity_scaler),
-                        "friction": scaler(self.friction_scaler)},
-            "metrics": jsonable(self.metrics),
-            "stages": jsonable(self.stages),
-            "timings": jsonable(self.timings),
+            "num_params": self.num_params, "dt": self.dt, "n_train": self.n_train, "n_samples": self.n_samples,
+            "scalers": {"velocity": scaler(self.velocity_scaler), "friction": scaler(self.friction_scaler)},
+            "metrics": jsonable(self.metrics), "stages": jsonable(self.stages), "timings": jsonable(self.timings),
             "key": {"data": self.key_data, "impl": self.key_impl, "seed": self.seed},
-            "settings": jsonable(self.settings),
-            "jaxfric_version": self.version,
+            "settings": jsonable(self.settings), "jaxfric_version": self.version,
             "train_velocity_range": None if self.velocity_range is None else list(self.velocity_range),
             "diagnostics": jsonable({**self.diagnostics, **(
                 {"uncertainty_error": self._uncertainty.error} if self._uncertainty.error else {})}),
@@ -649,8 +616,7 @@ class Fit:
         if not self.model.needs_scaling:
             out["verdicts"] = jsonable(self.verdicts())
         if self.ensemble:
-            out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items()
-                                         if include_theta or k != "theta"})
+            out["ensemble"] = jsonable({k: v for k, v in self.ensemble.items() if include_theta or k != "theta"})
         if not self.model.needs_scaling:
             out["params"] = {k: jsonable(v) for k, v in self.params.items()}
         if include_theta:
@@ -728,14 +694,9 @@ class Fit:
         def scaler(s):
             return np.zeros(0) if s is None else np.array([np.asarray(s.lo), np.asarray(s.hi)], np.float64)
 
-        arrays = {
-            "header": np.frombuffer(blob, dtype=np.uint8),
-            "theta": np.asarray(self.theta),
-            "velocity_scaler": scaler(self.velocity_scaler),
-            "friction_scaler": scaler(self.friction_scaler),
-            "history_evals": np.asarray(self.history["evals"]),
-            "history_f": np.asarray(self.history["f"]),
-        }
+        arrays = {"header": np.frombuffer(blob, dtype=np.uint8), "theta": np.asarray(self.theta),
+                  "velocity_scaler": scaler(self.velocity_scaler), "friction_scaler": scaler(self.friction_scaler),
+                  "history_evals": np.asarray(self.history["evals"]), "history_f": np.asarray(self.history["f"])}
         if self.ensemble and "theta" in self.ensemble:
             arrays["ensemble_theta"] = np.asarray(self.ensemble["theta"])
         def write(tmp):
@@ -800,11 +761,9 @@ def load_fit(path) -> Fit:
     if not isinstance(version, int) or version < 1:
         raise ValueError(f"{path}: unknown fit format version {version!r}")
     if version > FORMAT_VERSION:
-        raise ValueError(
-            f"{path} was written in fit format version {version} by jaxfric "
-            f"{header.get('jaxfric_version')}; this jaxfric ({_jaxfric_version()}) reads up to "
-            f"version {FORMAT_VERSION}: upgrade jaxfric"
-        )
+        raise ValueError(f"{path} was written in fit format version {version} by jaxfric "
+                         f"{header.get('jaxfric_version')}; this jaxfric ({_jaxfric_version()}) reads up to "
+                         f"version {FORMAT_VERSION}: upgrade jaxfric")
     try:
         m = header["model"]
         model = model_from_config(m["class"], m["config"])
@@ -835,28 +794,12 @@ def load_fit(path) -> Fit:
             raise ValueError(f"{path}: the training velocity range {vrange!r} is not two finite numbers")
         key = header.get("key") or {}
         return Fit(
-            model=model,
-            theta=theta,
-            velocity_scaler=scaler("velocity_scaler"),
-            friction_scaler=scaler("friction_scaler"),
-            dt=header["dt"],
-            n_train=header["n_train"],
-            n_samples=header["n_samples"],
-            metrics=header["metrics"],
-            stages=header.get("stages", ()),
-            history={"evals": arrays["history_evals"], "f": arrays["history_f"]},
-            solution=None,
-            timings=header.get("timings"),
-            key_data=key.get("data"),
-            key_impl=key.get("impl"),
-            seed=key.get("seed"),
-            settings=header.get("settings"),
-            version=header.get("jaxfric_version"),
-            velocity_range=vrange,
-            diagnostics=header.get("diagnostics"),
-            ensemble=ensemble,
-            box=box,
-            uncertainty=uncertainty,
-        )
+            model=model, theta=theta, velocity_scaler=scaler("velocity_scaler"),
+            friction_scaler=scaler("friction_scaler"), dt=header["dt"], n_train=header["n_train"],
+            n_samples=header["n_samples"], metrics=header["metrics"], stages=header.get("stages", ()),
+            history={"evals": arrays["history_evals"], "f": arrays["history_f"]}, solution=None,
+            timings=header.get("timings"), key_data=key.get("data"), key_impl=key.get("impl"), seed=key.get("seed"),
+            settings=header.get("settings"), version=header.get("jaxfric_version"), velocity_range=vrange,
+            diagnostics=header.get("diagnostics"), ensemble=ensemble, box=box, uncertainty=uncertainty)
     except (KeyError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None
