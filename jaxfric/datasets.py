@@ -34,9 +34,10 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 import urllib.request
 from pathlib import Path
+
+from .files import atomic_write
 
 __all__ = ["DatasetUnavailable", "DATA_ENV", "cache_dir", "emps", "emps_path", "pneumatic",
            "pneumatic_path", "PNEUMATIC_SEALS", "PNEUMATIC_BARS"]
@@ -108,17 +109,12 @@ def _sha256(path: Path) -> str:
 def _download(url: str, dest: Path) -> None:
     """Fetch ``url`` into ``dest`` (a temporary file beside it, moved into place whole)."""
     with urllib.request.urlopen(url, timeout=60) as response:  # offline: fails here, before any folder is made
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=dest.parent, prefix=f".{dest.name}.", suffix=".part")
-        try:
-            with os.fdopen(fd, "wb") as out:
+        def write(tmp):
+            with open(tmp, "wb") as out:
                 for block in iter(lambda: response.read(1 << 20), b""):
                     out.write(block)
-            os.replace(tmp, dest)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+
+        atomic_write(dest, write)
 
 
 def fetch(relpath: str, local=None, *, download: bool = True) -> Path:
