@@ -14,8 +14,10 @@
   :func:`x64` switches a script to float64 (the script's choice: the library never does);
   :func:`emps_file` / :func:`pneumatic` find the real data (``jaxfric.datasets``' folders,
   no download) or return ``None`` so a script can say so and skip (:func:`skipped`);
-  :func:`friction_record` is the record of ``--record rig|emps|oring``; :func:`machine`
-  is the one-line machine description every report starts with.
+  :func:`friction_record` is the record of ``--record rig|emps|oring``, :func:`emps_motion`
+  the EMPS file as motion data; :func:`machine` is the one-line machine description every
+  report starts with; :func:`fit_cells` an ``identify`` fit's MSE and time cells;
+  :func:`pyplot` matplotlib on the Agg backend.
 
 A script starts with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under
 ``jaxfric bench`` the folder is not on ``sys.path``) and then imports from here.
@@ -124,6 +126,36 @@ def friction_record(record: str, data_dir=None):
     return rec[1].with_split(0.8), "pneumatic O-ring_3bar.csv (jaxfric.datasets.pneumatic pipeline)"
 
 
+def emps_motion(path):
+    """``DATA_EMPS.mat`` as :class:`jaxfric.motion.MotionData`: force ``gtau·vir``, position
+    ``qm``, the benchmark's 100 Hz filter for the initial states' velocity."""
+    from jaxfric.motion import MotionData
+    from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
+
+    rec = load_emps(path)
+    return MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
+
+
+def fit_cells(fit) -> dict:
+    """An ``identify`` fit's cells: validation and training MSE % (NaN where absent), and the
+    run and compile seconds of its global and gradient stages together."""
+    t, m = fit.timings, fit.metrics
+    return {"valid": (m.get("valid") or {}).get("mse_percent", float("nan")),
+            "train": (m.get("train") or {}).get("mse_percent", float("nan")),
+            "run_s": t.get("run_s", 0.0) + t.get("refine_run_s", 0.0),
+            "compile_s": t.get("compile_s", 0.0) + t.get("refine_compile_s", 0.0)}
+
+
+def pyplot():
+    """matplotlib's ``pyplot`` on the file-only Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def skipped(name: str, why: str) -> int:
     """Say on stderr that ``name`` wrote nothing and why (its data is absent); exit status 0."""
     print(f"{name}: {why}; skipped, nothing written.", file=sys.stderr)
@@ -145,11 +177,20 @@ def results_dir(out=None, *, quick: bool = False) -> Path:
     return path
 
 
-def add_output_arguments(parser: argparse.ArgumentParser, quick_help: str = "tiny sizes (smoke test)") -> None:
-    """``--quick`` and ``--out`` (default: :func:`results_dir`'s rule, resolved after parsing)."""
+def add_output_arguments(parser: argparse.ArgumentParser, quick_help: str = "tiny sizes (smoke test)",
+                         *, tag: bool = False) -> None:
+    """``--quick`` and ``--out`` (default: :func:`results_dir`'s rule, resolved after parsing);
+    ``tag``: also ``--tag`` (a suffix of the result files' names, :func:`tagged`)."""
     parser.add_argument("--quick", action="store_true", help=quick_help)
     parser.add_argument("--out", type=Path, default=None,
                         help=f"output folder (default {RESULTS}, or {QUICK_RESULTS} with --quick)")
+    if tag:
+        parser.add_argument("--tag", default="", help="suffix of the output files (e.g. gpu: NAME_gpu.md)")
+
+
+def tagged(stem: str, tag: str = "") -> str:
+    """``stem`` or ``stem_tag``: the name of a result file measured elsewhere (``--tag gpu``)."""
+    return f"{stem}_{tag}" if tag else stem
 
 
 # --------------------------------------------------------------------------- timing

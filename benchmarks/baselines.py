@@ -23,7 +23,7 @@ v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_
 (``emps.py``, ``pipelines.py``, ``pressure_records.py``).
 
 NumPy test functions on a batch of rows (:data:`NUMPY_BATCH`), for the peers that take a
-vectorised objective (pyswarms) in ``speed_optim.py``.
+vectorised objective: pyswarms in ``speed_optim.py``, SciPy's DE and pycma in ``compile_time.py``.
 """
 
 from __future__ import annotations

@@ -35,10 +35,10 @@ import functools
 import inspect
 import json
 import os
-import shlex
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 import types
 from pathlib import Path
@@ -46,12 +46,12 @@ from pathlib import Path
 import jax
 import numpy as np
 
-import jaxfric as jf
+import jaxfric as jf  # before _harness, which puts this checkout first: --baseline's PYTHONPATH wins
 from jaxfric import functions as F
 
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv
-
-HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
+from _harness import HERE, add_output_arguments, cell, command, markdown_table, results_dir, write_csv, write_report  # noqa: E402
+from baselines import NUMPY_BATCH  # noqa: E402
 
 FUNCTIONS = ["sphere", "rosenbrock", "rastrigin", "ackley", "griewank", "schwefel_2_22"]
 
@@ -96,27 +96,10 @@ def solvers(quick: bool) -> dict:
 
 #: the peers of the per-dimension table: whole runs of a user's default call
 PEERS = ("SciPy DE", "pycma")
-
 #: the per-dimension table's functions (each has a NumPy twin for the peers)
 DIM_FUNCTIONS = ["sphere", "rosenbrock", "rastrigin", "ackley"]
-
-
-def _numpy_function(name: str):
-    """The test function ``name`` on a batch of rows in NumPy (checked against jaxfric's)."""
-    def rastrigin(X):
-        return 10.0 * X.shape[1] + np.sum(X * X - 10.0 * np.cos(2 * np.pi * X), axis=1)
-
-    def rosenbrock(X):
-        return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
-
-    def ackley(X):
-        n = X.shape[1]
-        return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / n))
-                - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / n) + 20.0 + np.e)
-
-    fns = {"sphere": lambda X: np.sum(X * X, axis=1), "rastrigin": rastrigin,
-           "rosenbrock": rosenbrock, "ackley": ackley}
-    return fns[name]
+#: the solvers whose host-call costs (ask/tell, pure_callback) are measured
+ASK_TELL = ("PSO", "NelderMead", "PSO->NM")
 
 
 def peer_run(label: str, name: str, n: int, seed: int) -> dict:
@@ -125,17 +108,16 @@ def peer_run(label: str, name: str, n: int, seed: int) -> dict:
     (``vectorized=True``, ``updating="deferred"``), or pycma's ``fmin2`` with its defaults,
     the box as its bounds, a start drawn in the box, σ0 = 1 and ``maxfevals = 1000·n``
     (its own default, ~1e3·(n+5)²/√λ, runs minutes at 30-D)."""
-    f_batch = _numpy_function(name)
+    f_batch = NUMPY_BATCH[name]  # checked against jaxfric's function first
     probe = np.random.default_rng(1).uniform(-2, 2, (3, n))
     ref = np.asarray(jax.vmap(F.get(name).fn)(jax.numpy.asarray(probe)))
     np.testing.assert_allclose(f_batch(probe), ref, rtol=1e-9, atol=1e-9)
-    bounds = [(-2.0, 2.0)] * n
     c0, t0 = time.process_time(), time.perf_counter()
     if label == "SciPy DE":
         import scipy.optimize
 
         res = scipy.optimize.differential_evolution(
-            lambda X: f_batch(np.asarray(X).T), bounds, seed=seed, vectorized=True,
+            lambda X: f_batch(np.asarray(X).T), [(-2.0, 2.0)] * n, seed=seed, vectorized=True,
             updating="deferred")
         f, evals = float(res.fun), int(res.nfev)
     else:
@@ -151,23 +133,10 @@ def peer_run(label: str, name: str, n: int, seed: int) -> dict:
             "trace_s": 0.0, "lower_s": 0.0, "programs": 0, "f": f, "evals": evals}
 
 
-def measure_dims(label: str, functions, dims, quick: bool) -> list[dict]:
-    """Every (function, dimension) of ``label`` (a solver, or a peer) in this process."""
-    rows = []
-    with jax.enable_x64(True):
-        if label in PEERS:
-            for n in dims:
-                for i, name in enumerate(functions):
-                    rows.append({"function": name, "dim": n, **peer_run(label, name, n, i)})
-            return rows
-        jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
-                    (-np.ones(2), np.ones(2)), key=0)  # JAX's own first-use costs
-        solver = solvers(quick)[label]
-        for n in dims:
-            for i, name in enumerate(functions):
-                rows.append({"function": name, "dim": n,
-                             **measure_compile(solver, name, n, key=i)})
-    return rows
+def _warm() -> None:
+    """JAX's own first-use costs, paid before anything is measured."""
+    jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
+                (-np.ones(2), np.ones(2)), key=0)
 
 
 def fresh_objective(name: str):
@@ -195,7 +164,8 @@ def measure_compile(solver, name: str, n: int, key: int) -> dict:
 
 
 def _numpy_sphere(X):
-    return np.sum(np.asarray(X, np.float64) ** 2, axis=1)
+    X = np.asarray(X, np.float64)
+    return NUMPY_BATCH["sphere"](X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1])
 
 
 def _ask_tell_api(solver):
@@ -209,13 +179,11 @@ def _ask_tell_api(solver):
     return solver if hasattr(solver, "ask_init") else None
 
 
-def ask_tell_ms(solver, n: int, seeds: int = 1) -> tuple[float, int]:
+def ask_tell_ms(api, n: int, seeds: int = 1) -> tuple[float, int]:
     """Milliseconds per ask of one ask/tell run told a NumPy sphere's values, after a
     first run has compiled the program; and the asks of a run. ``seeds`` > 1: one run of
     that many keys (``ask_init(..., keys=)``), each ask carrying every seed's batch."""
     lo, hi = np.full(n, -2.0, np.float32), np.full(n, 2.0, np.float32)
-
-    api = _ask_tell_api(solver)
 
     def drive(seed):
         key = jax.random.key(seed)
@@ -225,8 +193,7 @@ def ask_tell_ms(solver, n: int, seeds: int = 1) -> tuple[float, int]:
         while not api.ask_done(st):
             X, st = api.ask(st)
             X = np.asarray(X)
-            f = _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1])
-            st = api.tell(st, X, f)
+            st = api.tell(st, X, _numpy_sphere(X))
             asks += 1
         return asks
 
@@ -245,8 +212,7 @@ def callback_ms(solver, n: int, seeds: int) -> tuple[float, int]:
 
     def host(X):
         calls[0] += 1
-        X = np.asarray(X)
-        return _numpy_sphere(X.reshape(-1, X.shape[-1])).reshape(X.shape[:-1]).astype(X.dtype)
+        return _numpy_sphere(X).astype(np.asarray(X).dtype)
 
     def fn(y, args):
         return jax.pure_callback(host, jax.ShapeDtypeStruct(y.shape[:-1], y.dtype), y,
@@ -264,28 +230,29 @@ def callback_ms(solver, n: int, seeds: int) -> tuple[float, int]:
 
 
 def measure(label: str, functions, dim: int, seeds: int, dims=None) -> dict:
-    """Every measurement of one solver, in this process (``--one``): with ``dims`` the
-    per-dimension table's rows (and, for the ask/tell solvers, the host-call costs)."""
-    if dims:
-        rows = measure_dims(label, DIM_FUNCTIONS[:2] if len(functions) < len(FUNCTIONS)
-                            else DIM_FUNCTIONS, dims, len(functions) < len(FUNCTIONS))
-        if label in PEERS:
-            return {"rows": rows, "asks": []}
-        return {"rows": rows, "asks": measure(label, functions, dim, seeds)["asks"]
-                if label in ASK_TELL and seeds else []}
+    """Every measurement of one solver, in this process (``--one``): the compile rows of
+    ``functions`` at ``dim``, or with ``dims`` of the per-dimension table's functions at
+    each of ``dims``; then, for the ask/tell solvers, the host-call costs at ``dim``."""
+    quick = len(functions) < len(FUNCTIONS)
+    rows = []
     with jax.enable_x64(True):
-        jf.minimise(fresh_objective("sphere"), jf.PSO(num_generations=2, num_particles=4),
-                    (-np.ones(2), np.ones(2)), key=0)  # JAX's own first-use costs
-        solver = solvers(quick=len(functions) < len(FUNCTIONS))[label]
-        rows = [{"function": name, **measure_compile(solver, name, dim, key=i)}
-                for i, name in enumerate(functions)]
+        if label in PEERS:
+            return {"rows": [{"function": name, "dim": n, **peer_run(label, name, n, i)} for n in dims
+                             for i, name in enumerate(DIM_FUNCTIONS[:2] if quick else DIM_FUNCTIONS)],
+                    "asks": []}
+        _warm()
+        solver = solvers(quick)[label]
+        for n in dims or [dim]:
+            for i, name in enumerate((DIM_FUNCTIONS[:2] if quick else DIM_FUNCTIONS) if dims else functions):
+                rows.append({"function": name, **({"dim": n} if dims else {}),
+                             **measure_compile(solver, name, n, key=i)})
     asks = []
     if label in ASK_TELL and seeds:  # in float32, JAX's default
         api = _ask_tell_api(solver)
         if api is not None:  # None: a version whose NelderMead has no ask/tell
             many = "keys" in inspect.signature(api.ask_init).parameters
             for k in (1, seeds) if many else (1,):  # keys=: several seeds in one run
-                ms, n_asks = ask_tell_ms(solver, dim, k)
+                ms, n_asks = ask_tell_ms(api, dim, k)
                 asks.append({"route": "ask/tell", "seeds": k, "ms_per_host_call": ms,
                              "host_calls": n_asks})
         for k in (1, seeds):
@@ -295,18 +262,13 @@ def measure(label: str, functions, dim: int, seeds: int, dims=None) -> dict:
     return {"rows": rows, "asks": asks}
 
 
-ASK_TELL = ("PSO", "NelderMead", "PSO->NM")
-
-
 def _in_subprocess(label, a, pythonpath=None) -> dict:
     """:func:`measure` in a fresh process (``pythonpath``: the library to measure)."""
-    env = dict(os.environ)
-    if pythonpath:
-        env["PYTHONPATH"] = os.pathsep.join([pythonpath, str(HERE)])
+    env = dict(os.environ, **({"PYTHONPATH": os.pathsep.join([pythonpath, str(HERE)])} if pythonpath else {}))
     cmd = [sys.executable, str(HERE / "compile_time.py"), "--one", label, "--dim", str(a.dim),
-           "--seeds", str(a.seeds), "--dims", a.dims] + (["--quick"] if a.quick else []) + (
-           ["--functions", a.functions] if a.functions else []) + (
-           ["--cache", a.cache] if a.cache else []) + (["--no-asktell"] if a.no_asktell else [])
+           "--seeds", str(a.seeds), "--dims", a.dims, *(["--quick"] if a.quick else []),
+           *(["--functions", a.functions] if a.functions else []), *(["--cache", a.cache] if a.cache else []),
+           *(["--no-asktell"] if a.no_asktell else [])]
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if done.returncode:
         raise RuntimeError(f"{label} ({pythonpath or 'this'}) failed:\n{done.stderr[-3000:]}")
@@ -377,7 +339,7 @@ def demo_twice(label: str, cache: Path, work: Path, pythonpath=None, quick=True)
     return rows
 
 
-def main():
+def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_output_arguments(p)
     p.add_argument("--dim", type=int, default=5, help="dimension of the ask/tell part "
@@ -403,8 +365,26 @@ def main():
                    help=f"comma-separated functions of the per-dimension table (default "
                         f"{','.join(DIM_FUNCTIONS)}; --quick: the first two)")
     p.add_argument("--one", default=None, help=argparse.SUPPRESS)
-    a = p.parse_args()
-    command = "python benchmarks/compile_time.py " + shlex.join(sys.argv[1:])
+    return p.parse_args(argv)
+
+
+def summarise(label, pooled, dims) -> list[dict]:
+    """Medians per (version, dimension) of one solver's rows."""
+    out = []
+    for version, got_rows in pooled.items():
+        for n in (dims or [None]):
+            per = [r for r in got_rows if n is None or r.get("dim") == n]
+            med = lambda k: statistics.median(r[k] for r in per)  # noqa: E731
+            out.append({"version": version, "solver": label, **({"dim": n} if n is not None else {}),
+                        "runs": len(per), **{k: med(k) for k in ("first_s", "cpu_s", "second_s", "trace_s",
+                                                                   "lower_s", "compile_s")},
+                        "programs": int(med("programs"))})
+            print(out[-1], flush=True)
+    return out
+
+
+def main(argv=None):
+    a = parse(argv)
     if a.cache:
         # the script's choice, never the library's: a user option (docs/solvers.md)
         jax.config.update("jax_compilation_cache_dir", a.cache)
@@ -417,21 +397,17 @@ def main():
     if a.functions:
         DIM_FUNCTIONS[:] = a.functions.split(",")
     if a.one:
-        print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds,
-                                 dims)))
+        print(json.dumps(measure(a.one, functions, a.dim, 0 if a.no_asktell else a.seeds, dims)))
         return
     out = results_dir(a.out, quick=a.quick)
     if a.cache:  # the first process fills the cache, the second reads it
         versions = {"cache empty": None, "cache filled": None}
         if Path(a.cache).exists() and os.listdir(a.cache):
             raise SystemExit(f"--cache {a.cache} must be an empty folder")
-    elif a.baseline:
-        versions = {"baseline": a.baseline, "this": None}
     else:
-        versions = {"this": None}
+        versions = {"baseline": a.baseline, "this": None} if a.baseline else {"this": None}
     rows, summary, asks = [], [], []
-    labels = a.solvers.split(",") if a.solvers else list(solvers(a.quick)) + (
-        list(PEERS) if dims else [])
+    labels = a.solvers.split(",") if a.solvers else list(solvers(a.quick)) + (list(PEERS) if dims else [])
     for label in labels:
         pooled = collections.defaultdict(list)
         for r in range(a.repeat):
@@ -440,26 +416,11 @@ def main():
                     continue  # a peer does not depend on jaxfric's version
                 got = _in_subprocess(label, a, path)
                 pooled[version] += got["rows"]
-                rows += [{"version": version, "solver": label, "dim": a.dim, "round": r, **x}
-                         for x in got["rows"]]
+                rows += [{"version": version, "solver": label, "dim": a.dim, "round": r, **x} for x in got["rows"]]
                 asks += [{"version": version, "solver": label, **x} for x in got["asks"]]
-        for version, got_rows in pooled.items():
-            for n in (dims or [None]):
-                per = [r for r in got_rows if n is None or r.get("dim") == n]
-                med = lambda k: statistics.median(r[k] for r in per)  # noqa: E731
-                summary.append({
-                    "version": version, "solver": label,
-                    **({"dim": n} if n is not None else {}), "runs": len(per),
-                    "first_s": med("first_s"), "cpu_s": med("cpu_s"),
-                    "second_s": med("second_s"), "trace_s": med("trace_s"),
-                    "lower_s": med("lower_s"), "compile_s": med("compile_s"),
-                    "programs": int(med("programs")),
-                })
-                print(summary[-1], flush=True)
+        summary += summarise(label, pooled, dims)
     demo = []
     if a.cache and not a.no_demo:
-        import tempfile
-
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             # the versions in turn, each on a new cache of its own: the same load for both
@@ -468,44 +429,35 @@ def main():
                 for label, path in todo:
                     cache = tmp / f"cache-{label}-{r}"
                     cache.mkdir()
-                    demo += [{**row, "round": r}
-                             for row in demo_twice(label, cache, tmp, path, quick=True)]
+                    demo += [{**row, "round": r} for row in demo_twice(label, cache, tmp, path, quick=True)]
         write_csv(demo, out / f"{a.stem or 'compile_time_cache'}_demo.csv")
     load = os.getloadavg()
     stem = a.stem or ("compile_time_cache" if a.cache else "compile_time")
-    write_csv(rows, out / f"{stem}.csv")
     if asks:
         write_csv(asks, out / f"{stem}_asktell.csv")
-    fmt = lambda v: f"{v:.3g}" if isinstance(v, float) else str(v)  # noqa: E731
-    baseline = (f"`baseline`: the library in {a.baseline}, measured in turn with `this` "
-                "(each solver in a fresh process, one after the other). "
-                if a.baseline else "")
-    if dims:
-        heading = _dims_text(summary, dims, a, load, fmt)
-    else:
-        heading = [
-            f"{a.note}\n\njax {jax.__version__}, float64, {a.dim} parameters, medians over "
+    fmt = cell(".3g")
+    baseline = (f"`baseline`: the library in {a.baseline}, measured in turn with `this` (each solver in a "
+                "fresh process, one after the other). " if a.baseline else "")
+    heading = _dims_text(summary, dims, a, load, fmt) if dims else [
+        f"{a.note}\n\njax {jax.__version__}, float64, {a.dim} parameters, medians over "
         f"{len(functions)} test functions ({', '.join(functions)}) × {a.repeat} round(s) "
-        f"(`runs`), each a new Python function; load average at the end {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}; "
-        f"persistent cache: {a.cache or 'off'}. {baseline}Seconds: the first call (a new "
+        f"(`runs`), each a new Python function; load average at the end {load[0]:.2f} / {load[1]:.2f} / "
+        f"{load[2]:.2f}; persistent cache: {a.cache or 'off'}. {baseline}Seconds: the first call (a new "
         "objective), the second (same objective, another key: the run alone), and the "
         "first call's tracing, lowering and XLA compilation as JAX reports them "
         "(`jax.monitoring`); `programs`: XLA compilations in the first call.",
         markdown_table(summary, fmt=fmt)]
     text = "\n\n".join([
-        "# Compilation per new objective",
-        *heading,
+        "# Compilation per new objective", *heading,
         "An objective outside JAX, in float32 (a NumPy sphere, compiled run reused): "
         "milliseconds per host call (an ask, or a `pure_callback` call) and host calls per "
         f"run, by ask/tell (one seed, and {a.seeds} in one run with `keys=`) and by the "
-        "`pure_callback` recipe under `minimise` "
-        f"(one seed) or `minimise_many` ({a.seeds} keys).",
+        f"`pure_callback` recipe under `minimise` (one seed) or `minimise_many` ({a.seeds} keys).",
         markdown_table(asks, fmt=fmt) if asks else "(not measured: --no-asktell)",
         *(_demo_text(demo, a, fmt) if demo else []),
-        f"Command: `{command}`",
+        f"Command: `{command('compile_time.py', argv)}`",
     ])
-    (out / f"{stem}.md").write_text(text + "\n")
-    print(text)
+    write_report(out, stem, text, rows)
 
 
 def _dims_text(summary, dims, a, load, fmt) -> list[str]:
