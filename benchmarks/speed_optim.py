@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib.util
 import logging
 import statistics
 import sys
@@ -36,7 +37,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import Case, machine, results_dir, run_round_robin, write_report, x64 as enable_x64  # noqa: E402
+from _harness import Case, machine, results_dir, run_round_robin, tagged, write_report, x64 as enable_x64  # noqa: E402
 from baselines import NUMPY_BATCH  # noqa: E402
 
 PYSWARMS = "pyswarms GlobalBestPSO (numpy)"
@@ -101,8 +102,7 @@ def main(argv=None):
                    help="timed rounds; each round times every implementation once, in turn")
     p.add_argument("--seeds", type=int, default=8)
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32")
-    p.add_argument("--out", default=None,
-                   help="output folder (default benchmarks/results)")
+    p.add_argument("--out", default=None, help="output folder (default benchmarks/results)")
     p.add_argument("--tag", default="", help="suffix for the output files (e.g. gpu)")
     p.add_argument("--short", action="store_true",
                    help="the short default runs (speed_optim_short.md) instead")
@@ -133,9 +133,7 @@ def main(argv=None):
         return short_runs(a, lo, hi, obj, f_batch, x64)
     cases: list[Case] = []
 
-    def add(label, once):
-        """``once(r)`` runs round ``r`` (``-1``: the warm-up) and returns
-        ``(evaluations, best f values)``."""
+    def add(label, once):  # once(r): round r (-1: the warm-up) -> (evaluations, best f values)
         cases.append(Case(label, once, x64=x64))
 
     def jax_once(solver, batched=False, calls=1):
@@ -166,11 +164,9 @@ def main(argv=None):
 
     # evosax's PSO (ask/tell in one lax.scan, vmapped over the seeds) at jaxfric PSO's
     # evaluation count: P (G + 1)
-    try:
+    if importlib.util.find_spec("evosax"):  # the bench extra
         from evosax.algorithms import PSO as EvosaxPSO
-    except ImportError:  # pragma: no cover - the bench extra is not installed
-        EvosaxPSO = None
-    if EvosaxPSO is not None:
+
         es = EvosaxPSO(population_size=a.agents, solution=jnp.zeros(a.dim, dt))
         params = es.default_params
         f_pop = jax.vmap(lambda x: obj(x, None))
@@ -218,10 +214,7 @@ def main(argv=None):
 
     timed_rounds(cases, a.repeats)
     by = {c.label: c for c in cases}
-    rows = []
-    for c in cases:
-        peer = by[SCIPY_NM if "Nelder" in c.label else PYSWARMS]
-        rows.append(_row(c, peer))
+    rows = [_row(c, by[SCIPY_NM if "Nelder" in c.label else PYSWARMS]) for c in cases]
     # the batched comparisons, round by round: vmapped seeds against one call each, and
     # against evosax
     ratios = []
@@ -240,8 +233,7 @@ def main(argv=None):
     ceiling = by[OBJECTIVE]
     ratios.append(f"ceiling: the objective alone (XLA) over pyswarms (evals/s): "
                   f"{_spread(_round_ratios(ceiling, by[PYSWARMS]))}; no single run can exceed it")
-    stem = ("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else "")
-            + (f"_{a.tag}" if a.tag else ""))
+    stem = tagged("speed_optim" + (f"_{a.function}" if a.function != "rosenbrock" else ""), a.tag)
     lines = [
         "# Optimiser throughput against peers",
         "",
@@ -328,7 +320,7 @@ def short_runs(a, lo, hi, obj, f_batch, x64):
                      f"evaluations per second, the ceiling "
                      f"{c.results[0][0] / (fixed + ceil) / (peer[c.meta['g']].results[0][0] / peer[c.meta['g']].median):.2f}× "
                      "with no solver work at all")
-    stem = "speed_optim_short" + (f"_{a.tag}" if a.tag else "")
+    stem = tagged("speed_optim_short", a.tag)
     lines = [
         "# Short runs: one default `minimise` call each",
         "",
