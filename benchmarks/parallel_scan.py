@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import Case, add_output_arguments, cell, markdown_table, results_dir, run_round_robin, write_report  # noqa: E402
+from _harness import (Case, add_output_arguments, cell, markdown_table, results_dir, run_round_robin,  # noqa: E402
+                      tagged, write_report)
 
 
 def _device() -> str:
@@ -107,9 +108,8 @@ def _row(kind, case, T, P, dtype, cases, info, diff):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_output_arguments(p)
+    add_output_arguments(p, tag=True)
     p.add_argument("--rounds", type=int, default=5)
-    p.add_argument("--tag", default="", help="suffix of the output names (e.g. gpu)")
     p.add_argument("--elman", default="2000x1,2000x64,24741x1,24741x16", metavar="TxP,...",
                    help="Elman cases: record length x candidates")
     p.add_argument("--motion", default="2000,24741", metavar="T,...", help="motion cases: record lengths")
@@ -132,7 +132,7 @@ def main(argv=None) -> int:
             "the sequential scan answered (its time is then included). `max_rel_diff`: largest "
             "difference of the outputs (Elman) or of x and v (motion), relative to their largest "
             "magnitude.", "", markdown_table(rows, fmt=cell(".3g")), ""]
-    write_report(out, "parallel_scan" + (f"_{args.tag}" if args.tag else ""), text, rows)
+    write_report(out, tagged("parallel_scan", args.tag), text, rows)
     return 0
 
 
