@@ -31,39 +31,11 @@ from .greybox import GreyBox
 from .lugre import Dahl, LuGre, bristle_friction, bristle_phi
 from .static import Coulomb, Cylinder, Stribeck
 
-__all__ = [
-    "AbstractFrictionModel",
-    "AbstractPhysicalModel",
-    "Coulomb",
-    "Cylinder",
-    "DEFAULT_RANGES",
-    "Dahl",
-    "Elman",
-    "ElmanFull",
-    "GMS",
-    "GreyBox",
-    "LuGre",
-    "Scaler",
-    "SearchBox",
-    "Stribeck",
-    "Unidentifiable",
-    "available",
-    "bristle_friction",
-    "bristle_phi",
-    "elman_hidden",
-    "ACCELERATOR_UNROLL",
-    "RANGE_FLOORS",
-    "add_offset",
-    "by_direction",
-    "time_loop",
-    "time_scan",
-    "widened",
-    "check_theta",
-    "data_ranges",
-    "friction_scales",
-    "get",
-    "stribeck_curve",
-]
+__all__ = ["AbstractFrictionModel", "AbstractPhysicalModel", "Coulomb", "Cylinder", "DEFAULT_RANGES", "Dahl",
+           "Elman", "ElmanFull", "GMS", "GreyBox", "LuGre", "Scaler", "SearchBox", "Stribeck",
+           "Unidentifiable", "available", "bristle_friction", "bristle_phi", "elman_hidden",
+           "ACCELERATOR_UNROLL", "RANGE_FLOORS", "add_offset", "by_direction", "time_loop", "time_scan",
+           "widened", "check_theta", "data_ranges", "friction_scales", "get", "stribeck_curve"]
 
 _REGISTRY: dict[str, type[AbstractFrictionModel]] = {
     "elman": Elman,

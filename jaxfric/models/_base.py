@@ -95,14 +95,10 @@ def check_theta(theta: ArrayLike, num_params: int, *, name: str = "theta") -> np
     """
     arr = np.asarray(theta)
     if arr.ndim not in (1, 2):
-        raise ValueError(
-            f"{name} must be a 1-D parameter vector or a 2-D (P, n) batch, got shape {arr.shape}"
-        )
+        raise ValueError(f"{name} must be a 1-D parameter vector or a 2-D (P, n) batch, got shape {arr.shape}")
     if arr.shape[-1] != num_params:
-        raise ValueError(
-            f"{name} has {arr.shape[-1]} entries per candidate but the model has "
-            f"{num_params} parameters"
-        )
+        raise ValueError(f"{name} has {arr.shape[-1]} entries per candidate but the model has "
+                         f"{num_params} parameters")
     if not np.issubdtype(arr.dtype, np.number):
         raise ValueError(f"{name} must be numeric, got dtype {arr.dtype}")
     if not np.all(np.isfinite(arr)):
@@ -171,11 +167,9 @@ class AbstractFrictionModel(eqx.Module):
             return None
         missing = [n for n in self.input_names if getattr(data, n, None) is None]
         if missing:
-            raise ValueError(
-                f"{type(self).__name__} needs the measured channel(s) {', '.join(missing)} "
-                f"(of {self.input_names}) but the data have none; pass a record that holds "
-                "them (e.g. FrictionData.from_arrays(..., p1=..., p2=...))"
-            )
+            raise ValueError(f"{type(self).__name__} needs the measured channel(s) {', '.join(missing)} "
+                             f"(of {self.input_names}) but the data have none; pass a record that holds "
+                             "them (e.g. FrictionData.from_arrays(..., p1=..., p2=...))")
         rows = [np.asarray(getattr(data, n), dtype=np.float64).ravel() for n in self.input_names]
         for name, row in zip(self.input_names, rows):
             if length is not None and row.shape[0] != length:
@@ -233,16 +227,12 @@ class AbstractFrictionModel(eqx.Module):
         if not self.input_names:
             return None
         if inputs is None:
-            raise ValueError(
-                f"{type(self).__name__} needs inputs={self.input_names} (a (C, T) array of "
-                "measured channels, e.g. chamber pressures in Pa); none were given"
-            )
+            raise ValueError(f"{type(self).__name__} needs inputs={self.input_names} (a (C, T) array of "
+                             "measured channels, e.g. chamber pressures in Pa); none were given")
         inputs = jnp.asarray(inputs)
         if inputs.ndim != 2 or inputs.shape[0] != len(self.input_names):
-            raise ValueError(
-                f"inputs must be a ({len(self.input_names)}, T) array holding {self.input_names}, "
-                f"got shape {inputs.shape}"
-            )
+            raise ValueError(f"inputs must be a ({len(self.input_names)}, T) array holding {self.input_names}, "
+                             f"got shape {inputs.shape}")
         return inputs
 
     def simulate_batch(
@@ -339,10 +329,8 @@ class AbstractFrictionModel(eqx.Module):
         if thetas.ndim != 2:
             raise ValueError(f"thetas must be a 2-D (P, n) batch, got shape {thetas.shape}")
         if thetas.shape[-1] != self.num_params:
-            raise ValueError(
-                f"theta has {thetas.shape[-1]} entries but {type(self).__name__} has "
-                f"{self.num_params} parameters"
-            )
+            raise ValueError(f"theta has {thetas.shape[-1]} entries but {type(self).__name__} has "
+                             f"{self.num_params} parameters")
         if velocity.ndim != 1:
             raise ValueError(f"velocity must be a 1-D time series, got shape {velocity.shape}")
         if velocity.shape[0] == 0:

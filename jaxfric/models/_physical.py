@@ -232,10 +232,8 @@ class AbstractPhysicalModel(AbstractFrictionModel):
         missing = set(self.physical_names) - set(params)
         extra = set(params) - set(self.physical_names)
         if missing or extra:
-            raise ValueError(
-                f"{type(self).__name__}.from_physical needs exactly {self.physical_names}; "
-                f"missing {sorted(missing)}, unexpected {sorted(extra)}"
-            )
+            raise ValueError(f"{type(self).__name__}.from_physical needs exactly {self.physical_names}; "
+                             f"missing {sorted(missing)}, unexpected {sorted(extra)}")
 
     def from_physical(self, **params) -> Array:
         """Physical parameters (keywords [`physical_names`][jaxfric.models.AbstractPhysicalModel.physical_names]) -> ``theta``."""

@@ -42,9 +42,7 @@ class Scaler(eqx.Module):
         lo = arr.min(axis=0)
         hi = arr.max(axis=0)
         if np.any(hi <= lo):
-            raise ValueError(
-                "cannot fit a Scaler on a constant signal (max == min); mapminmax scaling is undefined"
-            )
+            raise ValueError("cannot fit a Scaler on a constant signal (max == min); mapminmax scaling is undefined")
         # Kept as float64 NumPy so that a scaler fitted before x64 is switched on
         # does not lose precision; arrays are cast to the data's dtype on use.
         return cls(lo=lo.astype(np.float64), hi=hi.astype(np.float64))

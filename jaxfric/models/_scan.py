@@ -47,9 +47,7 @@ def time_loop(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = No
 
     if unroll is not None:
         return scan_with(unroll)(init, xs)
-    return jax.lax.platform_dependent(
-        init, xs, cpu=scan_with(cpu_unroll), default=scan_with(ACCELERATOR_UNROLL)
-    )
+    return jax.lax.platform_dependent(init, xs, cpu=scan_with(cpu_unroll), default=scan_with(ACCELERATOR_UNROLL))
 
 
 def time_scan(step: Callable, init, xs, cpu_unroll: int, unroll: int | None = None):

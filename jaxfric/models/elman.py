@@ -136,21 +136,14 @@ class Elman(AbstractFrictionModel):
         """Search box of §2.4: w, r, b in ±5; v in ±2; alpha in [0, 0.99]; c0, b_o in ±1
         (set by the options; a ``box`` is refused, [`search_box`][jaxfric.models.AbstractFrictionModel.search_box])."""
         self.search_box(box)
-        n = self.neurons
-        half = np.concatenate(
-            [
-                np.full(n, self.weight_bound),
-                np.full(n, self.context_weight_bound),
-                np.full(n, self.weight_bound),
-                np.full(n, self.output_weight_bound),
-            ]
-        )
         cb = self.c0_bound
-        lower = np.concatenate([-half, np.zeros(n), np.full(n, -cb)])
-        upper = np.concatenate([half, np.full(n, self.alpha_max), np.full(n, cb)])
-        if self.output_bias:
-            lower = np.append(lower, -cb)
-            upper = np.append(upper, cb)
+        # per block of _BLOCKS (w, r, b, v, alpha, c0), N entries each; then b_o
+        hi = (self.weight_bound, self.context_weight_bound, self.weight_bound, self.output_weight_bound,
+              self.alpha_max, cb)
+        lo = tuple(-h for h in hi[:4]) + (0.0, -cb)
+        tail = 1 if self.output_bias else 0
+        lower = np.concatenate([np.repeat(np.asarray(lo, float), self.neurons), [-cb] * tail])
+        upper = np.concatenate([np.repeat(np.asarray(hi, float), self.neurons), [cb] * tail])
         return lower.astype(np.float64), upper.astype(np.float64)
 
     def to_physical(self, theta: Float[ArrayLike, "... n"]) -> dict[str, Array]:
@@ -182,9 +175,7 @@ class Elman(AbstractFrictionModel):
             raise ValueError("this Elman has output_bias=False: b_o must not be given")
         return jnp.concatenate(blocks, axis=-1)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
-    ) -> Float[Array, "P T"]:
+    def _simulate_batch(self, thetas, velocity, dt=None) -> Float[Array, "P T"]:
         """Free-run outputs of ``P`` networks on one scaled velocity record (§2.2).
 
         One ``lax.scan`` over time carries the contexts of all candidates as one
@@ -339,14 +330,8 @@ class ElmanFull(AbstractFrictionModel):
 
     def bounds(self, box=None) -> tuple[np.ndarray, np.ndarray]:
         self.search_box(box)
-        half = {
-            "w": self.weight_bound,
-            "W_c": self.context_bound,
-            "b": self.weight_bound,
-            "v": self.output_weight_bound,
-            "c0": self.c0_bound,
-            "b_o": self.c0_bound,
-        }
+        half = {"w": self.weight_bound, "W_c": self.context_bound, "b": self.weight_bound,
+                "v": self.output_weight_bound, "c0": self.c0_bound, "b_o": self.c0_bound}
         upper = np.concatenate([np.full(size, half[name]) for name, size in self._sizes()])
         return (-upper).astype(np.float64), upper.astype(np.float64)
 
@@ -388,9 +373,7 @@ class ElmanFull(AbstractFrictionModel):
             raise ValueError(f"{extra} not used by this ElmanFull configuration")
         return jnp.concatenate(parts, axis=-1)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
-    ) -> Float[Array, "P T"]:
+    def _simulate_batch(self, thetas, velocity, dt=None) -> Float[Array, "P T"]:
         """Free-run outputs of ``P`` networks on one scaled velocity record (§2.3)."""
         del dt
         thetas, u = self._prepare(thetas, velocity)

@@ -38,13 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._physical import (
-    AbstractPhysicalModel,
-    add_offset,
-    by_direction,
-    directional_coords,
-    stribeck_curve,
-)
+from ._physical import AbstractPhysicalModel, add_offset, by_direction, directional_coords, stribeck_curve
 from ._scan import time_scan
 from .lugre import _sample_time
 
@@ -146,8 +140,7 @@ class GMS(AbstractPhysicalModel):
         """Physical parameters ([`physical_names`][jaxfric.models.GMS.physical_names]; the alphas must sum to 1) -> ``theta``."""
         self._check_physical_names(params)
         n = self.num_elements
-        alpha = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(params[f"alpha{i}"])
-                                                 for i in range(1, n + 1))), axis=-1)
+        alpha = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(params[f"alpha{i}"]) for i in range(1, n + 1))), axis=-1)
         if not isinstance(alpha, jax.core.Tracer):
             total = np.asarray(jnp.sum(alpha, axis=-1))
             if not np.allclose(total, 1.0, rtol=1e-5, atol=1e-6):
@@ -158,10 +151,7 @@ class GMS(AbstractPhysicalModel):
         return self._theta_from(values)
 
     # ---------------------------------------------------------------- rollout
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
-    ) -> Float[Array, "P T"]:
-        """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
+    def _simulate_batch(self, thetas, velocity, dt) -> Float[Array, "P T"]:
         thetas, v = self._prepare(thetas, velocity)
         dt = _sample_time(dt, v.dtype)
         p = self.to_physical(thetas)

@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..records import check_int
 from ._base import AbstractFrictionModel, Unidentifiable
 from ._box import DEFAULT_RANGES, SearchBox, data_ranges
 from ._physical import AbstractPhysicalModel
@@ -132,8 +133,7 @@ class GreyBox(AbstractFrictionModel):
                              f"{type(self.physical).__name__} does not have")
         if self.physical.input_names:
             raise ValueError("GreyBox takes physical models driven by the velocity alone")
-        if isinstance(self.hidden, bool) or not isinstance(self.hidden, (int, np.integer)) or self.hidden < 1:
-            raise ValueError(f"hidden must be a positive integer, got {self.hidden!r}")
+        check_int("hidden", self.hidden)
         for name in ("bound", "weight_bound", "c0_bound"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):
@@ -221,8 +221,7 @@ class GreyBox(AbstractFrictionModel):
         ``α = alpha_max / 2``, the velocity scale at the top of its range (with a data-centred
         box the record's top speed, so the units start unsaturated)."""
         box = self.search_box(box, velocity, friction)
-        theta_p = self.physical.initial_guess(velocity, friction,
-                                              {k: box[k] for k in self.physical.box_keys})
+        theta_p = self.physical.initial_guess(velocity, friction, {k: box[k] for k in self.physical.box_keys})
         return np.concatenate([theta_p, self.network_start(box)])
 
     def network_start(self, box=None) -> np.ndarray:

@@ -32,15 +32,9 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, Float
 
-from ._physical import (
-    AbstractPhysicalModel,
-    add_offset,
-    by_direction,
-    directional_coords,
-    stribeck_curve,
-)
+from ._physical import AbstractPhysicalModel, add_offset, by_direction, directional_coords, stribeck_curve
 from ._scan import linear_recurrence
 
 __all__ = ["LuGre", "Dahl", "bristle_friction", "bristle_phi"]
@@ -77,9 +71,7 @@ def bristle_phi(x: Array) -> Array:
     return jnp.where(small, 1.0 - 0.5 * x, -jnp.expm1(-x_safe) / x_safe)
 
 
-def bristle_friction(
-    sigma0: Array, sigma1: Array, sigma2: Array, g: Array, velocity: Array, dt
-) -> Float[Array, "P T"]:
+def bristle_friction(sigma0: Array, sigma1: Array, sigma2: Array, g: Array, velocity: Array, dt) -> Float[Array, "P T"]:
     """Exact-ZOH rollout of the LuGre bristle state and friction output, §8.2.
 
     ``sigma0``, ``sigma1``: shape ``(P, 1)``; ``sigma2``: ``(P, 1)`` or
@@ -118,11 +110,7 @@ class LuGre(AbstractPhysicalModel):
     [N s/m], ``sigma2`` [N s/m], ``Fc`` [N], ``Fs`` [N], ``vs`` [m/s].
 
     Hyperparameters (static): ``stribeck_exponent`` delta (default 2, the
-    original model). The search box is not a field: [`jaxfric.identify`][jaxfric.identification.identify]
-    takes it as data, ``box={"Fc": (5, 100), "Fs_ratio": (1, 2)}`` ((low, high) in
-    physical units, ``Fs_ratio`` for Fs/Fc, a [`SearchBox`][jaxfric.models.SearchBox]);
-    entries left out are the §8.5 defaults or the data-centred ranges
-    ([`search_box`][jaxfric.models.AbstractPhysicalModel.search_box]). ``dt`` in [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] is the sample time in s.
+    original model). The search box is data, not a field ([`SearchBox`][jaxfric.models.SearchBox]).
 
     ``asymmetric=True`` (docs/algorithms.md §13.1, module docstring) replaces
     ``log10_sigma2``, ``Fc``, ``Fs_over_Fc`` by their ``_pos`` / ``_neg`` pairs
@@ -142,20 +130,15 @@ class LuGre(AbstractPhysicalModel):
 
     @property
     def _coords(self):
-        coords = (
-            ("log10_sigma0", "sigma0", "log10"),
-            ("log10_sigma1", "sigma1", "log10"),
-            ("log10_sigma2", "sigma2", "log10"),
-            ("Fc", "Fc", "linear"),
-            ("Fs_over_Fc", "Fs", "ratio"),
-            ("log10_vs", "vs", "log10"),
-        )
+        coords = (("log10_sigma0", "sigma0", "log10"),
+                  ("log10_sigma1", "sigma1", "log10"),
+                  ("log10_sigma2", "sigma2", "log10"),
+                  ("Fc", "Fc", "linear"),
+                  ("Fs_over_Fc", "Fs", "ratio"),
+                  ("log10_vs", "vs", "log10"))
         return directional_coords(coords, self.asymmetric, self.offset)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
-    ) -> Float[Array, "P T"]:
-        """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
+    def _simulate_batch(self, thetas, velocity, dt) -> Float[Array, "P T"]:
         p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         vv = v[None, :]
         if self.asymmetric:
@@ -197,10 +180,7 @@ class Dahl(AbstractPhysicalModel):
             coords += (("log10_sigma2", "sigma2", "log10"),)
         return directional_coords(coords, self.asymmetric, self.offset)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt
-    ) -> Float[Array, "P T"]:
-        """Friction [N] of ``P`` parameter sets for velocity [m/s] sampled every ``dt`` s."""
+    def _simulate_batch(self, thetas, velocity, dt) -> Float[Array, "P T"]:
         p, v, dt = _bristle_columns(self, thetas, velocity, dt)
         zero = jnp.zeros_like(p["sigma0"])
         vv = v[None, :]

@@ -24,15 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._physical import (
-    AbstractPhysicalModel,
-    Unidentifiable,
-    add_offset,
-    by_direction,
-    directional_coords,
-    signed_level,
-    stribeck_curve,
-)
+from ._physical import (AbstractPhysicalModel, Unidentifiable, add_offset, by_direction, directional_coords,
+                        signed_level, stribeck_curve)
 
 __all__ = ["Coulomb", "Cylinder", "Stribeck"]
 
@@ -89,10 +82,7 @@ class Coulomb(AbstractPhysicalModel):
             coords += (("log10_sigma2", "sigma2", "log10"),)
         return directional_coords(coords, self.asymmetric, self.offset)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
-    ) -> Float[Array, "P T"]:
-        """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
+    def _simulate_batch(self, thetas, velocity, dt=None) -> Float[Array, "P T"]:
         p, vv, t = _columns(self, thetas, velocity)
         if self.asymmetric:
             f = signed_level(t, p, "Fc", p["Fc_pos"], p["Fc_neg"])
@@ -113,10 +103,8 @@ class Coulomb(AbstractPhysicalModel):
         v = np.asarray(velocity, dtype=float).ravel()
         f = np.asarray(friction, dtype=float).ravel()
         if v.shape != f.shape or v.size < self.num_params:
-            raise ValueError(
-                f"velocity and friction must have the same length, at least {self.num_params}; "
-                f"got {v.shape} and {f.shape}"
-            )
+            raise ValueError(f"velocity and friction must have the same length, at least {self.num_params}; "
+                             f"got {v.shape} and {f.shape}")
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
             raise ValueError("velocity and friction must be finite (no NaN or inf)")
         t = np.tanh(v / self.v_eps)
@@ -173,20 +161,15 @@ class Stribeck(AbstractPhysicalModel):
 
     @property
     def _coords(self):
-        coords = (
-            ("Fc", "Fc", "linear"),
-            ("Fs_over_Fc", "Fs", "ratio"),
-            ("log10_vs", "vs", "log10"),
-            ("log10_sigma2", "sigma2", "log10"),
-        )
+        coords = (("Fc", "Fc", "linear"),
+                  ("Fs_over_Fc", "Fs", "ratio"),
+                  ("log10_vs", "vs", "log10"),
+                  ("log10_sigma2", "sigma2", "log10"))
         if self.fit_exponent:
             coords += (("delta", "delta", "linear"),)
         return directional_coords(coords, self.asymmetric, self.offset)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt=None
-    ) -> Float[Array, "P T"]:
-        """Friction [N] for velocity [m/s]; ``dt`` is ignored."""
+    def _simulate_batch(self, thetas, velocity, dt=None) -> Float[Array, "P T"]:
         p, vv, t = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
         if not (self.asymmetric or self.offset):
@@ -269,16 +252,11 @@ class Cylinder(AbstractPhysicalModel):
                 out += [Unidentifiable("F_pr", why), Unidentifiable("f_cfr", why)]
         return tuple(out)
 
-    def _simulate_batch(
-        self, thetas: Float[ArrayLike, "P n"], velocity: Float[ArrayLike, " T"], dt, inputs
-    ) -> Float[Array, "P T"]:
-        """Friction [N] for velocity [m/s] and ``inputs = [p1, p2]`` [Pa]; ``dt`` is ignored."""
+    def _simulate_batch(self, thetas, velocity, dt, inputs) -> Float[Array, "P T"]:
         p, vv, t = _columns(self, thetas, velocity)
         inputs = jnp.asarray(inputs, vv.dtype)
         if inputs.shape[-1] != vv.shape[-1]:
-            raise ValueError(
-                f"inputs have {inputs.shape[-1]} samples but velocity has {vv.shape[-1]}"
-            )
+            raise ValueError(f"inputs have {inputs.shape[-1]} samples but velocity has {vv.shape[-1]}")
         f_c = p["F_pr"] + p["f_cfr"] * (inputs[0] + inputs[1])[None, :]
         level = f_c
         if self.breakaway:
