@@ -1,9 +1,5 @@
 """Input checks of the pipeline and the loaders: the record's checks (defined once, in
-[`jaxfric.records`][jaxfric.records]) and the edge padding of the zero-phase filter.
-
-They run on concrete NumPy data *before* any computation, so a bad record fails
-with a ValueError that names the channel and the problem, not deep inside
-SciPy or a jitted function.
+[`jaxfric.records`][jaxfric.records], which says when they run) and the edge padding of the zero-phase filter.
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._warnings import IrregularSamplingWarning
 from ..files import column_index, read_rows
+from ..records import check_int
 from ._checks import as_channel, check_increasing, check_positive, is_uniform
 from .data import FrictionData, Measurements
 
@@ -131,13 +132,11 @@ def _gather(source, columns, required, scale, fill, delimiter, skip_rows, commen
             optional=()) -> dict:
     """The ``required`` channels (read, or filled with a constant) and those of the
     ``optional`` channels the source maps, scaled to SI, as float64 arrays of one length."""
-    if isinstance(skip_rows, bool) or not isinstance(skip_rows, (int, np.integer)) or skip_rows < 0:
-        raise ValueError(f"skip_rows must be a whole number >= 0, got {skip_rows!r}")
+    check_int("skip_rows", skip_rows, 0)
     scale = {ch: _factor("scale", ch, v, allow_zero=False) for ch, v in dict(scale or {}).items()}
     fill = {ch: _factor("fill", ch, v, allow_zero=True) for ch, v in dict(fill or {}).items()}
     if isinstance(source, Mapping):
-        columns = (dict(columns) if columns is not None
-                   else {c: c for c in (*required, *optional) if c in source})
+        columns = (dict(columns) if columns is not None else {c: c for c in (*required, *optional) if c in source})
         missing_keys = [col for col in columns.values() if col not in source]
         if missing_keys:
             raise ValueError(f"missing column(s) {missing_keys}; the arrays given are {sorted(source)}")

@@ -62,19 +62,9 @@ def force_balance(p1, p2, load, acceleration, *, bore, rod, mass, gravity=0.0):
     return p1 * a1 - p2 * a2 - load - mass * acceleration - mass * gravity
 
 
-def estimate_friction(
-    meas: Measurements,
-    cylinder=None,
-    *,
-    bore: float | None = None,
-    rod: float | None = None,
-    mass: float | None = None,
-    gravity: float | None = None,
-    cutoff: float = 5.0,
-    order: int = 4,
-    train_fraction: float = 0.8,
-    n_train: int | None = None,
-) -> FrictionData:
+def estimate_friction(meas: Measurements, cylinder=None, *, bore: float | None = None, rod: float | None = None,
+                      mass: float | None = None, gravity: float | None = None, cutoff: float = 5.0,
+                      order: int = 4, train_fraction: float = 0.8, n_train: int | None = None) -> FrictionData:
     """Run the §7 pipeline on uniformly sampled measurements and return [`FrictionData`][jaxfric.rig.FrictionData].
 
     Geometry comes from ``cylinder`` (anything with ``bore``, ``rod``, ``mass``,

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import friction as _fr
+from ..records import check_int
 from .data import Measurements
 from .params import Rig
 
@@ -234,11 +235,6 @@ def _float_dtype(tree):
 
 
 # --------------------------------------------------------------------------- entry point
-def _whole(name: str, value, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be a whole number >= {minimum}, got {value!r}")
-
-
 def _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_reference, command):
     """Reject bad arguments of [`simulate`][jaxfric.rig.simulate] before tracing (a clear ValueError instead
     of a ZeroDivisionError, a reshape error or a silently empty or NaN record)."""
@@ -247,8 +243,8 @@ def _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_r
     raw = dtype == jnp.uint32 and jnp.shape(key)[-1:] == (2,)
     if not (typed or raw):
         raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed)), got {key!r}")
-    _whole("n_samples", n_samples, 2)
-    _whole("substeps", substeps, 1)
+    check_int("n_samples", n_samples, 2)
+    check_int("substeps", substeps, 1)
     for name, value, zero_ok in (("fs", fs, False), ("settle_time", settle_time, True)):
         try:
             v = float(value)
@@ -267,18 +263,9 @@ def _check_simulate_inputs(key, n_samples, fs, substeps, settle_time, velocity_r
             raise ValueError(f"{name} holds NaN or inf")
 
 
-def simulate(
-    rig: Rig,
-    key: jax.Array,
-    *,
-    n_samples: int = 2000,
-    fs: float = 128.0,
-    substeps: int = 32,
-    velocity_reference=None,
-    command=None,
-    sensors: Sensors = Sensors(),
-    settle_time: float = 1.0,
-) -> RigRecord:
+def simulate(rig: Rig, key: jax.Array, *, n_samples: int = 2000, fs: float = 128.0, substeps: int = 32,
+             velocity_reference=None, command=None, sensors: Sensors = Sensors(),
+             settle_time: float = 1.0) -> RigRecord:
     """Simulate the rig and return sampled measurements plus the ground truth (docs/algorithms.md §7).
 
     rig: parameters (a pytree; vmap over a batched ``Rig`` for many rigs at once).
@@ -379,9 +366,7 @@ def _simulate(rig, key, velocity_reference, command, sensors, n_samples, fs, sub
     normals = jax.vmap(lambda k: jax.random.normal(k, (n_samples,), dtype))(jax.random.split(key, 4))
     x_m, p1_m, p2_m, l_m = (_add_noise(z, c, lv, q, sensors.relative)
                             for z, c, lv, q in zip(normals, channels, levels, quants))
-    return RigRecord(
-        t=t_samples, x=x_m, p1=p1_m, p2=p2_m, load=l_m,
-        velocity=obs["v"], acceleration=obs["a"], friction=obs["friction"],
-        x_true=obs["x"], p1_true=obs["p1"], p2_true=obs["p2"], load_true=obs["load"],
-        valve=obs["valve"],
-    )
+    return RigRecord(t=t_samples, x=x_m, p1=p1_m, p2=p2_m, load=l_m,
+                     velocity=obs["v"], acceleration=obs["a"], friction=obs["friction"],
+                     x_true=obs["x"], p1_true=obs["p1"], p2_true=obs["p2"], load_true=obs["load"],
+                     valve=obs["valve"])

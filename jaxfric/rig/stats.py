@@ -37,5 +37,4 @@ def coulomb_levels(velocity, friction, v_move: float = 3e-3) -> CoulombLevels:
     if not pos.any() or not neg.any():
         raise ValueError(f"the record must slide both ways faster than v_move = {v_move} m/s")
     f_pos, f_neg = float(f[pos].mean()), float(f[neg].mean())
-    return CoulombLevels(f_pos, f_neg, 0.5 * (f_pos - f_neg), 0.5 * (f_pos + f_neg),
-                         int(pos.sum()), int(neg.sum()))
+    return CoulombLevels(f_pos, f_neg, 0.5 * (f_pos - f_neg), 0.5 * (f_pos + f_neg), int(pos.sum()), int(neg.sum()))
