@@ -4,18 +4,10 @@ Every function builds a new `Figure` and returns it; none
 calls ``plt.show`` or picks a backend (the CLI selects Agg, notebooks keep theirs),
 so the caller decides whether to show, save or close it.
 
-Figures (paper numbering from docs/algorithms.md §1):
-
-- [`plot_data`][jaxfric.plot.plot_data] -- velocity and computed friction against time, with the
-  training/validation split marked (the paper's Figs 9-10);
-- [`plot_friction_velocity`][jaxfric.plot.plot_friction_velocity] -- friction against velocity (hysteresis loops);
-- [`plot_fit`][jaxfric.plot.plot_fit] -- measured against estimated friction for one model (Figs 11-12);
-- [`plot_error`][jaxfric.plot.plot_error] -- error curves ``F - F_hat`` of several models;
-- [`plot_models`][jaxfric.plot.plot_models] -- several models on one window: measured samples as dots under
-  the models' lines, and each model's error below;
-- [`plot_band`][jaxfric.plot.plot_band] -- an ensemble's prediction band around its best member;
-- [`plot_convergence`][jaxfric.plot.plot_convergence] -- best objective against function evaluations (log scale);
-- [`plot_table1`][jaxfric.plot.plot_table1] -- final values of the Table 1 benchmark, per function and solver.
+Figures (each function's docstring says what it draws; paper numbering from docs/algorithms.md §1):
+[`plot_data`][jaxfric.plot.plot_data] (Figs 9-10), [`plot_friction_velocity`][jaxfric.plot.plot_friction_velocity],
+[`plot_fit`][jaxfric.plot.plot_fit] (Figs 11-12), [`plot_error`][jaxfric.plot.plot_error], [`plot_models`][jaxfric.plot.plot_models],
+[`plot_band`][jaxfric.plot.plot_band], [`plot_convergence`][jaxfric.plot.plot_convergence], [`plot_table1`][jaxfric.plot.plot_table1].
 
 Every figure draws a model in its own colour and line style ([`STYLES`][jaxfric.styles.STYLES],
 [`style`][jaxfric.styles.style]): the same model looks the same in the CLI's report and in every
@@ -42,21 +34,9 @@ from .optim import History, Solution
 from .records import FrictionData
 from .styles import STYLES, style
 
-__all__ = [
-    "fit_label",
-    "plot_band",
-    "plot_convergence",
-    "plot_data",
-    "plot_error",
-    "plot_fit",
-    "plot_friction_velocity",
-    "plot_models",
-    "plot_table1",
-    "predict_on",
-    "STYLES",
-    "style",
-    "velocity_unit",
-]
+__all__ = ["fit_label", "plot_band", "plot_convergence", "plot_data", "plot_error", "plot_fit",
+           "plot_friction_velocity", "plot_models", "plot_table1", "predict_on", "STYLES", "style",
+           "velocity_unit"]
 
 _MEASURED = dict(color="0.15", lw=1.1)
 _VALID_SHADE = dict(color="tab:orange", alpha=0.08, lw=0)
@@ -103,8 +83,7 @@ def _mark_split(ax, data) -> None:
 def _legend_outside(ax, **kwargs):
     """The axes' legend beside it, to the right, never over the data (the figures use
     constrained layout, which makes room for it)."""
-    return ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
-                     **{"fontsize": 8, **kwargs})
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, **{"fontsize": 8, **kwargs})
 
 
 def _finish(ax, xlabel: str, ylabel: str, title: str, **legend) -> None:
@@ -420,8 +399,7 @@ def plot_models(fits, data, *, window: str = "valid", labels: Sequence[str] | No
         ax_f.plot(ts, y_hat, lw=1.1, zorder=4 if look == STYLES["baseline"] else 3, label=label, **look)
         ax_e.plot(ts, ys - y_hat, lw=0.9, label=f"{label}: MSE {_mse_percent(ys, y_hat):.3g} %", **look)
     ax_e.axhline(0.0, color="0.4", lw=0.6)
-    _finish(ax_f, "", "friction force [N]", title or f"Measured friction and the models on the {name}",
-            markerscale=3)
+    _finish(ax_f, "", "friction force [N]", title or f"Measured friction and the models on the {name}", markerscale=3)
     _finish(ax_e, "time [s]", "error  F - F_hat [N]", f"Error on the {name} (normalised MSE % in the legend)",
             markerscale=3)
     return fig
@@ -493,8 +471,7 @@ def _global_phase_evals(item):
     searched = [s for s in stages if "num_evals" in s]  # the stages the history covers
     if isinstance(solution, Solution) and "num_evals_global" in solution.stats:
         g = np.asarray(solution.stats["num_evals_global"])
-        names = (" -> ".join(_stage_name(s) for s in searched[:2]) if len(searched) > 1
-                 else "MAPSO -> Nelder-Mead")
+        names = (" -> ".join(_stage_name(s) for s in searched[:2]) if len(searched) > 1 else "MAPSO -> Nelder-Mead")
         return (float(np.median(g)) if g.ndim else float(g)), names
     if len(searched) > 1:  # a Fit loaded from disk keeps its stages only
         return float(searched[0]["num_evals"]), f"{_stage_name(searched[0])} -> {_stage_name(searched[1])}"
@@ -571,8 +548,7 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
             clipped |= bool(np.any(y <= 0))
             y = np.maximum(y, floor)
         stage_text = " -> ".join(_stage_name(s) for s in searched) if searched else ""
-        ax.step(evals, y, where="post", color=color, lw=1.4,
-                label=f"{label}: {stage_text}" if stage_text else label)
+        ax.step(evals, y, where="post", color=color, lw=1.4, label=f"{label}: {stage_text}" if stage_text else label)
         switch = _global_phase_evals(items[i])
         if switch is not None:
             ax.axvline(switch[0], color=color, ls=":", lw=1.0, label=f"{label}: {switch[1]} switch")
