@@ -43,14 +43,8 @@ import jax
 import numpy as np
 from scipy import stats
 
-__all__ = [
-    "METHODS",
-    "ParameterUncertainty",
-    "andrews_bandwidth",
-    "block_bootstrap_covariance",
-    "hac_covariance",
-    "jacobian_covariance",
-]
+__all__ = ["METHODS", "ParameterUncertainty", "andrews_bandwidth", "block_bootstrap_covariance",
+           "hac_covariance", "jacobian_covariance"]
 
 #: Covariance estimators (see the module docstring); the first is the default shown.
 METHODS = ("hac", "jacobian", "block_bootstrap")
@@ -303,8 +297,7 @@ class ParameterUncertainty:
         """Parameters whose interval covers their whole search box: the data do not
         determine them."""
         lo, hi = self.theta_intervals(level, method)
-        return [k for i, k in enumerate(self.names)
-                if lo[i] <= self.lower[i] and hi[i] >= self.upper[i]]
+        return [k for i, k in enumerate(self.names) if lo[i] <= self.lower[i] and hi[i] >= self.upper[i]]
 
     def box_capped(self, method=None, level: float = DEFAULT_LEVEL) -> np.ndarray:
         """The search-coordinate covariance with its undetermined *directions* shrunk to

@@ -28,19 +28,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = [
-    "TEMP_SUFFIX",
-    "atomic_write",
-    "atomic_write_bytes",
-    "atomic_write_text",
-    "column_index",
-    "csv_text",
-    "jsonable",
-    "read_rows",
-    "usual_mode",
-    "write_csv",
-    "write_json",
-]
+__all__ = ["TEMP_SUFFIX", "atomic_write", "atomic_write_bytes", "atomic_write_text", "column_index",
+           "csv_text", "jsonable", "read_rows", "usual_mode", "write_csv", "write_json"]
 
 TEMP_SUFFIX = ".jaxfric-tmp"
 """Suffix of the temporaries of an unfinished write (``.<name>.<random>.jaxfric-tmp``)."""

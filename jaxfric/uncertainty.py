@@ -33,24 +33,14 @@ import numpy as np
 
 from ._warnings import ExtrapolationWarning
 from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_REPLICATES, METHODS,
-                         MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level, _check_methods,
-                         andrews_bandwidth, block_bootstrap_covariance, correlation_text, hac_covariance,
-                         interval_text, jacobian_covariance, number_text)
+                         MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level,
+                         _check_methods, andrews_bandwidth, block_bootstrap_covariance, correlation_text,
+                         hac_covariance, interval_text, jacobian_covariance, number_text)
 from .fit import NOT_IDENTIFIABLE_MEANING, Fit, diagnostic_flags, grouped_reasons, parameter_verdicts
 from .plausibility import check_plausibility, warn_implausible
 
-__all__ = [
-    "METHODS",
-    "ParameterUncertainty",
-    "andrews_bandwidth",
-    "assess_fit",
-    "block_bootstrap_covariance",
-    "coverage",
-    "hac_covariance",
-    "jacobian_covariance",
-    "parameter_uncertainty",
-    "prediction_interval",
-]
+__all__ = ["METHODS", "ParameterUncertainty", "andrews_bandwidth", "assess_fit", "block_bootstrap_covariance",
+           "coverage", "hac_covariance", "jacobian_covariance", "parameter_uncertainty", "prediction_interval"]
 
 
 def _problem(fit):
@@ -299,8 +289,7 @@ def report_markdown(summary: dict | None) -> list[str]:
             names = corr["names"]
             L += ["", "Correlation of the estimates:", "", "| | " + " | ".join(names) + " |",
                   "|---|" + "---|" * len(names)]
-            L += [f"| {a} | " + " | ".join(f"{x:+.2f}" for x in row) + " |"
-                  for a, row in zip(names, corr["matrix"])]
+            L += [f"| {a} | " + " | ".join(f"{x:+.2f}" for x in row) + " |" for a, row in zip(names, corr["matrix"])]
         for a, b, r in summary.get("correlated", []):
             L += ["", correlation_text(a, b, r) + "."]
         band = summary.get("band")
