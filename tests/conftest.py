@@ -168,16 +168,22 @@ SLOW_TESTS = {
 # subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol and
 # test_parallel_scan, which start no subprocess, instead of stalling that worker's
 # subprocess tests (test_cli's waited 10-20 s for the lock when it came second).
+# Added later, placed by each file's CPU seconds run alone (`-n 0`, children included):
+# test_progress_cache 35, test_models_greybox 27, test_motion_judge 26, test_pipeline_stages
+# 23, test_docs 19, test_export 11, test_verdicts 10 (test_sharding 34 and
+# test_identify_pipeline 33 on the same runs); unlisted, they came last in alphabetical
+# order, where one of them can keep a worker busy while the other has nothing left.
 LONGEST_FIRST = [
     "test_notebooks.py", "test_optim_protocol.py", "test_parallel_scan.py", "test_cli.py",
     "test_reproducibility.py", "test_motion_api.py", "test_motion_dependable.py", "test_evosax_adapter.py",
     "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
-    "test_identify.py", "test_sharding.py", "test_reliability.py", "test_motion.py",
-    "test_records.py", "test_rig_simulator.py", "test_identify_pipeline.py", "test_uncertainty.py",
+    "test_identify.py", "test_sharding.py", "test_progress_cache.py", "test_reliability.py", "test_motion.py",
+    "test_records.py", "test_rig_simulator.py", "test_identify_pipeline.py", "test_models_greybox.py",
+    "test_motion_judge.py", "test_pipeline_stages.py", "test_docs.py", "test_uncertainty.py",
     "test_checkpoint.py", "test_models_scan.py", "test_sweep.py", "test_bad_input_catalogue.py",
-    "test_ensembles.py", "test_rng.py", "test_nelder_mead.py", "test_models_lugre.py",
-    "test_models_base.py", "test_models_realdrive.py", "test_asktell_many.py",
+    "test_export.py", "test_verdicts.py", "test_ensembles.py", "test_rng.py", "test_nelder_mead.py",
+    "test_models_lugre.py", "test_models_base.py", "test_models_realdrive.py", "test_asktell_many.py",
     "test_uncertainty_report.py",
 ]
 
