@@ -373,3 +373,104 @@ def test_ipop_with_a_strategy_object_per_population_size(counter):
     assert int(sol.state.restarts) >= 1
     assert int(sol.state.ipop.level) == min(int(sol.state.restarts), 2)
     assert float(sol.f) < 1e-8
+
+
+def test_flat_values_restart_on_the_second_flat_generation():
+    """pycma's ``tolflatfitness`` (1): a generation whose best value equals its
+    ⌊0.75·λ⌋-th best is flat, and the second flat generation in a row restarts. On a
+    constant function every generation is flat, so with P = 6 and R = 3 the restarts end
+    steps 2 (two generations of one batch), 6 (two of two), 14 (two of four), then every
+    16 steps (population P·2^R, two generations of eight batches)."""
+    solver = Evosax("CMA_ES", num_generations=100, restarts=3)
+    with jax.enable_x64(True):
+        states = _steps(solver, lambda y, a: jnp.zeros(()) * jnp.sum(y), -np.ones(2), np.ones(2),
+                        key=0, n=70)
+    restarts = np.array([int(s.restarts) for s in states])
+    ends = np.flatnonzero(np.diff(np.concatenate([[0], restarts]))) + 1  # 1-based steps
+    np.testing.assert_array_equal(ends, [2, 6, 14, 30, 46, 62])
+    np.testing.assert_array_equal([int(s.ipop.level) for s in states], np.minimum(restarts, 3))
+
+
+def _schwefel_2_26(y, a):
+    return 418.9828872724338 * y.shape[0] - jnp.sum(y * jnp.sin(jnp.sqrt(jnp.abs(y))))
+
+
+def test_ipop_solves_a_deceptive_function_a_single_run_does_not():
+    """Schwefel 2.26 on [−500, 500]² (minimum 0 at 420.97…, near a bound, far from the
+    next-best minima): with the same 6001 evaluations and the same keys, CMA-ES run once
+    finds it for at most two of eight keys, IPOP (pycma's bound transformation and
+    restart criteria) for all eight."""
+    lo, hi = np.full(2, -500.0), np.full(2, 500.0)
+    keys = jax.random.split(jax.random.key(0), 8)
+    with jax.enable_x64(True):
+        once = jf.minimise_many(_schwefel_2_26, Evosax("CMA_ES", num_generations=1000, restarts=0),
+                                (lo, hi), keys=keys)
+        ipop = jf.minimise_many(_schwefel_2_26, Evosax("CMA_ES", num_generations=1000, restarts=4),
+                                (lo, hi), keys=keys)
+    assert np.sum(np.asarray(once.f) < 1e-5) <= 2, np.asarray(once.f)
+    assert np.all(np.asarray(ipop.f) < 1e-5), np.asarray(ipop.f)
+    assert np.all(np.asarray(ipop.state.restarts) >= 1)
+    np.testing.assert_allclose(np.asarray(ipop.value), 420.9687, atol=1e-3)
+
+
+def test_linquad_is_pycmas_bound_transform():
+    """The IPOP path's bound handling is pycma's BoundTransform on the unit box
+    (cma.transformations.BoxConstraintsLinQuadTransformation), its inverse too; every
+    genotype maps into [0, 1] and the middle of the box is left alone."""
+    from jaxfric.optim.evosax_adapter import _linquad, _linquad_inverse
+
+    G = np.random.default_rng(0).normal(0.5, 3.0, 4000)
+    U = np.random.default_rng(1).uniform(0.0, 1.0, 1000)
+    with jax.enable_x64(True):
+        mapped = np.asarray(_linquad(jnp.asarray(G)))
+        back = np.asarray(_linquad_inverse(jnp.asarray(U)))
+        round_trip = np.asarray(_linquad(jnp.asarray(back)))
+    assert np.all((mapped >= 0.0) & (mapped <= 1.0))
+    middle = (G > 0.05) & (G < 0.95)
+    np.testing.assert_array_equal(mapped[middle], G[middle])
+    np.testing.assert_allclose(round_trip, U, rtol=0, atol=1e-15)
+    cma = pytest.importorskip("cma")
+    ref = cma.transformations.BoxConstraintsLinQuadTransformation([[0.0, 1.0]])
+    np.testing.assert_allclose(mapped, np.asarray(ref(list(G))), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(back, np.asarray(ref.inverse(list(U))), rtol=0, atol=1e-14)
+
+
+def test_rescaled_covariance_converges_at_pycmas_rate():
+    """evosax adds 1e-8·I to CMA-ES's covariance at every ask: with λ = 96 on a 2-D
+    sphere ``C`` reaches that floor in a few generations and only σ shrinks after it.
+    ``_rescaled`` (C's largest variance 1, the scale moved into σ) leaves the
+    distribution σ²·C unchanged and brings the generations to a 1e-11 spread of values
+    to pycma's 28–32 (evosax alone: 95–101)."""
+    from evosax.algorithms import CMA_ES
+
+    from jaxfric.optim.evosax_adapter import _rescaled
+
+    n, lam = 2, 96
+    with jax.enable_x64(True):
+        es = CMA_ES(population_size=lam, solution=jnp.zeros(n))
+        params = es.default_params.replace(std_init=jnp.asarray(0.3))
+        ask, tell = jax.jit(es.ask), jax.jit(es.tell)
+        fn = lambda X: 1.0 + 1e4 * jnp.sum((X - 0.3) ** 2, axis=-1)  # noqa: E731
+
+        def generations(rescale):
+            state = es.init(jax.random.key(0), jnp.full(n, 0.5), params)
+            bests = []
+            for g in range(150):
+                k_ask, k_tell = jax.random.split(jax.random.key(g))
+                X, state = ask(k_ask, state, params)
+                F = fn(X)
+                told, _ = tell(k_tell, X, F, state, params)
+                if rescale:
+                    again = _rescaled(told)
+                    np.testing.assert_allclose(again.std**2 * again.C, told.std**2 * told.C,
+                                               rtol=1e-12, atol=0)
+                    assert float(jnp.max(jnp.diag(again.C))) == pytest.approx(1.0, abs=1e-15)
+                    told = again
+                state = told
+                bests.append(float(jnp.min(F)))
+                if len(bests) >= 11 and np.ptp(bests[-11:]) < 1e-11 and float(jnp.ptp(F)) < 1e-11:
+                    return g + 1
+            return 150
+
+        assert generations(True) <= 40
+        assert generations(False) >= 80

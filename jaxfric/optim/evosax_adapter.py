@@ -16,7 +16,12 @@ Every candidate the strategy asks for is *projected* onto the box, ``u ← clip(
 projected point is what the strategy is told (repair, not penalty). The map is clipped
 to the box too (``lower + u·(upper − lower)`` can round past ``upper``), so every
 evaluated point, every member of a population-based strategy and the reported best lie
-in the bounds.
+in the bounds. With IPOP restarts (below) a distribution-based strategy uses pycma's
+``BoundTransform`` instead (``bound_handling="transform"``, any strategy may ask for it):
+the strategy searches unbounded genotypes ``g``, is told them unchanged, and the point
+evaluated is ``u = T(g)``, pycma's linear–quadratic map (the identity on
+``[0.05, 0.95]``, quadratic towards the bounds, mirrored and periodic beyond), so
+nothing piles up on a bound and the covariance learns the unbounded samples.
 
 **Start.** Distribution-based strategies (CMA-ES, SNES, …) start with their mean at a
 uniform random point of the box (``y0`` when given) and, where the strategy has a
@@ -44,13 +49,23 @@ first spread and **twice the population**, up to ``P·2^R`` (later restarts keep
 population). A generation is stagnant, by pycma's default termination criteria, when
 
 * its values, and the best values of the last ``10 + ⌈30·D/λ⌉`` generations, each lie
-  within ``restart_tolfun`` (pycma's ``tolfun`` and ``tolfunhist``), or all its values
-  are equal (``tolflatfitness``);
+  within ``restart_tolfun`` (pycma's ``tolfun``), or those best values within
+  ``restart_tolfun/10`` (``tolfunhist``, after 10 generations), or it is the second
+  generation in a row whose best value equals its ``⌊0.75·λ⌋``-th best
+  (``tolflatfitness = 1``);
 * the spread is below ``restart_tolx`` box widths in every coordinate: ``σ·√C_ii`` and,
   for CMA-ES, ``σ·|p_c|`` (``tolx``);
 * adding ``0.2·σ·√C_ii`` leaves a coordinate of the mean unchanged (``noeffectcoord``),
   or CMA-ES's covariance has a condition number above 1e14 (``conditioncov``);
 * or the strategy's state turned non-finite.
+
+pycma's ``tolstagnation``, ``tolxstagnation``, ``tolupsigma`` and per-run ``maxiter`` are
+not checked (pycma's runs on Griewank and Schwefel 2.26 in benchmarks/cmaes_restarts.py
+ended by ``tolfun``, ``tolfunhist``, ``tolflatfitness`` or the budget only). After
+each generation the CMA-ES state is rescaled, the same distribution ``N(m, σ²·C)`` with
+``C``'s largest variance 1 (``_rescaled``): evosax adds ``1e-8·I`` to ``C`` at every ask,
+which otherwise stalls the shrinking of ``C`` with large populations (a run of λ = 96 on
+a 2-D sphere took 3× pycma's generations to stagnate; rescaled, pycma's number).
 
 Everything stays inside the compiled run, with fixed shapes: each step evaluates one
 batch of ``P`` points, so a generation of population ``λ = P·2^j`` takes ``2^j`` steps
@@ -156,6 +171,38 @@ def _to_box(U, lower, upper):
     return jnp.clip(lower + U * (upper - lower), lower, upper)
 
 
+#: The margin of pycma's linear–quadratic box transformation on the unit box, in box
+#: widths: ``max(1, |bound|)/20`` for the bounds 0 and 1 (cma.transformations'
+#: ``margin_width2``).
+LINQUAD_MARGIN = 0.05
+
+
+def _linquad(G):
+    """pycma's ``BoundTransform`` (``BoxConstraintsLinQuadTransformation``) onto the unit
+    box, elementwise: the identity on ``[a, 1 − a]`` (``a = LINQUAD_MARGIN``), quadratic
+    ``(g + a)²/(4a)`` and ``1 − (g − 1 − a)²/(4a)`` towards the bounds, mirrored at
+    ``−a`` and ``1 + a`` and periodic beyond (period ``2·(1 + 2a)``): every genotype ``g``
+    maps into ``[0, 1]``, smoothly (C¹)."""
+    a = LINQUAD_MARGIN
+    r, s = 2.0 * (1.0 + 2.0 * a), -2.0 * a - 0.5
+    far = (G < s) | (G > 1.0 + 2.0 * a + 0.5)
+    G = jnp.where(far, G - r * jnp.floor((G - s) / r), G)
+    G = jnp.where(G > 1.0 + a, G - 2.0 * (G - 1.0 - a), G)
+    G = jnp.where(G < -a, G + 2.0 * (-a - G), G)
+    low = (G + a) ** 2 / (4.0 * a)
+    high = 1.0 - (G - 1.0 - a) ** 2 / (4.0 * a)
+    return jnp.clip(jnp.where(G < a, low, jnp.where(G < 1.0 - a, G, high)), 0.0, 1.0)
+
+
+def _linquad_inverse(U):
+    """The genotype in ``[−a, 1 + a]`` of a point ``U`` of the unit box (``_linquad``'s
+    inverse there)."""
+    a = LINQUAD_MARGIN
+    low = -a + 2.0 * jnp.sqrt(a * jnp.maximum(U, 0.0))
+    high = 1.0 + a - 2.0 * jnp.sqrt(a * jnp.maximum(1.0 - U, 0.0))
+    return jnp.where(U < a, low, jnp.where(U < 1.0 - a, U, high))
+
+
 def _all_finite(tree):
     leaves = [jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(tree)
               if jnp.issubdtype(jnp.result_type(a), jnp.inexact)]
@@ -211,6 +258,29 @@ def _no_spread(inner, tolx) -> Any:
     return out
 
 
+def _rescaled(inner):
+    """The same search distribution ``N(m, σ²·C)`` with ``C``'s largest variance 1: ``C``
+    divided by ``c = max_i C_ii``, ``σ`` multiplied by ``√c``, and CMA-ES's path ``p_c``
+    and root eigenvalues ``D`` divided by ``√c`` (``p_σ`` is whitened, unchanged). CMA-ES's
+    update is equivariant under this rescaling, but evosax adds ``1e-8·I`` to ``C`` at
+    every ask and floors ``D`` at ``1e-4``: with a large population ``C`` shrinks to that
+    floor within a few generations and from then on only ``σ`` can shrink (on a 2-D
+    sphere with λ = 96 evosax took 95–101 generations to its values' 1e-11 spread,
+    pycma 28–32; rescaled, evosax took 28–30). A state without ``std`` and ``C`` is
+    returned as it is."""
+    C, std = getattr(inner, "C", None), getattr(inner, "std", None)
+    if C is None or std is None:
+        return inner
+    c = jnp.max(jnp.diag(C)) if C.ndim == 2 else jnp.max(C)
+    c = jnp.where(jnp.isfinite(c) & (c > 0), c, 1.0)
+    r = jnp.sqrt(c)
+    new = {"C": C / c, "std": std * r}
+    for name in ("p_c", "D"):
+        if getattr(inner, name, None) is not None:
+            new[name] = getattr(inner, name) / r
+    return inner.replace(**new)
+
+
 @functools.lru_cache(maxsize=64)
 def _build(cls, population_size: int, num_dims: int, dtype: str, kwargs: tuple):
     """One evosax strategy object per configuration: its ``init/ask/tell`` are jitted
@@ -263,7 +333,8 @@ class IPOPState(eqx.Module):
     the population level ``j`` (population ``P·2^j``), the batch of ``P`` points the
     generation is at, the generation's points (unit box) and values in buffers of the
     largest population's rows, and the best value of each generation since the last
-    restart (a ring of ``count`` entries)."""
+    restart (a ring of ``count`` entries), and how many generations in a row were flat
+    (best value equal to the ``⌊0.75·λ⌋``-th best)."""
 
     level: Any
     batch: Any
@@ -271,6 +342,7 @@ class IPOPState(eqx.Module):
     F: Any
     bests: Any
     count: Any
+    flat: Any
 
 
 class EvosaxState(eqx.Module):
@@ -315,6 +387,10 @@ class Evosax(AbstractGenerational):
         restart_tolfun: the stagnation tolerance on values (pycma's ``tolfun``).
         restart_tolx: the stagnation tolerance on the spread, in box widths (pycma's
             ``tolx``).
+        bound_handling: ``"clip"`` (project onto the box, tell the projected points) or
+            ``"transform"`` (pycma's ``BoundTransform``; distribution-based strategies);
+            default ``"transform"`` with restarts, ``"clip"`` without (the one-run results
+            stay those of earlier versions).
         **strategy_kwargs: passed to the evosax constructor (e.g. ``num_diff=2`` for DE).
     """
 
@@ -328,12 +404,13 @@ class Evosax(AbstractGenerational):
     restarts: int
     restart_tolfun: float
     restart_tolx: float
+    bound_handling: str
 
     def __init__(self, strategy="CMA_ES", *, population_size: int | None = None,
                  num_generations: int = 1000, std_init: float | None = 0.3,
                  params: dict | None = None, restarts: int | None = None,
                  restart_tolfun: float = 1e-11, restart_tolx: float = 1e-11,
-                 **strategy_kwargs):
+                 bound_handling: str | None = None, **strategy_kwargs):
         self.strategy = resolve_strategy(strategy)
         self.pop_size = population_size
         self.num_generations = num_generations
@@ -345,6 +422,9 @@ class Evosax(AbstractGenerational):
         self.restarts = restarts
         self.restart_tolfun = restart_tolfun
         self.restart_tolx = restart_tolx
+        if bound_handling is None:
+            bound_handling = "transform" if restarts else "clip"
+        self.bound_handling = bound_handling
 
     def __repr__(self):  # the constructor call (Fit.settings records it)
         extra = "".join(f", {k}={v!r}" for k, v in self.strategy_kwargs)
@@ -352,6 +432,8 @@ class Evosax(AbstractGenerational):
         tols = ""
         if (self.restart_tolfun, self.restart_tolx) != (1e-11, 1e-11):
             tols = f", restart_tolfun={self.restart_tolfun}, restart_tolx={self.restart_tolx}"
+        if self.bound_handling != ("transform" if self.restarts else "clip"):
+            tols += f", bound_handling={self.bound_handling!r}"
         return (f"Evosax({self.strategy.__name__!r}, population_size={self.pop_size}, "
                 f"num_generations={self.num_generations}, std_init={self.std_init}{params}, "
                 f"restarts={self.restarts}{tols}{extra})")
@@ -399,6 +481,12 @@ class Evosax(AbstractGenerational):
         check_positive_int("restarts", self.restarts, minimum=0)
         check_range("restart_tolfun", self.restart_tolfun, 0.0)
         check_range("restart_tolx", self.restart_tolx, 0.0)
+        if self.bound_handling not in ("clip", "transform"):
+            raise ValueError(f"bound_handling must be 'clip' or 'transform', got "
+                             f"{self.bound_handling!r}")
+        if self.bound_handling == "transform" and not self.distribution_based:
+            raise ValueError(f"bound_handling='transform' needs a distribution-based strategy; "
+                             f"{self.strategy.__name__} keeps a population (use 'clip')")
         if self.restarts:
             if not self.distribution_based:
                 raise ValueError(
@@ -429,7 +517,7 @@ class Evosax(AbstractGenerational):
         u0 = None if x0 is None else (jnp.atleast_2d(x0) - lower) / width
         if self.distribution_based:
             mean = jax.random.uniform(k_start, (n,), lower.dtype) if u0 is None else u0[0]
-            inner = es.init(k_init, mean, params)
+            inner = es.init(k_init, self._genotype(mean), params)
             x = _to_box(mean, lower, upper)
             f = (yield x[None])[0]
             evals = 1
@@ -450,7 +538,7 @@ class Evosax(AbstractGenerational):
                 level=jnp.array(0, jnp.int32), batch=jnp.array(0, jnp.int32),
                 U=jnp.zeros((P << R, n), lower.dtype), F=jnp.full((P << R,), jnp.inf, lower.dtype),
                 bests=jnp.full((self._windows(n)[0],), jnp.inf, lower.dtype),
-                count=jnp.array(0, jnp.int32))
+                count=jnp.array(0, jnp.int32), flat=jnp.array(0, jnp.int32))
         return EvosaxState(inner, x, f, jnp.array(evals, count_dtype()),
                            jnp.array(0, jnp.int32), key, jnp.array(0, jnp.int32), ipop)
 
@@ -467,8 +555,8 @@ class Evosax(AbstractGenerational):
         params = self._es_params(es)
         k_ask, k_tell = jax.random.split(jax.random.fold_in(state.key, state.generation))
         U, inner = es.ask(k_ask, state.inner, params)
-        U = jnp.clip(U.astype(lower.dtype), 0.0, 1.0)  # projection onto the box
-        X = _to_box(U, lower, upper)
+        U = self._repair(U.astype(lower.dtype))
+        X = _to_box(self._phenotype(U), lower, upper)
         F = yield X
         inner, _ = es.tell(k_tell, U, F, inner, params)
         inner = self._like(inner, state.inner)
@@ -477,8 +565,8 @@ class Evosax(AbstractGenerational):
         broken = ~_all_finite(inner)
         k_restart = jax.random.fold_in(k_tell, 1)
         if self.distribution_based:
-            fresh = es.init(k_restart, jax.random.uniform(k_restart, lower.shape, lower.dtype),
-                            params)
+            fresh = es.init(k_restart, self._genotype(
+                jax.random.uniform(k_restart, lower.shape, lower.dtype)), params)
         else:
             fresh = es.init(k_restart, U, F, params)
         inner = jax.tree_util.tree_map(lambda f, i: jnp.where(broken, f, i),
@@ -537,7 +625,7 @@ class Evosax(AbstractGenerational):
         def ask_all():
             def one(c):
                 U, inner = objects[c].ask(k_ask, inner0, at(c, ip.level))
-                U = jnp.clip(U.astype(lower.dtype), 0.0, 1.0)  # projection onto the box
+                U = self._repair(U.astype(lower.dtype))
                 return ip.U.at[: U.shape[0]].set(U), self._like(inner, inner0)
             return by_class(ip.level, one)
 
@@ -546,7 +634,7 @@ class Evosax(AbstractGenerational):
                 size = objects[c].population_size
                 F_c = jnp.where(valid[:size], F_all[:size], jnp.inf)
                 new, _ = objects[c].tell(k_tell, U_all[:size], F_c, inner, at(c, ip.level))
-                return self._like(new, inner0)
+                return self._like(_rescaled(new), inner0)
             return by_class(ip.level, one)
 
         def init_at(k, mean, level):
@@ -555,7 +643,7 @@ class Evosax(AbstractGenerational):
 
         U_all, inner = jax.lax.cond(ip.batch == 0, ask_all, lambda: (ip.U, inner0))
         U = jax.lax.dynamic_slice_in_dim(U_all, ip.batch * P, P)
-        X = _to_box(U, lower, upper)
+        X = _to_box(self._phenotype(U), lower, upper)
         F = yield X
         F_all = jax.lax.dynamic_update_slice_in_dim(ip.F, F.astype(ip.F.dtype), ip.batch * P, 0)
         ends = ip.batch + 1 == jnp.left_shift(1, ip.level)
@@ -574,7 +662,12 @@ class Evosax(AbstractGenerational):
                       - jnp.min(jnp.where(recent, bests, jnp.inf)))
         tol = jnp.asarray(self.restart_tolfun, g_best.dtype)
         stagnant = ((count >= window) & (hist_range < tol) & (g_worst - g_best < tol))
-        stagnant |= g_worst == g_best  # flat: every point of the generation alike
+        stagnant |= (jnp.minimum(count, window) > 9) & (hist_range < tol / 10)  # tolfunhist
+        # flat (pycma's tolflatfitness = 1): a second generation in a row whose best value
+        # equals its ⌊0.75·λ⌋-th best
+        quartile = jnp.sort(jnp.where(valid, F_all, jnp.inf))[(lam * 3) // 4]
+        flat = jnp.where(g_best == quartile, ip.flat + 1, 0)
+        stagnant |= flat > 1
         stagnant |= _no_spread(told, self.restart_tolx)
         stagnant |= ~_all_finite(told)
         stagnant &= ends
@@ -582,7 +675,8 @@ class Evosax(AbstractGenerational):
         def restart():
             k = jax.random.fold_in(k_tell, 1)
             level = jnp.minimum(ip.level + 1, R)
-            return init_at(k, jax.random.uniform(k, lower.shape, lower.dtype), level), level
+            mean = self._genotype(jax.random.uniform(k, lower.shape, lower.dtype))
+            return init_at(k, mean, level), level
 
         inner, level = jax.lax.cond(stagnant, restart, lambda: (told, ip.level))
         i = jnp.argmin(F)
@@ -593,6 +687,7 @@ class Evosax(AbstractGenerational):
             U=U_all, F=F_all,
             bests=jnp.where(ends, bests, ip.bests),
             count=jnp.where(stagnant, 0, jnp.where(ends, count, ip.count)),
+            flat=jnp.where(stagnant, 0, jnp.where(ends, flat, ip.flat)),
         )
         return EvosaxState(
             inner,
@@ -604,6 +699,20 @@ class Evosax(AbstractGenerational):
             state.restarts + stagnant.astype(jnp.int32),
             ipop,
         )
+
+    # ------------------------------------------------------------------ bound handling
+    def _repair(self, U):
+        """The points the strategy asked for, as it is told them: projected onto the box
+        (``"clip"``) or as they are (``"transform"``, its genotypes)."""
+        return jnp.clip(U, 0.0, 1.0) if self.bound_handling == "clip" else U
+
+    def _phenotype(self, U):
+        """The unit-box points evaluated for the told points ``U``."""
+        return U if self.bound_handling == "clip" else _linquad(U)
+
+    def _genotype(self, u):
+        """The strategy's mean for a start ``u`` in the unit box."""
+        return u if self.bound_handling == "clip" else _linquad_inverse(u)
 
     @staticmethod
     def _like(inner, old):
