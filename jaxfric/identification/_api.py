@@ -4,29 +4,11 @@ The end-to-end algorithm of §11: split and scale the record (steps 2–3), buil
 cost J (step 4), run the optimiser (steps 5–7), then report metrics on the
 training, validation and whole record (step 8).
 
-Two pipelines (``method=``): ``"paper"`` is MAPSO–NMDS as the paper describes
-(steps 5–6). ``"jaxfric"`` (default) is the best measured: for the networks a short
-MAPSO on the first [`GLOBAL_STAGE_SAMPLES`][jaxfric.identification.GLOBAL_STAGE_SAMPLES] training samples (coarse-to-fine),
-then BFGS on the whole training window (step 7, not in the paper) with the exact
-gradient of the network's hand-written adjoint; physical models keep MAPSO–NMDS.
-On EMPS at 1 kHz the paper's pipeline spent 172–374 s, 70 % of it in Nelder–Mead
-evaluating one 20 000-step rollout at a time; ``benchmarks/pipelines.py`` measures both.
-
-Beyond the paper: several records (``train=[...]``, ``valid=...``; the cost pools
-them, each rolled out from its own initial state, `._pooled`), an ensemble of K
-keys (``keys=K``), and the flags of `._diagnostics` (parameters on a bound,
-unidentifiable parameters).
-
-``identify`` is a sequence of named stages, each a function of
-[`jaxfric.identification.stages`][jaxfric.identification.stages] (records → box → objective → global stage →
-gradient stage → Fit; docs/identify.md).
-
-Everything the user passed is checked first (`._data`, the model's own
-checks, the solver's ``check``), so bad input fails in milliseconds with a
-``ValueError`` instead of after a long run.
-
-``progress=`` goes to [`jaxfric.minimise`][jaxfric.optim.minimise], which reports from inside the
-compiled run, and to the gradient stage, which reports between compiled chunks.
+Two pipelines (``method=``, [`default_solver`][jaxfric.identification.default_solver]): ``"paper"`` is MAPSO–NMDS as
+the paper describes (steps 5–6); ``"jaxfric"`` (default) is the best measured: on EMPS at
+1 kHz the paper's pipeline spent 172–374 s, 70 % of it in Nelder–Mead evaluating one
+20 000-step rollout at a time (``benchmarks/pipelines.py`` measures both). ``identify`` is
+the sequence of [`jaxfric.identification.stages`][jaxfric.identification.stages] (docs/identify.md).
 """
 
 from __future__ import annotations
@@ -169,47 +151,25 @@ def resolve_model(model, options: dict | None) -> AbstractFrictionModel:
                       if k.endswith("_range") and k[: -len("_range")] in _models.DEFAULT_RANGES]
             hint = (f"; a search range is not a model option but the box: pass box={{{ranges[0]!r}: "
                     "(low, high)}" if ranges else "")
-            raise ValueError(
-                f"invalid options for model {model!r}: {', '.join(map(repr, unknown))}; "
-                f"its options are {', '.join(valid) or '(none)'}{hint}"
-            )
+            raise ValueError(f"invalid options for model {model!r}: {', '.join(map(repr, unknown))}; "
+                             f"its options are {', '.join(valid) or '(none)'}{hint}")
         try:
             return _models.get(model, **kwargs)
         except TypeError as err:
             raise ValueError(f"invalid options for model {model!r}: {err}") from None
     if isinstance(model, AbstractFrictionModel):
         if options:
-            raise ValueError(
-                f"model options ({', '.join(sorted(options))}) apply only to a model given by "
-                f"name; configure the {type(model).__name__} instance directly"
-            )
+            raise ValueError(f"model options ({', '.join(sorted(options))}) apply only to a model given by "
+                             f"name; configure the {type(model).__name__} instance directly")
         return model
-    raise ValueError(
-        f"model must be a friction model instance or a name ({', '.join(_models.available())}), "
-        f"got {type(model).__name__}"
-    )
+    raise ValueError(f"model must be a friction model instance or a name ({', '.join(_models.available())}), "
+                     f"got {type(model).__name__}")
 
 
-def identify(
-    model,
-    data=None,
-    *,
-    solver: AbstractSolver | None = None,
-    key=None,
-    keys=None,
-    train=None,
-    valid=None,
-    refine=None,
-    theta0=None,
-    dtype=None,
-    box=None,
-    data_bounds: bool = True,
-    model_options: dict | None = None,
-    progress=None,
-    compiler_options="auto",
-    method: str = "jaxfric",
-    **options,
-) -> Fit:
+def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None, keys=None, train=None,
+             valid=None, refine=None, theta0=None, dtype=None, box=None, data_bounds: bool = True,
+             model_options: dict | None = None, progress=None, compiler_options="auto", method: str = "jaxfric",
+             **options) -> Fit:
     """Identify a friction model from a velocity/friction record (docs/algorithms.md §11).
 
     Args:
@@ -235,15 +195,9 @@ def identify(
             ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
             MSE %, the spread of each parameter); ``fit.predict_band(v)`` is the
             members' min-max prediction band. Member ``i`` equals
-            ``identify(..., key=keys[i])``: on a CPU to the bit for the physical models
-            and through the global stage for every model (``stages.ensemble_batching``);
-            the networks' gradient stage runs the members side by side
-            (``GradientRefinement(batching="auto")``, the default), whose batched sums
-            round differently, and 500 float32 BFGS steps can carry a member to another
-            nearby optimum (measured on EMPS in docs/identify.md); with
-            ``refine=GradientRefinement(max_steps=500, batching="map")`` every member is
-            the single fit to the bit, at K times one gradient stage's cost. On a GPU
-            every stage runs the members side by side (equal up to reassociation).
+            ``identify(..., key=keys[i])``, on a CPU to the bit but for the networks'
+            batched gradient stage (``GradientRefinement(batching="map")`` makes that
+            one exact too; docs/identify.md).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
             window and must hold at least [`MIN_VALID_SAMPLES`][jaxfric.identification.MIN_VALID_SAMPLES]
@@ -286,15 +240,9 @@ def identify(
         compiler_options: XLA options for the optimiser run and the gradient stage
             (their executables only): ``"auto"`` (default, see
             [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``None`` (XLA's defaults) or a dict.
-
-        method: ``"jaxfric"`` (default, the best measured) or ``"paper"``. For the
-            networks (more than `LARGE_MODEL_PARAMS` parameters) ``"jaxfric"``
-            runs a short MAPSO ([`FAST_GENERATIONS_BLACK_BOX`][jaxfric.identification.FAST_GENERATIONS_BLACK_BOX] generations) on the
-            first [`GLOBAL_STAGE_SAMPLES`][jaxfric.identification.GLOBAL_STAGE_SAMPLES] training samples, then BFGS on the
-            whole training window (benchmarks/friction.py, benchmarks/emps.py);
-            ``"paper"`` runs MAPSO–NMDS exactly as the paper describes
-            ([`paper_solver`][jaxfric.identification.paper_solver], no gradient stage). For physical models both are
-            [`paper_solver`][jaxfric.identification.paper_solver]. An explicit ``solver`` or ``refine`` wins.
+        method: ``"jaxfric"`` (default, the best measured) or ``"paper"`` (MAPSO–NMDS exactly
+            as the paper describes, no gradient stage): what each runs is
+            [`default_solver`][jaxfric.identification.default_solver]'s. An explicit ``solver`` or ``refine`` wins.
 
     Cost (§2.4): J = mean squared training error of the free-run prediction, on
     [−1, 1]-scaled data for the networks, divided by the friction variance for
@@ -324,10 +272,8 @@ def identify(
             invalid solver, refinement or key.
     """
     if model_options and options and set(model_options) & set(options):
-        raise ValueError(
-            f"model option(s) {sorted(set(model_options) & set(options))} given twice "
-            "(in model_options and as keywords)"
-        )
+        raise ValueError(f"model option(s) {sorted(set(model_options) & set(options))} given twice "
+                         "(in model_options and as keywords)")
     with Stopwatch() as total:
         # Every check first, so bad input fails before any long computation.
         records = records_stage(data, train, valid, stacklevel=3)

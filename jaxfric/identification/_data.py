@@ -55,24 +55,18 @@ def _train_count(n: int, train, data_count) -> int:
 def _unpack(data):
     if isinstance(data, (tuple, list)):
         if len(data) != 3:
-            raise ValueError(
-                f"data as a tuple must be (velocity, friction, dt), got {len(data)} items"
-            )
+            raise ValueError(f"data as a tuple must be (velocity, friction, dt), got {len(data)} items")
         v, f, dt = data
         return v, f, dt, None
     if isinstance(data, RigRecord):
-        raise ValueError(
-            "data is a RigRecord (the simulator's true states and raw sensor channels), not "
-            "a friction record: identify what the rig measures, "
-            "jaxfric.rig.estimate_friction(record.measurements(), rig.cylinder), or simulate "
-            "and measure in one call with jaxfric.rig.synthetic_friction_data(key)"
-        )
+        raise ValueError("data is a RigRecord (the simulator's true states and raw sensor channels), not "
+                         "a friction record: identify what the rig measures, "
+                         "jaxfric.rig.estimate_friction(record.measurements(), rig.cylinder), or simulate "
+                         "and measure in one call with jaxfric.rig.synthetic_friction_data(key)")
     if not isinstance(data, FrictionData):
-        raise ValueError(
-            "data must be a FrictionData (not merely a FrictionData-like object: build one with "
-            "jaxfric.FrictionData.from_arrays or a loader of jaxfric.rig) or a tuple "
-            f"(velocity, friction, dt), got {type(data).__name__}"
-        )
+        raise ValueError("data must be a FrictionData (not merely a FrictionData-like object: build one with "
+                         "jaxfric.FrictionData.from_arrays or a loader of jaxfric.rig) or a tuple "
+                         f"(velocity, friction, dt), got {type(data).__name__}")
     # A validation-only view (n_train 0) carries no split of its own.
     return data.velocity, data.friction, data.dt, (data.n_train or None)
 
@@ -97,35 +91,25 @@ def as_record(data, train=None, *, min_valid: int = 1) -> Record:
     velocity = as_channel("velocity", v, label="velocity", allow_empty=True)
     friction = as_channel("friction", f, label="friction", allow_empty=True)
     if velocity.shape != friction.shape:
-        raise ValueError(
-            f"velocity and friction must have the same length, got {velocity.shape[0]} "
-            f"and {friction.shape[0]} samples"
-        )
+        raise ValueError(f"velocity and friction must have the same length, got {velocity.shape[0]} "
+                         f"and {friction.shape[0]} samples")
     n = velocity.shape[0]
     if n < 3:
-        raise ValueError(
-            f"the record has {n} sample{'' if n == 1 else 's'}; identification needs at "
-            "least 3 (2 to train, 1 to validate)"
-        )
+        raise ValueError(f"the record has {n} sample{'' if n == 1 else 's'}; identification needs at "
+                         "least 3 (2 to train, 1 to validate)")
     dt = check_sample_time(dt)
     n_train = _train_count(n, train, data_count)
     if n - n_train < min_valid:
-        raise ValueError(
-            f"the validation window has {n - n_train} sample(s) (train={n_train} of {n}); "
-            f"need at least {min_valid} for a meaningful validation error: use a smaller "
-            "train fraction, or train on whole records with train=[...] and valid=[...]"
-        )
+        raise ValueError(f"the validation window has {n - n_train} sample(s) (train={n_train} of {n}); "
+                         f"need at least {min_valid} for a meaningful validation error: use a smaller "
+                         "train fraction, or train on whole records with train=[...] and valid=[...]")
     f_train = friction[:n_train]
     if not np.ptp(f_train) > 0.0:
-        raise ValueError(
-            "friction has zero variance over the training window (a constant signal); "
-            "the cost and MSE % are undefined"
-        )
+        raise ValueError("friction has zero variance over the training window (a constant signal); "
+                         "the cost and MSE % are undefined")
     if not np.ptp(velocity[:n_train]) > 0.0:
-        raise ValueError(
-            "velocity is constant over the training window; a friction model cannot be "
-            "identified from it"
-        )
+        raise ValueError("velocity is constant over the training window; a friction model cannot be "
+                         "identified from it")
     return FrictionData(t=np.arange(n) * dt, velocity=velocity, friction=friction, acceleration=None,
                         dt=dt, n_train=n_train, **_pressures(data))
 
@@ -136,8 +120,7 @@ def _pressures(data) -> dict:
     ([`inputs_from`][jaxfric.models.AbstractFrictionModel.inputs_from]), so a bad channel no model
     needs does not stop the run."""
     given = (data.p1, data.p2) if isinstance(data, FrictionData) else (None, None)
-    return {name: None if p is None else np.asarray(p, dtype=np.float64)
-            for name, p in zip(("p1", "p2"), given)}
+    return {name: None if p is None else np.asarray(p, dtype=np.float64) for name, p in zip(("p1", "p2"), given)}
 
 
 def _checked_whole(data, role: str, name: str) -> Record:
@@ -146,10 +129,8 @@ def _checked_whole(data, role: str, name: str) -> Record:
     velocity = as_channel("velocity", v, label=f"{name}: velocity", allow_empty=True)
     friction = as_channel("friction", f, label=f"{name}: friction", allow_empty=True)
     if velocity.shape != friction.shape:
-        raise ValueError(
-            f"{name}: velocity and friction must have the same length, got "
-            f"{velocity.shape[0]} and {friction.shape[0]} samples"
-        )
+        raise ValueError(f"{name}: velocity and friction must have the same length, got "
+                         f"{velocity.shape[0]} and {friction.shape[0]} samples")
     n = velocity.shape[0]
     need = 2 if role == "train" else MIN_VALID_SAMPLES
     if n < need:
@@ -175,10 +156,8 @@ def _record_list(x, what: str) -> list[tuple[str, object]]:
     elif isinstance(x, (list, tuple)):
         items = [(f"{what}[{i}]", v) for i, v in enumerate(x)]
     else:
-        raise ValueError(
-            f"{what} must be a record (FrictionData or (velocity, friction, dt)), a list of "
-            f"records or a mapping name -> record, got {type(x).__name__}"
-        )
+        raise ValueError(f"{what} must be a record (FrictionData or (velocity, friction, dt)), a list of "
+                         f"records or a mapping name -> record, got {type(x).__name__}")
     if not items:
         raise ValueError(f"{what} holds no records")
     return items
@@ -246,15 +225,11 @@ def as_records(data=None, train=None, valid=None) -> RecordSet:
     """
     if data is not None:
         if valid is not None:
-            raise ValueError(
-                "valid= needs the training records as train=[record, ...] (each used whole); "
-                "with data= the one record is split by train= (a count or a fraction)"
-            )
+            raise ValueError("valid= needs the training records as train=[record, ...] (each used whole); "
+                             "with data= the one record is split by train= (a count or a fraction)")
         if train is not None and not isinstance(train, numbers.Real):
-            raise ValueError(
-                "with data=, train= is the split (a sample count or a fraction); to train on "
-                "whole records call identify(model, train=[record, ...], valid=...)"
-            )
+            raise ValueError("with data=, train= is the split (a sample count or a fraction); to train on "
+                             "whole records call identify(model, train=[record, ...], valid=...)")
         return RecordSet((as_record(data, train, min_valid=MIN_VALID_SAMPLES),))
     if train is None:
         raise ValueError("no data: pass a record as data=, or train=[record, ...] (and valid=...)")
@@ -270,15 +245,11 @@ def as_records(data=None, train=None, valid=None) -> RecordSet:
     dts = sorted({r.dt for r in records})
     if not np.allclose(dts, dts[0], rtol=1e-6, atol=0.0):
         detail = ", ".join(f"{r.name} {r.dt:.6g} s" for r in records)
-        raise ValueError(
-            f"the records have different sample times ({detail}); resample them onto one "
-            "grid first (jaxfric.rig.resample_uniform)"
-        )
+        raise ValueError(f"the records have different sample times ({detail}); resample them onto one "
+                         "grid first (jaxfric.rig.resample_uniform)")
     rs = RecordSet(tuple(records))
     if not np.ptp(rs.train_friction) > 0.0:
-        raise ValueError(
-            "friction has zero variance over the training records (a constant signal); "
-            "the cost and MSE % are undefined"
-        )
+        raise ValueError("friction has zero variance over the training records (a constant signal); "
+                         "the cost and MSE % are undefined")
     return rs
 

@@ -251,10 +251,6 @@ def cost_data(model, record: Record, scalers, dtype) -> CostData:
         u, y = v, f
         inv_norm = 1.0 / float(np.var(f))
     inputs = model.inputs_from(record, record.n_samples)
-    return CostData(
-        u=jnp.asarray(u, dtype),
-        y=jnp.asarray(y, dtype),
-        dt=jnp.asarray(record.dt, dtype),
-        inv_norm=jnp.asarray(inv_norm, dtype),
-        inputs=None if inputs is None else jnp.asarray(inputs[:, : record.n_train], dtype),
-    )
+    return CostData(u=jnp.asarray(u, dtype), y=jnp.asarray(y, dtype), dt=jnp.asarray(record.dt, dtype),
+                    inv_norm=jnp.asarray(inv_norm, dtype),
+                    inputs=None if inputs is None else jnp.asarray(inputs[:, : record.n_train], dtype))

@@ -45,8 +45,7 @@ class PooledOutputErrorCost(eqx.Module):
 
     def _errors(self, theta, data: PooledCostData) -> list[Array]:
         inputs = data.inputs or (None,) * len(data.u)
-        return [y - self.model.simulate(theta, u, data.dt, x)
-                for u, y, x in zip(data.u, data.y, inputs)]
+        return [y - self.model.simulate(theta, u, data.dt, x) for u, y, x in zip(data.u, data.y, inputs)]
 
     def residuals(self, theta, data: PooledCostData) -> Array:
         """Residual vector ``r`` with ``Σ r² = J`` (for least-squares refinement)."""

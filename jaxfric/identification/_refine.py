@@ -115,10 +115,8 @@ def as_refinement(refine, num_params: int) -> GradientRefinement | None:
             name = "lm" if num_params <= AUTO_LM_MAX_PARAMS else "bfgs"
         refine = GradientRefinement(method=name)
     if not isinstance(refine, GradientRefinement):
-        raise ValueError(
-            "refine must be None, True, 'auto', one of "
-            f"{METHODS}, or a GradientRefinement, got {refine!r}"
-        )
+        raise ValueError("refine must be None, True, 'auto', one of "
+                         f"{METHODS}, or a GradientRefinement, got {refine!r}")
     refine.check()
     return refine
 
@@ -206,8 +204,7 @@ def _advance(settings: GradientRefinement, cost, z, state, steps, done, result, 
         res = optx.RESULTS.where(finite, res, optx.RESULTS.nonfinite)
         return y_new, eqx.partition(st_new, eqx.is_array)[0], k + 1, stop, res
 
-    z, dynamic, steps, done, result = jax.lax.while_loop(
-        cond, body, (z, dynamic, steps, done, result))
+    z, dynamic, steps, done, result = jax.lax.while_loop(cond, body, (z, dynamic, steps, done, result))
     return z, eqx.combine(static, dynamic), steps, done, result, cost(to_box(z, lower, upper), data)
 
 
@@ -219,14 +216,8 @@ def _finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data, max
     f_new = cost(theta_new, data)
     f_new_safe = jnp.where(jnp.isfinite(f_new), f_new, jnp.inf)
     improved = f_new_safe < f_old
-    return RefineOutcome(
-        theta=jnp.where(improved, theta_new, theta0),
-        f=jnp.where(improved, f_new_safe, f_old),
-        f_refined=f_new,
-        improved=improved,
-        result=result,
-        num_steps=steps,
-    )
+    return RefineOutcome(theta=jnp.where(improved, theta_new, theta0), f=jnp.where(improved, f_new_safe, f_old),
+                         f_refined=f_new, improved=improved, result=result, num_steps=steps)
 
 
 def _progress_sink(progress, settings: GradientRefinement):
@@ -263,8 +254,7 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
             update(int(steps), float(f))
     finally:
         close(int(steps))
-    return finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data,
-                  settings.max_steps)
+    return finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data, settings.max_steps)
 
 
 def _over_members(settings: GradientRefinement, fn, *batched):
@@ -331,8 +321,7 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
     steps = jnp.zeros(thetas.shape[0], jnp.int32)
 
     def running(steps, done, result):
-        return bool(jnp.any((steps < settings.max_steps) & jnp.invert(done)
-                            & (result == optx.RESULTS.successful)))
+        return bool(jnp.any((steps < settings.max_steps) & jnp.invert(done) & (result == optx.RESULTS.successful)))
 
     top = 0
     try:
@@ -343,8 +332,7 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
             update(top, float(jnp.min(jnp.where(jnp.isfinite(f), f, jnp.inf))))
     finally:
         close(top)
-    return finish(settings, cost, thetas, f_old, z, steps, done, result, lower, upper, data,
-                  settings.max_steps)
+    return finish(settings, cost, thetas, f_old, z, steps, done, result, lower, upper, data, settings.max_steps)
 
 
 _RESULT_NAMES = (

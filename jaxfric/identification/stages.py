@@ -49,18 +49,8 @@ from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, RefineOutcome, refine_impl, refine_many, result_name
 from .._timing import Stopwatch
 
-__all__ = [
-    "Bounds",
-    "Objective",
-    "box_stage",
-    "ensemble_batching",
-    "fit_stage",
-    "global_stage",
-    "gradient_stage",
-    "objective_stage",
-    "records_stage",
-    "refine_batching",
-]
+__all__ = ["Bounds", "Objective", "box_stage", "ensemble_batching", "fit_stage", "global_stage",
+           "gradient_stage", "objective_stage", "records_stage", "refine_batching"]
 
 
 # ------------------------------------------------------------------ records
@@ -108,8 +98,7 @@ def record_inputs(model: AbstractFrictionModel, records: RecordSet) -> list:
 def _train_inputs(records: RecordSet, inputs: list):
     """The training samples of every training record's channels, side by side (for the
     search box), or ``None`` for a model without them."""
-    parts = [x[:, : r.n_train] for r, x in zip(records.records, inputs)
-             if x is not None and r.n_train > 0]
+    parts = [x[:, : r.n_train] for r, x in zip(records.records, inputs) if x is not None and r.n_train > 0]
     return np.concatenate(parts, axis=1) if parts else None
 
 
@@ -136,10 +125,8 @@ def check_theta0(model: AbstractFrictionModel, theta0, bounds: Bounds):
     outside = np.flatnonzero((theta0 < lower) | (theta0 > upper))
     if outside.size:
         i = int(outside[0])
-        raise ValueError(
-            f"theta0 lies outside the search box: {model.param_names[i]} = {theta0[i]!r} not in "
-            f"[{lower[i]!r}, {upper[i]!r}] ({outside.size} such parameter(s))"
-        )
+        raise ValueError(f"theta0 lies outside the search box: {model.param_names[i]} = {theta0[i]!r} not in "
+                         f"[{lower[i]!r}, {upper[i]!r}] ({outside.size} such parameter(s))")
     return theta0
 
 
@@ -304,8 +291,7 @@ def record_metrics(predictions, records: RecordSet) -> dict:
     else:
         y_hats = [np.asarray(p, np.float64) for p in predictions]
         if not all(np.all(np.isfinite(p)) for p in y_hats):
-            return {"train": None, "valid": None, "all": None, "prediction_finite": False,
-                    "records": []}
+            return {"train": None, "valid": None, "all": None, "prediction_finite": False, "records": []}
 
         def pooled(part):
             f = np.concatenate([r.friction[part(r)] for r in records.records])
@@ -341,14 +327,10 @@ def warn_if_divergent(metrics: dict, stacklevel: int = 3) -> None:
     if not (tr and va):
         return
     if va["mse_percent"] > max(10.0 * tr["mse_percent"], 5.0):
-        warnings.warn(
-            f"validation MSE {va['mse_percent']:.3g} % is far above training MSE "
-            f"{tr['mse_percent']:.3g} %: the free-run prediction leaves the training "
-            "behaviour (for the Elman network try another key or a smaller "
-            "context_weight_bound)",
-            RuntimeWarning,
-            stacklevel=stacklevel,
-        )
+        warnings.warn(f"validation MSE {va['mse_percent']:.3g} % is far above training MSE "
+                      f"{tr['mse_percent']:.3g} %: the free-run prediction leaves the training "
+                      "behaviour (for the Elman network try another key or a smaller "
+                      "context_weight_bound)", RuntimeWarning, stacklevel=stacklevel)
 
 
 def members_valid_mse(member_predictions, records: RecordSet) -> list:
@@ -404,16 +386,11 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
     scalers = objective.scalers
     ensemble = keys.members is not None
 
-    def run_predictions(theta):
-        return [predict(model, theta, scalers, r.velocity, r.dt, x)
-                for r, x in zip(records.records, bounds.inputs)]
-
-    def member_predictions(thetas):
-        # One batched free run per record for all members (vmap over θ reaches the
-        # model's batched rollout), not K runs one after another: on a GPU each run is
-        # a sequence of kernel launches whatever its batch.
-        return [np.asarray(jax.vmap(lambda th, r=r, x=x: predict(model, th, scalers, r.velocity,
-                                                                  r.dt, x))(thetas))
+    def run_predictions(theta, batched=False):
+        # members: one batched free run per record (vmap over θ reaches the model's batched
+        # rollout), not K runs one after another (on a GPU each run is a sequence of kernel launches)
+        return [np.asarray(jax.vmap(lambda th, r=r, x=x: predict(model, th, scalers, r.velocity, r.dt, x))(theta))
+                if batched else predict(model, theta, scalers, r.velocity, r.dt, x)
                 for r, x in zip(records.records, bounds.inputs)]
 
     thetas = jnp.atleast_2d(sol.value if refined is None else refined.theta)
@@ -428,15 +405,9 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
         r = jax.tree_util.tree_map(lambda a: a[best], refined) if ensemble else refined
         theta = r.theta
         metrics = record_metrics(run_predictions(theta), records)
-        stages.append({
-            "stage": refine.method,
-            "J": float(r.f),
-            "J_refined": float(r.f_refined),
-            "improved": bool(r.improved),
-            "num_steps": int(r.num_steps),
-            "result": result_name(r.result),
-            **stage_mse(metrics),
-        })
+        stages.append({"stage": refine.method, "J": float(r.f), "J_refined": float(r.f_refined),
+                       "improved": bool(r.improved), "num_steps": int(r.num_steps),
+                       "result": result_name(r.result), **stage_mse(metrics)})
     else:
         theta = theta_opt
         metrics = record_metrics(run_predictions(theta), records)
@@ -445,39 +416,23 @@ def fit_stage(model: AbstractFrictionModel, records: RecordSet, bounds: Bounds,
     members = None
     if ensemble:
         members = ensemble_summary(model, thetas, f_np, keys.members, best,
-                                   member_predictions(thetas), records)
+                                   run_predictions(thetas, batched=True), records)
     key_data, key_impl = key_record(keys.members[best] if ensemble else keys.key)
     warn_if_divergent(metrics, stacklevel=stacklevel + 1)
-    diagnostics = {
-        "on_bound": on_bound(model, theta, bounds.box),
-        "unidentifiable": list(unidentifiable(model, records.train_velocity)),
-    }
+    diagnostics = {"on_bound": on_bound(model, theta, bounds.box),
+                   "unidentifiable": list(unidentifiable(model, records.train_velocity))}
     for d in diagnostics["on_bound"]:
-        warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning,
-                      stacklevel=stacklevel)
+        warnings.warn(f"{type(model).__name__}: {d['message']}", BoundWarning, stacklevel=stacklevel)
     return Fit(
-        model=model,
-        theta=np.asarray(theta),
-        velocity_scaler=scalers[0],
-        friction_scaler=scalers[1],
-        dt=records.dt,
-        n_train=records.n_train,
-        n_samples=records.n_samples,
+        model=model, theta=np.asarray(theta), velocity_scaler=scalers[0], friction_scaler=scalers[1],
+        dt=records.dt, n_train=records.n_train, n_samples=records.n_samples,
         metrics={**metrics, "num_params": model.num_params, "cost": float(stages[-1]["J"])},
-        stages=stages,
-        history=history(sol_best),
-        solution=sol,
-        key_data=key_data,
-        key_impl=key_impl,
+        stages=stages, history=history(sol_best), solution=sol, key_data=key_data, key_impl=key_impl,
         seed=None if ensemble else keys.seed,
         velocity_range=(float(records.train_velocity.min()), float(records.train_velocity.max())),
-        diagnostics=diagnostics,
-        ensemble=members,
-        box=bounds.box,
+        diagnostics=diagnostics, ensemble=members, box=bounds.box,
         settings={
-            "model_name": model_name(model),
-            "model_config": model_config(model),
-            "solver": repr(solver),
+            "model_name": model_name(model), "model_config": model_config(model), "solver": repr(solver),
             "refine": None if refine is None else {
                 "method": refine.method, "max_steps": refine.max_steps,
                 "rtol": refine.rtol, "atol": refine.atol, "edge": refine.edge,
