@@ -223,8 +223,7 @@ def motion_metrics(x, x_hat) -> dict:
     ``max_abs_mm``, plus the rest of [`jaxfric.metrics.friction_metrics`][jaxfric.metrics.friction_metrics] in metres."""
     x_hat = np.asarray(x_hat, np.float64)
     if not np.all(np.isfinite(x_hat)):
-        return {"rmse_mm": float("inf"), "fit_percent": float("-inf"), "max_abs_mm": float("inf"),
-                "finite": False}
+        return {"rmse_mm": float("inf"), "fit_percent": float("-inf"), "max_abs_mm": float("inf"), "finite": False}
     m = friction_metrics(np.asarray(x, np.float64), x_hat)
     m.update(rmse_mm=1e3 * m["rmse"], max_abs_mm=1e3 * m["max_abs"])
     return m
@@ -344,8 +343,7 @@ class MotionFit(Fit):
         theta = jnp.asarray(self.theta)
         states = _track_jit(self.friction_step(), theta, jnp.asarray(v_win, theta.dtype), dt)
         s0 = jax.tree_util.tree_map(lambda a: a[n - 1], states)
-        return {"x0": float(x_win[-1]), "v0": float(v_win[-1]), "state0": s0, "x_window": x_win,
-                "v_window": v_win}
+        return {"x0": float(x_win[-1]), "v0": float(v_win[-1]), "state0": s0, "x_window": x_win, "v_window": v_win}
 
     def _simulate_record(self, data, init_window) -> dict:
         data = _as_motion_data(data)
@@ -595,8 +593,7 @@ def _mass_setting(mass):
 
 
 def _as_record_list(name, value) -> list:
-    items = list(value.values()) if isinstance(value, dict) else (
-        list(value) if isinstance(value, list) else [value])
+    items = list(value.values()) if isinstance(value, dict) else (list(value) if isinstance(value, list) else [value])
     if not items:
         raise ValueError(f"{name} must hold at least one record")
     out = []
@@ -662,32 +659,13 @@ def _pooled(records, dtype, scalers, mass0, *, segment=None, lead=0, windows=Non
             "plan": schedule(starts, at, segment=segment, lead=lead, weights=weights, dtype=dtype)}
 
 
-def identify_motion(
-    model,
-    data=None,
-    *,
-    key=None,
-    mass,
-    train=0.8,
-    valid=None,
-    solver: AbstractSolver | None = None,
-    search: MotionSearch | None = None,
-    error: str = "position",
-    horizon: int | None = None,
-    fit_offset: bool = False,
-    fit_v0: bool = False,
-    offset_range=None,
-    box=None,
-    data_bounds: bool = True,
-    dtype=None,
-    model_options: dict | None = None,
-    metric_horizon: int = DEFAULT_METRIC_HORIZON,
-    init_window: int = DEFAULT_INIT_WINDOW,
-    max_evals: int | None = None,
-    max_time: float | None = None,
-    progress=None,
-    keys=None,
-) -> MotionFit:
+def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
+                    solver: AbstractSolver | None = None, search: MotionSearch | None = None,
+                    error: str = "position", horizon: int | None = None, fit_offset: bool = False,
+                    fit_v0: bool = False, offset_range=None, box=None, data_bounds: bool = True, dtype=None,
+                    model_options: dict | None = None, metric_horizon: int = DEFAULT_METRIC_HORIZON,
+                    init_window: int = DEFAULT_INIT_WINDOW, max_evals: int | None = None,
+                    max_time: float | None = None, progress=None, keys=None) -> MotionFit:
     """Identify friction inside ``m dv/dt = F_act - F_f - F_load`` from force and position (§13.2).
 
     Args:
@@ -757,23 +735,8 @@ def identify_motion(
     physical_options = dict(options, data=data, key=key, model_options=None)
     with Stopwatch() as total:
         tr_records, va_records, data, n_train = _records(data, train, valid)
-        if error not in ERRORS:
-            raise ValueError(f"error must be one of {ERRORS}, got {error!r}")
-        legacy_cost = horizon is not None or error != "position"
-        if legacy_cost and data is None:
-            raise ValueError("k-step (horizon) and velocity costs take one record with a held-back block: "
-                             "pass data and a train fraction below 1")
-        if horizon is not None:
-            check_int("horizon", horizon, 1, n_train - 1, " (or None: the free run)")
-            if error != "position":
-                raise ValueError("k-step costs use the position error only: pass error='position'")
-        metric_horizon = check_int("metric_horizon", metric_horizon)
-        if data is not None:  # a short held-back block gets a shorter k
-            metric_horizon = min(metric_horizon, data.n_samples - n_train - 1)
-        init_window = _init_window(init_window)
-        for i, r in enumerate(va_records):
-            if r.n_samples <= init_window:
-                raise ValueError(f"valid[{i}] has {r.n_samples} samples, not more than init_window={init_window}")
+        legacy_cost, metric_horizon, init_window = _checked_windows(
+            data, n_train, va_records, error, horizon, metric_horizon, init_window)
         budget = MotionBudget(max_evals, max_time)
         budget.check()
         if search is not None and not isinstance(search, MotionSearch):
@@ -808,36 +771,13 @@ def identify_motion(
             rows.append((-vmax, vmax))
         lower, upper = (np.asarray(b, np.float64) for b in zip(*rows))
 
-        if legacy_cost:  # one cost (k-step or velocity): one Levenberg-Marquardt stage on it
-            x_tr, v_tr = tr_records[0].position, tr_records[0].velocity
-            free = {"force": jnp.asarray(ut, dtype), "x": jnp.asarray(x_tr, dtype), "v": jnp.asarray(v_tr, dtype),
-                    "dt": jnp.asarray(data.dt, dtype), "mass": jnp.asarray(mass0, dtype),
-                    "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
-                    "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
-                    "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers)}
-            residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
-            cost, glob = residuals, free
-            search = MotionSearch(search.particles, search.generations, search.global_window, search.lead,
-                                  (None,), (sum(search.steps),), search.rtol)
-
-            def stage_data(h):
-                return free
-        else:
-            residuals = ShootingResiduals(model, layout)
-            cost = SumOfSquares(residuals)
-            free = _pooled(tr_records, dtype, scalers, mass0)
-            glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
-                           windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
-
-            def stage_data(h):
-                return free if h is None else _pooled(tr_records, dtype, scalers, mass0, segment=h,
-                                                      lead=search.lead)
+        residuals, cost, free, glob, stage_data, search = _costs(
+            model, layout, search, tr_records, scalers, mass0, dtype, error, horizon, legacy_cost)
         sol, stopped = None, None
         est = least_squares(tr_records, mass0 if mass_range is None else None)
         with Stopwatch() as sw:
             if solver is not None:
-                sol, _ = global_search(cost, free, lower, upper, solver, run_keys, dtype=dtype,
-                                       progress=progress)
+                sol, _ = global_search(cost, free, lower, upper, solver, run_keys, dtype=dtype, progress=progress)
                 y = np.asarray(sol.value)
                 stages = solver_stages(sol, solver)
             else:
@@ -892,6 +832,57 @@ def identify_motion(
         data = data if data is not None else _concatenated(tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**fit.timings, "total_s": total.wall_s})
+
+
+def _checked_windows(data, n_train, va_records, error, horizon, metric_horizon, init_window):
+    """``(legacy_cost, metric_horizon, init_window)`` of [`identify_motion`][jaxfric.motion.identify_motion],
+    checked: the cost is the legacy one-record cost for a k-step ``horizon`` or a velocity
+    ``error``; a short held-back block gets a shorter metric horizon."""
+    if error not in ERRORS:
+        raise ValueError(f"error must be one of {ERRORS}, got {error!r}")
+    legacy_cost = horizon is not None or error != "position"
+    if legacy_cost and data is None:
+        raise ValueError("k-step (horizon) and velocity costs take one record with a held-back block: "
+                         "pass data and a train fraction below 1")
+    if horizon is not None:
+        check_int("horizon", horizon, 1, n_train - 1, " (or None: the free run)")
+        if error != "position":
+            raise ValueError("k-step costs use the position error only: pass error='position'")
+    metric_horizon = check_int("metric_horizon", metric_horizon)
+    if data is not None:
+        metric_horizon = min(metric_horizon, data.n_samples - n_train - 1)
+    init_window = _init_window(init_window)
+    for i, r in enumerate(va_records):
+        if r.n_samples <= init_window:
+            raise ValueError(f"valid[{i}] has {r.n_samples} samples, not more than init_window={init_window}")
+    return legacy_cost, metric_horizon, init_window
+
+
+def _costs(model, layout, search, tr_records, scalers, mass0, dtype, error, horizon, legacy: bool):
+    """``(residuals, cost, free, glob, stage_data, search)`` of a motion search: the
+    multiple-shooting residuals of the training records (the default), or one free-run or
+    k-step cost of one record (``legacy``: a k-step ``horizon`` or a velocity ``error``, one
+    Levenberg–Marquardt stage on it). ``free``: the training data; ``glob``: the global
+    stage's; ``stage_data(h)``: a shooting stage's for segments of ``h`` samples."""
+    if legacy:
+        x_tr, v_tr = tr_records[0].position, tr_records[0].velocity
+        free = {"force": jnp.asarray(tr_records[0].net_force, dtype), "x": jnp.asarray(x_tr, dtype),
+                "v": jnp.asarray(v_tr, dtype), "dt": jnp.asarray(tr_records[0].dt, dtype),
+                "mass": jnp.asarray(mass0, dtype), "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
+                "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
+                "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers)}
+        residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
+        search = MotionSearch(search.particles, search.generations, search.global_window, search.lead,
+                              (None,), (sum(search.steps),), search.rtol)
+        return residuals, residuals, free, free, lambda h: free, search
+    residuals = ShootingResiduals(model, layout)
+    free = _pooled(tr_records, dtype, scalers, mass0)
+    glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
+                   windows=(search.lead + search.global_window, GLOBAL_SAMPLES))
+
+    def stage_data(h):
+        return free if h is None else _pooled(tr_records, dtype, scalers, mass0, segment=h, lead=search.lead)
+    return residuals, SumOfSquares(residuals), free, glob, stage_data, search
 
 
 def _ensemble(model, data, members, options) -> MotionFit:
@@ -969,5 +960,4 @@ def _training_cost(residuals, cost, y, lower, upper, free, dtype, scalar: bool) 
 
 def _concatenated(records) -> MotionData:
     """The training records end to end (for the plausibility check, which reads velocities)."""
-    return dataclasses.replace(records[0], **{k: np.concatenate([getattr(r, k) for r in records])
-                                              for k in _CHANNELS})
+    return dataclasses.replace(records[0], **{k: np.concatenate([getattr(r, k) for r in records]) for k in _CHANNELS})
