@@ -80,8 +80,7 @@ _PNEUMATIC_SHA256 = {
     "PK_7bar": ("74c6509a51ad4aa0966791e849369713bac00253d061bdf5f5554ed1269f5a37", 404860),
 }
 for _name, (_sha, _size) in _PNEUMATIC_SHA256.items():
-    _FILES[f"pneumatic_seal_friction/raw/{_name}.csv"] = (
-        _PNEUMATIC_URL.format(name=f"{_name}.csv"), _sha, _size)
+    _FILES[f"pneumatic_seal_friction/raw/{_name}.csv"] = (_PNEUMATIC_URL.format(name=f"{_name}.csv"), _sha, _size)
 
 
 class DatasetUnavailable(OSError):
@@ -216,6 +215,5 @@ def pneumatic(seal: str = "O-ring", bar: int = 3, local=None, *, download: bool 
             scale={"t": 1e-3, "x": 1e-3, "p2": 1e5, "load": -1.0},
             fill={"p1": 0.0}, delimiter=None, skip_rows=PNEUMATIC_DROP_ROWS, on_irregular="resample")
     bore = 0.0257 if "257" in seal else 0.025
-    data = rig.estimate_friction(meas, bore=bore, rod=0.0, mass=0.0, cutoff=cutoff,
-                                 train_fraction=train_fraction)
+    data = rig.estimate_friction(meas, bore=bore, rod=0.0, mass=0.0, cutoff=cutoff, train_fraction=train_fraction)
     return meas, data

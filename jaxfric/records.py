@@ -38,10 +38,8 @@ def as_channel(name: str, values, n: int | None = None, *, label: str | None = N
     """
     label = f"channel '{name}'" if label is None else label
     if np.iscomplexobj(values):
-        raise ValueError(
-            f"{label} holds complex numbers; pass the real-valued signal "
-            "(the imaginary part would otherwise be dropped silently)"
-        )
+        raise ValueError(f"{label} holds complex numbers; pass the real-valued signal "
+                         "(the imaginary part would otherwise be dropped silently)")
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -56,10 +54,8 @@ def as_channel(name: str, values, n: int | None = None, *, label: str | None = N
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
         kind = "NaN" if np.isnan(arr[first]) else "inf"
-        raise ValueError(
-            f"{label} has {int(bad.sum())} non-finite samples ({kind} first at index {first}); "
-            "remove or interpolate them"
-        )
+        raise ValueError(f"{label} has {int(bad.sum())} non-finite samples ({kind} first at index {first}); "
+                         "remove or interpolate them")
     return arr
 
 
@@ -157,10 +153,8 @@ def split_count(n: int, train, *, whole: bool = True, name: str = "train",
             raise ValueError(f"{fraction_name} must lie in (0, 1{closing}, got {frac!r}")
         count = int(round(frac * n))
     if not whole and count >= n:
-        raise ValueError(
-            f"the validation window is empty: all {n} samples are used for training "
-            f"({name}={count}); keep some samples for validation"
-        )
+        raise ValueError(f"the validation window is empty: all {n} samples are used for training "
+                         f"({name}={count}); keep some samples for validation")
     if count < 1:
         raise ValueError(f"{name} must leave at least 1 training sample of {n}, got {count}")
     return count
