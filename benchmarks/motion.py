@@ -21,11 +21,17 @@ Usage::
   excitation). Writes ``motion_keys.md`` / ``motion_keys.csv``.
 * ``compensation``: the position loop of ``jaxfric.compensation`` on the rig with no,
   static, LuGre, Elman and ideal (true friction) feed-forward.
+* ``official``: the EMPS benchmark's official forward task (docs/motion.md; ANCHORS.md §4.1),
+  ``--parts official --test PATH/DATA_EMPS_PULSES.mat [--rows coulomb,stribeck,lugre,gms]``:
+  train on the whole estimation file, free-run the test recording from its input, only its
+  first 20 samples setting the state (``MotionFit.score(..., init_window=20)``); RMSE of
+  ``qm[20:]`` [mm] and FIT %, beside the least-squares baseline (IDIM-LS on the estimation
+  file), the published IDIM-LS parameters and the published figures. The test recording is
+  not shipped (never tune on it): without it the part says so and writes nothing.
+  Writes ``emps_official.md`` / ``.csv``.
 
 Writes ``motion.md`` and ``motion_*.png`` into ``--out`` (default ``benchmarks/results``;
-``benchmarks/results/quick`` with ``--quick``, so a smoke run never overwrites the committed
-results). x64 is switched on here
-(benchmarks choose it; the library never does).
+``--quick``: ``benchmarks/results/quick``). x64 is switched on here (the library never does).
 """
 
 from __future__ import annotations
@@ -36,49 +42,34 @@ import sys
 import time
 from pathlib import Path
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
-# this checkout's jaxfric, even where another copy is installed
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the harness, also under `jaxfric bench`
+from _harness import (add_output_arguments, cell, emps_file, emps_motion, markdown_table, pyplot,  # noqa: E402
+                      results_dir, write_report, x64)
 
-import equinox as eqx
-import jax.numpy as jnp
-import numpy as np
+x64()
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
 
-from jaxfric import models
-from jaxfric.motion import MotionData, MotionFit, identify_motion
-from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead
-from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
+from jaxfric import models  # noqa: E402
+from jaxfric.motion import MotionData, MotionFit, baseline_motion_fit, identify_motion  # noqa: E402
+from jaxfric.optim import MAPSO, MAPSONMDS, NelderMead  # noqa: E402
+from jaxfric.rig.emps import EMPS_CUTOFF_HZ, emps_states, idim_ls, load_emps  # noqa: E402
 
-from _harness import add_output_arguments, markdown_table, results_dir, write_csv  # noqa: E402
-
-
-def _cell(v) -> str:
-    return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-EMPS_DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 #: Published IDIM-LS values of SOURCE.md (Janot, Gautier, Brunot 2019).
 IDIM = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
-IDIM_ASYM = {"Fv+": 166.71, "Fc+": 20.14, "Fv-": 240.42, "Fc-": 20.63}
 K_STEP = 100
 
 
 def emps_motion_data(path) -> tuple[MotionData, int]:
-    """EMPS estimation file (``jaxfric.rig.emps.load_emps``) -> (MotionData with force
-    gtau*vir and position qm, velocity for initial states from the benchmark's 100 Hz
-    filter; n_train = 80 %)."""
-    rec = load_emps(path)
-    data = MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
-    return data, int(round(0.8 * data.n_samples))
+    """The EMPS estimation file as motion data (:func:`_harness.emps_motion`) and n_train = 80 %."""
+    return (data := emps_motion(path)), int(round(0.8 * data.n_samples))
 
 
-def reference_fit(model, theta, mass, offset, data, n_train) -> MotionFit:
-    """A MotionFit holding given (published) parameters, evaluated like the identified ones."""
-    fit = MotionFit.given(model, theta, mass=mass, offset=offset, dt=data.dt, n_train=n_train,
-                          n_samples=data.n_samples)
+def reference_fit(M, Fc, Fv, offset, data, n_train) -> MotionFit:
+    """The Coulomb + viscous + offset law with given (published, least-squares) values as a
+    MotionFit (:func:`jaxfric.motion.baseline_motion_fit`), evaluated like the identified ones."""
+    fit = baseline_motion_fit(M, Fc, Fv, offset, dt=data.dt, n_train=n_train)
     return fit.replace(metrics=fit.evaluate(data, n_train, K_STEP))
 
 
@@ -91,25 +82,85 @@ def _solver(n_params, quick):
                      nelder_mead=NelderMead(max_steps=nm, max_evals=nm))
 
 
-def asymmetric_coulomb():
-    """The library's asymmetric Coulomb + viscous friction with its own output offset
-    (docs/algorithms.md §13.1): F = Fc+ [v>0] - Fc- [v<0] + Fv+- v + F_off."""
-    return models.Coulomb(asymmetric=True, offset=True, v_eps=1e-4)
-
-
-#: The EMPS rows: label -> (model name or instance, model options). Every row uses
-#: identify_motion's defaults (data-centred box, MotionSearch()) with the mass searched in
-#: [50, 200] kg and a constant offset.
+#: The EMPS rows: label -> (model name, or a model with its own offset; model options). Every
+#: row uses identify_motion's defaults (data-centred box, MotionSearch()) with the mass searched
+#: in [50, 200] kg and a constant offset. The asymmetric row is the library's asymmetric Coulomb
+#: + viscous friction with its own output offset (docs/algorithms.md §13.1):
+#: F = Fc+ [v>0] - Fc- [v<0] + Fv+- v + F_off.
 EMPS_MODELS = {
     "coulomb": ("static Coulomb+viscous+offset", "coulomb", None),
     "stribeck": ("static Stribeck+offset", "stribeck", None),
-    "asymmetric": ("asymmetric Coulomb+viscous, own offset", None, None),
+    "asymmetric": ("asymmetric Coulomb+viscous, own offset", models.Coulomb(asymmetric=True, offset=True,
+                                                                             v_eps=1e-4), None),
     "dahl": ("Dahl+viscous+offset", "dahl", {"viscous": True}),
     "lugre": ("LuGre+offset", "lugre", None),
     "gms": ("GMS(3)+offset", "gms", None),
     "elman": ("Elman(10)+offset", "elman", {"neurons": 10}),
 }
 DEFAULT_EMPS_MODELS = "coulomb,stribeck,asymmetric,dahl,lugre,gms,elman"
+
+
+#: official task: samples that set the state; the drive gain of a file without ``gtau``
+#: (SOURCE.md); the published figures (ANCHORS.md §4)
+INIT_WINDOW, GTAU = 20, 35.15065188248547
+PUBLISHED = [("IDIM-LS physics, open loop (published parameters; ANCHORS.md, 0.1 ms Euler)", 8.44, 89.8),
+             ("dynoNet (Forgione & Piga 2021)", 2.64, 96.8)]
+
+
+def motion_data(path) -> MotionData:
+    """An EMPS ``.mat`` file as motion data: the estimation file through
+    :func:`_harness.emps_motion`; a file without all of its channels (a test recording may lack
+    ``qg`` or the loop gains) read for ``qm``, ``vir``, ``t`` and ``gtau`` only."""
+    try:
+        return emps_motion(path)
+    except (KeyError, ValueError):
+        from scipy.io import loadmat
+
+        mat = loadmat(path)
+        qm, vir = (np.asarray(mat[k], np.float64).ravel() for k in ("qm", "vir"))
+        gtau = float(np.asarray(mat["gtau"]).ravel()[0]) if "gtau" in mat else GTAU
+        dt = float(np.median(np.diff(np.asarray(mat["t"], np.float64).ravel()))) if "t" in mat else 1e-3
+        return MotionData.from_arrays(gtau * vir, qm, dt, cutoff=EMPS_CUTOFF_HZ)
+
+
+def run_official(path, test_path, names, quick) -> list[dict]:
+    """Rows of the ``official`` part (module docstring)."""
+    from jaxfric.motion import MotionSearch
+
+    est, test = motion_data(path), motion_data(test_path)
+    rows = []
+
+    def row(name, fit, seconds=None, kind="simulated here"):
+        tr, te = fit.score(est, init_window=INIT_WINDOW), fit.score(test, init_window=INIT_WINDOW)
+        rows.append({"model": name, "kind": kind, "mass_kg": fit.mass, "offset_N": fit.offset,
+                     "estimation_rmse_mm": tr["rmse_mm"], "estimation_fit_percent": tr["fit_percent"],
+                     "test_rmse_mm": te["rmse_mm"], "test_fit_percent": te["fit_percent"], "seconds": seconds})
+        print(name, f"test {te['rmse_mm']:.3f} mm, FIT {te['fit_percent']:.2f} %", flush=True)
+
+    s = emps_states(load_emps(path))
+    ls = idim_ls(s["v"], s["a"], s["force"])  # the benchmark's own recipe, whole estimation file
+    row(f"least squares Coulomb+viscous+offset (IDIM-LS here: M {ls.M:.2f}, Fv {ls.Fv:.1f}, "
+        f"Fc {ls.Fc:.2f}, offset {ls.offset:.2f})", baseline_motion_fit(ls.M, ls.Fc, ls.Fv, ls.offset, dt=est.dt),
+        kind="baseline")
+    row("IDIM-LS published parameters", baseline_motion_fit(IDIM["M"], IDIM["Fc"], IDIM["Fv"], IDIM["offset"],
+                                                            dt=est.dt), kind="reference")
+    search = MotionSearch(particles=6, generations=3, horizons=(None,), steps=(3,)) if quick else None
+    for name in names:
+        t0 = time.perf_counter()
+        fit = identify_motion(name, est, train=1.0, key=0, mass=(50.0, 200.0), fit_offset=True, dtype=jnp.float64,
+                              model_options={"neurons": 10} if name.startswith("elman") else None, search=search)
+        row(f"{name} + mass + offset (identify_motion defaults, whole estimation file)", fit,
+            time.perf_counter() - t0, kind="jaxfric")
+    return rows + [{"model": name, "kind": "published", "mass_kg": None, "offset_N": None, "estimation_rmse_mm": None,
+                    "estimation_fit_percent": None, "test_rmse_mm": rmse, "test_fit_percent": fitp, "seconds": None}
+                   for name, rmse, fitp in PUBLISHED]
+
+
+OFFICIAL_NOTE = f"""Train on DATA_EMPS.mat (all samples), free-run simulate DATA_EMPS_PULSES.mat from its input; \
+the first {INIT_WINDOW} samples of each file set the initial state (quadratic fit of the \
+positions, friction state tracked along its slope) and are not scored. RMSE of qm in mm, \
+FIT = 100 (1 - ||e|| / ||y - mean y||). 'estimation' = the same protocol on the training \
+file itself. Times: wall seconds of the identify_motion call, compilation included."""
 
 
 def total_offset(fit) -> float:
@@ -125,30 +176,25 @@ def least_squares_fit(path, data, n_train) -> MotionFit:
     s = emps_states(load_emps(path))
     keep = s["t"] < n_train * data.dt
     est = idim_ls(s["v"][keep], s["a"][keep], s["force"][keep])
-    coul = models.Coulomb(v_eps=1e-4)
-    return reference_fit(coul, coul.from_physical(Fc=est.Fc, sigma2=est.Fv), est.M, est.offset, data, n_train)
+    return reference_fit(est.M, est.Fc, est.Fv, est.offset, data, n_train)
 
 
 def identify_default(key_name, data, n_train, seed=0, progress=None, metric_horizon=K_STEP):
     """One EMPS row with identify_motion's defaults (``metric_horizon=None``: the default k
     of the k-step metrics too); returns (label, fit, wall seconds)."""
     extra = {} if metric_horizon is None else {"metric_horizon": metric_horizon}
-    label, name, opts = EMPS_MODELS[key_name]
-    model = asymmetric_coulomb() if name is None else name
-    own_offset = name is None
+    label, model, opts = EMPS_MODELS[key_name]
     t0 = time.perf_counter()
-    fit = identify_motion(model, data, key=seed, mass=(50.0, 200.0), train=n_train, fit_offset=not own_offset,
-                          dtype=jnp.float64, model_options=opts, progress=progress, **extra)
+    fit = identify_motion(model, data, key=seed, mass=(50.0, 200.0), train=n_train,
+                          fit_offset=isinstance(model, str), dtype=jnp.float64, model_options=opts,
+                          progress=progress, **extra)
     return label, fit, time.perf_counter() - t0
 
 
 def run_emps(path, quick, key=0, only=None):
     data, n_train = emps_motion_data(path)
-    rows = []
-    coul = models.Coulomb(v_eps=1e-4)
-    ref = reference_fit(coul, coul.from_physical(Fc=IDIM["Fc"], sigma2=IDIM["Fv"]), IDIM["M"],
-                        IDIM["offset"], data, n_train)
-    rows.append(("IDIM-LS reference (published)", ref, 0.0))
+    rows = [("IDIM-LS reference (published)",
+             reference_fit(IDIM["M"], IDIM["Fc"], IDIM["Fv"], IDIM["offset"], data, n_train), 0.0)]
     rows.append(("least squares Coulomb+viscous+offset (IDIM-LS on the estimation part)",
                  least_squares_fit(path, data, n_train), 0.0))
     names = only or DEFAULT_EMPS_MODELS.split(",")
@@ -202,11 +248,7 @@ def emps_table(rows) -> str:
 
 
 def emps_figure(data, n_train, rows, out):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     t = np.arange(data.n_samples) * data.dt
     fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     ax[0].plot(t[n_train:], 1e3 * data.position[n_train:], "k", lw=2, label="measured qm")
@@ -344,12 +386,16 @@ the same way. seconds_per_key: wall time of the call / K, compilation included, 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--emps", default=os.environ.get("JAXFRIC_EMPS", str(EMPS_DEFAULT)))
+    ap.add_argument("--emps", default=None, help="DATA_EMPS.mat (default: $JAXFRIC_EMPS, jaxfric.datasets' "
+                    "folders, ../shared/data)")
     ap.add_argument("--parts", default="emps,rig,compensation")
     add_output_arguments(ap, "smaller budgets, no Elman row (smoke test)")
     ap.add_argument("--rows", default=None,
                     help=f"comma-separated EMPS rows to fit (of {DEFAULT_EMPS_MODELS}); the result then "
-                         "goes to motion_rows.md, never over motion.md")
+                         "goes to motion_rows.md, never over motion.md (--parts official: the models "
+                         "fitted, default coulomb,stribeck,lugre,gms)")
+    ap.add_argument("--test", default=os.environ.get("JAXFRIC_EMPS_TEST"),
+                    help="--parts official: the benchmark's test recording DATA_EMPS_PULSES.mat (not shipped)")
     ap.add_argument("--models", default=None,
                     help="time exactly identify_motion's default calls for these EMPS rows (e.g. "
                          "coulomb,stribeck,lugre,gms) in this process, compilation included, beside the "
@@ -360,64 +406,67 @@ def main(argv=None):
                     help="with --parts keys: the EMPS rows to fit")
     ap.add_argument("--splits", default="whole,tail", help=f"with --parts keys: of {','.join(SPLITS)}")
     args = ap.parse_args(argv)
+    path, load0, quick = emps_file(args.emps), os.getloadavg()[0], " --quick" if args.quick else ""
+    if args.parts == "official" and (not args.test or not Path(args.test).exists() or path is None):
+        print("EMPS estimation file not found: skipping" if args.test and Path(args.test).exists() else
+              f"EMPS test recording {args.test!r} not given or not found: skipping the official task (pass "
+              "--test PATH/DATA_EMPS_PULSES.mat)")
+        return
     out = results_dir(args.out, quick=args.quick)
+    if args.parts == "official":
+        names = (args.rows or "coulomb,stribeck,lugre,gms").replace(" ", "")
+        rows = run_official(path, args.test, names.split(","), args.quick)
+        write_report(out, "emps_official", [
+            "# EMPS official forward task (benchmarks/motion.py --parts official)", "",
+            f"Command: `python benchmarks/motion.py --parts official --test PATH{quick} --rows {names}`", "",
+            OFFICIAL_NOTE, "", markdown_table(rows, fmt=cell())], rows)
+        return
+    if path is None and (args.parts == "keys" or args.models):
+        raise SystemExit(f"EMPS file {args.emps or 'DATA_EMPS.mat'} not found (pass --emps or set JAXFRIC_DATA)")
     if args.parts == "keys":
-        load0 = os.getloadavg()[0]
-
-        def write(rows):  # after every row: a long run leaves what it measured
-            write_csv(rows, out / "motion_keys.csv")
-            text = "\n".join([
+        def write(rows, echo=False):  # after every row: a long run leaves what it measured
+            write_report(out, "motion_keys", [
                 "# Motion identification over keys: spread, baseline, ensemble (benchmarks/motion.py)", "",
                 f"Command: `python benchmarks/motion.py --parts keys --keys {args.keys} --key-models "
-                f"{args.key_models} --splits {args.splits}{' --quick' if args.quick else ''}` (1-minute load "
-                f"average {load0:.1f} at "
+                f"{args.key_models} --splits {args.splits}{quick}` (1-minute load average {load0:.1f} at "
                 f"the start, {os.getloadavg()[0]:.1f} at the last row, {os.cpu_count()} CPUs)", "",
-                KEYS_NOTE, "", markdown_table(rows, fmt=_cell), ""])
-            (out / "motion_keys.md").write_text(text)
-            return text
+                KEYS_NOTE, "", markdown_table(rows, fmt=cell(".4g"))], rows, echo=echo)
 
-        rows = run_keys(args.emps, [m.strip() for m in args.key_models.split(",")], args.keys, args.quick,
-                        on_row=write, splits=[k.strip() for k in args.splits.split(",")])
-        print(write(rows))
+        write(run_keys(path, [m.strip() for m in args.key_models.split(",")], args.keys, args.quick,
+                       on_row=write, splits=[k.strip() for k in args.splits.split(",")]), echo=True)
         return
     if args.models:
-        names = [m.strip() for m in args.models.split(",") if m.strip()]
-        load0 = os.getloadavg()[0]
-        rows, total, ref = run_timing(args.emps, names, reference=not args.no_reference)
-        load1 = os.getloadavg()[0]
+        rows, total, ref = run_timing(path, [m.strip() for m in args.models.split(",") if m.strip()],
+                                      reference=not args.no_reference)
         md = ["# identify_motion default calls on the whole EMPS estimation split (benchmarks/motion.py)", "",
               f"Command: `python benchmarks/motion.py --models {args.models}`", "",
               "Each row: `identify_motion(name, data, key=0, mass=(50, 200), train=19873, "
               "fit_offset=True, dtype=float64)` with the default search, in one fresh process (so "
               "compilation is included), float64; RMSE of the held-back last 20 %.", "",
-              markdown_table(rows, fmt=_cell), "", f"Total wall for these calls: **{total:.1f} s** "
-              f"(1-minute load average {load0:.1f} at the start, {load1:.1f} at the end, on "
+              markdown_table(rows, fmt=cell(".4g")), "", f"Total wall for these calls: **{total:.1f} s** "
+              f"(1-minute load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, on "
               f"{os.cpu_count()} CPUs).", ""]
         if ref is not None:
             md += [f"Same-run load reference: the pre-0.9 default search (MAPSO 5x5, 200 generations, then "
                    f"Nelder-Mead) for LuGre + mass + offset on the first 2 000 samples: {ref[0]:.1f} s "
-                   f"(held-back RMSE {ref[1]:.3f} mm).", ""]
-        text = "\n".join(md)
-        (out / "motion_timing.md").write_text(text)
-        print(text)
+                   f"(held-back RMSE {ref[1]:.3f} mm)."]
+        write_report(out, "motion_timing", md)
         return
     parts = set(args.parts.split(","))
     md = ["# Motion identification and friction compensation (benchmarks/motion.py)", "",
-          f"Command: `python benchmarks/motion.py --parts {args.parts}{' --quick' if args.quick else ''}`", ""]
-    if "emps" in parts:
-        if not Path(args.emps).exists():
-            print(f"EMPS file {args.emps} not found: skipping the EMPS part")
-        else:
-            only = [r.strip() for r in args.rows.split(",")] if args.rows else None
-            data, n_train, rows = run_emps(args.emps, args.quick, only=only)
-            if not only:
-                emps_figure(data, n_train, rows, out)
-            md += ["## EMPS: friction inside the mechanics, last 20 % held back", "",
-                   EMPS_NOTE, "", emps_table(rows), "", "![EMPS free run](motion_emps.png)", ""]
+          f"Command: `python benchmarks/motion.py --parts {args.parts}{quick}`", ""]
+    if "emps" in parts and path is None:
+        print(f"EMPS file {args.emps or 'DATA_EMPS.mat'} not found: skipping the EMPS part")
+    elif "emps" in parts:
+        only = [r.strip() for r in args.rows.split(",")] if args.rows else None
+        data, n_train, rows = run_emps(path, args.quick, only=only)
+        if not only:
+            emps_figure(data, n_train, rows, out)
+        md += ["## EMPS: friction inside the mechanics, last 20 % held back", "",
+               EMPS_NOTE, "", emps_table(rows), "", "![EMPS free run](motion_emps.png)", ""]
     if "rig" in parts:
-        rows = run_rig(args.quick)
         md += ["## Simulated rig: motion identification against force balance", "", RIG_NOTE, "",
-               rig_table(rows), ""]
+               rig_table(run_rig(args.quick)), ""]
     if "compensation" in parts:
         from jaxfric.compensation import compensation_table
 
@@ -426,9 +475,7 @@ def main(argv=None):
                "| fit | valid MSE % (force balance) |", "|---|---|",
                *[f"| {k} | {f.metrics['valid']['mse_percent']:.3f} |" for k, f in fits.items()], "",
                compensation_table(rows), "", "![tracking error](motion_compensation.png)", ""]
-    text = "\n".join(md)
-    (out / ("motion_rows.md" if args.rows else "motion.md")).write_text(text)
-    print(text)
+    write_report(out, "motion_rows" if args.rows else "motion", md)
 
 
 COMP_NOTE = """`jaxfric.compensation.compensation_study` on the default rig: 1 kHz cascade (outer PID on

@@ -350,7 +350,7 @@ def test_emps_official_benchmark_skips_cleanly_without_the_test_recording(tmp_pa
 
     root = Path(__file__).resolve().parents[1]
     env = {k: v for k, v in os.environ.items() if k != "JAXFRIC_EMPS_TEST"}
-    out = subprocess.run([sys.executable, str(root / "benchmarks" / "emps_official.py"), "--test",
+    out = subprocess.run([sys.executable, str(root / "benchmarks" / "motion.py"), "--parts", "official", "--test",
                           str(tmp_path / "DATA_EMPS_PULSES.mat"), "--out", str(tmp_path / "res")],
                          capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr
