@@ -16,8 +16,8 @@ Each on the same record and split (first 80 % train; the rig's 1600/400), float3
   ``NM_EVALS_PER_BFGS_STEP`` evaluations per BFGS step of the ``jaxfric`` row;
 * the least-squares baseline ``baselines.ls_coulomb_viscous`` (not in the library).
 
-EMPS adds the IDIM-LS table against the published values. Run time excludes compilation
-(JAX's compile events); the first key pays it, reported apart. Writes ``pipelines_<record>.md``/``.csv``.
+Run time excludes compilation (JAX's compile events); the first key pays it, reported apart
+(EMPS's IDIM-LS against the published values: ``emps.py``'s table (a)). Writes ``pipelines_<record>.md``/``.csv``.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
-from _harness import (add_output_arguments, command, emps_file, friction_record, machine, results_dir,  # noqa: E402
-                      skipped, spread, write_report)
+from _harness import (add_output_arguments, command, fit_cells, friction_record, machine,  # noqa: E402
+                      results_dir, skipped, spread, timed, write_report)
 from baselines import ls_coulomb_viscous  # noqa: E402
 
 import jax  # noqa: E402
@@ -61,13 +61,6 @@ def ls_baseline(v, f, n):
     return {"train": friction_metrics(f[:n], y[:n]), "valid": friction_metrics(f[n:], y[n:]), "coef": x}
 
 
-def idim_rows(args):
-    from emps import idim_table  # benchmarks/emps.py: the IDIM-LS table against the published values
-    from jaxfric.rig import emps
-
-    return idim_table(emps.load_emps(emps_file(args.data_dir and Path(args.data_dir) / "DATA_EMPS.mat")))
-
-
 # ---------------------------------------------------------------- pipelines
 def run_identify(data, key, method, quick):
     from jaxfric.identification import identify
@@ -80,13 +73,9 @@ def run_identify(data, key, method, quick):
         kw = ({"solver": jf.MAPSO(lattice_size=8, num_generations=3),
                "refine": GradientRefinement(max_steps=10)} if method == "jaxfric" else
               {"solver": jf.mapso_nmds(lattice_size=8, num_generations=3, nm_max_steps=50, nm_max_evals=50)})
-    cpu0 = time.process_time()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        fit = identify("elman", data, key=key, method=method, **kw)
-    return {"cpu_s": time.process_time() - cpu0,"valid": fit.metrics["valid"]["mse_percent"], "train": fit.metrics["train"]["mse_percent"],
-            "run_s": fit.timings["run_s"] + fit.timings.get("refine_run_s", 0.0),
-            "compile_s": fit.timings["compile_s"] + fit.timings.get("refine_compile_s", 0.0),
+    with warnings.catch_warnings(action="ignore", category=RuntimeWarning):
+        fit, _, cpu = timed(lambda: identify("elman", data, key=key, method=method, **kw))
+    return {"cpu_s": cpu, **fit_cells(fit),
             "evals": sum(s.get("num_evals", 0) for s in fit.stages),
             "steps": sum(s.get("num_steps", 0) for s in fit.stages)}
 
@@ -160,7 +149,6 @@ def main(argv=None):
              "train": base["train"]["mse_percent"], "run_s": 0.0, "compile_s": 0.0, "evals": "", "steps": ""}]
     print(f"{args.record}: {data.n_samples} samples, {n} train; LS baseline valid {rows[0]['valid']:.3f} %", flush=True)
     t0 = time.time()
-    idim = idim_rows(args) if args.record == "emps" else None
     plan = [("jaxfric", seeds), ("paper", paper_seeds), ("de_nm", seeds)]
     for name, count in plan:
         if name in skip:
@@ -173,8 +161,8 @@ def main(argv=None):
                   f"run {r['run_s']:.1f} s  compile {r['compile_s']:.1f} s  cpu {r['cpu_s']:.1f} s  "
                   f"evals {r['evals']}", flush=True)
             # after every row, so a run stopped by a time limit still leaves its results
-            write(out, args, desc, rows, base, time.time() - t0, idim)
-    write(out, args, desc, rows, base, time.time() - t0, idim)
+            write(out, args, desc, rows, base, time.time() - t0)
+    write(out, args, desc, rows, base, time.time() - t0)
     return 0
 
 
@@ -183,7 +171,7 @@ LABELS = {"jaxfric": "ENN N = 30, jaxfric default (MAPSO G = 50 on ≤ 2000 samp
           "de_nm": "ENN N = 30, scipy DE → Nelder–Mead (same budget as jaxfric)"}
 
 
-def write(out, args, desc, rows, base, wall, idim):
+def write(out, args, desc, rows, base, wall):
     keys = ["pipeline", "seed", "valid", "train", "run_s", "compile_s", "cpu_s", "evals", "steps"]
     stem = f"pipelines_{args.record}{args.tag}"
     lines = [f"# ENN identification pipelines: {desc}", "",
@@ -207,12 +195,6 @@ def write(out, args, desc, rows, base, wall, idim):
     c = base["coef"]
     lines += ["", f"LS baseline on the training window: Fv+ = {c[0]:.4g}, Fv− = {c[1]:.4g}, Fc+ = {c[2]:.4g}, "
               f"Fc− = {c[3]:.4g}, offset = {c[4]:.4g} (SI units).", ""]
-    if idim:
-        lines += ["## EMPS IDIM-LS against the published values (SOURCE.md)", "",
-                  "| model | parameter | ours | published | diff % |", "|---|---|---|---|---|"]
-        lines += [f"| {r['form']} | {r['parameter']} | {r['ours']:.4f} | {r['published']:.4f} | {r['diff_pct']:+.2f} |"
-                  for r in idim]
-        lines.append("")
     lines.append(f"Benchmark wall time: {wall:.0f} s.")
     write_report(out, stem, lines, [{k: r.get(k, "") for k in keys} for r in rows], echo=False)
 
