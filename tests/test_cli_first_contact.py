@@ -164,6 +164,18 @@ def test_every_benchmark_with_quick_writes_quick_results_elsewhere():
     assert [name for name, tree in quick.items() if not _passes_quick_to_results_dir(tree)] == []
 
 
+def test_every_benchmark_script_is_listed_with_the_page_that_cites_it():
+    """Every script in benchmarks/ backs a claim: docs/benchmarks.md's table lists it with
+    what it writes and the page citing that, and lists no script that is gone."""
+    import re
+
+    text = (ROOT / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+    listed = set(re.findall(r"^\| `(\w+\.(?:py|sh))` \|", text, re.M))
+    scripts = {p.name for p in (ROOT / "benchmarks").glob("*.py") if not p.name.startswith("_")}
+    assert scripts - {"baselines.py"} <= listed, scripts - listed
+    assert listed <= scripts | {"gpu_check.sh"}, listed - scripts
+
+
 # ------------------------------------------------------ 19.4: one specification object
 def _args(*argv):
     from jaxfric.cli.parser import build_parser
