@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import KEPT, UserError, _prepare_out, _say
+from .errors import KEPT, UserError, _prepare_out, _say, print_warning
 from .fitting import check_fits, fit_all
 from .spec import FitSpec
 
@@ -299,7 +299,7 @@ def cmd_predict(args, argv) -> int:
         pred = np.asarray(fit.predict_at(t, v), dtype=np.float64)
     for w in caught:
         if issubclass(w.category, UserWarning):
-            print(f"jaxfric: warning: {' '.join(str(w.message).split())}", file=sys.stderr, flush=True)
+            print_warning(" ".join(str(w.message).split()))
     cols = {"t": t, "velocity": v, "friction_predicted": pred}
     if measured is not None:
         cols["friction_measured"] = measured

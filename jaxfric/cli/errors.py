@@ -88,6 +88,11 @@ def print_error(message: str) -> None:
     print(error_line(message), file=sys.stderr, flush=True)
 
 
+def print_warning(message: str) -> None:
+    """``jaxfric: warning: <message>`` on stderr (said also under ``--quiet``)."""
+    print(f"jaxfric: warning: {message}", file=sys.stderr, flush=True)
+
+
 def run_interruptible(work: Callable[[], int], *, debug: bool = False) -> int:
     """Run ``work()`` in a worker thread; map errors and Ctrl-C to exit statuses.
 

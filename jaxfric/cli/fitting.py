@@ -11,11 +11,10 @@ it also warms the compilation cache.
 
 from __future__ import annotations
 
-import sys
 import time
 import warnings
 
-from .errors import UserError
+from .errors import UserError, print_warning
 from .spec import FitSpec
 
 REFINE_CHOICES = ("none", "auto", "bfgs", "lbfgs", "lm", "gauss_newton")
@@ -111,8 +110,7 @@ def check_memory(spec, model, *, x64: bool, available: int | None = None, say=No
         raise UserError(f"{name} has {_n(model.num_params)} parameters: {what} needs {_bytes(need)}, more than "
                         f"the {_bytes(available)} of memory available{fewer}")
     if need > available / 4 and say is not None:
-        print(f"jaxfric: warning: {name}: {what} needs {_bytes(need)} of the {_bytes(available)} of memory "
-              "available", file=sys.stderr, flush=True)
+        print_warning(f"{name}: {what} needs {_bytes(need)} of the {_bytes(available)} of memory available")
 
 
 def label(name: str, model) -> str:
@@ -286,7 +284,7 @@ def fit_all(data, args, key, *, say, kept_fit=None, notes=None, valid=None) -> d
         for text in texts:
             own = f"{type(model).__name__}: "
             text = text[len(own):] if text.startswith(own) else text  # the label says it
-            print(f"jaxfric: warning: {label(name, model)}: {text}", file=sys.stderr, flush=True)
+            print_warning(f"{label(name, model)}: {text}")
             if notes is not None:
                 notes.append(f"{label(name, model)}: {text}")
         m = (fit.metrics.get("valid") or fit.metrics.get("all") or {})

@@ -9,22 +9,18 @@ and k-step, per model, the judge's score), ``results.json`` (the ranking's rows,
 and its scores), ``models/<model>.npz`` (load with
 [`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``.
 
-``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s: ``short`` (the default, as the
-library's) free-runs every ``--window`` seconds of the whole record (2 s by default) from
-its own first 20 samples and pools the RMSE ([`jaxfric.motion.short_runs_score`][jaxfric.motion.short_runs_score]);
-``tail`` ranks by the held-back block's free-run RMSE. Progress bars are shown unless
-``--quiet``; ``--max-time``/``--max-evals`` bound each model's search.
+``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s (``short``, the default, or ``tail``;
+[`jaxfric.motion.short_runs_score`][jaxfric.motion.short_runs_score]); ``--max-time``/``--max-evals`` bound each model's search.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 
 import numpy as np
 
-from .errors import KEPT, UserError, _prepare_out, _say
+from .errors import KEPT, UserError, _prepare_out, _say, print_warning
 
 EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
@@ -121,7 +117,7 @@ def _data(args):
     except ValueError as e:
         raise UserError(f"{args.file}: {e}") from None
     for note in notes:
-        print(f"jaxfric: warning: {note}", file=sys.stderr, flush=True)
+        print_warning(note)
     return data
 
 
@@ -165,10 +161,8 @@ def cmd_identify_motion(args, argv) -> int:
 
     import warnings
 
-    from jaxfric.files import atomic_write_text, jsonable
     from jaxfric._warnings import BaselineWarning
     from jaxfric.motion import MotionSearch, OverfitWarning, identify_motion, rank_fits
-    from jaxfric.report import save_figure
 
     say = _say(args)
     data = _data(args)
@@ -195,7 +189,7 @@ def cmd_identify_motion(args, argv) -> int:
             raise UserError(str(e)) from None
         for w in caught:  # said even under --quiet, without a source line
             if issubclass(w.category, BaselineWarning):
-                print(f"jaxfric: warning: {w.message}", file=sys.stderr, flush=True)
+                print_warning(w.message)
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         fits[name] = fit
@@ -213,7 +207,17 @@ def cmd_identify_motion(args, argv) -> int:
         else:
             ranked = rank_fits(fits, scores=judge["scores"], judge="short", baseline_score=judge["baseline"])
     for w in caught:  # said even under --quiet: it changes which model to use
-        print(f"jaxfric: warning: {w.message}", file=sys.stderr, flush=True)
+        print_warning(w.message)
+    _write_report(args, argv, out, data, fits, ranked, judge, window)
+    say(f"report written to {out}")
+    return 0
+
+def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
+    """``motion.md``, ``results.json`` and ``motion_free_run.png`` of the ranked fits; the
+    ranking table printed."""
+    from jaxfric.files import atomic_write_text, jsonable
+    from jaxfric.report import save_figure
+
     table = ranked.table()
     first = next(iter(fits.values()))
     k = first.metrics["horizon"]
@@ -258,5 +262,3 @@ def cmd_identify_motion(args, argv) -> int:
     ax.set_ylabel("position [mm]")
     ax.legend()
     KEPT.add(save_figure(fig, out / "motion_free_run.png"))
-    say(f"report written to {out}")
-    return 0

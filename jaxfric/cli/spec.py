@@ -118,6 +118,19 @@ class FitSpec:
         changes = {k: v for k, v in (("max_steps", g), ("max_evals", nm)) if v is not None}
         return dataclasses.replace(base.nelder_mead, **changes)
 
+    def options(self) -> dict:
+        """The ``jaxfric.identify`` keywords of this specification besides the data, key and
+        progress: ``model_options`` and ``solver`` (``None``: the library's), then ``box``,
+        ``refine`` and ``method`` where they differ from the library's choice."""
+        out = {"model_options": self.model_options, "solver": self.build_solver()}
+        if self.box:
+            out["box"] = dict(self.box)
+        if self.refine != "default":
+            out["refine"] = False if self.refine == "none" else self.refine
+        if self.paper:
+            out["method"] = "paper"
+        return out
+
     def python(self, data: str = "data", key: str = "key", valid: str | None = None,
                train_name: str = "train") -> str:
         """The ``jf.identify(...)`` call (``import jaxfric as jf``) that [`identify`][jaxfric.cli.spec.FitSpec.identify]
@@ -127,19 +140,8 @@ class FitSpec:
         args = [repr(self.model)]
         args += ([f"train={{{train_name!r}: {data}}}", f"valid={valid}"] if valid else [data])
         args.append(f"key={key}")
-        if self.model_options:
-            args.append(f"model_options={self.model_options!r}")
-        solver = self.build_solver()
-        if solver is not None:
-            args.append(f"solver={python_source(solver)}")
-        if self.box:
-            args.append(f"box={dict(self.box)!r}")
-        if self.refine == "none":
-            args.append("refine=False")
-        elif self.refine != "default":
-            args.append(f"refine={self.refine!r}")
-        if self.paper:
-            args.append("method='paper'")
+        args += [f"{k}={python_source(v) if k == 'solver' else repr(v)}"
+                 for k, v in self.options().items() if v is not None]
         return f"jf.identify({', '.join(args)})"
 
     def identify(self, data, *, key=None, progress=None, valid=None, train_name="train"):
@@ -152,16 +154,7 @@ class FitSpec:
 
         from jaxfric.identification import identify
 
-        kwargs = {"solver": self.build_solver(), "model_options": self.model_options,
-                  "key": jax.random.key(self.seed) if key is None else key}
-        if self.box:
-            kwargs["box"] = dict(self.box)
-        if self.refine == "none":
-            kwargs["refine"] = False
-        elif self.refine != "default":
-            kwargs["refine"] = self.refine
-        if self.paper:
-            kwargs["method"] = "paper"
+        kwargs = {**self.options(), "key": jax.random.key(self.seed) if key is None else key}
         if progress is not None and "progress" in inspect.signature(identify).parameters:
             kwargs["progress"] = progress
         if valid:

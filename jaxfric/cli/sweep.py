@@ -78,8 +78,7 @@ def add_parser(sub, *, common, columns, formatter, positive_int, fraction, box_e
     g.add_argument("--solver", choices=solvers, default="mapso-nmds", help="optimiser")
     g.add_argument("--generations", type=positive_int, default=None, metavar="G", help="swarm generations")
     g.add_argument("--nm-evals", type=positive_int, default=None, metavar="N", help="Nelder-Mead evaluations")
-    g.add_argument("--refine", choices=REFINE_CHOICES, default="none",
-                   help="gradient polish after the optimiser")
+    g.add_argument("--refine", choices=REFINE_CHOICES, default="none", help="gradient polish after the optimiser")
     g.add_argument("--paper", action="store_true", help="the paper's method exactly (MAPSO-NMDS, no gradient stage)")
     g.add_argument("--box", action="append", type=box_entry, default=None, metavar="NAME=LO,HI",
                    help="search range of a physical model's parameter in SI units (repeatable)")
@@ -144,16 +143,9 @@ def cmd_sweep(args, argv) -> int:
     models = {}
     for name in args.models:
         spec = FitSpec.from_args(name, spec_args)
-        options = {"model_options": spec.model_options}
-        solver = spec.build_solver()
-        if solver is not None:
-            options["solver"] = solver
-        if spec.box:
-            options["box"] = dict(spec.box)
-        if spec.refine != "none":
-            options["refine"] = spec.refine
-        if spec.paper:
-            options["method"] = "paper"
+        options = {k: v for k, v in spec.options().items() if v is not None or k == "model_options"}
+        if spec.refine == "none":  # the sweep's "none": identify's own choice
+            options.pop("refine")
         models[name] = (name, options)
     processes = ({} if args.process_index is None
                  else {"process_index": args.process_index, "process_count": args.process_count})
