@@ -42,18 +42,8 @@ from .metrics import METRIC_FORMULAS, friction_metrics
 from .records import FrictionData
 from .uncertainty import report_markdown, report_summary
 
-__all__ = [
-    "FIGURES",
-    "TEMP_PATTERNS",
-    "atomic_write_bytes",
-    "atomic_write_text",
-    "comparison_rows",
-    "format_table",
-    "markdown_table",
-    "remove_temporaries",
-    "save_figure",
-    "write_report",
-]
+__all__ = ["FIGURES", "TEMP_PATTERNS", "atomic_write_bytes", "atomic_write_text", "comparison_rows",
+           "format_table", "markdown_table", "remove_temporaries", "save_figure", "write_report"]
 
 FIGURES = ("data.png", "friction_velocity.png", "error.png", "convergence.png")
 """Figures every report holds, besides one ``fit_<model>.png`` per model."""
@@ -161,11 +151,7 @@ def comparison_rows(fits: Mapping[str, Any], data) -> list[dict]:
 
 
 def _cell(rows, key, window, fmt):
-    out = []
-    for r in rows:
-        v = r["metrics"].get(window, {}).get(key)
-        out.append("-" if v is None else format(v, fmt))
-    return out
+    return ["-" if (v := r["metrics"].get(window, {}).get(key)) is None else format(v, fmt) for r in rows]
 
 
 def _columns(rows):
@@ -285,43 +271,9 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
             on_written(p)
 
     rows = comparison_rows(fits, data)
-    figs: dict[str, str] = {}
-
-    def figure(name: str, make: Callable, caption: str) -> None:
-        fig = make()
-        done(save_figure(fig, out / name))
-        figs[name] = caption
-
-    figure("data.png", lambda: _plot.plot_data(data), "Velocity and friction from the force balance")
-    figure("friction_velocity.png", lambda: _plot.plot_friction_velocity(data, dict(
-        (r["label"], fits[r["name"]]) for r in rows)), "Friction against velocity, measured and estimated")
-    for r in rows:
-        name = f"fit_{slug(r['name'])}.png"
-        figure(name, lambda r=r: _plot.plot_fit(fits[r["name"]], data, label=r["label"]),
-               f"Measured and estimated friction: {r['label']}")
     records = dict(records or {})
-    record_figs: dict[str, dict[str, str]] = {}
-    for rec_name, rec in records.items():
-        for r in rows:
-            name = f"fit_{slug(r['name'])}_{slug(rec_name)}.png"
-            figure(name, lambda r=r, rec=rec, rec_name=rec_name: _plot.plot_fit(
-                fits[r["name"]], rec, label=r["label"],
-                title=f"Validation record {rec_name}: {r['label']}"),
-                f"Validation record {rec_name}: {r['label']}")
-            record_figs.setdefault(r["name"], {})[rec_name] = name
-    for r in rows:
-        if fits[r["name"]].ensemble:
-            name = f"band_{slug(r['name'])}.png"
-            figure(name, lambda r=r: _plot.plot_band(fits[r["name"]], data, label=r["label"]),
-                   f"Ensemble prediction band: {r['label']}")
-    figure("error.png", lambda: _plot.plot_error({r["label"]: fits[r["name"]] for r in rows}, data),
-           "Estimation error of each model")
-    conv = {r["label"]: fits[r["name"]] for r in rows}
-    try:
-        figure("convergence.png", lambda: _plot.plot_convergence(
-            conv, ylabel="best objective J (each model's own cost)"), "Optimiser convergence")
-    except ValueError as e:  # a fit without an optimiser history (e.g. loaded from disk)
-        notes = list(notes or []) + [f"no convergence figure: {e}"]
+    figs, record_figs, missing = _draw_figures(out, data, fits, rows, records, done)
+    notes = list(notes or []) + missing if missing else notes
     for name, caption in (figures or {}).items():
         if not (out / name).is_file():
             raise ValueError(f"figure {name} is not in {out}: draw it before write_report")
@@ -347,7 +299,7 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         "models": {r["name"]: {"label": r["label"], "num_params": r["params"], "seconds": r["seconds"],
                                "metrics": r["metrics"], "file": model_files.get(r["name"]),
                                "records": _fit_records(fits[r["name"]]),
-                               "on_bound": _on_bound(fits[r["name"]]),
+                               "on_bound": list(fits[r["name"]].diagnostics.get("on_bound", [])),
                                "unidentifiable": list(fits[r["name"]].diagnostics.get("unidentifiable", [])),
                                "ensemble": _ensemble(fits[r["name"]]),
                                "uncertainty": jsonable(report_summary(fits[r["name"]], data), finite=True),
@@ -363,14 +315,46 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
     return {"files": written, "rows": rows, "table": format_table(rows), "figures": dict(figs)}
 
 
+def _draw_figures(out: Path, data, fits: Mapping, rows: list[dict], records: dict, done: Callable):
+    """The report's figures, each saved into ``out`` and passed to ``done``: ``({name:
+    caption}, {model: {record: figure}}, notes)`` (a note when a fit has no optimiser history)."""
+    figs: dict[str, str] = {}
+    record_figs: dict[str, dict[str, str]] = {}
+    by_label = {r["label"]: fits[r["name"]] for r in rows}
+
+    def figure(name: str, make: Callable, caption: str) -> None:
+        done(save_figure(make(), out / name))
+        figs[name] = caption
+
+    figure("data.png", lambda: _plot.plot_data(data), "Velocity and friction from the force balance")
+    figure("friction_velocity.png", lambda: _plot.plot_friction_velocity(data, by_label),
+           "Friction against velocity, measured and estimated")
+    for r in rows:
+        figure(f"fit_{slug(r['name'])}.png", lambda r=r: _plot.plot_fit(fits[r["name"]], data, label=r["label"]),
+               f"Measured and estimated friction: {r['label']}")
+    for rec_name, rec in records.items():
+        for r in rows:
+            name, title = f"fit_{slug(r['name'])}_{slug(rec_name)}.png", f"Validation record {rec_name}: {r['label']}"
+            figure(name, lambda r=r, rec=rec, title=title: _plot.plot_fit(fits[r["name"]], rec, label=r["label"],
+                                                                         title=title), title)
+            record_figs.setdefault(r["name"], {})[rec_name] = name
+    for r in rows:
+        if fits[r["name"]].ensemble:
+            figure(f"band_{slug(r['name'])}.png", lambda r=r: _plot.plot_band(fits[r["name"]], data, label=r["label"]),
+                   f"Ensemble prediction band: {r['label']}")
+    figure("error.png", lambda: _plot.plot_error(by_label, data), "Estimation error of each model")
+    try:
+        figure("convergence.png", lambda: _plot.plot_convergence(
+            by_label, ylabel="best objective J (each model's own cost)"), "Optimiser convergence")
+    except ValueError as e:  # a fit without an optimiser history (e.g. loaded from disk)
+        return figs, record_figs, [f"no convergence figure: {e}"]
+    return figs, record_figs, []
+
+
 def _fit_records(fit) -> list[dict]:
     """Per-record metrics of a fit (``fit.metrics["records"]``), when it has several records."""
     recs = (fit.metrics or {}).get("records") or []
     return list(recs) if len(recs) > 1 else []
-
-
-def _on_bound(fit) -> list[dict]:
-    return list(fit.diagnostics.get("on_bound", []))
 
 
 def _ensemble(fit) -> dict | None:
