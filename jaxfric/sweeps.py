@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from .files import atomic_write_text, write_json
+from .records import check_int
 
 __all__ = ["Run", "SweepResult", "TABLE_COLUMNS", "read_table", "sweep"]
 
@@ -183,12 +184,8 @@ def _processes(process_index, process_count) -> tuple[int, int, bool]:
 
         count = jax.process_count()
         return jax.process_index(), count, count > 1
-    for name, v in (("process_index", process_index), ("process_count", process_count)):
-        if not isinstance(v, numbers.Integral) or isinstance(v, bool):
-            raise ValueError(f"{name} must be an int, got {v!r}")
-    if not (process_count >= 1 and 0 <= process_index < process_count):
-        raise ValueError(f"need 0 <= process_index < process_count, got {process_index} and {process_count}")
-    return int(process_index), int(process_count), False
+    count = check_int("process_count", process_count)
+    return check_int("process_index", process_index, 0, count - 1, " (below process_count)"), count, False
 
 
 def _record_digest(record) -> str:
@@ -253,11 +250,7 @@ def _load(path: Path, motion: bool):
 
 
 def _number(x):
-    if isinstance(x, bool) or x is None:
-        return None
-    if isinstance(x, numbers.Real):
-        return float(x)
-    return None
+    return float(x) if isinstance(x, numbers.Real) and not isinstance(x, bool) else None
 
 
 def _row(run: Run, fit) -> dict:
@@ -315,18 +308,8 @@ def _check_local_layout() -> None:
 
 
 # --------------------------------------------------------------------- sweep
-def sweep(
-    models,
-    records,
-    keys,
-    out_dir,
-    *,
-    progress: bool = True,
-    on_run: Callable | None = None,
-    process_index: int | None = None,
-    process_count: int | None = None,
-    **options,
-) -> SweepResult:
+def sweep(models, records, keys, out_dir, *, progress: bool = True, on_run: Callable | None = None,
+          process_index: int | None = None, process_count: int | None = None, **options) -> SweepResult:
     """Run every (model, record, key) identification, resumably (module docstring).
 
     Args:
@@ -359,13 +342,10 @@ def sweep(
     """
     from tqdm.auto import tqdm
 
-    from .identification import as_record, identify, resolve_model
+    from .identification import identify
     from .motion import MotionData, identify_motion
 
-    for forbidden in ("key", "keys", "progress"):
-        if forbidden in options:
-            raise ValueError(f"{forbidden}= is the sweep's own: give the seeds as keys=, not as an "
-                             "identify option")
+    _refuse_own(options, "")
     model_map = _models(models)
     record_map = _records(records)
     seeds = _seeds(keys)
@@ -375,27 +355,8 @@ def sweep(
         raise ValueError("records mix MotionData (identify_motion) with friction records (identify); "
                          "sweep them separately")
     motion = kinds == {True}
-    # Every check identify would make on models and records, before the first run.
     fit_fn = identify_motion if motion else identify
-    keywords = _identify_keywords(fit_fn)
-    run_options = {}
-    for label, (m, own) in model_map.items():
-        for forbidden in ("key", "keys", "progress"):
-            if forbidden in own:
-                raise ValueError(f"model {label!r}: {forbidden}= is the sweep's own")
-        run_options[label] = {**options, **own}
-        model_options = {k: v for k, v in run_options[label].items() if k not in keywords}
-        model_options.update(run_options[label].get("model_options") or {})
-        try:
-            resolve_model(m, model_options if isinstance(m, str) else None)
-        except ValueError as err:
-            raise ValueError(f"model {label!r}: {err}") from None
-    if not motion:
-        for label, r in record_map.items():
-            try:
-                as_record(r)
-            except ValueError as err:
-                raise ValueError(f"record {label!r}: {err}") from None
+    run_options = _run_options(model_map, record_map, options, fit_fn, motion)
     if distributed:
         _check_local_layout()
 
@@ -435,8 +396,7 @@ def sweep(
         for run in todo:
             bar.set_postfix_str(f"{run.model} {run.record} seed {run.seed}")
             start = time.perf_counter()
-            fit = fit_fn(model_map[run.model][0], record_map[run.record], key=run.seed,
-                         **run_options[run.model])
+            fit = fit_fn(model_map[run.model][0], record_map[run.record], key=run.seed, **run_options[run.model])
             fit = fit.replace(timings={**(fit.timings or {}), "total_s": time.perf_counter() - start})
             fit.save(out / run.fit_file)
             rows[run.index] = _row(run, fit)
@@ -462,6 +422,12 @@ def sweep(
     return SweepResult(out_dir=out, runs=runs, rows=ordered, computed=computed, done=done, motion=motion)
 
 
+def _refuse_own(options, where: str) -> None:
+    for name in ("key", "keys", "progress"):
+        if name in options:
+            raise ValueError(f"{where}{name}= is the sweep's own: give the seeds as keys=, not as an identify option")
+
+
 def _rows_on_disk(out: Path, runs: list[Run], motion: bool) -> dict[int, dict]:
     rows = {}
     for run in runs:
@@ -471,11 +437,31 @@ def _rows_on_disk(out: Path, runs: list[Run], motion: bool) -> dict[int, dict]:
     return rows
 
 
-def _identify_keywords(fn) -> set[str]:
+def _run_options(model_map: dict, record_map: dict, options: dict, fit_fn, motion: bool) -> dict:
+    """Each model's options for ``fit_fn`` (its own over the sweep's), after every check
+    ``fit_fn`` would make on the models and records: before the first run."""
     import inspect
 
-    return {name for name, p in inspect.signature(fn).parameters.items()
-            if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    from .identification import as_record, resolve_model
+
+    keywords = {name for name, p in inspect.signature(fit_fn).parameters.items()
+                if p.kind is not inspect.Parameter.VAR_KEYWORD}
+    run_options = {}
+    for label, (m, own) in model_map.items():
+        _refuse_own(own, f"model {label!r}: ")
+        run_options[label] = {**options, **own}
+        model_options = {k: v for k, v in run_options[label].items() if k not in keywords}
+        model_options.update(run_options[label].get("model_options") or {})
+        try:
+            resolve_model(m, model_options if isinstance(m, str) else None)
+        except ValueError as err:
+            raise ValueError(f"model {label!r}: {err}") from None
+    for label, r in ({} if motion else record_map).items():
+        try:
+            as_record(r)
+        except ValueError as err:
+            raise ValueError(f"record {label!r}: {err}") from None
+    return run_options
 
 
 def read_table(path) -> list[dict]:
@@ -484,18 +470,9 @@ def read_table(path) -> list[dict]:
 
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    out = []
-    for r in rows:
-        row = {}
-        for k, v in r.items():
-            if v == "":
-                row[k] = None
-            elif k == "seed" or k == "num_params":
-                row[k] = int(v)
-            elif k in ("model", "record", "fit_file"):
-                row[k] = v
-            else:
-                row[k] = float(v)
-        out.append(row)
-    return out
+    def value(k, v):
+        if v == "":
+            return None
+        return int(v) if k in ("seed", "num_params") else v if k in ("model", "record", "fit_file") else float(v)
+    return [{k: value(k, v) for k, v in r.items()} for r in rows]
 
