@@ -91,8 +91,7 @@ def old_box_entries(config: dict[str, Any]) -> dict[str, Any]:
     """The search box of a fit written by jaxfric 0.6/0.7, whose model configuration held
     it as ``*_range`` fields (``Fc_range`` -> ``Fc``; unset ones, ``None``, were the
     defaults): ``{name: (low, high)}``."""
-    return {k: config[f"{k}_range"] for k in _models.DEFAULT_RANGES
-            if config.get(f"{k}_range") is not None}
+    return {k: config[f"{k}_range"] for k in _models.DEFAULT_RANGES if config.get(f"{k}_range") is not None}
 
 
 def model_name(model: AbstractFrictionModel) -> str | None:
@@ -645,6 +644,11 @@ class Fit:
             parts = [f"{name} J={J:.4g} ({n} {'evals' if evals else 'steps'})"
                      for name, J, n, evals in self.stage_counts()]
             lines.append("stages: " + " -> ".join(parts))
+        base = self.metrics.get("baseline")
+        if base:
+            lines.append(f"baseline, {self.settings.get('baseline', {}).get('model', 'least squares')}: "
+                         + ", ".join(f"{w} MSE {base[w]['mse_percent']:.4g} %" for w in ("train", "valid")
+                                     if w in base))
         records = self.metrics.get("records") or []
         if len(records) > 1:
             lines.append(f"{'record':<16}{'role':<7}{'samples':>8}{'MSE %':>10}{'MAX [N]':>11}")
@@ -674,8 +678,7 @@ class Fit:
                              f"min..max [{sp['min']:.4g}, {sp['max']:.4g}]")
         t = self.timings
         if t:
-            lines.append(
-                "time [s]: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in t.items() if k.endswith("_s")))
+            lines.append("time [s]: " + ", ".join(f"{k[:-2]} {v:.2f}" for k, v in t.items() if k.endswith("_s")))
         return "\n".join(lines)
 
     def __repr__(self) -> str:

@@ -173,16 +173,18 @@ def kept_members(scores, drop: float = ENSEMBLE_DROP) -> list:
 #: A fit counts as worse than its baseline when its training score exceeds the
 #: baseline's by more than this fraction.
 BASELINE_MARGIN = 1e-3
+#: How the least-squares Coulomb + viscous + offset baseline is named in tables, figures and warnings.
+BASELINE_LABEL = "least squares (Coulomb + viscous + offset)"
 #: The windows of a baseline's metrics shown beside the fit's.
 BASELINE_WINDOWS = ("train", "valid")
 
 
-def baseline_stage(fit, baseline, *, label: str, advice: str, stacklevel: int = 2):
-    """``fit`` with ``metrics["baseline"]``: the ``"train"`` and ``"valid"`` metrics of
-    ``baseline`` (a reference fit scored like ``fit``, on the same windows), and a
+def baseline_stage(fit, baseline: dict, *, label: str, advice: str, stacklevel: int = 2):
+    """``fit`` with ``metrics["baseline"]``: the ``"train"`` and ``"valid"`` rows of
+    ``baseline`` (the metrics of a reference scored like ``fit``, on the same windows), and a
     [`BaselineWarning`][jaxfric.motion.BaselineWarning] when ``fit`` is worse on its training data
     ([`warn_if_worse`][jaxfric.pipeline.warn_if_worse])."""
-    rows = {w: baseline.metrics[w] for w in BASELINE_WINDOWS if w in baseline.metrics}
+    rows = {w: baseline[w] for w in BASELINE_WINDOWS if baseline.get(w) is not None}
     fit = fit.replace(metrics={**fit.metrics, "baseline": rows})
     warn_if_worse(fit, label=label, advice=advice, stacklevel=stacklevel + 1)
     return fit

@@ -30,7 +30,7 @@ LOOKUP = {
     "force_balance": {"resolve_keys": identify_api, "global_search": identify_stages,
                       "solver_stages": identify_stages, "history": identify_stages,
                       "key_record": identify_stages, "best_member": identify_stages,
-                      "assess_fit": identify_api},
+                      "baseline_stage": identify_api, "assess_fit": identify_api},
     "motion": {name: motion_api for name in ("resolve_keys", "global_search", "solver_stages", "history",
                                              "key_record", "best_member", "baseline_stage", "assess_fit")},
 }
@@ -162,7 +162,7 @@ def test_baseline_stage_puts_the_baseline_beside_the_fit_and_warns_when_the_fit_
         base = fit.replace(metrics={"train": {metric: factor * mine}, "valid": {metric: 7.0}, "other": 1})
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            out = pipeline.baseline_stage(fit, base, label="reference", advice="try again")
+            out = pipeline.baseline_stage(fit, base.metrics, label="reference", advice="try again")
         got = [str(w.message) for w in caught if issubclass(w.category, BaselineWarning)]
         assert out.metrics["baseline"] == {"train": {metric: factor * mine}, "valid": {metric: 7.0}}
         assert {k: v for k, v in out.metrics.items() if k != "baseline"} == {
@@ -170,10 +170,10 @@ def test_baseline_stage_puts_the_baseline_beside_the_fit_and_warns_when_the_fit_
         assert len(got) == int(worse)
         if worse:
             assert f"{mine:.4g} {unit} against {factor * mine:.4g} {unit}" in got[0] and "reference" in got[0]
-    if problem == "motion":  # identify_motion runs it on its least-squares baseline
-        (args, _, out), = calls["baseline_stage"]
-        assert out.metrics["baseline"] == {w: args[1].metrics[w] for w in ("train", "valid")}
-        assert out.metrics["baseline"] == fit.metrics["baseline"]
+    # each entry point runs it on its least-squares baseline
+    (args, _, out), = calls["baseline_stage"]
+    assert out.metrics["baseline"] == {w: args[1][w] for w in ("train", "valid")}
+    assert out.metrics["baseline"] == fit.metrics["baseline"]
 
 
 @pytest.mark.parametrize("problem", PROBLEMS)

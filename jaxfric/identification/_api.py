@@ -28,9 +28,10 @@ from ._data import as_record, as_records  # noqa: F401  (re-exported: _api.as_re
 from ._objective import search_dtype
 from ._refine import GradientRefinement, as_refinement
 from .._timing import Stopwatch
-from ..pipeline import check_solver
+from ..pipeline import BASELINE_LABEL, baseline_stage, check_solver
 from .stages import (
     box_stage,
+    least_squares_baseline,
     check_theta0,
     fit_stage,
     global_stage,
@@ -126,6 +127,11 @@ def default_solver(model: AbstractFrictionModel, method: str = "jaxfric") -> Abs
     if fast_pipeline(model, method):
         return MAPSO(lattice_size=8, num_generations=FAST_GENERATIONS_BLACK_BOX)
     return paper_solver(model)
+
+
+#: What a force-balance fit worse than the baseline should try ([`jaxfric.pipeline.warn_if_worse`][jaxfric.pipeline.warn_if_worse]).
+BASELINE_ADVICE = ("the search did not reach its optimum or the model cannot express the baseline: use the "
+                   "baseline, another key, a longer search (solver=...) or a gradient stage (refine=...)")
 
 
 def _check_method(method) -> str:
@@ -254,6 +260,13 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
     (``benchmarks/results/peers_gpu.md``). For a single fit on a GPU machine, use
     ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
 
+    The baseline (`jaxfric.pipeline`): every fit carries the least-squares Coulomb + viscous +
+    offset solution on the same training windows, scored the same way, in
+    ``fit.metrics["baseline"]`` (``"train"``, ``"valid"``; its parameters in
+    ``fit.settings["baseline"]``) and in ``fit.summary()``; a fit whose training MSE exceeds
+    the baseline's warns with both numbers ([`BaselineWarning`][jaxfric.motion.BaselineWarning]): such a fit has
+    not earned its parameters.
+
     Parameters on a bound: for physical models every parameter that ends on an edge
     of its search box is named with a [`BoundWarning`][jaxfric.identification.BoundWarning] (which box entry to widen,
     e.g. ``box={"vs": ...}``) and in ``fit.diagnostics["on_bound"]``; parameters the model
@@ -291,10 +304,13 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
         refined, refine_timings = gradient_stage(
             refine, objective, sol.value, bounds, dtype, ensemble=keys.members is not None,
             progress=progress, compiler_options=compiler_options)
+        base = least_squares_baseline(records)
         fit = fit_stage(model, records, bounds, objective, solver, sol, refined, keys,
                         settings={"dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
-                                  "method": method},
+                                  "method": method,
+                                  "baseline": {"model": BASELINE_LABEL, "params": base["params"]}},
                         refine=refine, theta0_given=theta0 is not None)
+        fit = baseline_stage(fit, base, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
     fit = assess_fit(fit, records)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**timings, **refine_timings, "total_s": total.wall_s})
 

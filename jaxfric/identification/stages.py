@@ -8,6 +8,7 @@ docs/algorithms.md §11. ``identify`` is this sequence::
     found     = global_stage(objective, solver, bounds, keys, ...)   # derivative-free (steps 5-6)
     polished  = gradient_stage(refine, objective, found, bounds, ...) # optional (step 7)
     fit       = fit_stage(...)                                       # metrics, diagnostics (step 8)
+    baseline  = least_squares_baseline(records)                      # beside the fit (jaxfric.pipeline)
 
 Every stage takes and returns plain values (a [`RecordSet`][jaxfric.identification.RecordSet], a [`Bounds`][jaxfric.identification.stages.Bounds],
 an [`Objective`][jaxfric.identification.stages.Objective], a [`jaxfric.Solution`][jaxfric.optim.Solution], a `RefineOutcome`), so each
@@ -38,7 +39,7 @@ import numpy as np
 from .. import _xla
 from ..fit import Fit, model_config, model_name, predict
 from ..metrics import friction_metrics
-from ..models import AbstractFrictionModel
+from ..models import AbstractFrictionModel, Coulomb
 from ..optim import AbstractSolver, Solution
 from ..pipeline import Keys, best_member, global_search, history, key_record, solver_stages
 from ..pipeline import resolve_keys  # noqa: F401  (the key stage, with identify's: stages.resolve_keys)
@@ -49,8 +50,9 @@ from ._pooled import PooledOutputErrorCost, pooled_cost_data
 from ._refine import GradientRefinement, RefineOutcome, refine_impl, refine_many, result_name
 from .._timing import Stopwatch
 
-__all__ = ["Bounds", "Objective", "box_stage", "ensemble_batching", "fit_stage", "global_stage",
-           "gradient_stage", "objective_stage", "records_stage", "refine_batching"]
+__all__ = ["BASELINE_MODEL", "Bounds", "Objective", "box_stage", "ensemble_batching", "fit_stage",
+           "global_stage", "gradient_stage", "least_squares_baseline", "objective_stage", "records_stage",
+           "refine_batching"]
 
 
 # ------------------------------------------------------------------ records
@@ -258,6 +260,27 @@ def gradient_stage(settings: GradientRefinement | None, objective: Objective, th
                               progress=progress, compiler_options=options)
         out = jax.block_until_ready(out)
     return out, {"refine_compile_s": sw.compile_s, "refine_run_s": sw.run_s}
+
+
+# ----------------------------------------------------------------- baseline
+#: The least-squares baseline every force-balance fit is shown beside: Coulomb + viscous +
+#: offset, ``F = Fc tanh(v / v_eps) + sigma2 v + F_off`` (docs/algorithms.md §13.1).
+BASELINE_MODEL = Coulomb(offset=True)
+
+
+def least_squares_baseline(records: RecordSet) -> dict:
+    """The least-squares baseline's §6 metrics, scored like a fit's (`record_metrics`).
+
+    [`BASELINE_MODEL`][jaxfric.identification.stages.BASELINE_MODEL]'s exact least-squares
+    solution on the pooled training windows (`Coulomb.fit_least_squares`, §13.1), its
+    friction on every record (the least-squares projection, [`Coulomb.regressors`][jaxfric.models.Coulomb.regressors];
+    NumPy, nothing to compile); ``"params"`` holds the solution.
+    """
+    model = BASELINE_MODEL
+    params = model.fit_least_squares(records.train_velocity, records.train_friction)
+    predictions = [sum(params[n] * col for n, col in model.regressors(r.velocity).items())
+                   for r in records.records]
+    return {**record_metrics(predictions, records), "params": params}
 
 
 # ------------------------------------------------------------------ the fit

@@ -107,6 +107,18 @@ class Coulomb(AbstractPhysicalModel):
                              f"got {v.shape} and {f.shape}")
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
             raise ValueError("velocity and friction must be finite (no NaN or inf)")
+        cols = self.regressors(v)
+        names = list(cols)
+        coef, *_ = np.linalg.lstsq(np.stack([cols[n] for n in names], axis=1), f, rcond=None)
+        return {n: float(c) for n, c in zip(names, coef)}
+
+    def regressors(self, velocity: ArrayLike) -> dict[str, np.ndarray]:
+        """The columns of the model's linear form, ``F = sum_i params[i] * columns[i]``
+        (NumPy, float64, the model's own smoothed sign ``t = tanh(v / v_eps)``): the
+        regressors [`fit_least_squares`][jaxfric.models.Coulomb.fit_least_squares] solves for, and
+        with its solution the least-squares prediction itself (a negative viscous slope
+        included)."""
+        v = np.asarray(velocity, dtype=float).ravel()
         t = np.tanh(v / self.v_eps)
         cols: dict[str, np.ndarray] = {}
         if self.asymmetric:
@@ -120,9 +132,7 @@ class Coulomb(AbstractPhysicalModel):
                 cols["sigma2"] = v
         if self.offset:
             cols["F_off"] = np.ones_like(v)
-        names = list(cols)
-        coef, *_ = np.linalg.lstsq(np.stack([cols[n] for n in names], axis=1), f, rcond=None)
-        return {n: float(c) for n, c in zip(names, coef)}
+        return cols
 
 
 class Stribeck(AbstractPhysicalModel):

@@ -828,7 +828,7 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
             metrics={**metrics, "num_params": int(y.size), "cost": j_final},
             settings={**fit.settings, "motion": {**fit.mechanics, "baseline": {
                 "M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}}})
-        fit = baseline_stage(fit, base, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
+        fit = baseline_stage(fit, base.metrics, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
         data = data if data is not None else _concatenated(tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**fit.timings, "total_s": total.wall_s})

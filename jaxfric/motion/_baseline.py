@@ -15,12 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..models import AbstractPhysicalModel, Coulomb
+from ..pipeline import BASELINE_LABEL
 from ..rig.emps import IDIMResult, idim_ls
 
 __all__ = ["BASELINE_LABEL", "baseline_model", "least_squares", "least_squares_start"]
 
-#: How the baseline is named in tables and figures.
-BASELINE_LABEL = "least squares (Coulomb + viscous + offset)"
 #: Samples dropped at each end of a record: the zero-phase filter's edges.
 EDGE = 20
 
