@@ -24,12 +24,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, emps_file, machine, results_dir, write_report  # noqa: E402
+from _harness import add_output_arguments, emps_file, fit_cells, machine, results_dir, timed, write_report  # noqa: E402
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -95,20 +94,13 @@ def solvers(model_name: str, n: int, generations: int, nm_evals: int):
 def run(data_name, data, model_name, keys, generations, nm_evals):
     """Yields one row per (global stage, key)."""
     model = jf.models.get(model_name, **NAMED_MODEL_DEFAULTS.get(model_name, {}))
-    if model.num_params > LARGE_MODEL_PARAMS:
-        generations = generations[1]
-    else:
-        generations = generations[0]
-    budget, chains = solvers(model_name, model.num_params, generations, nm_evals)
+    budget, chains = solvers(model_name, model.num_params, generations[model.num_params > LARGE_MODEL_PARAMS],
+                             nm_evals)
     for label, solver in chains.items():
         for i, k in enumerate(keys):
-            t0 = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                fit = jf.identify(model_name, data, solver=solver, key=int(k))
-            wall = time.perf_counter() - t0
-            valid = (fit.metrics.get("valid") or {}).get("mse_percent", float("nan"))
-            train = (fit.metrics.get("train") or {}).get("mse_percent", float("nan"))
+            with warnings.catch_warnings(action="ignore", category=RuntimeWarning):
+                fit, wall, _ = timed(lambda: jf.identify(model_name, data, solver=solver, key=int(k)))
+            valid, train = fit_cells(fit)["valid"], fit_cells(fit)["train"]
             row = {
                 "data": data_name, "model": model_name, "global": label, "key": int(k),
                 "budget_global": budget, "num_evals_global": fit.stages[0]["num_evals"],
@@ -152,21 +144,14 @@ def write(out: Path, rows, a):
     for r in rows:
         groups.setdefault((r["data"], r["model"], r["global"]), []).append(r)
 
-    def mm(vals, fmt):
-        v = np.asarray(vals, float)
-        return f"{fmt(np.median(v))} [{fmt(v.min())} – {fmt(v.max())}]"
+    def mm(key):  # median [min – max] over keys
+        v = np.asarray([r[key] for r in rs], float)
+        return f"{np.median(v):.3g} [{v.min():.3g} – {v.max():.3g}]"
 
-    g3 = lambda x: f"{x:.3g}"  # noqa: E731
-
-    def evals(rs):
-        v = sorted({int(r["num_evals_global"]) for r in rs})
-        return str(v[0]) if len(v) == 1 else f"{v[0]}–{v[-1]}"
     for (d, m, g), rs in groups.items():
-        lines.append(
-            f"| {d} | {m} | {g} | {evals(rs)} | "
-            f"{mm([r['valid_mse_pct'] for r in rs], g3)} | {mm([r['train_mse_pct'] for r in rs], g3)} | "
-            f"{mm([r['J_global'] for r in rs], g3)} | {mm([r['J'] for r in rs], g3)} | "
-            f"{np.median([r['run_s'] for r in rs]):.1f} |")
+        ev = sorted({int(r["num_evals_global"]) for r in rs})
+        lines.append(f"| {d} | {m} | {g} | {ev[0] if len(ev) == 1 else f'{ev[0]}–{ev[-1]}'} | {mm('valid_mse_pct')} | "
+                     f"{mm('train_mse_pct')} | {mm('J_global')} | {mm('J')} | {np.median([r['run_s'] for r in rs]):.1f} |")
     write_report(out, "global_stages", lines, rows, float_format="", echo=False)
 
 
