@@ -6,7 +6,10 @@ Two ways to share it, each with two local CPU processes writing into one folder:
   127.0.0.1, the runs split by ``jax.process_index()``, a barrier at the end and the
   table written by process 0 (XLA:CPU's cross-process collectives are gloo's);
 * a job array without JAX's runtime: ``process_index`` / ``process_count`` given, as
-  ``jaxfric sweep --process-index $SLURM_ARRAY_TASK_ID`` does.
+  ``jaxfric sweep --process-index $SLURM_ARRAY_TASK_ID`` does. Its two processes are this
+  test process (index 0) and a subprocess (index 1), running at the same time: a job array's
+  tasks are independent processes, and one fewer start of Python and JAX saves the suite
+  about 3 s of CPU.
 
 This file is also the worker script (``python tests/test_multihost.py worker ...``), so the
 records and the solver are defined once. The subprocesses' timeouts are subprocess
@@ -100,22 +103,30 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _two_processes(mode: str, out: Path):
+def _two_processes(mode: str, out: Path, *, here: bool = False):
+    """``(exit status, stdout, stderr)`` of the two processes, by index. ``here``: process 0
+    is this one (the job array only: JAX's distributed runtime cannot start in a process
+    that has already computed), process 1 a subprocess running at the same time."""
     from processes import jax_subprocess
 
     env = dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="")
     port = _free_port()
     cmd = [sys.executable, str(Path(__file__).resolve()), "worker", mode, str(out)]
+    first = 1 if here else 0
     with jax_subprocess():
         procs = [subprocess.Popen(cmd + [str(i), "2", str(port)], env=env, stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True) for i in range(2)]
+                                  stderr=subprocess.PIPE, text=True) for i in range(first, 2)]
         try:
+            mine = []
+            if here:  # what _worker("array", ...) does and prints, in this process
+                result = run_sweep(out, process_index=0, process_count=2)
+                mine = [(0, f"computed {[run.index for run in result.computed]}\n", "")]
             outs = [p.communicate(timeout=600) for p in procs]
         finally:
             for p in procs:
                 if p.poll() is None:
                     p.kill()
-    return [(p.returncode, o, e) for p, (o, e) in zip(procs, outs)]
+    return mine + [(p.returncode, o, e) for p, (o, e) in zip(procs, outs)]
 
 
 def _rows(result_rows):
@@ -155,7 +166,7 @@ def test_job_array_two_processes_equal_one(single, tmp_path):
     from jaxfric.sweeps import read_table
 
     out = tmp_path / "array"
-    _check_against_single(single, out, _two_processes("array", out))
+    _check_against_single(single, out, _two_processes("array", out, here=True))
     # the later process's table holds whatever was finished when it ended; a rerun in one
     # process collects every run without computing any
     again = run_sweep(out, process_index=0, process_count=1)
