@@ -34,7 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
 from _harness import (add_output_arguments, cell, command, friction_record, machine, markdown_table,  # noqa: E402
-                      read_csv, results_dir, skipped, timed, write_csv, write_report)
+                      read_csv, results_dir, skipped, tagged, timed, write_csv, write_report)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -56,8 +56,7 @@ def parse(argv=None):
     p.add_argument("--rollouts", action="store_true",
                    help="also time the cost of P candidates at once (the floor of the ratios)")
     p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
-    p.add_argument("--tag", default="", help="suffix of the result files (e.g. gpu)")
-    add_output_arguments(p, "tiny budgets (smoke test)")
+    add_output_arguments(p, "tiny budgets (smoke test)", tag=True)
     p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
     p.add_argument("--append", action="store_true",
                    help="keep the rows of the existing result files (a row of the same model and K "
@@ -186,20 +185,28 @@ def _median_cpu(fn, reps: int) -> float:
     return statistics.median(ts)
 
 
-def rollout_costs(model_name: str, data, reps: int) -> list[dict]:
-    """CPU time of the global stage's evaluation (J of P candidates at once, on the data
-    that stage sees) per candidate, and for the networks of the gradient stage's J and
-    gradient for 1 and K networks on the whole training window."""
+def _stages(model_name: str, data):
+    """``identify``'s default plan of ``model_name`` on ``data``, as its own stage functions
+    see it: ``(model, solver, refine, box, objective)``."""
     import jax.numpy as jnp
 
     from jaxfric.identification import stages
     from jaxfric.identification._api import _plan, resolve_model
 
     model = resolve_model(model_name, None)
-    _, refine, head = _plan(model, "jaxfric", None, None)
+    solver, refine, head = _plan(model, "jaxfric", None, None)
     records = stages.records_stage(data)
-    bounds = stages.box_stage(model, records)
-    obj = stages.objective_stage(model, records, jnp.float32, head)
+    return (model, solver, refine, stages.box_stage(model, records),
+            stages.objective_stage(model, records, jnp.float32, head))
+
+
+def rollout_costs(model_name: str, data, reps: int) -> list[dict]:
+    """CPU time of the global stage's evaluation (J of P candidates at once, on the data
+    that stage sees) per candidate, and for the networks of the gradient stage's J and
+    gradient for 1 and K networks on the whole training window."""
+    import jax.numpy as jnp
+
+    model, _, refine, bounds, obj = _stages(model_name, data)
     lo, hi = bounds.lower, bounds.upper
     rng = np.random.default_rng(0)
     thetas = jnp.asarray(lo + (hi - lo) * rng.random((max(ROLLOUT_BATCHES), lo.size)), jnp.float32)
@@ -231,13 +238,8 @@ def stage_costs(model_name: str, data, k: int) -> list[dict]:
     import jax.numpy as jnp
 
     from jaxfric.identification import stages
-    from jaxfric.identification._api import _plan, resolve_model
 
-    model = resolve_model(model_name, None)
-    solver, refine, head = _plan(model, "jaxfric", None, None)
-    records = stages.records_stage(data)
-    bounds = stages.box_stage(model, records)
-    obj = stages.objective_stage(model, records, jnp.float32, head)
+    _, solver, refine, bounds, obj = _stages(model_name, data)
     keys = jax.random.split(jax.random.key(7), k)
 
     def run(members):
@@ -342,33 +344,18 @@ def main(argv=None):
         return skipped("ensembles", desc)
     out = results_dir(args.out, quick=args.quick)
     rows, floor, costs = [], [], []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with warnings.catch_warnings(action="ignore"):
         for model in args.models.split(","):
             for k in (int(s) for s in args.sizes.split(",")):
                 row = measure(model, data, k, args.rounds, args.quick, args.loop_fits)
                 rows.append(row)
                 print(f"{model} K={k}: one fit {row['one_fit_s']:.2f} s, ensemble {row['ensemble_s']:.2f} s "
-                      f"({row['ensemble_over_one']:.2f}x one fit, {row['ensemble_over_one_cpu']:.2f}x in CPU "
-                      f"time; global stage {row['global_over_one']:.2f}x, gradient stage "
-                      f"{row['gradient_over_one']:.2f}x; loop/ensemble {row['loop_over_ensemble']:.2f}), "
-                      f"members' max rel dJ {row['member_max_rel_dJ']:.2g}, bitwise "
-                      f"{row['global_bitwise']}/{row['theta_bitwise']} of {row['members_checked']}",
-                      flush=True)
+                      f"({row['ensemble_over_one']:.2f}x, {row['ensemble_over_one_cpu']:.2f}x in CPU time)", flush=True)
             if args.rollouts and ":" not in model:
                 floor += rollout_costs(model, data, reps=3 if args.quick else 9)
-                for k in (int(s) for s in args.sizes.split(",")):
-                    if k > 1 and not args.quick:
-                        new = stage_costs(model, data, k)
-                        costs += new
-                        for c in new:
-                            print(f"  {c['model']} {c['stage']} stage, K={c['K']}: {c['ratio']:.2f}x one "
-                                  "in CPU time", flush=True)
-                for f in floor:
-                    if f["model"] == model:
-                        print(f"  {f['what']}, P={f['P']}: {f['us_per_candidate']:.1f} us per candidate",
-                              flush=True)
-    stem = f"ensembles_{args.record}" + (f"_{args.tag}" if args.tag else "")
+                costs += [c for k in (int(s) for s in args.sizes.split(",")) if k > 1 and not args.quick
+                          for c in stage_costs(model, data, k)]
+    stem = tagged(f"ensembles_{args.record}", args.tag)
     runs = [f"`{command('ensembles.py')}`" + (f": {args.note}" if args.note else "")]
     notes = out / f"{stem}.runs"
     if args.append:
