@@ -32,7 +32,6 @@ num_evals``, [`AbstractSolver`][jaxfric.optim.AbstractSolver]) with none. So
 
 from __future__ import annotations
 
-import functools
 from typing import Any, Callable
 
 import equinox as eqx
@@ -55,7 +54,7 @@ from ._base import (
     uniform_in_box,
 )
 from .contract import AbstractLocal, AbstractStartDraws, Capabilities
-from .rounds import Batch, Scan, drive, relay, skipped
+from .rounds import Batch, drive, relay, skipped
 
 _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
 
@@ -104,23 +103,6 @@ def _take(tree, i):
 
 def _tree_select(pred, a, b):
     return jax.tree_util.tree_map(lambda u, v: jnp.where(pred, u, v), a, b)
-
-
-def _trial_round(trials, restart, rules, carry, i):
-    """Round ``i`` of a step's sequential trial points, as rounds: the reflection
-    (``i = 0``, needed unless a restart is due), then the second point that
-    ``rules(f_r)`` picks, only where needed (``i = 1``). Both rounds evaluate one point
-    through one call of the objective (a ``lax.scan`` of two), so a compiled step holds
-    the objective once for its trials, not twice (issue 47); the points and values are
-    the sequential rule's, to the bit. ``carry``: ``((f_r, aux_r), (f_2, aux_2))``."""
-    (f_r, aux_r), (f_2, aux_2) = carry
-    _, _, _, second, need_2 = rules(f_r)
-    first = i == 0
-    x = jnp.where(first, trials[0], trials[second])
-    f, aux = yield Batch(x[None], jnp.where(first, ~restart, need_2), split=False)
-    f, aux = f[0], _take(aux, 0)
-    return ((jnp.where(first, f, f_r), _tree_select(first, aux, aux_r)),
-            (jnp.where(first, f_2, f), _tree_select(first, aux_2, aux)))
 
 
 def _no_aux(rounds):
@@ -329,30 +311,25 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         coef = jnp.asarray([rho, rho * chi, rho * gamma, -gamma], S.dtype)
         trials = jnp.clip(centroid[None] + coef[:, None] * d[None], lower[None], upper[None])
 
-        def rules(f_r):
-            """Where the reflected value ``f_r`` falls: expand, accept, outside contraction,
-            the second trial point's index, and whether it is needed."""
-            expand = f_r < f_best
-            accept_r = (f_r >= f_best) & (f_r < f_second)
-            outside = (f_r >= f_second) & (f_r < f_worst)
-            second = jnp.where(expand, 1, jnp.where(outside, 2, 3))
-            return expand, accept_r, outside, second, ~restart & ~accept_r
-
         # Nelder–Mead's few points are evaluated whole (not split over devices), as
         # optimistix's own step evaluates them
+        f_t, aux_t = yield Batch(trials if self.batched_trials else trials[:1], ~restart,
+                                 split=False)
+        f_r, aux_r = f_t[0], _take(aux_t, 0)
+
+        expand = f_r < f_best
+        accept_r = (f_r >= f_best) & (f_r < f_second)
+        outside = (f_r >= f_second) & (f_r < f_worst)
+        second = jnp.where(expand, 1, jnp.where(outside, 2, 3))
+        x_2 = trials[second]
+        need_2 = ~restart & ~accept_r
         if self.batched_trials:
-            f_t, aux_t = yield Batch(trials, ~restart, split=False)
-            f_r, aux_r = f_t[0], _take(aux_t, 0)
-            expand, accept_r, outside, second, need_2 = rules(f_r)
             f_2, aux_2 = f_t[second], _take(aux_t, second)
             trial_evals = jnp.where(restart, 0, 4)
         else:
-            (f_r, aux_r), (f_2, aux_2) = yield Scan(
-                functools.partial(_trial_round, trials, restart, rules),
-                ((jnp.asarray(jnp.inf, F.dtype), state.aux),) * 2, jnp.arange(2), 2)
-            expand, accept_r, outside, second, need_2 = rules(f_r)
+            f_2v, aux_2v = yield Batch(x_2[None], need_2, split=False)
+            f_2, aux_2 = f_2v[0], _take(aux_2v, 0)
             trial_evals = jnp.where(restart, 0, 1 + _i32(need_2))
-        x_2 = trials[second]
 
         # Lagarias rules: greedy minimisation on expansion, then contractions.
         take_e = expand & (f_2 < f_r)
