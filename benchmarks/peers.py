@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
 from _harness import (Case, add_output_arguments, cell, machine, markdown_table, results_dir,  # noqa: E402
-                      run_round_robin, write_report)
+                      run_round_robin, tagged, write_report)
 from baselines import (elman_rollout_loop, elman_rollout_vectorised, lugre_numpy_hoisted,  # noqa: E402
                        lugre_numpy_per_step, lugre_python_loop)
 
@@ -157,15 +157,14 @@ def report(rows: list[dict], quick: bool, wall: float) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_output_arguments(p, "fewer rounds, short loops (smoke test)")
-    p.add_argument("--tag", default="", help="suffix of the output files, e.g. gpu -> peers_gpu.md")
+    add_output_arguments(p, "fewer rounds, short loops (smoke test)", tag=True)
     a = p.parse_args(argv)
     t0 = time.perf_counter()
     measured = cases(a.quick)
     run_round_robin(measured, 3 if a.quick else 15)
     rows = rows_of(measured)
     out = results_dir(a.out, quick=a.quick)
-    write_report(out, "peers" + (f"_{a.tag}" if a.tag else ""), report(rows, a.quick, time.perf_counter() - t0), rows)
+    write_report(out, tagged("peers", a.tag), report(rows, a.quick, time.perf_counter() - t0), rows)
     return 0
 
 
