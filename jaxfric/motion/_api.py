@@ -871,10 +871,11 @@ def _costs(model, layout, search, tr_records, scalers, mass0, dtype, error, hori
                 "mass": jnp.asarray(mass0, dtype), "inv_var_x": jnp.asarray(1.0 / np.var(x_tr), dtype),
                 "inv_var_v": jnp.asarray(1.0 / max(np.var(v_tr), 1e-300), dtype),
                 "scalers": jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), scalers)}
-        residuals = MotionCost(model, layout, error, None if horizon is None else int(horizon))
+        cost = MotionCost(model, layout, error, None if horizon is None else int(horizon))
         search = MotionSearch(search.particles, search.generations, search.global_window, search.lead,
                               (None,), (sum(search.steps),), search.rtol)
-        return residuals, residuals, free, free, lambda h: free, search
+        # Levenberg–Marquardt needs the terms of J, not J itself
+        return cost.residuals, cost, free, free, lambda h: free, search
     residuals = ShootingResiduals(model, layout)
     free = _pooled(tr_records, dtype, scalers, mass0)
     glob = _pooled(tr_records, dtype, scalers, mass0, lead=search.lead,
