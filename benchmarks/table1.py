@@ -33,7 +33,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench table1`
-from _harness import machine, read_csv, results_dir, write_csv, x64  # noqa: E402
+from _harness import add_output_arguments, machine, pyplot, read_csv, results_dir, write_csv, x64  # noqa: E402
 
 x64()
 import jax  # noqa: E402
@@ -82,25 +82,14 @@ def summarise(label, fn_name, dim, sol, compile_s, run_s):
     f = np.asarray(sol.f, dtype=np.float64)
     evals = np.asarray(sol.stats["num_evals"])
     e2s = evals_to_success(sol)
-    return {
-        "dim": dim,
-        "function": fn_name,
-        "solver": label,
-        "mean": float(np.mean(f)),
-        "std": float(np.std(f, ddof=1)) if f.size > 1 else 0.0,
-        "variance": float(np.var(f, ddof=1)) if f.size > 1 else 0.0,
-        "best": float(np.min(f)),
-        "worst": float(np.max(f)),
-        "success": float(np.mean(f <= SUCCESS)),
-        "solved": int(np.sum(f <= SUCCESS)),
-        "runs": int(f.size),
-        "evals_to_success": float(np.nanmedian(e2s)) if np.any(np.isfinite(e2s)) else float("nan"),
-        "evals": int(np.round(np.mean(evals))),
-        "evals_max": int(np.max(evals)),
-        "compile_s": compile_s,
-        "batch_s": run_s,
-        "per_run_s": run_s / f.size,
-    }
+    return {"dim": dim, "function": fn_name, "solver": label, "mean": float(np.mean(f)),
+            "std": float(np.std(f, ddof=1)) if f.size > 1 else 0.0,
+            "variance": float(np.var(f, ddof=1)) if f.size > 1 else 0.0,
+            "best": float(np.min(f)), "worst": float(np.max(f)), "success": float(np.mean(f <= SUCCESS)),
+            "solved": int(np.sum(f <= SUCCESS)), "runs": int(f.size),
+            "evals_to_success": float(np.nanmedian(e2s)) if np.any(np.isfinite(e2s)) else float("nan"),
+            "evals": int(np.round(np.mean(evals))), "evals_max": int(np.max(evals)),
+            "compile_s": compile_s, "batch_s": run_s, "per_run_s": run_s / f.size}
 
 
 def median_history(sol):
@@ -117,13 +106,9 @@ def variants(a, dim):
     paper = jf.mapso_nmds(num_generations=a.generations)
     g, sl = a.restart_generations, a.restart_sl_generations
     swarm_evals = jf.MAPSO(num_generations=g, sl_generations=sl).evaluations()
-    restarted = jf.mapso_nmds(
-        num_generations=g,
-        sl_generations=sl,
-        nm_restarts=a.nm_restarts,
-        nm_max_evals=max(1, a.budget - swarm_evals - (dim + 1)),  # a last step may add n + 1
-        nm_max_steps=10 * a.budget,  # the evaluation budget binds, not the step cap
-    )
+    restarted = jf.mapso_nmds(num_generations=g, sl_generations=sl, nm_restarts=a.nm_restarts,
+                              nm_max_evals=max(1, a.budget - swarm_evals - (dim + 1)),  # a last step may add n + 1
+                              nm_max_steps=10 * a.budget)  # the evaluation budget binds, not the step cap
     rows = [("MAPSO-NMDS (paper)", paper), ("MAPSO-NMDS + NM restarts", restarted)]
     if not a.no_maga:
         rows.append(("MAPSO-NMDS (sR=0.2, MAGA)", jf.mapso_nmds(num_generations=a.generations, sl_radius=0.2)))
@@ -147,9 +132,8 @@ def main(argv=None):
     p.add_argument("--budget", type=int, default=200_000, help="restart row: total evaluations per run")
     p.add_argument("--functions", default=",".join(F.PAPER_TABLE1 + ("rastrigin",)))
     p.add_argument("--seed", type=int, default=2017)
-    p.add_argument("--quick", action="store_true", help="D=10, 5 runs, 100 generations")
+    add_output_arguments(p, "D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
-    p.add_argument("--out", default=None)
     p.add_argument("--rows", choices=("all", "swarm", "cmaes"), default="all",
                    help="swarm: the MAPSO-NMDS rows and PSO; cmaes: the paper row (it sets the "
                         "budget) and the CMA-ES rows; split to run as separate processes, then --merge")
@@ -170,7 +154,6 @@ def main(argv=None):
     if swarm.evaluations() >= a.budget:
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
     out = results_dir(a.out, quick=a.quick)
-    out.mkdir(parents=True, exist_ok=True)
     if a.merge:
         a.load = a.load if a.load is not None else float("nan")
         return merge(a, out)
@@ -193,16 +176,11 @@ def main(argv=None):
             if a.rows != "swarm" and importlib.util.find_spec("evosax"):  # CMA-ES rows at this budget
                 results += evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
-                row = summarise(label, name, dim, sol, c, r)
-                rows.append(row)
+                rows.append(row := summarise(label, name, dim, sol, c, r))
                 curves[(dim, name, label)] = median_history(sol)
-                print(
-                    f"D={dim:2d} {name:11s} {label:27s} mean={row['mean']:.3e} var={row['variance']:.2e} "
-                    f"best={row['best']:.2e} worst={row['worst']:.2e} solved={row['solved']}/{row['runs']} "
-                    f"evals-to-success={row['evals_to_success']:.0f} evals={row['evals']} "
-                    f"(max {row['evals_max']}) compile={c:.1f}s run={r:.1f}s",
-                    flush=True,
-                )
+                print(f"D={dim:2d} {name:11s} {label:27s} mean={row['mean']:.3e} best={row['best']:.2e} "
+                      f"worst={row['worst']:.2e} solved={row['solved']}/{row['runs']} evals={row['evals']} "
+                      f"compile={c:.1f}s run={r:.1f}s", flush=True)
             write_all(out, rows, curves, a, dims)
     print(f"wrote {out / 'table1.md'}, table1.csv, table1_convergence.png")
 
@@ -292,11 +270,7 @@ def write_md(path, rows, a, dims):
 
 
 def plot(path, curves, a):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     order = list(F.PAPER_TABLE1 + tuple(F.REGISTRY))
     names = sorted({k[1] for k in curves}, key=order.index)
     dims = sorted({k[0] for k in curves}, reverse=True)
