@@ -30,9 +30,8 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _harness import (add_output_arguments, cell, emps_file, machine, markdown_table, results_dir,  # noqa: E402
-                      skipped, write_report, x64)
+from _harness import (add_output_arguments, cell, command, emps_file, emps_motion, machine,  # noqa: E402
+                      markdown_table, results_dir, skipped, write_report, x64)
 
 INIT = 20
 TRAIN = 0.7
@@ -104,11 +103,9 @@ def score_row(fit, train, held):
 def run(path, folds, names, quick, on_row, grey=None):
     import jax.numpy as jnp
 
-    from jaxfric.motion import MotionData, MotionSearch, identify_motion
-    from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps
+    from jaxfric.motion import MotionSearch, identify_motion
 
-    rec = load_emps(path)
-    data = MotionData.from_arrays(rec.force, rec.qm, rec.dt, cutoff=EMPS_CUTOFF_HZ)
+    data = emps_motion(path)
     rows = []
     for fold in folds:
         train, held, where = fold_data(data, fold)
@@ -120,8 +117,7 @@ def run(path, folds, names, quick, on_row, grey=None):
             search = MotionSearch(particles=8, generations=4, horizons=(2000, None), steps=(5, 5),
                                   polish=0) if quick else None
             t0 = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with warnings.catch_warnings(action="ignore"):
                 fit = identify_motion(build(name, grey), train, key=0, mass=(50.0, 200.0), train=1.0,
                                       fit_offset=True, dtype=jnp.float64, search=search)
             secs = time.perf_counter() - t0
@@ -174,23 +170,16 @@ def main(argv=None):
     out = results_dir(args.out, quick=args.quick)
     folds = [f.strip().upper() for f in args.folds.split(",") if f.strip()]
     names = [m.strip() for m in args.models.split(",") if m.strip()]
-    for f in folds:
-        if f not in ("A", "B"):
-            raise SystemExit(f"--folds takes A and/or B, got {f!r}")
-    for m in names:
-        if m not in CANDIDATES:
-            raise SystemExit(f"--models takes {', '.join(CANDIDATES)}, got {m!r}")
-    command = "python benchmarks/motion_greybox.py" + (f" --folds {args.folds}" if args.folds != "A,B" else "") \
-        + (f" --models {args.models}" if args.models != ",".join(CANDIDATES) else "") \
-        + (" --quick" if args.quick else "")
+    if not set(folds) <= {"A", "B"} or not set(names) <= set(CANDIDATES):
+        raise SystemExit(f"--folds takes A and/or B, --models of {', '.join(CANDIDATES)}; got "
+                         f"{args.folds!r}, {args.models!r}")
 
     def write(rows):
         splits = sorted({f"Fold {r['fold']}: {r['split']}." for r in rows})
-        write_report(out, "motion_greybox", table(rows, command, splits), rows, echo=False)
+        write_report(out, "motion_greybox", table(rows, command("motion_greybox.py", argv), splits), rows,
+                     echo=False)
 
     grey = {k: getattr(args, k) for k in ("hidden", "bound", "ridge") if getattr(args, k) is not None}
-    for k, v in grey.items():
-        command += f" --{k} {v}"
     run(path, folds, names, args.quick, write, grey)
     print((out / "motion_greybox.md").read_text())
     return 0
