@@ -23,7 +23,7 @@ def test_the_screen_returns_close_after_screen_cycle_widenings(cycle, spreads):
     lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     with jax.enable_x64(True):
         stages = []
-        y, f = screen_free_run(MotionSearch(screen=5, screen_size=8, screen_steps=5, screen_spread=0.2,
+        _, f = screen_free_run(MotionSearch(screen=5, screen_size=8, screen_steps=5, screen_spread=0.2,
                                             screen_cycle=cycle),
                                _Clock(MotionBudget()), _bowl, np.asarray(c), 1.0, lo, hi, c,
                                jax.random.key(0), jnp.float64, stages)

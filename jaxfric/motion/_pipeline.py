@@ -36,7 +36,7 @@ default pipeline therefore grows the simulation horizon:
    free-run-ranked starts (the default since issue 45; keys 0–4 one call each) no key of
    any model ended higher: LuGre 2.090 2.072 2.088 2.170 2.154 mm (4.7 %; was 2.090 2.072
    2.088 2.588 2.273), Coulomb 2.772 2.735 2.804 2.743 2.793 (2.5 %), Stribeck unchanged
-   (6.4 %: the least-squares start wins and no round moves it), GMS 1.885 1.693 2.206 2.370
+   (6.4 %: each key's first rounds lowered its winner, then none did), GMS 1.885 1.693 2.206 2.370
    2.369 (was 1.885 2.480 2.617 2.370 2.587; the lower optimum of key 1 widens the spread
    to 40 %: its screen still lowered J at round 15, while keys 3 and 4 sat in one valley,
    J 8.2e-4 against 4.2e-4, that no round left).
@@ -113,10 +113,11 @@ class MotionSearch(eqx.Module):
             screen's spread returns to ``screen_spread`` instead of growing 4x again (0, the
             default: it keeps growing, up to a quarter of the box). Not a default: on the
             whole EMPS estimation file ``screen_cycle=4`` took Stribeck's training free-run
-            RMSE over keys 0–4 from 2.698 2.731 2.700 2.784 2.617 mm (6.4 %) to 2.595 2.597
+            RMSE over keys 0–4 from 2.698 2.731 2.700 2.784 2.617 mm (6.4 %) to 2.600 2.662
             2.574 2.697 2.617 (4.8 %) and GMS's keys 3 and 4 from 2.370 and 2.369 to 2.224
-            and 2.317 (key 1: 1.693); LuGre lost with a cycle of 3 (4.7 % to 9.1 %, its gain
-            came from the widest draws), and LuGre and Coulomb were not rerun with 4.
+            and 2.317 (key 1: 1.693, unchanged; GMS still ~35 %); LuGre lost with a cycle of
+            3 (4.7 % to 9.1 %, its gain came from the widest draws), and LuGre and Coulomb
+            were not rerun with 4 (docs/motion.md).
     """
 
     particles: int = eqx.field(default=25, static=True)
