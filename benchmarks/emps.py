@@ -27,8 +27,8 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _harness import (add_output_arguments, cell, command, emps_file, machine, markdown_table, results_dir,  # noqa: E402
-                      skipped, write_csv, write_report)
+from _harness import (add_output_arguments, cell, command, emps_file, fit_cells, machine, markdown_table,  # noqa: E402
+                      pyplot, results_dir, skipped, timed, write_csv, write_report)
 from baselines import ls_coulomb_viscous  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -97,15 +97,9 @@ def run_identify(model, data, seed, quick, refine):
 
         kw = {"solver": MAPSO(lattice_size=8, num_generations=QUICK_GENERATIONS),
               "refine": GradientRefinement(method="bfgs", max_steps=10)}
-    t0 = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        fit = identify(model, data, key=seed, **kw)
-    wall = time.perf_counter() - t0
-    t = fit.timings
-    return fit, {"valid": fit.metrics["valid"]["mse_percent"], "train": fit.metrics["train"]["mse_percent"],
-                 "wall_s": wall, "run_s": t.get("run_s", 0.0) + t.get("refine_run_s", 0.0),
-                 "compile_s": t.get("compile_s", 0.0) + t.get("refine_compile_s", 0.0),
+    with warnings.catch_warnings(record=True, action="always") as caught:
+        fit, wall, _ = timed(lambda: identify(model, data, key=seed, **kw))
+    return fit, {**fit_cells(fit), "wall_s": wall,
                  "on_bound": ", ".join(d["name"] for d in fit.diagnostics.get("on_bound", [])),
                  "unidentifiable": ", ".join(str(u).split(":", 1)[0] for u in fit.diagnostics.get("unidentifiable", [])),
                  "warnings": len(caught)}
@@ -139,8 +133,7 @@ def main(argv=None):
         fit, r = run_identify(model, data, args.seed, args.quick, refine)
         r.update(model=label, refine={None: "default (BFGS 500)", False: "none", "lm": "LM"}[refine])
         rows.append(r)
-        with warnings.catch_warnings():  # the record's extremes lie a hair outside the training range
-            warnings.simplefilter("ignore")
+        with warnings.catch_warnings(action="ignore"):  # the extremes lie a hair outside the training range
             preds[label if refine is not False else label + " (no refine)"] = np.asarray(fit.predict(data.velocity))
         print(f"{label:55s} refine {r['refine']:>18s}: valid {r['valid']:.3f} %  train {r['train']:.3f} %  "
               f"wall {r['wall_s']:.1f} s (run {r['run_s']:.1f}, compile {r['compile_s']:.1f})"
@@ -152,11 +145,7 @@ def main(argv=None):
 
 
 def figure(out, data, preds):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     t, f, n = np.asarray(data.t), np.asarray(data.friction), int(data.n_train)
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), constrained_layout=True)
     ax[0].plot(t[n:], f[n:], color="0.6", lw=0.8, label="measured (gtau·vir − M·a)")
