@@ -412,6 +412,8 @@ def real_report(out, proxy, cmd, judges, choices, rows, rescored):
             "over the two other blocks, each simulated from its own first 20 samples" if emps else
             "pneumatic seals: key k trains seal k on the first 80 % of its 1, 5 and 7 bar records; `unseen`: "
             f"{unit} of the held-out 3 bar record (criteria: {unit} of the training records)")
+    if not emps:  # MSE %, not mm
+        choices = [{k.replace("_mm", "_mse_pct"): v for k, v in c.items()} for c in choices]
     cmds = f"`{cmd}`" + (f", then `{cmd} --rescore FITS`" if rescored else "")
     text = [f"# Which judge predicts new excitation ({proxy} proxy, real data)", "",
             f"Command: {cmds}. {head}. Module docstring of benchmarks/motion_judge.py: the criteria.", "",
