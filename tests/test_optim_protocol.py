@@ -549,6 +549,22 @@ def test_the_contract_is_small_and_knows_nothing_of_ask_tell():
             "simplex_from_swarm"} <= jf.optim.AbstractChain.__abstractvars__
 
 
+def test_generational_fields_are_abstract_so_positional_arguments_follow_each_solver():
+    """``num_generations`` is an ``eqx.AbstractVar`` of the generational and swarm bases (a
+    stringified annotation would make it a plain field of the base, the first positional
+    argument of every subclass: ``PSO(30)`` once set 30 generations of 25 particles)."""
+    import dataclasses
+
+    from jaxfric.optim import AbstractGenerational, AbstractSwarm
+
+    assert "num_generations" in AbstractGenerational.__abstractvars__
+    assert "num_generations" in AbstractSwarm.__abstractvars__
+    positional = [f.name for f in dataclasses.fields(jf.PSO) if not f.kw_only]
+    assert positional[:2] == ["num_particles", "num_generations"]
+    assert jf.PSO(30, 7) == jf.PSO(num_particles=30, num_generations=7)
+    assert [f.name for f in dataclasses.fields(jf.MAPSO) if not f.kw_only][0] == "lattice_size"
+
+
 def test_a_64_bit_run_after_a_32_bit_run_of_the_same_problem():
     """The blank carry kept per problem shape is kept per counter dtype too: under
     jax.enable_x64 the counters are int64 while the bounds' arrays are as before (a

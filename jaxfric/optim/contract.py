@@ -11,7 +11,6 @@ read the record or test these types, never ``hasattr``.
 ask/tell is no part of the contract: it is a driver beside [`jaxfric.minimise`][jaxfric.optim.minimise]
 ([`jaxfric.optim.asktell`][jaxfric.optim.asktell]) that runs any solver's rounds."""
 
-from __future__ import annotations
 
 import abc
 import dataclasses

@@ -11,7 +11,6 @@ defines both, and a run driven by ``ask``/``tell`` visits the points
 [`jaxfric.minimise`][jaxfric.optim.minimise] visits for the same key.
 """
 
-from __future__ import annotations
 
 from typing import Any
 
