@@ -372,7 +372,8 @@ fit_offset=True, dtype=float64)` with the default search (docs/motion.md: PSO on
 Levenberg-Marquardt on 5 000-sample shooting segments and on the whole free run, from 3 of the
 swarm's personal bests, 2 more of its points ranked by their whole free-run cost and the
 least-squares start, a 200-step polish of the lowest, then 16 rounds of screening: 64 whole
-free-run costs around the best point per round, Levenberg-Marquardt from the lowest). Member i
+free-run costs around the best point per round, Levenberg-Marquardt from the lowest, the spread
+back to the first after 4 fruitless widenings). Member i
 is the fit of key i. "whole
 file": trained on all 24 841 samples of DATA_EMPS.mat, training free-run RMSE [mm] from the
 first sample; "80 % / tail": trained on the first 19 873 samples, "tail" = the held-back last

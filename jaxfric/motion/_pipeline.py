@@ -111,13 +111,10 @@ class MotionSearch(eqx.Module):
             whole record (0: none).
         screen_cycle: after this many rounds in a row that found nothing lower, the
             screen's spread returns to ``screen_spread`` instead of growing 4x again (0, the
-            default: it keeps growing, up to a quarter of the box). Not a default: on the
-            whole EMPS estimation file ``screen_cycle=4`` took Stribeck's training free-run
-            RMSE over keys 0–4 from 2.698 2.731 2.700 2.784 2.617 mm (6.4 %) to 2.600 2.662
-            2.574 2.697 2.617 (4.8 %) and GMS's keys 3 and 4 from 2.370 and 2.369 to 2.224
-            and 2.317 (key 1: 1.693, unchanged; GMS still ~35 %); LuGre lost with a cycle of
-            3 (4.7 % to 9.1 %, its gain came from the widest draws), and LuGre and Coulomb
-            were not rerun with 4 (docs/motion.md).
+            class default: it keeps growing, up to a quarter of the box; `default_search` uses
+            4 for physical models). On the whole EMPS estimation file, keys 0–4, a cycle of 4
+            lowered or kept every key of LuGre, Coulomb, Stribeck and GMS (a cycle of 3 hurt
+            LuGre); ``benchmarks/results/motion_keys.md`` holds the table, docs/motion.md why.
     """
 
     particles: int = eqx.field(default=25, static=True)
@@ -186,7 +183,7 @@ def default_search(model) -> MotionSearch:
     most 100 steps), from 3 of the swarm's personal bests, 2 more of its points ranked by
     their whole free-run cost (`free_run_ranked`) and the least-squares start; the lowest
     training free-run cost wins, up to 200 more free-run steps polish it, and 16 rounds of
-    screening (`screen_free_run`) follow (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
+    screening (`screen_free_run`, its spread back to the first after 4 fruitless widenings) follow (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
     parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
     gradient stages do the work, coarse to fine: 60 steps on 1 000-sample segments, then 150
     on 5 000. On the EMPS estimation split this took the Elman(10) network's held-back error
@@ -201,7 +198,7 @@ def default_search(model) -> MotionSearch:
     if model.num_params > NETWORK_PARAMS:
         return MotionSearch(horizons=(1000, 5000), steps=(60, 150))
     return MotionSearch(horizons=(5000, None), steps=(60, 100), starts=3, least_squares_start=True, polish=200,
-                        screen=16, free_run_starts=2)
+                        screen=16, free_run_starts=2, screen_cycle=4)
 
 
 @dataclasses.dataclass
