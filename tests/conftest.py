@@ -320,3 +320,21 @@ def make_fit():
                    friction_scaler=None, dt=dt, n_train=n_train, n_samples=n_samples, **{**defaults, **fields})
 
     return build
+
+
+def coulomb_drive(n=600, dt=1e-3):
+    """A Coulomb + viscous axis (Fc 12 N, 60 N s/m, 2.5 kg) driven by two tones, simulated in
+    float64: motion data whose friction is known (tests of identify_motion)."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxfric import models
+    from jaxfric.motion import MotionData, friction_step, simulate_motion
+
+    model = models.Coulomb(v_eps=1e-3)
+    t = np.arange(n) * dt
+    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
+    with jax.enable_x64(True):
+        out = simulate_motion(friction_step(model), jnp.asarray(model.from_physical(Fc=12.0, sigma2=60.0)),
+                              2.5, u, dt, 0.0, 0.0)
+    return MotionData.from_arrays(u, np.asarray(out["x"]), dt)

@@ -10,20 +10,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import coulomb_drive
 from jaxfric import models
-from jaxfric.motion import MotionData, friction_step, identify_motion, simulate_motion
+from jaxfric.motion import identify_motion
 
 
 @pytest.fixture(scope="module")
 def drive():
-    model = models.Coulomb(v_eps=1e-3)
-    n, dt = 600, 1e-3
-    t = np.arange(n) * dt
-    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
-    with jax.enable_x64(True):
-        out = simulate_motion(friction_step(model), jnp.asarray(model.from_physical(Fc=12.0, sigma2=60.0)),
-                              2.5, u, dt, 0.0, 0.0)
-    return MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    return coulomb_drive()
 
 
 @pytest.mark.parametrize("option", [{"horizon": 50}, {"error": "velocity"}])

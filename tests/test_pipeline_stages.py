@@ -10,16 +10,16 @@ from __future__ import annotations
 import warnings
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxfric as jf
+from conftest import coulomb_drive
 from jaxfric import models, pipeline, uncertainty
 from jaxfric._warnings import BaselineWarning
 from jaxfric.identification import _api as identify_api
 from jaxfric.identification import stages as identify_stages
-from jaxfric.motion import MotionData, friction_step, identify_motion, simulate_motion
+from jaxfric.motion import identify_motion
 from jaxfric.motion import _api as motion_api
 
 PROBLEMS = ("force_balance", "motion")
@@ -48,13 +48,7 @@ def _stribeck_record(n=700, n_train=560, dt=1.0 / 128.0):
 
 def _drive_record(n=600, dt=1e-3):
     """A Coulomb + viscous axis (2.5 kg) driven by two tones, simulated in float64."""
-    model = models.Coulomb(v_eps=1e-3)
-    t = np.arange(n) * dt
-    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
-    with jax.enable_x64(True):
-        out = simulate_motion(friction_step(model), jnp.asarray(model.from_physical(Fc=12.0, sigma2=60.0)),
-                              2.5, u, dt, 0.0, 0.0)
-    return MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    return coulomb_drive(n, dt)
 
 
 def _identify(problem, data, **kw):
