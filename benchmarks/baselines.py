@@ -22,8 +22,9 @@ v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_
 :func:`ls_coulomb_viscous`: the least-squares friction baseline every model must beat
 (``emps.py``, ``pipelines.py``, ``pressure_records.py``).
 
-NumPy test functions on a batch of rows (:data:`NUMPY_BATCH`), for the peers that take a
-vectorised objective: pyswarms in ``speed_optim.py``, SciPy's DE and pycma in ``compile_time.py``.
+NumPy test functions on a batch of rows (:func:`numpy_batch`, checked against jaxfric's), for
+the peers that take a vectorised objective: pyswarms in ``speed_optim.py``, SciPy's DE and
+pycma in ``compile_time.py``.
 """
 
 from __future__ import annotations
@@ -31,19 +32,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-__all__ = [
-    "NUMPY_BATCH",
-    "ackley_batch",
-    "elman_rollout_loop",
-    "griewank_batch",
-    "elman_rollout_vectorised",
-    "lugre_numpy_hoisted",
-    "lugre_numpy_per_step",
-    "lugre_python_loop",
-    "rosen_batch",
-    "unpack_elman",
-]
 
 
 def unpack_elman(thetas, neurons: int, output_bias: bool = False, dtype=np.float64) -> dict[str, np.ndarray]:
@@ -153,7 +141,6 @@ def lugre_python_loop(p, v, dt):
     return out
 
 
-# ------------------------------------------------------------- test functions
 def ls_coulomb_viscous(v, f, n=None):
     """Asymmetric Coulomb + viscous + offset, ``F = Fv± v + Fc+ [v>0] − Fc− [v<0] + o``, by
     least squares on the first ``n`` samples (all if None): ``(prediction on all samples,
@@ -165,27 +152,27 @@ def ls_coulomb_viscous(v, f, n=None):
     return A @ coef, coef
 
 
-def rosen_batch(X):
-    return np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
-
-
-def ackley_batch(X):
-    d = X.shape[1]
-    return (-20.0 * np.exp(-0.2 * np.sqrt(np.sum(X * X, axis=1) / d))
-            - np.exp(np.sum(np.cos(2 * np.pi * X), axis=1) / d) + 20.0 + np.e)
-
-
-def griewank_batch(X):
-    i = np.sqrt(np.arange(1, X.shape[1] + 1))
-    return 1.0 + np.sum(X * X, axis=1) / 4000.0 - np.prod(np.cos(X / i), axis=1)
-
-
-#: NumPy versions (a batch of rows at once) for the peers; checked against jaxfric's at start.
+#: NumPy versions (a batch of rows at once) for the peers; :func:`numpy_batch` checks them.
 NUMPY_BATCH = {
-    "rosenbrock": rosen_batch,
-    "ackley": ackley_batch,
-    "griewank": griewank_batch,
+    "rosenbrock": lambda X: np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1),
+    "ackley": lambda X: (-20.0 * np.exp(-0.2 * np.sqrt(np.mean(X * X, axis=1)))
+                         - np.exp(np.mean(np.cos(2 * np.pi * X), axis=1)) + 20.0 + np.e),
+    "griewank": lambda X: 1.0 + np.sum(X * X, axis=1) / 4000.0
+    - np.prod(np.cos(X / np.sqrt(np.arange(1, X.shape[1] + 1))), axis=1),
     "sphere": lambda X: np.sum(X * X, axis=1),
     "schwefel": lambda X: np.sum(np.abs(X), axis=1) + np.prod(np.abs(X), axis=1),
     "rastrigin": lambda X: np.sum(X * X - 10.0 * np.cos(2 * np.pi * X) + 10.0, axis=1),
 }
+
+
+def numpy_batch(name: str):
+    """``NUMPY_BATCH[name]``, first checked against jaxfric's function on random points (float64)."""
+    import jax
+
+    from jaxfric import functions as F
+
+    probe = np.random.default_rng(1).uniform(-2, 2, (4, 5))
+    with jax.enable_x64(True):
+        ref = np.asarray(jax.vmap(F.get(name).fn)(jax.numpy.asarray(probe)))
+    np.testing.assert_allclose(NUMPY_BATCH[name](probe), ref, rtol=1e-9, atol=1e-9)
+    return NUMPY_BATCH[name]
