@@ -439,8 +439,10 @@ def minimise(
             different problem is refused (see [`jaxfric.optim.checkpoint`][jaxfric.optim.checkpoint]).
         checkpoint_every: steps (generations, simplex steps) per chunk.
         compiler_options: XLA options for this run's executable only (never global):
-            ``"auto"`` (see [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``None`` (XLA's
-            defaults) or a dict of XLA option names to values.
+            ``"auto"`` (see [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]),
+            ``"fast-compile"`` (about half the compilation for a new cheap objective, run
+            once; heavier runs are slower), ``None`` (XLA's defaults) or a dict of XLA
+            option names to values.
         warm_start: a [`Solution`][jaxfric.optim.Solution] of an earlier run with the same kind of solver:
             continue it (``solver`` with a larger ``num_generations``, say) instead of
             starting afresh.
