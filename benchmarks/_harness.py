@@ -1,23 +1,14 @@
 """What every benchmark script shares: start-up, data, where results go, timing, tables.
 
-* :func:`results_dir` — the one rule for output folders: ``--out`` when given; otherwise
-  ``benchmarks/results/`` for a full run and ``benchmarks/results/quick/`` (git-ignored)
-  for a ``--quick`` smoke run, so a smoke test never overwrites the committed numbers.
-  :func:`add_output_arguments` adds ``--quick`` and ``--out`` with that rule.
-* :class:`Case` / :func:`run_round_robin` — time implementations side by side, in turn,
-  medians over rounds, so load from other processes on a shared machine hits all alike.
-* :func:`write_csv` / :func:`read_csv` / :func:`markdown_table` / :func:`write_report` —
-  result rows as CSV (and back, to merge runs) and as a Markdown table; a report's ``.md``
-  and ``.csv`` in one call. :func:`command` is the command line a report's header quotes,
-  :func:`cell` / :func:`spread` format its cells, :func:`timed` measures wall and CPU time.
-* Start-up: importing this module puts the checkout's ``jaxfric`` first on ``sys.path``;
-  :func:`x64` switches a script to float64 (the script's choice: the library never does);
-  :func:`emps_file` / :func:`pneumatic` find the real data (``jaxfric.datasets``' folders,
-  no download) or return ``None`` so a script can say so and skip (:func:`skipped`);
-  :func:`friction_record` is the record of ``--record rig|emps|oring``, :func:`emps_motion`
-  the EMPS file as motion data; :func:`machine` is the one-line machine description every
-  report starts with; :func:`fit_cells` an ``identify`` fit's MSE and time cells;
-  :func:`pyplot` matplotlib on the Agg backend.
+Importing this module puts the checkout's ``jaxfric`` first on ``sys.path``. Output folders
+(:func:`results_dir`): ``--out`` when given, else ``benchmarks/results/`` for a full run and
+``benchmarks/results/quick/`` (git-ignored) for a ``--quick`` one, so a smoke test never
+overwrites the committed numbers. Real data (:func:`emps_file`, :func:`pneumatic`) comes from
+``jaxfric.datasets``' folders, never a download, or is ``None`` so a script can skip
+(:func:`skipped`). Timing: :func:`run_round_robin` (implementations in turn, medians over
+rounds, so load from other processes hits all alike), :func:`timed`; tables:
+:func:`write_report`, :func:`markdown_table`, :func:`write_csv` / :func:`read_csv`, and
+:func:`about`, a script's docstring as its report's description.
 
 A script starts with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under
 ``jaxfric bench`` the folder is not on ``sys.path``) and then imports from here.
@@ -30,6 +21,7 @@ import csv
 import io
 import os
 import platform
+import re
 import shlex
 import statistics
 import sys
@@ -162,6 +154,13 @@ def skipped(name: str, why: str) -> int:
     return 0
 
 
+def about(doc: str) -> str:
+    """A script's docstring but its first line and its command lines, as Markdown for a
+    report's header (what the script measures, written once)."""
+    paras = [" ".join(p.split()) for p in doc.split("\n\n")[1:] if not p.lstrip().startswith("python ")]
+    return re.sub(r":\w+:`([^`]+)`", r"`\1`", "\n\n".join(paras)).replace("``", "`")
+
+
 def command(script: str, argv=None) -> str:
     """``python benchmarks/<script> ARGS``, the command line a report quotes (``argv``, else
     this process's arguments; under ``jaxfric bench NAME ARGS``, ``ARGS``)."""
@@ -280,12 +279,7 @@ def read_csv(path: Path, *, parse: bool = True) -> list[dict]:
 
 
 def _columns(rows) -> list[str]:
-    keys: list[str] = []
-    for r in rows:
-        for k in r:
-            if k not in keys:
-                keys.append(k)
-    return keys
+    return list(dict.fromkeys(k for r in rows for k in r))
 
 
 def write_csv(rows, path: Path, *, float_format: str = ".6g") -> Path:
