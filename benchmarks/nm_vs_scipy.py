@@ -1,23 +1,14 @@
 """jaxfric's Nelder–Mead against SciPy's adaptive Nelder–Mead on random starts.
 
-Problems: shifted sphere ``Σ(x − s)²`` and shifted Rosenbrock ``rosen(x − s + 1)``
-(minimum 0 at ``s``), n = 4, 8, 12. For each (function, n) the shift ``s ~ U(−2, 2)^n``
-and ``--starts`` starting points ``x0 ~ s + U(−3, 3)^n`` come from fixed seeds. Both
-solvers get the same start, the same first simplex (fminsearch's rule: 5 % of ``x0_i``,
-0.00025 where ``x0_i = 0``), no bounds, the same evaluation budget (``--budget`` × n) and
-the same stopping rule (every vertex within ``xatol`` and every value within ``fatol`` of
-the best, absolute). A run is *solved* when its final value is below ``--solved``.
+Shifted sphere ``Σ(x − s)²`` and Rosenbrock ``rosen(x − s + 1)``, n = 4, 8, 12; the shift
+``s ~ U(−2, 2)^n`` and ``--starts`` starts ``x0 ~ s + U(−3, 3)^n`` from fixed seeds. Both solvers
+get the same start, first simplex (fminsearch's rule), evaluation budget (``--budget`` × n) and
+stopping rule (every vertex within ``xatol``, every value within ``fatol`` of the best); a run
+is *solved* below ``--solved``. SciPy's ``adaptive=True`` against ``jaxfric.NelderMead`` as
+shipped, with ``adaptive=True`` and with restarts. ``tests/test_nelder_mead_vs_scipy.py`` runs
+:func:`compare` with fewer starts.
 
-Compared: ``scipy.optimize.minimize(method="Nelder-Mead", options={"adaptive": True})``
-(Gao–Han coefficients at every n) against ``jaxfric.NelderMead`` as shipped (standard
-coefficients below n = 10, Gao–Han from 10), with ``adaptive=True``, and with restarts.
-
-Writes ``nm_vs_scipy.md`` and ``nm_vs_scipy.csv`` to ``--out`` (default
-``benchmarks/results``). ``tests/test_nelder_mead_vs_scipy.py`` runs :func:`compare`
-with fewer starts.
-
-    python benchmarks/nm_vs_scipy.py             # 30 starts per case, ~minutes
-    python benchmarks/nm_vs_scipy.py --quick     # 5 starts, n = 4 (smoke test)
+    python benchmarks/nm_vs_scipy.py [--quick]    # 30 starts per case; --quick: 5, n = 4
 """
 
 from __future__ import annotations
@@ -27,7 +18,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, machine, results_dir, write_report  # noqa: E402
+from _harness import add_output_arguments, machine, markdown_table, results_dir, write_report  # noqa: E402
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -43,14 +34,9 @@ FUNCTIONS = ("sphere", "rosenbrock")
 
 def objective(name):
     """``fn(y, shift)`` for jaxfric and ``f(x, shift)`` (NumPy) for SciPy."""
-    if name == "sphere":
-        return (lambda y, s: jnp.sum((y - s) ** 2)), (lambda x, s: float(np.sum((x - s) ** 2)))
-    if name == "rosenbrock":
-        return (
-            lambda y, s: jf.functions.rosenbrock(y - s + 1.0),
-            lambda x, s: float(scipy.optimize.rosen(x - s + 1.0)),
-        )
-    raise ValueError(f"unknown function {name!r}")
+    return {"sphere": ((lambda y, s: jnp.sum((y - s) ** 2)), (lambda x, s: float(np.sum((x - s) ** 2)))),
+            "rosenbrock": ((lambda y, s: jf.functions.rosenbrock(y - s + 1.0)),
+                           (lambda x, s: float(scipy.optimize.rosen(x - s + 1.0))))}[name]
 
 
 def problem_set(name, n, starts, seed=0):
@@ -60,15 +46,10 @@ def problem_set(name, n, starts, seed=0):
 
 
 def run_scipy(name, n, shift, x0s, budget, tol):
-    _, f_np = objective(name)
-    out = []
-    for x0 in x0s:
-        r = scipy.optimize.minimize(
-            f_np, x0, args=(shift,), method="Nelder-Mead",
-            options=dict(adaptive=True, xatol=tol, fatol=tol, maxfev=budget, maxiter=budget),
-        )
-        out.append((float(r.fun), int(r.nfev)))
-    return np.array(out)
+    opts = dict(adaptive=True, xatol=tol, fatol=tol, maxfev=budget, maxiter=budget)
+    runs = [scipy.optimize.minimize(objective(name)[1], x0, args=(shift,), method="Nelder-Mead", options=opts)
+            for x0 in x0s]
+    return np.array([(float(r.fun), int(r.nfev)) for r in runs])
 
 
 def run_jaxfric(name, n, shift, x0s, budget, tol, **solver_kw):
@@ -99,10 +80,7 @@ def compare(name, n, starts, budget, tol, solved, variants=VARIANTS, seed=0):
     res = {"scipy adaptive": run_scipy(name, n, shift, x0s, budget, tol)}
     for label, kw in variants.items():
         res[label] = run_jaxfric(name, n, shift, x0s, budget, tol, **kw)
-    return {
-        label: (int(np.sum(r[:, 0] < solved)), float(np.median(r[:, 1])), r[:, 0])
-        for label, r in res.items()
-    }
+    return {label: (int(np.sum(r[:, 0] < solved)), float(np.median(r[:, 1])), r[:, 0]) for label, r in res.items()}
 
 
 def main(argv=None):
@@ -125,19 +103,16 @@ def main(argv=None):
                              "median_evals": med_ev, "median_f": float(np.median(f)), "worst_f": float(np.max(f))})
                 print(f"{name:10s} n={n:2d} {label:36s} solved {ok:2d}/{a.starts}  median evals {med_ev:8.0f}  "
                       f"median f {np.median(f):.1e}", flush=True)
+    table = [{"function": r["function"], "n": r["n"], "solver": r["solver"], "solved": f"{r['solved']}/{r['starts']}",
+              "median evaluations": f"{r['median_evals']:.0f}", "median f": f"{r['median_f']:.1e}",
+              "worst f": f"{r['worst_f']:.1e}"} for r in rows]
     lines = [
         "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
         "",
         f"{a.starts} random starts per case (fixed seeds), budget {a.budget}·n evaluations, "
         f"xatol = fatol = {a.tol:g} (absolute), solved: f < {a.solved:g}; first simplex: fminsearch's "
         f"rule for both; float64. SciPy {scipy.__version__}, jaxfric {jf.__version__}; {machine()}. Re-run: `python benchmarks/nm_vs_scipy.py`.",
-        "",
-        "| function | n | solver | solved | median evaluations | median f | worst f |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(f"| {r['function']} | {r['n']} | {r['solver']} | {r['solved']}/{r['starts']} | "
-                     f"{r['median_evals']:.0f} | {r['median_f']:.1e} | {r['worst_f']:.1e} |")
+        "", markdown_table(table)]
     write_report(results_dir(a.out, quick=a.quick), "nm_vs_scipy", lines, rows, float_format="", echo=False)
 
 
