@@ -1,25 +1,14 @@
 """Friction-model rollouts: batched JAX against the NumPy code users would otherwise write.
 
-64 candidates × 1600 samples (the §7 rig's length at 128 Hz), float32 and float64
-(``jax.enable_x64`` around each case), compiled with the options jaxfric's own jits use:
+64 candidates × 1600 samples (the §7 rig's length at 128 Hz), float32 and float64, compiled
+with the options jaxfric's own jits use. ENN (Elman, 30 neurons): ``simulate_batch``,
+``vmap(simulate)`` (its custom batching rule) and JAX's default batching of a one-candidate
+scan, against ``baselines.elman_rollout_vectorised`` and ``elman_rollout_loop``. LuGre (exact
+zero-order hold): ``simulate_batch`` against ``baselines.py``'s per-step (MATLAB style),
+hoisted and scalar-loop references. Every reference is checked against the JAX rollout first;
+all cases run round-robin (:func:`_harness.run_round_robin`), the first call apart.
 
-* **ENN** (Elman, 30 neurons, 180 parameters): ``simulate_batch`` (the scan with an (N, P)
-  state), ``vmap(simulate)`` (its custom batching rule) and JAX's default batching of a
-  one-candidate scan, against ``baselines.elman_rollout_vectorised`` (NumPy, vectorised
-  over candidates) and ``baselines.elman_rollout_loop`` (one candidate at a time).
-* **LuGre** (exact zero-order-hold update): ``simulate_batch`` against the NumPy
-  references of ``baselines.py``: recomputed at every step (MATLAB style), with the
-  v-only coefficients hoisted (jaxfric's layout), and a scalar per-candidate loop.
-
-Every NumPy reference is checked against the JAX rollout first (float64). All cases run
-round-robin (:func:`_harness.run_round_robin`), medians over rounds, the first call
-(compile + run) apart. The other sections of the committed ``peers.md`` are measured by
-``speed_optim.py`` (test functions against pyswarms, scipy and evosax), ``compile_time.py``
-(compile times) and ``pipelines.py`` (identification against scipy at equal budget).
-
-    python benchmarks/peers.py [--quick] [--out DIR] [--tag gpu]
-
-Writes ``peers[_TAG].md`` and ``peers[_TAG].csv``.
+    python benchmarks/peers.py [--quick] [--out DIR] [--tag gpu]    # peers[_TAG].md, .csv
 """
 
 from __future__ import annotations
@@ -151,8 +140,7 @@ def report(rows: list[dict], quick: bool, wall: float) -> str:
         "this row's, same dtype (the Python loop: float64)."
         + (" --quick: fewer rounds, the loops on 8 (ENN) and 4 (LuGre) candidates, scaled." if quick else ""), "",
         f"Machine: {machine()}.", "",
-        "Batched ENN rollout: " + "; ".join(met) + ".", "",
-        markdown_table(rows, fmt=cell(".3g", "-")), ""])
+        "Batched ENN rollout: " + "; ".join(met) + ".", "", markdown_table(rows, fmt=cell(".3g", "-")), ""])
 
 
 def main(argv=None) -> int:
