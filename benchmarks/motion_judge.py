@@ -25,6 +25,12 @@ Criteria, each computed from the training family alone (lower is better):
 * ``spread``: ``tail`` plus the ensemble members' disagreement on the tail (RMS spread);
 * ``bic``: training free-run RMSE with a complexity penalty, ``log(rmse) + p log(n)/(2n)``.
 
+Variants of ``short`` from saved fits (``--save-fits DIR``, then ``--rescore DIR``: no refit):
+``short_<samples>`` at other window lengths (`WIDTHS` seconds); ``short_median``, the median
+instead of the pooled RMSE over its 2 s windows; ``short_reversals``, 2 s windows each started
+20 samples before a velocity reversal (`reversal_starts`); ``short_margin``, the baseline kept
+unless a model's ``short`` is more than 10 % lower.
+
 A criterion's choice (the lowest, the baseline included) *succeeds* on a key when its
 unseen RMSE is within 10 % of the best candidate's and not above the baseline's. Rows go
 to ``motion_judge.csv`` as they come (a cut run leaves data; a rerun skips keys done), the
@@ -70,7 +76,7 @@ from jaxfric import rig  # noqa: E402
 from jaxfric.metrics import friction_metrics  # noqa: E402
 from jaxfric.motion import (MotionData, baseline_fit, identify_motion, load_motion_fit, motion_metrics,  # noqa: E402
                             short_runs_score)
-from jaxfric.motion._compare import blocked_score, short_window  # noqa: E402
+from jaxfric.motion._compare import blocked_score, short_window, window_scores  # noqa: E402
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps  # noqa: E402
 
 FS, N = 128.0, 2000
@@ -84,7 +90,7 @@ PNEUMATIC_CANDIDATES = ("stribeck", "lugre", "gms", "cylinder")
 BASE = "baseline"
 CRITERIA = ("tail", "blocked", "short", "spread", "bic")
 #: The short-runs criterion at other window lengths [s], from saved fits (``--rescore``).
-WIDTHS = (1.0, 4.0)
+WIDTHS = (0.5, 1.0, 4.0, 8.0)
 STEMS = {"rig": "motion_judge", "emps-blocked": "judge_emps", "pneumatic": "judge_pneumatic"}
 
 
@@ -213,7 +219,8 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
         by_key.setdefault(int(r["key"]), []).append(r)
     done = {k: v for k, v in by_key.items() if any(r["model"] == BASE for r in v)}
     choices, judges = [], []
-    extra = sorted({c for r in rows for c in r if c.startswith("short_")}, key=lambda c: int(c[6:]))
+    extra = sorted({c for r in rows for c in r if c.startswith("short_")},
+                   key=lambda c: (not c[6:].isdigit(), int(c[6:]) if c[6:].isdigit() else 0, c))
     for crit in criteria + tuple(c for c in extra if all(r.get(c) not in (None, "") for r in rows)):
         wins = never_worse = 0
         for k, rs in sorted(done.items()):
@@ -256,9 +263,31 @@ def ensemble_summary(ens) -> list:
     return out
 
 
+def reversal_starts(v, width, init=INIT) -> list:
+    """Starts of non-overlapping windows of ``width`` samples, each ``init`` samples before a
+    sign change of the velocity ``v`` (the first of a cluster)."""
+    out = []
+    for i in np.flatnonzero(np.sign(v[1:]) * np.sign(v[:-1]) < 0) + 1 - init:
+        if i >= (out[-1] + width if out else 0) and i + width <= v.size:
+            out.append(int(i))
+    return out
+
+
+def variants(fit, rec, baseline) -> dict:
+    """The criteria ``--rescore`` adds (module docstring) for one fit."""
+    width = short_window(rec.dt)
+    out = {f"short_{round(w / rec.dt)}": short_runs(fit, rec, round(w / rec.dt)) for w in WIDTHS}
+    per = [m["rmse_mm"] if math.isfinite(m["rmse_mm"]) else math.inf for m in window_scores(fit, [rec], width, INIT)]
+    out["short_median"] = float(np.median(per))
+    out["short_reversals"] = short_runs_score(fit, [rec.window(a, a + width) for a in
+                                                   reversal_starts(np.asarray(rec.velocity), width)], width, INIT)
+    out["short_margin"] = short_runs(fit, rec) * ((1 - MARGIN) if baseline else 1.0)
+    return out
+
+
 def rescore(rows, folder, proxy="rig", emps=None) -> list:
-    """Add ``short_<samples>`` (`WIDTHS` seconds) to every row from the fits saved in
-    ``folder`` (no refit), and check that the saved fits reproduce the ``short`` column."""
+    """Add the ``short`` variants (`variants`) to every row from the fits saved in ``folder``
+    (no refit), and check that the saved fits reproduce the ``short`` column."""
     cache, worst = {}, 0.0
     for r in rows:
         key = int(r["key"])
@@ -268,7 +297,7 @@ def rescore(rows, folder, proxy="rig", emps=None) -> list:
         fit = load_motion_fit(folder / f"key{key}_{first if r['model'] == BASE else r['model']}.npz")
         fit = baseline_fit(fit) if r["model"] == BASE else fit
         worst = max(worst, abs(short_runs(fit, rec) / float(r["short"]) - 1.0))
-        r.update({f"short_{round(w / rec.dt)}": short_runs(fit, rec, round(w / rec.dt)) for w in WIDTHS})
+        r.update(variants(fit, rec, r["model"] == BASE))
     print(f"saved fits reproduce the short column within {worst:.2e} relative", flush=True)
     return rows
 
@@ -357,7 +386,8 @@ def main(argv=None):
     p.add_argument("--members", type=int, default=3, help="ensemble members per fit (keys=K)")
     p.add_argument("--save-fits", type=Path, default=None, help="folder to save every fit in (.npz)")
     p.add_argument("--rescore", type=Path, default=None,
-                   help="folder of saved fits: add the short criterion at other window lengths")
+                   help="folder of saved fits: add the short criterion's variants (no refit)")
+    p.add_argument("--fits-from", default=None, help="the commit whose search made the rescored fits (reports it)")
     p.add_argument("--summary-only", action="store_true", help="rebuild the tables from the CSV")
     add_output_arguments(p)
     a = p.parse_args(argv)
@@ -390,11 +420,13 @@ def main(argv=None):
                 measure_key(key, a.members, a.quick, on_row, a.save_fits, a.proxy, emps)
     judges, ens, choices = summarise(rows, CRITERIA if a.members > 1 else tuple(c for c in CRITERIA if c != "spread"))
     cmd = "python benchmarks/motion_judge.py" + (" --quick" if a.quick else "") + f" --keys {a.keys} --members {a.members}"
+    made = f"; the fits were made with the search of commit {a.fits_from}" if a.fits_from else ""
     if a.proxy != "rig":
-        return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows, a.rescore)
+        return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows,
+                           None if a.rescore is None else made)
     text = ["# Which judge predicts new excitation (rig proxy)", "",
-            f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion at "
-            f"{' and '.join(str(round(w * FS)) for w in WIDTHS)} samples from the saved fits, no refit). Free-run position RMSE [mm]; "
+            f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion's variants "
+            f"from the saved fits, no refit{made}). Free-run position RMSE [mm]; "
             "`unseen`: pooled over the three families the fit never saw, each simulated from its first 20 samples. "
             "Module docstring: the proxy and the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
@@ -414,7 +446,8 @@ def real_report(out, proxy, cmd, judges, choices, rows, rescored):
             f"{unit} of the held-out 3 bar record (criteria: {unit} of the training records)")
     if not emps:  # MSE %, not mm
         choices = [{k.replace("_mm", "_mse_pct"): v for k, v in c.items()} for c in choices]
-    cmds = f"`{cmd}`" + (f", then `{cmd} --rescore FITS`" if rescored else "")
+    cmds = f"`{cmd}`" if rescored is None else (f"`{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short "
+                                                f"criterion's variants, no refit{rescored})")
     text = [f"# Which judge predicts new excitation ({proxy} proxy, real data)", "",
             f"Command: {cmds}. {head}. Module docstring of benchmarks/motion_judge.py: the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
