@@ -1,23 +1,15 @@
 """Global stages compared on the main job: MAPSO vs CMA-ES vs PSO, each followed by the same
 Nelder–Mead stage, at equal evaluation budgets.
 
-Models: the Elman network (N = 30, 180 parameters, |r| ≤ 1) and LuGre (6 parameters), by
-:func:`jaxfric.identify` (``solver=chain(global, NM)``; the ENN then runs identify's default
-gradient stage, 500 BFGS steps) on ``rig`` (``jaxfric.rig.synthetic_friction_data``, 1600/400)
-and ``emps`` (``DATA_EMPS.mat``: Butterworth 100 Hz forward-backward on ``qm``, central
-differences twice, ``friction = gtau·vir − M·a`` with the published M, every 10th sample,
-last 20 % validation).
+The Elman network (N = 30, 180 parameters) and LuGre by :func:`jaxfric.identify`
+(``solver=chain(global, NM)``; the ENN then runs identify's gradient stage) on ``rig``
+(``jaxfric.rig.synthetic_friction_data``) and ``emps`` (``DATA_EMPS.mat``, SOURCE.md's recipe
+with the published M, every 10th sample, last 20 % validation). MAPSO runs
+``--generations`` (LuGre, 5×5) or ``--enn-generations`` (ENN, 8×8); PSO and CMA-ES get at most
+its evaluations; above ``LARGE_MODEL_PARAMS`` parameters CMA-ES is ``Sep_CMA_ES`` (full
+CMA-ES's eigendecomposition takes 0.2–0.9 s per generation at 180 parameters).
 
-MAPSO runs ``--generations`` (LuGre, 5×5) or ``--enn-generations`` (ENN, 8×8); PSO (as many
-particles) and CMA-ES (evosax through :class:`jaxfric.Evosax`) get at most MAPSO's evaluations.
-Above ``LARGE_MODEL_PARAMS`` parameters CMA-ES is ``Sep_CMA_ES``: full CMA-ES's 180×180
-eigendecomposition takes 0.2–0.9 s per generation on this CPU (measured).
-
-    python benchmarks/global_stages.py                       # both data sets, 5 keys
-    python benchmarks/global_stages.py --data rig --models lugre --keys 2
-    python benchmarks/global_stages.py --quick               # rig, LuGre, 1 key, tiny budgets
-
-Writes ``global_stages.md`` and ``global_stages.csv``.
+    python benchmarks/global_stages.py [--data rig,emps] [--models lugre,elman] [--keys 5] [--quick]
 """
 
 from __future__ import annotations
@@ -28,7 +20,8 @@ import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import add_output_arguments, emps_file, fit_cells, machine, results_dir, timed, write_report  # noqa: E402
+from _harness import (about, add_output_arguments, emps_file, fit_cells, machine, markdown_table, results_dir,  # noqa: E402
+                      timed, write_report)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -48,13 +41,9 @@ def emps_record(path: Path, decimate: int = 10, drop: int = 50):
     t, qm, vir = (np.ravel(m[k]).astype(np.float64) for k in ("t", "qm", "vir"))
     gtau = float(np.ravel(m["gtau"])[0])
     dt = float(np.median(np.diff(t)))
-    b, a = scipy.signal.butter(4, 100.0, fs=1.0 / dt)
-    q = scipy.signal.filtfilt(b, a, qm)
-    v = np.gradient(q, dt)
-    acc = np.gradient(v, dt)
-    friction = gtau * vir - EMPS_MASS * acc
+    v = np.gradient(scipy.signal.filtfilt(*scipy.signal.butter(4, 100.0, fs=1.0 / dt), qm), dt)
     sl = slice(drop, len(t) - drop, decimate)
-    return v[sl], friction[sl], dt * decimate
+    return v[sl], (gtau * vir - EMPS_MASS * np.gradient(v, dt))[sl], dt * decimate
 
 
 def datasets(names):
@@ -101,7 +90,7 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
             with warnings.catch_warnings(action="ignore", category=RuntimeWarning):
                 fit, wall, _ = timed(lambda: jf.identify(model_name, data, solver=solver, key=int(k)))
             valid, train = fit_cells(fit)["valid"], fit_cells(fit)["train"]
-            row = {
+            yield {
                 "data": data_name, "model": model_name, "global": label, "key": int(k),
                 "budget_global": budget, "num_evals_global": fit.stages[0]["num_evals"],
                 "num_evals": sum(s.get("num_evals", 0) for s in fit.stages),
@@ -110,10 +99,6 @@ def run(data_name, data, model_name, keys, generations, nm_evals):
                 "compile_s": fit.timings.get("compile_s", float("nan")),
                 "run_s": fit.timings.get("run_s", float("nan")), "wall_s": wall,
             }
-            print(f"{data_name:5s} {model_name:6s} {label:7s} key={k} J_glob={row['J_global']:.4g} "
-                  f"J={row['J']:.4g} train={train:.3g}% valid={valid:.3g}% "
-                  f"evals={row['num_evals']} run={row['run_s']:.1f}s wall={wall:.1f}s", flush=True)
-            yield row
 
 
 def write(out: Path, rows, a):
@@ -122,42 +107,38 @@ def write(out: Path, rows, a):
         "",
         f"`python benchmarks/global_stages.py --data {a.data} --models {a.models} --keys {a.keys} "
         f"--generations {a.generations} --enn-generations {a.enn_generations} --nm-evals {a.nm_evals}`. "
-        f"MAPSO G = {a.generations} (LuGre, 5×5 lattice), {a.enn_generations} (ENN, 8×8); PSO (same "
-        "particle count) and CMA-ES (evosax, population 4 + ⌊3 ln D⌋, box-scaled σ₀ = 0.3; for the "
-        "ENN's 180 parameters the diagonal Sep-CMA-ES, because full CMA-ES's 180×180 "
-        "eigendecomposition per generation costs 0.2–0.9 s here) get at most MAPSO's evaluations; "
-        f"then NelderMead(max_evals={a.nm_evals}); then, for the ENN only, identify's default "
-        "gradient stage (500 BFGS steps on the training window), for LuGre none. "
-        f"Keys 0..{a.keys - 1}. "
-        "Median [min – max] over keys; global evals: min–max over keys (CMA-ES ends early when "
-        "its step size underflows). Run s: median over keys of the global + Nelder–Mead run "
-        "without compilation (identify's timing; the BFGS stage's time not included).",
+        + about(__doc__) + " CMA-ES: evosax, population 4 + ⌊3 ln D⌋, box-scaled σ₀ = 0.3; then "
+        f"NelderMead(max_evals={a.nm_evals}); then, for the ENN only, identify's default gradient stage (500 BFGS "
+        f"steps on the training window). Keys 0..{a.keys - 1}. Median [min – max] over keys; global evals: min–max "
+        f"over keys (CMA-ES ends early when its step size underflows). Run s: median over keys of the global + "
+        f"Nelder–Mead run without compilation (identify's timing; the BFGS stage's time not included).",
         "",
         f"Machine: {a.machine} (at the start; timings noisy), jaxfric {jf.__version__}."
         + (" **--quick smoke budgets, not results.**" if a.quick else ""),
         "",
-        "| data | model | global stage | global evals | valid MSE % | train MSE % | J after global "
-        "| J final | run s |",
-        "|---|---|---|---|---|---|---|---|---|",
     ]
     groups = {}
     for r in rows:
         groups.setdefault((r["data"], r["model"], r["global"]), []).append(r)
 
-    def mm(key):  # median [min – max] over keys
+    def mm(rs, key):  # median [min – max] over keys
         v = np.asarray([r[key] for r in rs], float)
         return f"{np.median(v):.3g} [{v.min():.3g} – {v.max():.3g}]"
 
-    for (d, m, g), rs in groups.items():
+    def span(rs):  # global evaluations, min–max over keys
         ev = sorted({int(r["num_evals_global"]) for r in rs})
-        lines.append(f"| {d} | {m} | {g} | {ev[0] if len(ev) == 1 else f'{ev[0]}–{ev[-1]}'} | {mm('valid_mse_pct')} | "
-                     f"{mm('train_mse_pct')} | {mm('J_global')} | {mm('J')} | {np.median([r['run_s'] for r in rs]):.1f} |")
+        return str(ev[0]) if len(ev) == 1 else f"{ev[0]}–{ev[-1]}"
+
+    table = [{"data": d, "model": m, "global stage": g, "global evals": span(rs),
+              "valid MSE %": mm(rs, "valid_mse_pct"), "train MSE %": mm(rs, "train_mse_pct"),
+              "J after global": mm(rs, "J_global"), "J final": mm(rs, "J"),
+              "run s": f"{np.median([r['run_s'] for r in rs]):.1f}"} for (d, m, g), rs in groups.items()]
+    lines.append(markdown_table(table))
     write_report(out, "global_stages", lines, rows, float_format="", echo=False)
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", default="rig,emps")
     p.add_argument("--models", default="lugre,elman")
     p.add_argument("--keys", type=int, default=5)
@@ -174,9 +155,9 @@ def main(argv=None):
     rows = []
     for dname, data in datasets(a.data.split(",")).items():
         for model_name in a.models.split(","):
-            for row in run(dname, data, model_name, range(a.keys),
-                           (a.generations, a.enn_generations), a.nm_evals):
+            for row in run(dname, data, model_name, range(a.keys), (a.generations, a.enn_generations), a.nm_evals):
                 rows.append(row)
+                print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
                 write(a.out, rows, a)  # partial results survive an interruption
 
 
