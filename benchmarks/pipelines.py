@@ -1,23 +1,12 @@
 """ENN (N = 30) identification pipelines side by side, on the simulated rig and on real recordings.
 
-Usage::
-
     python benchmarks/pipelines.py --record rig|emps|oring [--seeds K] [--paper-seeds K]
         [--skip jaxfric,paper,de_nm] [--quick] [--out DIR] [--data-dir DIR]
 
-Each on the same record and split (first 80 % train; the rig's 1600/400), float32:
-
-* ``jaxfric``: ``identify("elman", data, key=k)``, every default (MAPSO 8×8 for
-  ``FAST_GENERATIONS_BLACK_BOX`` generations on the first ``GLOBAL_STAGE_SAMPLES`` samples,
-  then ``FAST_REFINE_STEPS`` BFGS steps on the whole window);
-* ``paper``: ``identify(..., method="paper")``, MAPSO–NMDS as the paper describes;
-* ``DE → NM``: scipy's vectorised differential evolution on the same jitted batched cost with
-  the swarm's evaluations, then scipy's Nelder–Mead on the whole window with
-  ``NM_EVALS_PER_BFGS_STEP`` evaluations per BFGS step of the ``jaxfric`` row;
-* the least-squares baseline ``baselines.ls_coulomb_viscous`` (not in the library).
-
-Run time excludes compilation (JAX's compile events); the first key pays it, reported apart
-(EMPS's IDIM-LS against the published values: ``emps.py``'s table (a)). Writes ``pipelines_<record>.md``/``.csv``.
+Same record and split, float32: ``jaxfric`` (``identify("elman", data, key=k)``, every default),
+``paper`` (``method="paper"``), ``DE → NM`` (scipy's differential evolution on the same jitted
+cost with the swarm's evaluations, then Nelder–Mead with ``NM_EVALS_PER_BFGS_STEP`` evaluations per
+BFGS step of the default) and the least-squares baseline; compilation timed apart.
 """
 
 from __future__ import annotations
@@ -30,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is not on sys.path under `jaxfric bench`
 from _harness import (add_output_arguments, command, fit_cells, friction_record, machine,  # noqa: E402
-                      results_dir, skipped, spread, timed, write_report)
+                      markdown_table, results_dir, skipped, spread, timed, write_report)
 from baselines import ls_coulomb_viscous  # noqa: E402
 
 import jax  # noqa: E402
@@ -40,28 +29,6 @@ import numpy as np  # noqa: E402
 NM_EVALS_PER_BFGS_STEP = 6
 
 
-def parse(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--record", choices=("rig", "emps", "oring"), default="rig")
-    p.add_argument("--seeds", type=int, default=None, help="keys for jaxfric and DE→NM (rig 5, else 1)")
-    p.add_argument("--paper-seeds", type=int, default=None, help="keys for the paper pipeline (default: --seeds)")
-    p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat or pneumatic_seal_friction")
-    add_output_arguments(p, "tiny budgets (smoke test)")
-    p.add_argument("--skip", default="", help="comma list of pipelines to skip: jaxfric,paper,de_nm")
-    p.add_argument("--tag", default="", help="suffix of the output names (pipelines_<record><tag>.md)")
-    return p.parse_args(argv)
-
-
-# --------------------------------------------------------------------- data
-def ls_baseline(v, f, n):
-    """The least-squares baseline (``baselines.ls_coulomb_viscous``) with its metrics."""
-    from jaxfric.metrics import friction_metrics
-
-    y, x = ls_coulomb_viscous(v, f, n)
-    return {"train": friction_metrics(f[:n], y[:n]), "valid": friction_metrics(f[n:], y[n:]), "coef": x}
-
-
-# ---------------------------------------------------------------- pipelines
 def run_identify(data, key, method, quick):
     from jaxfric.identification import identify
 
@@ -135,7 +102,15 @@ def run_de_nm(data, seed, quick):
 
 
 def main(argv=None):
-    args = parse(argv)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--record", choices=("rig", "emps", "oring"), default="rig")
+    p.add_argument("--seeds", type=int, default=None, help="keys for jaxfric and DE→NM (rig 5, else 1)")
+    p.add_argument("--paper-seeds", type=int, default=None, help="keys for the paper pipeline (default: --seeds)")
+    p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat or pneumatic_seal_friction")
+    add_output_arguments(p, "tiny budgets (smoke test)")
+    p.add_argument("--skip", default="", help="comma list of pipelines to skip: jaxfric,paper,de_nm")
+    p.add_argument("--tag", default="", help="suffix of the output names (pipelines_<record><tag>.md)")
+    args = p.parse_args(argv)
     data, desc = friction_record(args.record, args.data_dir)
     if data is None:
         return skipped("pipelines", desc)
@@ -143,17 +118,17 @@ def main(argv=None):
     paper_seeds = args.paper_seeds or seeds
     out = results_dir(args.out, quick=args.quick)
     skip = set(filter(None, args.skip.split(",")))
+    from jaxfric.metrics import friction_metrics
+
     v, f, n = np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
-    base = ls_baseline(v, f, n)
-    rows = [{"pipeline": "LS asymmetric Coulomb + viscous + offset", "seed": "", "valid": base["valid"]["mse_percent"],
-             "train": base["train"]["mse_percent"], "run_s": 0.0, "compile_s": 0.0, "evals": "", "steps": ""}]
+    y, coef = ls_coulomb_viscous(v, f, n)  # the least-squares baseline
+    rows = [{"pipeline": "LS asymmetric Coulomb + viscous + offset", "seed": "", "run_s": 0.0, "compile_s": 0.0,
+             "valid": friction_metrics(f[n:], y[n:])["mse_percent"],
+             "train": friction_metrics(f[:n], y[:n])["mse_percent"], "evals": "", "steps": ""}]
     print(f"{args.record}: {data.n_samples} samples, {n} train; LS baseline valid {rows[0]['valid']:.3f} %", flush=True)
     t0 = time.time()
-    plan = [("jaxfric", seeds), ("paper", paper_seeds), ("de_nm", seeds)]
-    for name, count in plan:
-        if name in skip:
-            continue
-        for seed in range(count):
+    for name, count in [("jaxfric", seeds), ("paper", paper_seeds), ("de_nm", seeds)]:
+        for seed in range(0 if name in skip else count):
             r = run_de_nm(data, seed, args.quick) if name == "de_nm" else run_identify(data, seed, name, args.quick)
             r.update(pipeline=name, seed=seed)
             rows.append(r)
@@ -161,8 +136,8 @@ def main(argv=None):
                   f"run {r['run_s']:.1f} s  compile {r['compile_s']:.1f} s  cpu {r['cpu_s']:.1f} s  "
                   f"evals {r['evals']}", flush=True)
             # after every row, so a run stopped by a time limit still leaves its results
-            write(out, args, desc, rows, base, time.time() - t0)
-    write(out, args, desc, rows, base, time.time() - t0)
+            write(out, args, desc, rows, coef, time.time() - t0)
+    write(out, args, desc, rows, coef, time.time() - t0)
     return 0
 
 
@@ -171,7 +146,7 @@ LABELS = {"jaxfric": "ENN N = 30, jaxfric default (MAPSO G = 50 on ≤ 2000 samp
           "de_nm": "ENN N = 30, scipy DE → Nelder–Mead (same budget as jaxfric)"}
 
 
-def write(out, args, desc, rows, base, wall):
+def write(out, args, desc, rows, c, wall):
     keys = ["pipeline", "seed", "valid", "train", "run_s", "compile_s", "cpu_s", "evals", "steps"]
     stem = f"pipelines_{args.record}{args.tag}"
     lines = [f"# ENN identification pipelines: {desc}", "",
@@ -180,19 +155,16 @@ def write(out, args, desc, rows, base, wall):
              "compilation; cells are mean (min–max) over keys; the first key also paid the compile time shown. "
              "CPU [s] = the process's CPU time over the call (all threads; compilation included for the first "
              "key): unlike wall time it hardly depends on what else runs, and the rollouts are sequential, so on "
-             "an idle machine the wall time of a key served from the jit cache is at most about its CPU time.", "",
-             "| pipeline | keys | MSE % valid | MSE % train | run [s] | compile [s] (first key) | CPU [s] (last key) | evaluations |",
-             "|---|---|---|---|---|---|---|---|"]
+             "an idle machine the wall time of a key served from the jit cache is at most about its CPU time.", ""]
     groups = {}
     for r in rows:
         groups.setdefault(r["pipeline"], []).append(r)
-    for name, rs in groups.items():
-        label = LABELS.get(name, name)
-        lines.append(f"| {label} | {len(rs) if name in LABELS else '–'} | {spread([r['valid'] for r in rs])} | "
-                     f"{spread([r['train'] for r in rs])} | "
-                     f"{spread([r['run_s'] for r in rs]) if name in LABELS else '–'} | "
-                     f"{rs[0]['compile_s']:.1f} | {rs[-1].get('cpu_s', 0.0):.1f} | {rs[0]['evals']} |")
-    c = base["coef"]
+    lines.append(markdown_table([
+        {"pipeline": LABELS.get(name, name), "keys": len(rs) if name in LABELS else "–",
+         "MSE % valid": spread([r["valid"] for r in rs]), "MSE % train": spread([r["train"] for r in rs]),
+         "run [s]": spread([r["run_s"] for r in rs]) if name in LABELS else "–",
+         "compile [s] (first key)": f"{rs[0]['compile_s']:.1f}", "CPU [s] (last key)": f"{rs[-1].get('cpu_s', 0.0):.1f}",
+         "evaluations": rs[0]["evals"]} for name, rs in groups.items()]))
     lines += ["", f"LS baseline on the training window: Fv+ = {c[0]:.4g}, Fv− = {c[1]:.4g}, Fc+ = {c[2]:.4g}, "
               f"Fc− = {c[3]:.4g}, offset = {c[4]:.4g} (SI units).", ""]
     lines.append(f"Benchmark wall time: {wall:.0f} s.")
