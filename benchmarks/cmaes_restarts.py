@@ -1,17 +1,13 @@
 """CMA-ES with and without IPOP restarts, beside pycma's IPOP-CMA-ES.
 
 Every solver gets ``--budget`` × D evaluations on 14 test functions at D = 2, 5, 10 (float64),
-3 seeds each; a run succeeds when it ends with |f − f*| < 1e-5.
-
-* ``jaxfric CMA-ES``: ``Evosax("CMA_ES", restarts=0)``, ``num_generations = (budget − 1) // P``;
-* ``jaxfric IPOP-CMA-ES``: ``Evosax("CMA_ES", restarts=R)``, the same budget;
-* ``pycma IPOP-CMA-ES``: ``cma.fmin2(..., restarts=R, incpopsize=2)`` on jaxfric's unit box,
-  from a uniform random start (a new one at each restart), σ0 = 0.3 box widths; its
-  ``ftarget`` only stops a successful run early.
-
+3 seeds each; a run succeeds when it ends with |f − f*| < 1e-5. ``jaxfric CMA-ES``:
+``Evosax("CMA_ES", restarts=0)``; ``jaxfric IPOP-CMA-ES``: ``restarts=R``; ``pycma IPOP-CMA-ES``:
+``cma.fmin2(..., restarts=R, incpopsize=2)`` on the unit box from a uniform random start (a new
+one at each restart), σ0 = 0.3 box widths, its ``ftarget`` only stopping a successful run early.
 Functions: jaxfric.functions' sphere, Schwefel 1.2, 2.21, 2.22, Rosenbrock, Rastrigin, Ackley,
-Griewank and, defined here, Levy, Zakharov, Styblinski–Tang, Michalewicz (m = 10), Dixon–Price,
-Schwefel 2.26. One program per dimension and solver serves every function (``lax.switch``).
+Griewank and Levy, Zakharov, Styblinski–Tang, Michalewicz (m = 10), Dixon–Price, Schwefel 2.26;
+one program per dimension and solver serves every function (``lax.switch``).
 
     python benchmarks/cmaes_restarts.py [--quick]    # pycma (pip install cma): benchmark only
 """
@@ -19,8 +15,8 @@ Schwefel 2.26. One program per dimension and solver serves every function (``lax
 from __future__ import annotations
 
 import argparse
-import collections
 import importlib.metadata
+import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -81,15 +77,11 @@ def problems():
                  "rastrigin", "ackley", "griewank"):
         t = F.get(name)
         out.append((name, t.fn, (-t.half_width, t.half_width), lambda d: 0.0))
-    out += [
-        ("levy", levy, (-10.0, 10.0), lambda d: 0.0),
-        ("zakharov", zakharov, (-5.0, 10.0), lambda d: 0.0),
-        ("styblinski_tang", styblinski_tang, (-5.0, 5.0), lambda d: -39.16616570377142 * d),
-        ("michalewicz", michalewicz, (0.0, np.pi), lambda d: MICHALEWICZ_MIN[d]),
-        ("dixon_price", dixon_price, (-10.0, 10.0), lambda d: 0.0),
-        ("schwefel_2_26", schwefel_2_26, (-500.0, 500.0), lambda d: 0.0),
-    ]
-    return out
+    return out + [("levy", levy, (-10.0, 10.0), lambda d: 0.0), ("zakharov", zakharov, (-5.0, 10.0), lambda d: 0.0),
+                  ("styblinski_tang", styblinski_tang, (-5.0, 5.0), lambda d: -39.16616570377142 * d),
+                  ("michalewicz", michalewicz, (0.0, np.pi), lambda d: MICHALEWICZ_MIN[d]),
+                  ("dixon_price", dixon_price, (-10.0, 10.0), lambda d: 0.0),
+                  ("schwefel_2_26", schwefel_2_26, (-500.0, 500.0), lambda d: 0.0)]
 
 
 # ------------------------------------------------------------------- the solvers
@@ -106,8 +98,7 @@ def jaxfric_runs(solver, probs, dim, seeds, budget):
     for i, (name, _, (lo, hi), fstar) in enumerate(probs):
         lower, upper = np.full(dim, lo), np.full(dim, hi)
         t0 = time.perf_counter()
-        sol = jf.minimise_many(objective, solver, (lower, upper), keys=keys,
-                               args=jnp.asarray(i, jnp.int32))
+        sol = jf.minimise_many(objective, solver, (lower, upper), keys=keys, args=jnp.asarray(i, jnp.int32))
         jax.block_until_ready(sol)
         seconds = (time.perf_counter() - t0) / seeds
         for s in range(seeds):
@@ -150,24 +141,18 @@ def summary(rows, solvers):
     out = []
     for label in solvers:
         mine = [r for r in rows if r["solver"] == label]
-        row = {"solver": label}
-        for d in sorted({r["dim"] for r in mine}):
-            at = [r for r in mine if r["dim"] == d]
-            row[f"D={d}"] = f"{sum(r['success'] for r in at)}/{len(at)}"
-        row["solved"] = f"{sum(r['success'] for r in mine)}/{len(mine)}"
-        row["success_%"] = 100.0 * sum(r["success"] for r in mine) / max(len(mine), 1)
-        row["max_evals"] = max(r["evals"] for r in mine)
-        row["s_per_run"] = float(np.median([r["seconds"] for r in mine]))
-        out.append(row)
+        solved = lambda at: f"{sum(r['success'] for r in at)}/{len(at)}"  # noqa: E731
+        out.append({"solver": label, **{f"D={d}": solved([r for r in mine if r["dim"] == d])
+                                        for d in sorted({r["dim"] for r in mine})},
+                    "solved": solved(mine), "success_%": 100.0 * sum(r["success"] for r in mine) / max(len(mine), 1),
+                    "max_evals": max(r["evals"] for r in mine), "s_per_run": float(np.median([r["seconds"] for r in mine]))})
     return out
 
 
 def per_function(rows, solvers):
-    table = collections.OrderedDict()
+    table = {}
     for r in rows:
-        key = (r["function"], r["dim"])
-        table.setdefault(key, {"function": r["function"], "D": r["dim"]})
-        t = table[key]
+        t = table.setdefault((r["function"], r["dim"]), {"function": r["function"], "D": r["dim"]})
         t[r["solver"]] = t.get(r["solver"], 0) + int(r["success"])
     return list(table.values())
 
@@ -188,51 +173,37 @@ def main(argv=None):
         probs = [q for q in probs if q[0] in ("sphere", "rastrigin", "levy", "schwefel_2_26")]
     out = results_dir(a.out, quick=a.quick)
 
+    pycma = not a.no_pycma and importlib.util.find_spec("cma") is not None
     rows = []
     t_start = time.perf_counter()
     for dim in dims:
         budget = budget_per_dim * dim
-        base = jf.Evosax("CMA_ES", num_generations=1)
-        G = (budget - 1) // base.population(dim)
-        variants = {
-            "jaxfric CMA-ES": jf.Evosax("CMA_ES", num_generations=G, restarts=0),
-            "jaxfric IPOP-CMA-ES": jf.Evosax("CMA_ES", num_generations=G, restarts=a.restarts),
-        }
-        for label, solver in variants.items():
+        G = (budget - 1) // jf.Evosax("CMA_ES", num_generations=1).population(dim)
+        runs = {label: lambda r=r: jaxfric_runs(jf.Evosax("CMA_ES", num_generations=G, restarts=r), probs, dim,
+                                                 a.seeds, budget)
+                for label, r in (("jaxfric CMA-ES", 0), ("jaxfric IPOP-CMA-ES", a.restarts))}
+        if pycma:
+            runs["pycma IPOP-CMA-ES"] = lambda: pycma_runs(probs, dim, a.seeds, budget, a.restarts)
+        for label, run in runs.items():
             t0 = time.perf_counter()
-            got = jaxfric_runs(solver, probs, dim, a.seeds, budget)
-            rows += [{"solver": label, **r} for r in got]
-            print(f"D={dim} {label}: {sum(r['error'] < SUCCESS for r in got)}/{len(got)} "
+            got = [{"solver": label, **r, "success": bool(r["error"] < SUCCESS)} for r in run()]
+            rows += got
+            print(f"D={dim} {label}: {sum(r['success'] for r in got)}/{len(got)} "
                   f"in {time.perf_counter() - t0:.0f} s", flush=True)
-        if not a.no_pycma:
-            t0 = time.perf_counter()
-            got = pycma_runs(probs, dim, a.seeds, budget, a.restarts)
-            rows += [{"solver": "pycma IPOP-CMA-ES", **r} for r in got]
-            print(f"D={dim} pycma: {sum(r['error'] < SUCCESS for r in got)}/{len(got)} "
-                  f"in {time.perf_counter() - t0:.0f} s", flush=True)
-    for r in rows:
-        r["success"] = bool(r["error"] < SUCCESS)
     solvers = list(dict.fromkeys(r["solver"] for r in rows))
-
-    import cma  # noqa: F401  (its version, for the record)
-
     fmt = cell(".3g")
     text = "\n\n".join([
         "# CMA-ES restarts (IPOP) beside pycma",
         f"Command: `{command('cmaes_restarts.py', argv)}` ({time.perf_counter() - t_start:.0f} s). Machine: {machine()} (at the end).",
-        f"evosax {importlib.metadata.version('evosax')}, "
-        f"pycma {sys.modules['cma'].__version__}, float64. {len(probs)} functions × D ∈ "
-        f"{dims} × {a.seeds} seeds; budget {budget_per_dim}·D evaluations for every "
-        f"solver; success: |f − f*| < {SUCCESS:g} at the end; IPOP restarts "
-        f"R = {a.restarts} (population up to P·2^R), for jaxfric and pycma alike. "
-        "See the script's docstring for the settings.",
-        markdown_table(summary(rows, solvers), fmt=fmt),
-        "`solved`: successful runs; `max_evals`: the most evaluations any run used (pycma "
-        "stops at the target, jaxfric spends the whole budget); `s_per_run`: median wall "
-        "seconds per run (jaxfric's include its compilation, one program per dimension, "
-        "spread over that dimension's runs; a loaded 2-core machine).",
-        "Successful seeds per function and dimension:",
-        markdown_table(per_function(rows, solvers), fmt=fmt),
+        f"evosax {importlib.metadata.version('evosax')}, pycma "
+        f"{importlib.metadata.version('cma') if pycma else '(not run)'}, float64. {len(probs)} functions × D ∈ "
+        f"{dims} × {a.seeds} seeds; budget {budget_per_dim}·D evaluations for every solver; success: |f − f*| < "
+        f"{SUCCESS:g} at the end; IPOP restarts R = {a.restarts} (population up to P·2^R), for jaxfric and pycma "
+        f"alike. See the script's docstring for the settings.", markdown_table(summary(rows, solvers), fmt=fmt),
+        "`solved`: successful runs; `max_evals`: the most evaluations any run used (pycma stops at the target, "
+        "jaxfric spends the whole budget); `s_per_run`: median wall seconds per run (jaxfric's include its "
+        "compilation, one program per dimension, spread over that dimension's runs; a loaded 2-core machine).",
+        "Successful seeds per function and dimension:", markdown_table(per_function(rows, solvers), fmt=fmt),
     ])
     write_report(out, "cmaes_restarts", text, rows)
 
