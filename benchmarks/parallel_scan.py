@@ -1,19 +1,12 @@
 """Parallel-in-time (DEER, ``jaxfric.parallel_scan``) against the sequential ``lax.scan``.
 
-Per case: the wall time of the sequential rollout and of the Newton/associative-scan one
-(both jitted, compile excluded, medians of round-robin rounds), the Newton iterations, whether
-they converged (else the sequential scan answered, ``fell_back``) and the largest relative
-difference of the outputs. Cases:
-
-* ``elman``: the diagonal Elman network, 30 neurons, P candidates, float32 (identify's
-  default dtype) -- the default box (α ≤ 0.99, |r| ≤ 1) and a contracting one
-  (α ≤ 0.9, |r| ≤ 0.5);
-* ``motion``: the friction model inside the mechanics (``simulate_motion``), float64, a
-  multi-sine force on a 95 kg axis -- Coulomb, Stribeck (x, v) and LuGre, Dahl (x, v, z);
-  the whole record at once and in chunks (``deer_scan(chunk=...)``).
-
-``--tag gpu`` names the outputs ``parallel_scan_gpu.*`` (benchmarks/gpu_check.sh); the
-device is written into every row.
+Per case: the wall time of both rollouts (jitted, compile excluded, medians of round-robin
+rounds), the Newton iterations, whether they converged (else the sequential scan answered,
+``fell_back``) and the largest relative difference of the outputs. ``elman``: the diagonal
+Elman network, 30 neurons, P candidates, float32, in the default box and a contracting one;
+``motion``: friction models inside the mechanics (``simulate_motion``), float64, a multi-sine
+force on a 95 kg axis, the whole record at once and in chunks. ``--tag gpu``:
+``parallel_scan_gpu.*`` (benchmarks/gpu_check.sh); every row names its device.
 """
 
 from __future__ import annotations
@@ -119,19 +112,17 @@ def main(argv=None) -> int:
     out = results_dir(args.out, quick=args.quick)
     sizes = [(500, 8)] if args.quick else [tuple(int(x) for x in c.split("x")) for c in args.elman.split(",") if c]
     rounds = 2 if args.quick else args.rounds
-    rows = []
-    for T, P in sizes:
-        rows += elman_cases(T, P, rounds)
     chunks = [None if c == "none" else int(c) for c in args.chunks.split(",") if c]
-    for T in ([500] if args.quick else [int(x) for x in args.motion.split(",") if x]):
-        rows += motion_cases(T, rounds, [None, 128] if args.quick else [c for c in chunks if c is None or c < T])
+    rows = [r for T, P in sizes for r in elman_cases(T, P, rounds)] + [
+        r for T in ([500] if args.quick else [int(x) for x in args.motion.split(",") if x])
+        for r in motion_cases(T, rounds, [None, 128] if args.quick else [c for c in chunks if c is None or c < T])]
     text = [f"# Parallel-in-time (DEER) against the sequential scan ({_device()})", "",
-            "`python benchmarks/parallel_scan.py" + (" --quick" if args.quick else "")
-            + (f" --tag {args.tag}" if args.tag else "") + "`; jitted, compile excluded, medians of "
-            f"{rounds} round-robin rounds. `fell_back`: Newton did not converge in 100 iterations and "
-            "the sequential scan answered (its time is then included). `max_rel_diff`: largest "
-            "difference of the outputs (Elman) or of x and v (motion), relative to their largest "
-            "magnitude.", "", markdown_table(rows, fmt=cell(".3g")), ""]
+            f"`python benchmarks/parallel_scan.py{' --quick' if args.quick else ''}"
+            f"{f' --tag {args.tag}' if args.tag else ''}`; jitted, compile excluded, medians of "
+            f"{rounds} round-robin rounds. `fell_back`: Newton did not converge in 100 iterations and the "
+            f"sequential scan answered (its time is then included). `max_rel_diff`: largest difference of the "
+            f"outputs (Elman) or of x and v (motion), relative to their largest magnitude.", "",
+            markdown_table(rows, fmt=cell(".3g")), ""]
     write_report(out, tagged("parallel_scan", args.tag), text, rows)
     return 0
 
