@@ -1,30 +1,15 @@
 """Plain-NumPy baselines the benchmarks time jaxfric against (not part of the library).
 
-Elman rollouts implement the same recursion as :class:`jaxfric.models.Elman`
-(docs/algorithms.md §2.2, parameter layout ``[w | r | b | v | alpha | c0] (+ b_o)``)
-without JAX, so ``benchmarks/peers.py`` compares like with like:
-
-- :func:`elman_rollout_vectorised`: a Python loop over time, NumPy-vectorised
-  over candidates and neurons (the usual "numpy PSO" way to score a swarm);
-- :func:`elman_rollout_loop`: a Python loop over candidates and over time,
-  vectorised over neurons only (scoring particles one at a time).
-
-Both compute in ``dtype`` (float64 by default, float32 for a like-for-like
-comparison with JAX's default precision), return ``(P, T)`` arrays, and are
-tested against the JAX rollout (``tests/test_baselines.py``).
-
-LuGre rollouts (exact zero-order-hold update, docs/algorithms.md §8.2), for
-``benchmarks/peers.py``: :func:`lugre_numpy_per_step` (everything recomputed
-inside the time loop, as MATLAB code would run it), :func:`lugre_numpy_hoisted` (the
-v-only coefficients vectorised first, jaxfric's layout) and :func:`lugre_python_loop`
-(scalar Python, one candidate at a time).
-
-:func:`ls_coulomb_viscous`: the least-squares friction baseline every model must beat
-(``emps.py``, ``pipelines.py``, ``pressure_records.py``).
-
-NumPy test functions on a batch of rows (:func:`numpy_batch`, checked against jaxfric's), for
-the peers that take a vectorised objective: pyswarms in ``speed_optim.py``, SciPy's DE and
-pycma in ``compile_time.py``.
+For ``peers.py``: Elman rollouts (the recursion of :class:`jaxfric.models.Elman`,
+docs/algorithms.md §2.2, layout ``[w | r | b | v | alpha | c0] (+ b_o)``), vectorised over
+candidates (:func:`elman_rollout_vectorised`, the usual "numpy PSO" way) or one candidate at a
+time (:func:`elman_rollout_loop`), in ``dtype``, returning ``(P, T)``; LuGre rollouts (exact
+zero-order hold, §8.2) recomputed at every step as MATLAB code would
+(:func:`lugre_numpy_per_step`), with the v-only coefficients hoisted (jaxfric's layout) or in
+scalar Python. ``tests/test_baselines.py`` checks them against the JAX rollouts.
+:func:`ls_coulomb_viscous`: the least-squares friction baseline every model must beat.
+:func:`numpy_batch`: NumPy test functions on a batch of rows, checked against jaxfric's, for
+the peers that take a vectorised objective (pyswarms, SciPy's DE, pycma).
 """
 
 from __future__ import annotations

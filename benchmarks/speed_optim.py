@@ -1,23 +1,14 @@
 """Optimiser throughput against the peers users would otherwise pick, same run.
 
-30-D Rosenbrock (``--function`` picks another test function), 100 agents: jaxfric
-PSO and MAPSO (10×10 lattice) against pyswarms' GlobalBestPSO (numpy, vectorised
-objective); jaxfric Nelder–Mead against ``scipy.optimize.minimize(method="Nelder-Mead")``. Function evaluations per second,
-timed in ``--repeats`` rounds after one warm-up (compile time reported apart), every
-implementation once per round, in turn, so that load from other processes hits all alike;
-ratios to the peer are taken round by round and their median reported. Batched rows
-run ``--seeds`` independent jaxfric runs in one vmapped call (:func:`jaxfric.minimise_many`),
-the way Table 1 uses the library.
+30-D Rosenbrock (``--function``: another), 100 agents: jaxfric PSO and MAPSO against pyswarms'
+GlobalBestPSO (vectorised NumPy objective) and evosax's PSO, Nelder–Mead against SciPy's;
+evaluations per second in ``--repeats`` rounds after a warm-up, every implementation once per
+round, in turn, ratios to the peer taken round by round (median). ``--short`` (issue 47): one
+default ``minimise`` call each (PSO at ``--short-generations``, MAPSO at the first) against
+pyswarms at the same generations, each call split into its fixed cost (a one-generation
+call), the objective alone on its evaluations (the ceiling) and the solver's own work.
 
-    python benchmarks/speed_optim.py --dtype float64                    # speed_optim.md
-    python benchmarks/speed_optim.py --dtype float64 --function ackley  # speed_optim_ackley.md
-    python benchmarks/speed_optim.py --dtype float64 --short            # speed_optim_short.md
-
-``--short`` times the short runs a benchmarking user makes instead (issue 47): one default
-``minimise`` call each, PSO at ``--short-generations`` (100 and 300) and MAPSO at 100,
-against pyswarms at the same generations, and splits each call's time into the call's
-fixed cost (a one-generation call), the objective alone on the run's evaluations (the
-ceiling), and the rest (the solver's own work per generation).
+    python benchmarks/speed_optim.py --dtype float64 [--function ackley] [--short] [--quick]
 """
 
 from __future__ import annotations
@@ -156,9 +147,7 @@ def main(argv=None):
         (f"jaxfric MAPSO, {a.seeds} x minimise", jax_once(obj, mapso, (lo, hi), calls=a.seeds))]]
     if importlib.util.find_spec("evosax"):  # the bench extra
         cases.append(Case(f"evosax PSO, {many}", evosax_once(a, lo, hi, obj), x64=x64))
-    # The objective alone on as many points as one PSO run evaluates caps the single-run
-    # rows' ratio to pyswarms (Ackley's float64 cosines, ~16 ns each with fresh arguments,
-    # dominate both sides).
+    # the objective alone on as many points as one PSO run evaluates caps the single-run rows' ratio to pyswarms
     evals = a.agents * (a.generations + 1)
     x0 = np.random.default_rng(0).uniform(lo, hi)
     opts = dict(maxfev=a.nm_evals, maxiter=10 * a.nm_evals, xatol=0.0, fatol=0.0, adaptive=True)
@@ -189,14 +178,12 @@ def main(argv=None):
                   f"{_spread(_round_ratios(by[OBJECTIVE], by[PYSWARMS]))}; no single run can exceed it")
     lines = [
         "# Optimiser throughput against peers", "",
-        f"{a.dim}-D {a.function}, {a.agents} agents, {a.generations} generations, {a.dtype}; "
-        f"Nelder–Mead budget {a.nm_evals} evaluations. {a.repeats} timed rounds after a warm-up; "
-        "each round runs every implementation once, in turn, so load from other processes hits "
-        "all alike. s: the median over rounds. × peer: evaluations per second over the peer's "
-        "(pyswarms for swarms, scipy for Nelder–Mead) in the same round, median over rounds "
-        "(lowest–highest round in brackets). Best f (first timed round) is not comparable across "
-        "swarm rows (different coefficients; evosax's PSO is unbounded, with per-particle "
-        "coefficients).", "",
+        f"{a.dim}-D {a.function}, {a.agents} agents, {a.generations} generations, {a.dtype}; Nelder–Mead budget "
+        f"{a.nm_evals} evaluations. {a.repeats} timed rounds after a warm-up; each round runs every implementation "
+        f"once, in turn, so load from other processes hits all alike. s: the median over rounds. × peer: "
+        f"evaluations per second over the peer's (pyswarms for swarms, scipy for Nelder–Mead) in the same round, "
+        f"median over rounds (lowest–highest round in brackets). Best f (first timed round) is not comparable "
+        f"across swarm rows (different coefficients; evosax's PSO is unbounded, with per-particle coefficients).", "",
         f"Machine: {machine()}, device {jax.devices()[0].device_kind}. "
         f"Re-run: `python benchmarks/speed_optim.py{' --dtype float64' if x64 else ''}`.", "",
         "| implementation | evals | s (median) | evals/s | × peer | compile s | best f |",
@@ -282,15 +269,13 @@ def short_runs(a, lo, hi, obj, f_batch, x64, out):
                      "with no solver work at all")
     lines = [
         "# Short runs: one default `minimise` call each", "",
-        f"{a.dim}-D {a.function}, {a.agents} agents, {a.dtype}, the default call "
-        "(`jf.minimise(fn, jf.PSO(num_particles=100, num_generations=G), bounds, key=k)`, "
-        "a new key each round, the program compiled by the warm-up) as a benchmarking user "
-        f"makes it, against pyswarms' GlobalBestPSO at the same generations. {a.repeats} timed "
-        "rounds after a warm-up, every row once per round in turn; s: the median over rounds; "
-        "× pyswarms: evaluations per second over pyswarms' at the same generations in the same "
-        "round, median (lowest–highest). The 1-generation rows are the call's fixed cost; the "
-        "objective-alone rows evaluate the run's points in batches of 100, compiled as the "
-        "solvers are (no run can be faster).", "",
+        f"{a.dim}-D {a.function}, {a.agents} agents, {a.dtype}, the default call (`jf.minimise(fn, "
+        f"jf.PSO(num_particles=100, num_generations=G), bounds, key=k)`, a new key each round, the program "
+        f"compiled by the warm-up) as a benchmarking user makes it, against pyswarms' GlobalBestPSO at the same "
+        f"generations. {a.repeats} timed rounds after a warm-up, every row once per round in turn; s: the median "
+        f"over rounds; × pyswarms: evaluations per second over pyswarms' at the same generations in the same "
+        f"round, median (lowest–highest). The 1-generation rows are the call's fixed cost; the objective-alone "
+        f"rows evaluate the run's points in batches of 100, compiled as the solvers are (no run can be faster).", "",
         f"Machine: {machine()} (at the end), device {jax.devices()[0].device_kind}. "
         f"Re-run: `python benchmarks/speed_optim.py --dtype {a.dtype} --short`.", "",
         "| implementation | evals | s (median) | evals/s | × pyswarms | first call s |",
