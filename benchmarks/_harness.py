@@ -1,17 +1,11 @@
 """What every benchmark script shares: start-up, data, where results go, timing, tables.
 
-Importing this module puts the checkout's ``jaxfric`` first on ``sys.path``. Output folders
-(:func:`results_dir`): ``--out`` when given, else ``benchmarks/results/`` for a full run and
-``benchmarks/results/quick/`` (git-ignored) for a ``--quick`` one, so a smoke test never
-overwrites the committed numbers. Real data (:func:`emps_file`, :func:`pneumatic`) comes from
-``jaxfric.datasets``' folders, never a download, or is ``None`` so a script can skip
-(:func:`skipped`). Timing: :func:`run_round_robin` (implementations in turn, medians over
-rounds, so load from other processes hits all alike), :func:`timed`; tables:
-:func:`write_report`, :func:`markdown_table`, :func:`write_csv` / :func:`read_csv`, and
-:func:`about`, a script's docstring as its report's description.
-
-A script starts with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under
-``jaxfric bench`` the folder is not on ``sys.path``) and then imports from here.
+Importing it puts the checkout's ``jaxfric`` first on ``sys.path``. :func:`results_dir`: ``--out``
+when given, else ``results/``, or ``results/quick/`` (git-ignored) for ``--quick``, so a smoke run
+never overwrites the committed numbers. Real data (:func:`emps_file`, :func:`pneumatic`) comes from
+``jaxfric.datasets``' folders, never a download, or is ``None`` (:func:`skipped`). A script starts
+with ``sys.path.insert(0, str(Path(__file__).resolve().parent))`` (under ``jaxfric bench`` the
+folder is not on ``sys.path``) and then imports from here.
 """
 
 from __future__ import annotations
@@ -59,22 +53,18 @@ def machine() -> str:
             f"numpy {numpy.__version__}, Python {platform.python_version()}")
 
 
-def _found(get) -> Path | None:
-    from jaxfric import datasets
-
-    try:
-        return get(datasets)
-    except datasets.DatasetUnavailable:
-        return None
-
-
 def emps_file(path=None) -> Path | None:
     """``DATA_EMPS.mat``: ``path``, else ``$JAXFRIC_EMPS``, else ``jaxfric.datasets``' folders
     (``$JAXFRIC_DATA``, the cache; never a download), else ``../shared/data``; ``None`` if absent."""
+    from jaxfric import datasets
+
     given = path or os.environ.get("JAXFRIC_EMPS")
     if given:
         return Path(given) if Path(given).is_file() else None
-    found = _found(lambda d: d.emps_path(download=False))
+    try:
+        found = datasets.emps_path(download=False)
+    except datasets.DatasetUnavailable:
+        found = None
     if found is None and (SHARED_DATA / "emps" / "DATA_EMPS.mat").is_file():
         found = SHARED_DATA / "emps" / "DATA_EMPS.mat"
     return found
