@@ -1,24 +1,11 @@
 """Friction identification on the simulated rig: the paper's ENN study (docs/algorithms.md §12).
 
-Usage::
+    python benchmarks/friction.py [--seeds 3] [--budgets 500,1000] [--quick] [--out DIR]
 
-    python benchmarks/friction.py [--seeds 3] [--budgets 500,1000] [--x64] [--quick] [--out DIR]
-
-Data: ``jaxfric.rig.synthetic_friction_data(key(--data-seed))`` at its default noise (2000
-samples at 128 Hz, 1600 training / 400 validation; docs/algorithms.md §7). Each
-configuration runs ``--seeds`` optimiser keys on the *same* record with the paper's solver
-(:func:`jaxfric.identification.paper_solver`: MAPSO, then Nelder–Mead with fminsearch's
-budget) and a gradient stage after it (BFGS for the networks, Levenberg–Marquardt for
-LuGre); each run gives two rows, before and after the gradient stage:
-
-1. the Elman context-weight box \\|r\\| ≤ 1, 2 and the spec's 5, with MAPSO–NMDS and with
-   MAPSO alone (``identify``'s default box, ``NAMED_MODEL_DEFAULTS``, comes from here);
-2. the neuron study N = 20, 30, 40 (paper: 0.3277 %, 0.2632 %, 0.2377 %);
-3. ENN against LuGre (paper: the ENN's MSE 95.6 % below LuGre's, LuGre above 5 %);
-4. the MAPSO generation budget: the default against ``--budgets``.
-
-Writes ``friction.md`` and ``friction.csv``. MSE % = 100·mean(e²)/var(F) (``jaxfric.metrics``).
-The default pipeline's time and accuracy on this record are ``pipelines.py --record rig``'s.
+``--seeds`` keys per configuration on one simulated record, the paper's solver
+(:func:`jaxfric.identification.paper_solver`) and a gradient stage, one row before and one after
+it: the Elman context-weight box (``identify``'s default comes from here), N = 20, 30, 40, ENN
+against LuGre, and MAPSO generations (the default against ``--budgets``), beside the paper's.
 """
 
 from __future__ import annotations
@@ -30,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
 from _harness import (add_output_arguments, command, machine, markdown_table, results_dir, spread,  # noqa: E402
-                      write_csv, write_report, x64)
+                      write_csv, write_report)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -38,16 +25,6 @@ import numpy as np  # noqa: E402
 PAPER_NEURONS = {20: 0.3277, 30: 0.2632, 40: 0.2377}
 BOXES = (1.0, 2.0, 5.0)
 METRICS = [f"{k}_{w}" for k in ("mse_percent", "max_abs", "fit_percent") for w in ("train", "valid", "all")]
-
-
-def parse(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--seeds", type=int, default=3, help="optimiser keys per configuration (--quick: 1)")
-    p.add_argument("--data-seed", type=int, default=0, help="key of the simulated record")
-    p.add_argument("--x64", action="store_true", help="search in float64 (default: float32)")
-    p.add_argument("--budgets", default="500,1000", help="MAPSO generations compared with the default ('' = none)")
-    add_output_arguments(p, "N = 4, one key, tiny budgets (smoke test)")
-    return p.parse_args(argv)
 
 
 def solver(model, quick, generations=None, mapso_only=False):
@@ -71,7 +48,7 @@ def run(config, model, seed, data, args, generations=None, mapso_only=False) -> 
     refine = GradientRefinement(method="bfgs", max_steps=50 if args.quick else 2000) if big else \
         GradientRefinement(method="lm", max_steps=200)
     fit = identify(model, data, key=jax.random.key(seed), solver=solver(model, args.quick, generations, mapso_only),
-                   refine=refine, dtype=np.float64 if args.x64 else np.float32)
+                   refine=refine, dtype=np.float32)
     t = fit.timings
     first = fit.stages[0] if mapso_only else next(s for s in fit.stages if s["stage"] == "nelder_mead")
     name = "MAPSO" if mapso_only else "MAPSO–NMDS"
@@ -95,18 +72,14 @@ def plan(args):
     rb = NAMED_MODEL_DEFAULTS["elman"]["context_weight_bound"]
     seeds = range(1 if args.quick else args.seeds)
     n_main = 4 if args.quick else 30
-    for box in BOXES:
-        for s in seeds:
-            for mapso_only in (False, True):
-                yield f"N={n_main} r<={box:g}", Elman(neurons=n_main, context_weight_bound=box), s, None, mapso_only
-    for n in () if args.quick else (20, 40):
-        for s in seeds:
-            yield f"N={n} r<={rb:g}", Elman(neurons=n, context_weight_bound=rb), s, None, False
-    for g in [] if args.quick or not args.budgets else [int(g) for g in args.budgets.split(",")]:
-        for s in seeds:
-            yield f"N=30 r<={rb:g} G={g}", Elman(neurons=30, context_weight_bound=rb), s, g, False
-    for s in seeds:
-        yield "LuGre", LuGre(), s, None, False
+    yield from ((f"N={n_main} r<={box:g}", Elman(neurons=n_main, context_weight_bound=box), s, None, only)
+                for box in BOXES for s in seeds for only in (False, True))
+    yield from ((f"N={n} r<={rb:g}", Elman(neurons=n, context_weight_bound=rb), s, None, False)
+                for n in (() if args.quick else (20, 40)) for s in seeds)
+    yield from ((f"N=30 r<={rb:g} G={g}", Elman(neurons=30, context_weight_bound=rb), s, g, False)
+                for g in ([] if args.quick or not args.budgets else [int(g) for g in args.budgets.split(",")])
+                for s in seeds)
+    yield from (("LuGre", LuGre(), s, None, False) for s in seeds)
 
 
 def report(rows, args, wall) -> str:
@@ -139,26 +112,27 @@ def report(rows, args, wall) -> str:
         "# Friction identification on the simulated rig (`benchmarks/friction.py`)", "",
         f"Generated by `{command('friction.py')}` in {wall:.0f} s"
         + (" — **--quick smoke budgets, not results**" if args.quick else "") + ". "
-        f"Record: `jaxfric.rig.synthetic_friction_data(jax.random.key({args.data_seed}))`, 1600 training / 400 "
-        f"validation samples; {'float64' if args.x64 else 'float32'}; cells are mean (min–max) over keys. "
+        "Record: `jaxfric.rig.synthetic_friction_data(jax.random.key(0))`, 1600 training / 400 "
+        "validation samples; float32; cells are mean (min–max) over keys. "
         f"Solver: the paper's (MAPSO 8×8, G = {DEFAULT_GENERATIONS_BLACK_BOX} for the networks, 5×5, G = 200 for "
         "LuGre, then Nelder–Mead with fminsearch's budget); 'MAPSO only' runs are separate runs with the same "
         "MAPSO; '+ BFGS' (at most 2000 steps) and '+ LM' (200 steps) are the same run's gradient stage. "
         "MAX = max|e| [N]; FIT % = 100·(1 − ‖e‖/‖F − mean F‖); diverged: validation MSE above 10× the "
         "training MSE and above 5 %. `r<=b`: the Elman context-weight box; `G=`: MAPSO generations.", "",
-        f"Machine: {machine()}.", "",
-        markdown_table(table), "", *lines, ""])
+        f"Machine: {machine()}.", "", markdown_table(table), "", *lines, ""])
 
 
 def main(argv=None):
-    args = parse(argv)
-    if args.x64:
-        x64()
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--seeds", type=int, default=3, help="optimiser keys per configuration (--quick: 1)")
+    p.add_argument("--budgets", default="500,1000", help="MAPSO generations compared with the default ('' = none)")
+    add_output_arguments(p, "N = 4, one key, tiny budgets (smoke test)")
+    args = p.parse_args(argv)
     from jaxfric import rig
 
     out = results_dir(args.out, quick=args.quick)
     t0 = time.perf_counter()
-    data = rig.synthetic_friction_data(jax.random.key(args.data_seed))
+    data = rig.synthetic_friction_data(jax.random.key(0))
     rows = []
     for config, model, seed, generations, mapso_only in plan(args):
         rows += run(config, model, seed, data, args, generations, mapso_only)
