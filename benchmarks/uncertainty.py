@@ -1,25 +1,12 @@
 """Are jaxfric's parameter intervals and prediction bands calibrated?
 
-Usage::
-
     python benchmarks/uncertainty.py [--emps PATH/DATA_EMPS.mat] [--quick] [--out DIR]
 
-1. **Parameter coverage on the rig simulator.** The velocity is the simulated rig's
-   (``rig.simulate(Rig(), key 0)``, 2000 samples at 128 Hz, first 1600 used); the friction
-   is a *known* model — Coulomb+viscous (linear; exact least squares) and Stribeck
-   (nonlinear; ``scipy.optimize.least_squares`` from the truth) — plus measurement noise,
-   white or AR(1) (ρ = 0.5, 0.9). Over R noisy replicates, the fraction of 95 % intervals
-   that hold the true value, per method (``jacobian``: independent residuals; ``hac``:
-   Newey–West; ``block_bootstrap``: one-step moving-block bootstrap).
-2. **Prediction-band coverage of held-out samples**, where the truth is not in the model
-   class: the rig's seal friction (``rig.synthetic_friction_data``, validation = last 400
-   samples), and EMPS (estimation = first 80 %, held-back block = last 20 %): the 95 %
-   covariance band ŷ ± t sqrt(j Σ jᵀ + s²) and, for LuGre on the rig, the min–max band of
-   an 8-member ensemble (``keys=8``). EMPS's Coulomb+viscous+offset least-squares fit is
-   the baseline.
-
-Writes ``uncertainty.md`` and ``uncertainty.csv`` into ``--out`` (default
-``benchmarks/results``; ``--quick``: fewer replicates, ``benchmarks/results/quick``).
+(1) How often the 95 % parameter intervals of each covariance method (``jacobian``, Newey–West
+``hac``, moving-block ``block_bootstrap``) hold a known truth: the simulated rig's velocity,
+Coulomb+viscous and Stribeck friction, white or AR(1) noise. (2) How often the prediction
+bands (covariance, and an 8-member ensemble's min–max) hold held-out samples where the truth is
+not in the model class: the rig's seal friction and EMPS, beside EMPS's least-squares baseline.
 """
 
 from __future__ import annotations
@@ -90,26 +77,18 @@ def parameter_coverage(v, reps, rng, methods, boot_reps):
         for rho in (0.0, 0.5, 0.9):
             noise = ar1(rng, reps, n, rho, NOISE_N)
             hits = {m: np.zeros(theta_true.size) for m in methods}
-            width = {m: [] for m in methods}
             t = stats.t.ppf(0.5 + LEVEL / 2, n - theta_true.size)
             for r in tqdm(range(reps), desc=f"{mname} rho={rho}", leave=False):
                 th, res, jac = fit_replicate(theta_true, clean + noise[r])
                 for m in methods:
-                    if m == "jacobian":
-                        cov = jacobian_covariance(jac, res)[0]
-                    elif m == "hac":
-                        cov = hac_covariance(jac, res, andrews_bandwidth(jac, res))
-                    else:
-                        cov = block_bootstrap_covariance(jac, res, r, int(andrews_bandwidth(jac, res)) + 1,
-                                                         boot_reps)
-                    se = np.sqrt(np.diag(cov))
-                    hits[m] += np.abs(th - theta_true) <= t * se
-                    width[m].append(se)
+                    cov = (jacobian_covariance(jac, res)[0] if m == "jacobian" else
+                           hac_covariance(jac, res, andrews_bandwidth(jac, res)) if m == "hac" else
+                           block_bootstrap_covariance(jac, res, r, int(andrews_bandwidth(jac, res)) + 1, boot_reps))
+                    hits[m] += np.abs(th - theta_true) <= t * np.sqrt(np.diag(cov))
             for m in methods:
                 cov_frac = hits[m] / reps
                 rows.append({"truth": mname, "noise": "white" if rho == 0 else f"AR(1) rho={rho}",
-                             "method": m, "replicates": reps,
-                             **{f"cover_{k}": "" for k in ALL_PARAMS},
+                             "method": m, "replicates": reps, **{f"cover_{k}": "" for k in ALL_PARAMS},
                              **{f"cover_{k}": round(float(c), 3) for k, c in zip(truth, cov_frac)},
                              "cover_min": round(float(cov_frac.min()), 3),
                              "cover_max": round(float(cov_frac.max()), 3)})
@@ -117,33 +96,26 @@ def parameter_coverage(v, reps, rng, methods, boot_reps):
 
 
 def band_row(label, fit, data, split, **extra):
-    n = data.n_train
-    inputs = fit.model.inputs_from(data, data.n_samples)
+    n, f, inputs = data.n_train, np.asarray(data.friction), fit.model.inputs_from(data, data.n_samples)
     out = {"data": label, "model": type(fit.model).__name__ + extra.pop("suffix", ""), "split": split}
     for method in ("hac", "jacobian"):
         y, lo, hi = fit.prediction_interval(data.velocity, LEVEL, inputs=inputs, method=method)
-        f = np.asarray(data.friction)
         out[f"train_{method}"] = round(coverage(f[:n], lo[:n], hi[:n]), 4)
         out[f"valid_{method}"] = round(coverage(f[n:], lo[n:], hi[n:]), 4)
         out[f"half_width_N_{method}"] = round(float(np.mean(hi - lo) / 2), 3)
-    e = (np.asarray(data.friction) - y)[n:]
+    e = (f - y)[n:]
     out["valid_rmse_N"] = round(float(np.sqrt(np.mean(e**2))), 3)
-    out["valid_mse_percent"] = round(float(100 * np.mean(e**2) / np.var(np.asarray(data.friction)[n:])), 4)
+    out["valid_mse_percent"] = round(float(100 * np.mean(e**2) / np.var(f[n:])), 4)
     out["implausible"] = "; ".join(f"{d['name']} ({d['rule']})" for d in fit.diagnostics.get("implausible", []))
     out.update(extra)
     return out
 
 
 def interval_rows(label, fit):
-    u = fit.uncertainty
-    rows = []
-    for r in u.table(LEVEL):
-        rows.append({"data": label, "model": type(fit.model).__name__, "param": r["name"],
-                     "estimate": f"{r['estimate']:.5g}", "se_hac": f"{r['se_hac']:.3g}",
-                     "se_jacobian": f"{r['se_jacobian']:.3g}",
-                     "interval_95": f"[{r['low']:.4g}, {r['high']:.4g}]",
-                     "not_determined": "yes" if r["covers_box"] else ""})
-    return rows
+    return [{"data": label, "model": type(fit.model).__name__, "param": r["name"], "estimate": f"{r['estimate']:.5g}",
+             "se_hac": f"{r['se_hac']:.3g}", "se_jacobian": f"{r['se_jacobian']:.3g}",
+             "interval_95": f"[{r['low']:.4g}, {r['high']:.4g}]", "not_determined": "yes" if r["covers_box"] else ""}
+            for r in fit.uncertainty.table(LEVEL)]
 
 
 def ls_baseline_fit(data):
@@ -170,8 +142,7 @@ def main(argv=None):
 
     rec = rig.simulate(rig.Rig(), jax.random.key(0))
     v = np.asarray(rec.velocity, np.float64)[:N_TRAIN]
-    cov_rows = parameter_coverage(v, reps, np.random.default_rng(0),
-                                  ("jacobian", "hac", "block_bootstrap"), boot)
+    cov_rows = parameter_coverage(v, reps, np.random.default_rng(0), ("jacobian", "hac", "block_bootstrap"), boot)
 
     band_rows, iv_rows = [], []
     data = rig.synthetic_friction_data(jax.random.key(1))
@@ -179,14 +150,13 @@ def main(argv=None):
         fit = jaxfric.identify(name, data, key=0)
         band_rows.append(band_row("rig (seal friction)", fit, data, "train 1600 / valid 400"))
         iv_rows += interval_rows("rig", fit)
-    ens = None
+    ens_text = "not run (--quick)"
     if not args.quick:
-        fit = jaxfric.identify("lugre", data, key=0, keys=8)
-        lo, hi = fit.predict_band(data.velocity)
-        f = np.asarray(data.friction)
-        n = data.n_train
-        ens = {"train": coverage(f[:n], lo[:n], hi[:n]), "valid": coverage(f[n:], lo[n:], hi[n:]),
-               "half_width": float(np.mean(hi - lo) / 2)}
+        lo, hi = jaxfric.identify("lugre", data, key=0, keys=8).predict_band(data.velocity)
+        f, n = np.asarray(data.friction), data.n_train
+        ens_text = (f"LuGre, keys=8 on the rig: the members' min–max band (mean half-width "
+                    f"{float(np.mean(hi - lo) / 2):.3g} N) holds {coverage(f[:n], lo[:n], hi[:n]):.1%} of the "
+                    f"training and {coverage(f[n:], lo[n:], hi[n:]):.1%} of the validation samples")
 
     emps_note = "EMPS: skipped (no file at --emps)."
     args.emps = emps_file(args.emps)
@@ -196,32 +166,23 @@ def main(argv=None):
         base = ls_baseline_fit(data)
         band_rows.append(band_row("EMPS", base, data, split, suffix=" (LS baseline, asym+offset)"))
         iv_rows += interval_rows("EMPS", base)
-        cases = [("stribeck", {}), ("lugre", dict(asymmetric=True, offset=True))]
-        if args.quick:
-            cases = cases[:1]
-        for name, opts in cases:
+        for name, opts in [("stribeck", {}), ("lugre", dict(asymmetric=True, offset=True))][:1 if args.quick else 2]:
             fit = jaxfric.identify(name, data, key=0, **opts)
             band_rows.append(band_row("EMPS", fit, data, split, suffix=" (asym+offset)" if opts else ""))
             iv_rows += interval_rows("EMPS", fit)
         emps_note = f"EMPS: {args.emps.name}, {data.n_samples} samples at {1 / data.dt:.4g} Hz, {split}."
 
-    ens_text = ("not run (--quick)" if ens is None else
-                f"LuGre, keys=8 on the rig: the members' min–max band (mean half-width "
-                f"{ens['half_width']:.3g} N) holds {ens['train']:.1%} of the training and "
-                f"{ens['valid']:.1%} of the validation samples")
     md = ["# Parameter intervals and prediction bands: measured coverage", "",
           f"`python benchmarks/uncertainty.py{' --quick' if args.quick else ''}` — jaxfric "
           f"{jaxfric.__version__ if hasattr(jaxfric, '__version__') else ''}, float64, "
           f"{machine()}, {time.perf_counter() - t0:.0f} s in all.", "",
           "## 1. Parameter coverage (known truth, rig velocity, noise 20 N)", "",
-          f"Fraction of {reps} noisy replicates whose 95 % interval holds the true parameter "
-          "(nominal 0.95; the test asks 0.85–0.99). `block_bootstrap`: "
-          f"{boot} resamples per replicate.", "", markdown_table(cov_rows), "",
+          f"Fraction of {reps} noisy replicates whose 95 % interval holds the true parameter (nominal 0.95; the "
+          f"test asks 0.85–0.99). `block_bootstrap`: {boot} resamples per replicate.", "", markdown_table(cov_rows), "",
           "## 2. Prediction-band coverage of held-out samples", "",
-          "95 % band ŷ ± t·sqrt(j Σ jᵀ + s²) with Σ from the Newey–West (`hac`) or the "
-          "independent-residual (`jacobian`) covariance and s² the training residual variance. "
-          "The truth is not in the model class here (seal friction on the rig; real EMPS data), so "
-          "the band's width is set by model error.", "", markdown_table(band_rows), "",
+          "95 % band ŷ ± t·sqrt(j Σ jᵀ + s²) with Σ from the Newey–West (`hac`) or the independent-residual "
+          "(`jacobian`) covariance and s² the training residual variance. The truth is not in the model class here "
+          "(seal friction on the rig; real EMPS data), so the band's width is set by model error.", "", markdown_table(band_rows), "",
           f"Ensemble min–max band: {ens_text}.", "", emps_note, "",
           "## 3. Intervals of the fits above", "", markdown_table(iv_rows), ""]
     write_report(out, "uncertainty", md, cov_rows + band_rows)
