@@ -235,6 +235,17 @@ def _classes(R: int, padded: bool) -> list[tuple[int, int]]:
     return [(lo, min(lo + step - 1, R)) for lo in range(0, R + 1, step)]
 
 
+def _stacked(params, P: int, lo: int, hi: int):
+    """The evosax parameters ``params`` of population levels ``lo..hi`` (population
+    ``P·2^j``) stacked on a new first axis, their weights padded with zeros to level
+    ``hi``'s population."""
+    return jax.tree_util.tree_map(
+        lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]),
+        *[q.replace(weights=jnp.pad(q.weights, (0, (P << hi) - (P << j))))
+          if hasattr(q, "weights") and hi > lo else q
+          for j, q in zip(range(lo, hi + 1), params)])
+
+
 def _no_spread(inner, tolx) -> Any:
     """pycma's ``tolx``, ``noeffectcoord`` and ``conditioncov`` on a distribution-based
     strategy's state (unit-box coordinates), from what it holds: ``std`` (σ), a full or
@@ -361,6 +372,16 @@ class EvosaxState(eqx.Module):
     ipop: Any = None
 
 
+def _advanced(state: EvosaxState, inner, X, F, evals, restarted, ipop=None) -> EvosaxState:
+    """The state after a step that evaluated the points ``X`` (values ``F``, ``evals`` of
+    them): the new strategy state, the best point so far, the counts advanced."""
+    i = jnp.argmin(F)
+    better = F[i] < state.f_best
+    return EvosaxState(inner, jnp.where(better, X[i], state.x_best), jnp.where(better, F[i], state.f_best),
+                       state.num_evals + evals, state.generation + 1, state.key,
+                       state.restarts + restarted.astype(jnp.int32), ipop)
+
+
 class Evosax(AbstractGenerational):
     """An evosax evolution strategy under jaxfric's driver (see the module docstring).
 
@@ -418,14 +439,10 @@ class Evosax(AbstractGenerational):
         self.std_init = std_init
         self.params = tuple(sorted((params or {}).items()))
         self.strategy_kwargs = tuple(sorted(strategy_kwargs.items()))
-        if restarts is None:
-            restarts = RESTARTS if _padded(self.strategy) else 0
-        self.restarts = restarts
+        self.restarts = (RESTARTS if _padded(self.strategy) else 0) if restarts is None else restarts
         self.restart_tolfun = restart_tolfun
         self.restart_tolx = restart_tolx
-        if bound_handling is None:
-            bound_handling = "transform" if restarts else "clip"
-        self.bound_handling = bound_handling
+        self.bound_handling = ("transform" if self.restarts else "clip") if bound_handling is None else bound_handling
 
     def __repr__(self):  # the constructor call (Fit.settings records it)
         extra = "".join(f", {k}={v!r}" for k, v in self.strategy_kwargs)
@@ -572,17 +589,7 @@ class Evosax(AbstractGenerational):
             fresh = es.init(k_restart, U, F, params)
         inner = jax.tree_util.tree_map(lambda f, i: jnp.where(broken, f, i),
                                        self._like(fresh, state.inner), inner)
-        i = jnp.argmin(F)
-        better = F[i] < state.f_best
-        return EvosaxState(
-            inner,
-            jnp.where(better, X[i], state.x_best),
-            jnp.where(better, F[i], state.f_best),
-            state.num_evals + es.population_size,
-            state.generation + 1,
-            state.key,
-            state.restarts + broken.astype(jnp.int32),
-        )
+        return _advanced(state, inner, X, F, es.population_size, broken)
 
     def _ipop_step(self, lower, upper, state: EvosaxState) -> Rounds:
         """One batch of ``P`` points of the current generation (see the module
@@ -603,15 +610,8 @@ class Evosax(AbstractGenerational):
         # size for strategies where that is not the same update (_padded).
         classes = _classes(R, _padded(self.strategy))
         member = np.concatenate([np.full(hi - lo + 1, c) for c, (lo, hi) in enumerate(classes)])
-        objects, stacked = [], []
-        for lo, hi in classes:
-            size = P << hi
-            objects.append(levels[hi])
-            stacked.append(jax.tree_util.tree_map(
-                lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]),
-                *[q.replace(weights=jnp.pad(q.weights, (0, size - (P << j))))
-                  if hasattr(q, "weights") and hi > lo else q
-                  for j, q in zip(range(lo, hi + 1), params[lo:hi + 1])]))
+        objects = [levels[hi] for _, hi in classes]
+        stacked = [_stacked(params[lo:hi + 1], P, lo, hi) for lo, hi in classes]
 
         def at(c, level):
             i = level - int(classes[c][0])
@@ -651,6 +651,31 @@ class Evosax(AbstractGenerational):
         told = jax.lax.cond(ends, lambda: tell_all(U_all, F_all, inner), lambda: inner)
 
         # stagnation, judged when the generation ends
+        stagnant, bests, count, flat = self._stagnation(ip, F_all, valid, lam, told, n)
+        stagnant &= ends
+
+        def restart():
+            k = jax.random.fold_in(k_tell, 1)
+            level = jnp.minimum(ip.level + 1, R)
+            mean = self._genotype(jax.random.uniform(k, lower.shape, lower.dtype))
+            return init_at(k, mean, level), level
+
+        inner, level = jax.lax.cond(stagnant, restart, lambda: (told, ip.level))
+        ipop = IPOPState(
+            level=level,
+            batch=jnp.where(ends, 0, ip.batch + 1),
+            U=U_all, F=F_all,
+            bests=jnp.where(ends, bests, ip.bests),
+            count=jnp.where(stagnant, 0, jnp.where(ends, count, ip.count)),
+            flat=jnp.where(stagnant, 0, jnp.where(ends, flat, ip.flat)),
+        )
+        return _advanced(state, inner, X, F, P, stagnant, ipop)
+
+    def _stagnation(self, ip: IPOPState, F_all, valid, lam, told, n: int):
+        """``(stagnant, bests, count, flat)``: whether a generation with the values ``F_all``
+        (those where ``valid``, ``lam`` of them) and the told state ``told`` is stagnant by
+        pycma's criteria (module docstring's **Restarts**), and the best-value history and
+        flat count as the generation's end leaves them."""
         g_best = jnp.min(jnp.where(valid, F_all, jnp.inf))
         g_worst = jnp.max(jnp.where(valid, F_all, -jnp.inf))
         H = ip.bests.shape[0]
@@ -673,35 +698,7 @@ class Evosax(AbstractGenerational):
         stagnant |= flat > 1
         stagnant |= _no_spread(told, self.restart_tolx)
         stagnant |= ~_all_finite(told)
-        stagnant &= ends
-
-        def restart():
-            k = jax.random.fold_in(k_tell, 1)
-            level = jnp.minimum(ip.level + 1, R)
-            mean = self._genotype(jax.random.uniform(k, lower.shape, lower.dtype))
-            return init_at(k, mean, level), level
-
-        inner, level = jax.lax.cond(stagnant, restart, lambda: (told, ip.level))
-        i = jnp.argmin(F)
-        better = F[i] < state.f_best
-        ipop = IPOPState(
-            level=level,
-            batch=jnp.where(ends, 0, ip.batch + 1),
-            U=U_all, F=F_all,
-            bests=jnp.where(ends, bests, ip.bests),
-            count=jnp.where(stagnant, 0, jnp.where(ends, count, ip.count)),
-            flat=jnp.where(stagnant, 0, jnp.where(ends, flat, ip.flat)),
-        )
-        return EvosaxState(
-            inner,
-            jnp.where(better, X[i], state.x_best),
-            jnp.where(better, F[i], state.f_best),
-            state.num_evals + P,
-            state.generation + 1,
-            state.key,
-            state.restarts + stagnant.astype(jnp.int32),
-            ipop,
-        )
+        return stagnant, bests, count, flat
 
     # ------------------------------------------------------------------ bound handling
     def _repair(self, U):
