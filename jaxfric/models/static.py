@@ -30,9 +30,12 @@ from ._physical import (AbstractPhysicalModel, Unidentifiable, add_offset, by_di
 __all__ = ["Coulomb", "Cylinder", "Stribeck"]
 
 
-def _check_v_eps(v_eps: float) -> None:
+def _check_smoothing(v_eps: float, exponent: float = 1.0) -> None:
+    """The sign's smoothing ``v_eps`` and the Stribeck exponent must be positive."""
     if not v_eps > 0.0:
         raise ValueError(f"v_eps must be positive (m/s), got {v_eps}")
+    if not exponent > 0.0:
+        raise ValueError(f"exponent must be positive, got {exponent}")
 
 
 def _columns(model, thetas, velocity):
@@ -73,7 +76,7 @@ class Coulomb(AbstractPhysicalModel):
     uses_dt = False
 
     def __check_init__(self):
-        _check_v_eps(self.v_eps)
+        _check_smoothing(self.v_eps)
 
     @property
     def _coords(self):
@@ -165,9 +168,7 @@ class Stribeck(AbstractPhysicalModel):
     uses_dt = False
 
     def __check_init__(self):
-        _check_v_eps(self.v_eps)
-        if not self.exponent > 0.0:
-            raise ValueError(f"exponent must be positive, got {self.exponent}")
+        _check_smoothing(self.v_eps, self.exponent)
 
     @property
     def _coords(self):
@@ -182,9 +183,6 @@ class Stribeck(AbstractPhysicalModel):
     def _simulate_batch(self, thetas, velocity, dt=None) -> Float[Array, "P T"]:
         p, vv, t = _columns(self, thetas, velocity)
         delta = p["delta"] if self.fit_exponent else self.exponent
-        if not (self.asymmetric or self.offset):
-            g = stribeck_curve(vv, p["Fc"], p["Fs"], p["vs"], delta)
-            return t * g + p["sigma2"] * vv
         if self.asymmetric:
             g_pos = stribeck_curve(vv, p["Fc_pos"], p["Fs_pos"], p["vs"], delta)
             g_neg = stribeck_curve(vv, p["Fc_neg"], p["Fs_neg"], p["vs"], delta)
@@ -224,9 +222,7 @@ class Cylinder(AbstractPhysicalModel):
     _low_speed = ("K_brk", "vs")
 
     def __check_init__(self):
-        _check_v_eps(self.v_eps)
-        if not self.exponent > 0.0:
-            raise ValueError(f"exponent must be positive, got {self.exponent}")
+        _check_smoothing(self.v_eps, self.exponent)
 
     @property
     def input_names(self) -> tuple[str, ...]:
