@@ -72,10 +72,9 @@ def _weights(fit) -> dict:
     if model.needs_scaling:
         w.update(v_lo=float(fit.velocity_scaler.lo), v_hi=float(fit.velocity_scaler.hi),
                  f_lo=float(fit.friction_scaler.lo), f_hi=float(fit.friction_scaler.hi))
-    if kind == "elman":
+    if kind in ("elman", "elman_full"):
         w["b_o"] = float(p["b_o"]) if model.output_bias else 0.0
     if kind == "elman_full":
-        w["b_o"] = float(p["b_o"]) if model.output_bias else 0.0
         w["c0"] = p["c0"] if model.learn_c0 else np.zeros_like(p["w"])
     if kind == "lugre":
         w["delta"] = float(model.stribeck_exponent)
