@@ -371,18 +371,9 @@ def sweep(models, records, keys, out_dir, *, progress: bool = True, on_run: Call
     runs = [Run(m, r, s, i) for i, (m, r, s) in enumerate(
         (m, r, s) for m in model_map for r in record_map for s in seeds)]
     mine = [run for run in runs if run.index % count == index]
-    rows: dict[int, dict] = {}
-    done, todo = [], []
-    for run in mine:
-        path = out / run.fit_file
-        if path.exists():
-            try:
-                rows[run.index] = _row(run, _load(path, motion))
-                done.append(run)
-                continue
-            except ValueError:
-                pass  # unreadable (e.g. written by hand): compute it again, atomically
-        todo.append(run)
+    rows = _rows_on_disk(out, mine, motion, skip_unreadable=True)
+    done = [run for run in mine if run.index in rows]
+    todo = [run for run in mine if run.index not in rows]
 
     def write_table(known: dict[int, dict]) -> None:
         atomic_write_text(out / "results.csv", _table_text([known[i] for i in sorted(known)]))
@@ -428,12 +419,18 @@ def _refuse_own(options, where: str) -> None:
             raise ValueError(f"{where}{name}= is the sweep's own: give the seeds as keys=, not as an identify option")
 
 
-def _rows_on_disk(out: Path, runs: list[Run], motion: bool) -> dict[int, dict]:
+def _rows_on_disk(out: Path, runs: list[Run], motion: bool, skip_unreadable: bool = False) -> dict[int, dict]:
+    """Run index -> row of the ``runs`` whose fit file ``out`` holds (``skip_unreadable``:
+    leaving out a file that does not load, e.g. one written by hand, to compute it again)."""
     rows = {}
     for run in runs:
         path = out / run.fit_file
         if path.exists():
-            rows[run.index] = _row(run, _load(path, motion))
+            try:
+                rows[run.index] = _row(run, _load(path, motion))
+            except ValueError:
+                if not skip_unreadable:
+                    raise
     return rows
 
 
