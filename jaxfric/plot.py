@@ -487,6 +487,26 @@ def _gradient_stages(item) -> list[Mapping]:
     return [s for s in item.stages if "num_evals" not in s and "J" in s]
 
 
+def _convergence_items(items, labels) -> tuple[list, list[str]]:
+    """``plot_convergence``'s items (one, a sequence, or a mapping label -> item; an
+    ``(evals, f)`` pair is one item) and their labels."""
+    if isinstance(items, Mapping):
+        labels = list(items) if labels is None else labels
+        items = list(items.values())
+    elif isinstance(items, (list, tuple)) and not (
+        len(items) == 2 and isinstance(items, tuple) and np.ndim(items[0]) >= 1
+    ):
+        items = list(items)
+    else:
+        items = [items]
+    if labels is None:
+        labels = [fit_label(it, f"run {i + 1}") for i, it in enumerate(items)]
+    labels = list(labels)
+    if len(labels) != len(items):
+        raise ValueError(f"{len(labels)} labels for {len(items)} histories")
+    return items, labels
+
+
 def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None, *,
                      title: str | None = None, ylabel: str = "best objective value J") -> Figure:
     """Best objective value against function evaluations, log scale.
@@ -499,22 +519,7 @@ def plot_convergence(solutions_or_histories, labels: Sequence[str] | None = None
     its gradient stage (e.g. the networks' BFGS), whose steps are counted on the
     evaluation axis, as a dashed segment to the cost it ended at.
     """
-    if isinstance(solutions_or_histories, Mapping):
-        labels = list(solutions_or_histories) if labels is None else labels
-        items = list(solutions_or_histories.values())
-    elif isinstance(solutions_or_histories, (list, tuple)) and not (
-        len(solutions_or_histories) == 2 and isinstance(solutions_or_histories, tuple)
-        and np.ndim(solutions_or_histories[0]) >= 1
-    ):
-        items = list(solutions_or_histories)
-    else:
-        items = [solutions_or_histories]
-    if labels is None:
-        labels = [fit_label(it, f"run {i + 1}") for i, it in enumerate(items)]
-    labels = list(labels)
-    if len(labels) != len(items):
-        raise ValueError(f"{len(labels)} labels for {len(items)} histories")
-
+    items, labels = _convergence_items(solutions_or_histories, labels)
     curves = [_history_arrays(it) for it in items]
     ends = [float(s["J"]) for it in items for s in _gradient_stages(it)]
     finite = np.concatenate([f[np.isfinite(f)].ravel() for _, f in curves] + [np.asarray(ends, float)]
