@@ -50,16 +50,12 @@ def _problem(fit):
     return fit.problem()
 
 
-def _coords(model):
-    return tuple(model._coords)
-
-
 # ----------------------------------------------------------------------- uncertainty
 def _physical(model, y, kinds):
     """Physical value of every coordinate of ``y`` (a motion fit's mechanics appended)."""
     k = model.num_params
     vals = model._coord_values(y[:k])
-    out = [vals[c[1]] for c in _coords(model)]
+    out = [vals[c[1]] for c in model._coords]
     for kind, x in zip(kinds[k:], y[k:]):
         out.append(10.0**x if kind == "log10" else x)
     return jnp.stack(out)
@@ -218,10 +214,10 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
         if one_record:
             try:
                 inputs = fit.model.inputs_from(data, len(data.velocity))
-                y, lo, hi = prediction_interval(fit, data.velocity, level, inputs=inputs)
+                _, lo, hi = prediction_interval(fit, data.velocity, level, inputs=inputs)
             except ValueError:
-                y = None
-            if y is not None:
+                pass
+            else:
                 out["band"] = {**_window_coverage(fit, data, lo, hi),
                                "median_half_width_N": float(np.median(hi - lo) / 2),
                                "max_half_width_N": float(np.max(hi - lo) / 2)}
