@@ -3,19 +3,10 @@ model on the held-back last 20 %.
 
     python benchmarks/emps.py [--data PATH/DATA_EMPS.mat] [--refine lm|none|both] [--quick] [--out DIR]
 
-Data: ``--data``, else :func:`_harness.emps_file` (none: says so, writes nothing). The record
-follows the benchmark's recipe (:mod:`jaxfric.rig.emps`: Butterworth 100 Hz forward–backward
-on ``qm``, central differences, ``friction = gtau·vir − M·a`` with the IDIM-LS mass); the
-first 80 % train, the last 20 % were never used to choose anything.
-
-(a) Fc, Fv (symmetric and asymmetric) from IDIM-LS on the whole record against Janot et al.
-    2019 (target: within 2 %);
-(b) validation MSE % = 100·mean(e²)/var(F) and run time of the least-squares baseline
-    (``baselines.ls_coulomb_viscous``), Coulomb, Stribeck, LuGre and GMS (symmetric, and
-    asymmetric + offset; MAPSO ``PHYS_LATTICE``², ``PHYS_GENERATIONS`` generations,
-    ``data_bounds=True``, then LM unless ``--refine none``) and the default ENN.
-
-Writes ``emps.md``, ``emps.csv``, ``emps_idim.csv`` and ``emps_validation.png``.
+The record follows the benchmark's recipe (:mod:`jaxfric.rig.emps`); (a) IDIM-LS on the whole
+record against Janot et al. 2019 (target: within 2 %); (b) the least-squares baseline and
+every model (MAPSO ``PHYS_LATTICE``², ``PHYS_GENERATIONS`` generations, then LM unless
+``--refine none``; the ENN with every default) scored on the last 20 %.
 """
 
 from __future__ import annotations
@@ -40,16 +31,6 @@ PHYS_LATTICE, PHYS_GENERATIONS = 5, 30
 QUICK_GENERATIONS = 3
 
 
-def parse(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", default=None, help="path of DATA_EMPS.mat (default $JAXFRIC_EMPS or the shared folder)")
-    add_output_arguments(p, "tiny budgets (smoke test)")
-    p.add_argument("--refine", choices=("lm", "none", "both"), default="lm",
-                   help="gradient stage of the physical models after MAPSO (default lm)")
-    p.add_argument("--seed", type=int, default=0)
-    return p.parse_args(argv)
-
-
 # ------------------------------------------------------------------------ (a) IDIM-LS
 def idim_table(rec):
     from jaxfric.rig import emps
@@ -58,18 +39,15 @@ def idim_table(rec):
     rows = []
     for asym in (False, True):
         est = emps.idim_ls(s["v"], s["a"], s["force"], asymmetric=asym)
-        names = ("M", "Fv_pos", "Fv_neg", "Fc_pos", "Fc_neg") if asym else ("M", "Fv", "Fc", "offset")
-        for k in names:
-            ours = getattr(est, k)
-            rows.append({"form": "asymmetric" if asym else "symmetric", "parameter": k, "ours": ours,
-                         "published": PUBLISHED[k], "diff_pct": 100.0 * (ours / PUBLISHED[k] - 1.0)})
+        rows += [{"form": "asymmetric" if asym else "symmetric", "parameter": k, "ours": getattr(est, k),
+                  "published": PUBLISHED[k], "diff_pct": 100.0 * (getattr(est, k) / PUBLISHED[k] - 1.0)}
+                 for k in (("M", "Fv_pos", "Fv_neg", "Fc_pos", "Fc_neg") if asym else ("M", "Fv", "Fc", "offset"))]
     return rows
 
 
 # ----------------------------------------------------------------------- (b) models
 def nmse(f, y):
-    e = f - y
-    return float(100.0 * np.mean(e ** 2) / np.var(f))
+    return float(100.0 * np.mean((f - y) ** 2) / np.var(f))
 
 
 def physical_models():
@@ -85,18 +63,12 @@ def physical_models():
 
 def run_identify(model, data, seed, quick, refine):
     from jaxfric import MAPSO
-    from jaxfric.identification import identify
+    from jaxfric.identification import GradientRefinement, identify
 
-    kw = {}
-    if model != "elman":
-        gens = QUICK_GENERATIONS if quick else PHYS_GENERATIONS
-        kw = {"solver": MAPSO(lattice_size=PHYS_LATTICE, num_generations=gens), "data_bounds": True,
-              "refine": refine}
-    elif quick:
-        from jaxfric.identification import GradientRefinement
-
-        kw = {"solver": MAPSO(lattice_size=8, num_generations=QUICK_GENERATIONS),
-              "refine": GradientRefinement(method="bfgs", max_steps=10)}
+    gens = QUICK_GENERATIONS if quick else PHYS_GENERATIONS
+    kw = ({"solver": MAPSO(lattice_size=PHYS_LATTICE, num_generations=gens), "data_bounds": True, "refine": refine}
+          if model != "elman" else {"solver": MAPSO(lattice_size=8, num_generations=QUICK_GENERATIONS),
+                                    "refine": GradientRefinement(method="bfgs", max_steps=10)} if quick else {})
     with warnings.catch_warnings(record=True, action="always") as caught:
         fit, wall, _ = timed(lambda: identify(model, data, key=seed, **kw))
     return fit, {**fit_cells(fit), "wall_s": wall,
@@ -106,7 +78,13 @@ def run_identify(model, data, seed, quick, refine):
 
 
 def main(argv=None):
-    args = parse(argv)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", default=None, help="path of DATA_EMPS.mat (default $JAXFRIC_EMPS or the shared folder)")
+    add_output_arguments(p, "tiny budgets (smoke test)")
+    p.add_argument("--refine", choices=("lm", "none", "both"), default="lm",
+                   help="gradient stage of the physical models after MAPSO (default lm)")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
     path = emps_file(args.data)
     if path is None:
         return skipped("emps", "no EMPS file (pass --data or set JAXFRIC_DATA)")
@@ -118,9 +96,7 @@ def main(argv=None):
     idim = idim_table(rec)
     data = rig.emps_friction_data(rec)
     v, f, n = np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
-    t0 = time.perf_counter()
-    y_ls, coef = ls_coulomb_viscous(v, f, n)
-    ls_s = time.perf_counter() - t0
+    (y_ls, coef), ls_s, _ = timed(lambda: ls_coulomb_viscous(v, f, n))
     rows = [{"model": "LS baseline: asymmetric Coulomb + viscous + offset (numpy lstsq)", "refine": "-",
              "valid": nmse(f[n:], y_ls[n:]), "train": nmse(f[:n], y_ls[:n]), "wall_s": ls_s, "run_s": ls_s,
              "compile_s": 0.0, "on_bound": "", "unidentifiable": "", "warnings": 0}]
@@ -128,13 +104,13 @@ def main(argv=None):
     preds = {"LS baseline": y_ls}
     refines = {"lm": ["lm"], "none": [False], "both": [False, "lm"]}[args.refine]
     plan = [(label, m, r) for label, m in physical_models() for r in refines]
-    plan.append(("ENN N = 30, jaxfric default (identify(\"elman\"))", "elman", None))
-    for label, model, refine in plan:
+    for label, model, refine in plan + [("ENN N = 30, jaxfric default (identify(\"elman\"))", "elman", None)]:
         fit, r = run_identify(model, data, args.seed, args.quick, refine)
         r.update(model=label, refine={None: "default (BFGS 500)", False: "none", "lm": "LM"}[refine])
         rows.append(r)
-        with warnings.catch_warnings(action="ignore"):  # the extremes lie a hair outside the training range
-            preds[label if refine is not False else label + " (no refine)"] = np.asarray(fit.predict(data.velocity))
+        if refine is not False:  # the figure's
+            with warnings.catch_warnings(action="ignore"):  # the extremes lie a hair outside the training range
+                preds[label] = np.asarray(fit.predict(data.velocity))
         print(f"{label:55s} refine {r['refine']:>18s}: valid {r['valid']:.3f} %  train {r['train']:.3f} %  "
               f"wall {r['wall_s']:.1f} s (run {r['run_s']:.1f}, compile {r['compile_s']:.1f})"
               f"{'  on bound: ' + r['on_bound'] if r['on_bound'] else ''}", flush=True)
@@ -146,19 +122,15 @@ def main(argv=None):
 
 def figure(out, data, preds):
     plt = pyplot()
-    t, f, n = np.asarray(data.t), np.asarray(data.friction), int(data.n_train)
+    t, v, f, n = np.asarray(data.t), np.asarray(data.velocity), np.asarray(data.friction), int(data.n_train)
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), constrained_layout=True)
     ax[0].plot(t[n:], f[n:], color="0.6", lw=0.8, label="measured (gtau·vir − M·a)")
-    keep = [k for k in preds if "no refine" not in k]
-    colours = [f"C{i}" for i in range(10) if i != 7]  # C7 is grey, the measured trace's colour
-    for k, c in zip(keep, colours):
+    ax[1].plot(v[n:], f[n:], ".", ms=1, color="0.6", label="measured")
+    for k, c in zip(preds, [f"C{i}" for i in range(10) if i != 7]):  # C7 is grey, the measured trace's colour
         ax[0].plot(t[n:], preds[k][n:], lw=0.8, color=c, label=k[:45])
+        ax[1].plot(v[n:], preds[k][n:], ".", ms=0.6, color=c, label=k[:45])
     ax[0].set(xlabel="t [s]", ylabel="friction [N]", title="EMPS, held-back last 20 %")
     ax[0].legend(fontsize=7, ncol=2)
-    v = np.asarray(data.velocity)
-    ax[1].plot(v[n:], f[n:], ".", ms=1, color="0.6", label="measured")
-    for k, c in zip(keep, colours):
-        ax[1].plot(v[n:], preds[k][n:], ".", ms=0.6, color=c, label=k[:45])
     ax[1].set(xlabel="v [m/s]", ylabel="friction [N]")
     fig.savefig(out / "emps_validation.png", dpi=110)
     plt.close(fig)
@@ -171,12 +143,11 @@ def write(out, args, path, data, idim, rows, coef, wall):
     worst_idim = max(abs(r["diff_pct"]) for r in idim)
     lines = [
         "# EMPS real recording: IDIM-LS and every model on the held-back 20 %", "",
-        f"Generated by `{command('emps.py')}` (docstring of benchmarks/emps.py). Data: `{path.name}` "
-        f"(not committed), {data.n_samples} samples at 1 kHz after the benchmark's recipe "
-        f"(Butterworth 100 Hz forward–backward, central differences, 50 samples dropped at each end, "
-        f"IDIM-LS mass); first {data.n_train} samples train, last {data.n_samples - data.n_train} validate and "
-        "were never used to choose anything. "
-        f"Machine: {machine()} (at the end), float32, key {args.seed}"
+        f"Generated by `{command('emps.py')}` (docstring of benchmarks/emps.py). Data: `{path.name}` (not "
+        f"committed), {data.n_samples} samples at 1 kHz after the benchmark's recipe (Butterworth 100 Hz "
+        f"forward–backward, central differences, 50 samples dropped at each end, IDIM-LS mass); first "
+        f"{data.n_train} samples train, last {data.n_samples - data.n_train} validate and were never used to "
+        f"choose anything. Machine: {machine()} (at the end), float32, key {args.seed}"
         + (" — **--quick smoke budgets, not results**" if args.quick else "") + ".", "",
         "## (a) IDIM-LS on the whole kept record against the published values", "",
         markdown_table([{**r, "ours": f"{r['ours']:.4f}", "published": f"{r['published']:.4f}",
