@@ -1,21 +1,10 @@
 """The paper's Table 1: MAPSO–NMDS against PSO and CMA-ES on five test functions (+ Rastrigin).
 
-For each dimension (default 30 and 10), function and solver, ``--runs`` independent runs
-(default 30) go through ONE vmapped call (:func:`jaxfric.minimise_many`). Rows:
-
-* ``MAPSO-NMDS (paper)``: G = ``--generations`` (1000), then one Nelder–Mead run from gBest
-  with fminsearch's budget;
-* ``MAPSO-NMDS + NM restarts``: G = ``--restart-generations`` with ``--restart-sl-generations``
-  (5) self-learning generations, then Nelder–Mead restarted from its own result
-  (``NelderMead(restarts=...)``) within ``--budget`` (200 000) evaluations in all;
-* ``MAPSO-NMDS (sR=0.2, MAGA)``: MAGA's self-learning radius (jaxfric's default is 1.0), unless ``--no-maga``;
-* ``PSO (equal evaluations)``, ``CMA-ES (evosax)`` and ``CMA-ES→NM`` (``jaxfric.cmaes_nm``; evosax
-  installed): the paper row's largest evaluation count; CMA-ES→NM gives ``GLOBAL_SHARE`` of it to CMA-ES.
-
-Columns (``table1.md``, ``table1.csv``, ``table1_convergence.png``, rewritten after every
-function): mean, sample std and variance (n − 1), best, worst, success (f ≤ 1e-8), median
-evaluations to success (first history entry ≤ 1e-8), evaluations per run, compile time (JAX's
-compile events) apart from the batch's run time.
+For each dimension, function and solver, ``--runs`` independent runs in ONE vmapped call
+(:func:`jaxfric.minimise_many`): ``MAPSO-NMDS (paper)`` (G = ``--generations``, then Nelder–Mead
+with fminsearch's budget); ``MAPSO-NMDS + NM restarts`` (Nelder–Mead restarted from its own
+result within ``--budget``); ``MAPSO-NMDS (sR=0.2, MAGA)`` unless ``--no-maga``; ``PSO (equal
+evaluations)``, ``CMA-ES (evosax)`` and ``CMA-ES→NM`` at the paper row's largest evaluation count.
 
     python benchmarks/table1.py                 # the full table (tens of minutes on 2 cores)
     python benchmarks/table1.py --quick         # D = 10, 5 runs, 100 generations
@@ -33,7 +22,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench table1`
-from _harness import add_output_arguments, machine, pyplot, read_csv, results_dir, write_csv, x64  # noqa: E402
+from _harness import (add_output_arguments, machine, markdown_table, pyplot, read_csv, results_dir,  # noqa: E402
+                      write_csv, x64)
 
 x64()
 import jax  # noqa: E402
@@ -52,9 +42,9 @@ GLOBAL_SHARE = 0.8
 def timed_batch(fn_name, solver, dim, keys):
     """``(solutions, compile s, run s)`` of one ``minimise_many`` batch, run once, its wall
     time split by JAX's compile events (the Stopwatch ``identify`` uses)."""
-    obj, bounds = F.objective(fn_name), F.get(fn_name).bounds(dim)
     with Stopwatch() as sw:
-        sol = jax.block_until_ready(jf.minimise_many(obj, solver, bounds, keys=keys))
+        sol = jax.block_until_ready(jf.minimise_many(F.objective(fn_name), solver, F.get(fn_name).bounds(dim),
+                                                     keys=keys))
     return sol, sw.compile_s, sw.run_s
 
 
@@ -120,28 +110,20 @@ def main(argv=None):
     p.add_argument("--dims", default="30,10")
     p.add_argument("--dim", type=int, default=None, help="one dimension (overrides --dims)")
     p.add_argument("--runs", type=int, default=30)
-    p.add_argument("--generations", type=int, default=1000,
-                   help="paper row: MAPSO generations G (1000: the fewest that solved 30/30 Griewank runs)")
-    p.add_argument("--restart-generations", type=int, default=1000,
-                   help="restart row: MAPSO generations before Nelder-Mead with restarts")
-    p.add_argument("--restart-sl-generations", type=int, default=5,
-                   help="restart row: self-learning generations sGen (the paper's 10 costs 45 000 "
-                        "more evaluations at G = 1000, which Nelder-Mead needs on Rosenbrock)")
-    p.add_argument("--nm-restarts", type=int, default=200,
-                   help="restart row: most Nelder-Mead restarts (they end earlier when one does not improve)")
+    p.add_argument("--generations", type=int, default=1000, help="paper row: MAPSO generations G")
+    p.add_argument("--restart-generations", type=int, default=1000, help="restart row: MAPSO generations")
+    p.add_argument("--restart-sl-generations", type=int, default=5, help="restart row: self-learning generations")
+    p.add_argument("--nm-restarts", type=int, default=200, help="restart row: most Nelder-Mead restarts")
     p.add_argument("--budget", type=int, default=200_000, help="restart row: total evaluations per run")
     p.add_argument("--functions", default=",".join(F.PAPER_TABLE1 + ("rastrigin",)))
     p.add_argument("--seed", type=int, default=2017)
     add_output_arguments(p, "D=10, 5 runs, 100 generations")
     p.add_argument("--no-maga", action="store_true", help="skip the sR = 0.2 variant")
     p.add_argument("--rows", choices=("all", "swarm", "cmaes"), default="all",
-                   help="swarm: the MAPSO-NMDS rows and PSO; cmaes: the paper row (it sets the "
-                        "budget) and the CMA-ES rows; split to run as separate processes, then --merge")
-    p.add_argument("--merge", default=None,
-                   help="comma-separated output folders of runs on other dimensions: write one table "
-                        "from them (no runs; the settings given here must match theirs)")
-    p.add_argument("--load", type=float, default=None,
-                   help="with --merge: the load average at the runs' start, for the header")
+                   help="swarm: the MAPSO-NMDS rows and PSO; cmaes: the paper row and CMA-ES (then --merge)")
+    p.add_argument("--merge", default=None, help="output folders of runs on parts of the table: one table "
+                   "from them (no runs; the settings given here must match theirs)")
+    p.add_argument("--load", type=float, default=None, help="with --merge: the load average at the runs' start")
     a = p.parse_args(argv)
     dims = [a.dim] if a.dim is not None else [int(d) for d in a.dims.split(",")]
     if a.quick:
@@ -150,29 +132,23 @@ def main(argv=None):
         F.get(name)  # unknown names fail before any computation
     if min(dims) < 2 or a.runs < 1 or a.generations < 1 or a.restart_generations < 1:
         p.error("dimensions must be >= 2, --runs and the generation counts >= 1")
-    swarm = jf.MAPSO(num_generations=a.restart_generations, sl_generations=a.restart_sl_generations)
-    if swarm.evaluations() >= a.budget:
+    if jf.MAPSO(num_generations=a.restart_generations, sl_generations=a.restart_sl_generations).evaluations() >= a.budget:
         p.error("--budget must exceed the swarm's evaluations at --restart-generations")
     out = results_dir(a.out, quick=a.quick)
     if a.merge:
-        a.load = a.load if a.load is not None else float("nan")
+        a.load = float("nan") if a.load is None else a.load
         return merge(a, out)
-
     a.load = os.getloadavg()[0]  # the machine may be shared: say how busy it was at the start
     keys = jax.random.split(jax.random.key(a.seed), a.runs)
     rows, curves = [], {}
     for dim in dims:
         for name in a.functions.split(","):
-            results = []
-            rows_here = variants(a, dim) if a.rows != "cmaes" else variants(a, dim)[:1]
-            for label, solver in rows_here:  # the paper row also sets the others' budget
-                sol, c, r = timed_batch(name, solver, dim, keys)
-                results.append((label, sol, c, r))
+            results = [(label, *timed_batch(name, solver, dim, keys))  # the paper row sets the others' budget
+                       for label, solver in variants(a, dim)[:None if a.rows != "cmaes" else 1]]
             budget = int(np.max(np.asarray(results[0][1].stats["num_evals"])))
             if a.rows != "cmaes":
                 pso = jf.PSO(num_particles=25, num_generations=max(1, math.ceil(budget / 25) - 1))
-                sol, c, r = timed_batch(name, pso, dim, keys)
-                results.append(("PSO (equal evaluations)", sol, c, r))
+                results.append(("PSO (equal evaluations)", *timed_batch(name, pso, dim, keys)))
             if a.rows != "swarm" and importlib.util.find_spec("evosax"):  # CMA-ES rows at this budget
                 results += evosax_runs(name, dim, keys, budget)
             for label, sol, c, r in results:
@@ -224,45 +200,40 @@ def write_md(path, rows, a, dims):
     lines = [
         "# Table 1: MAPSO–NMDS against PSO and CMA-ES",
         "",
-        f"D = {', '.join(map(str, dims))}; {a.runs} independent runs per function and solver (one vmapped "
-        f"call each), lattice 5×5, float64. Paper row: MAPSO G = {a.generations}, then Nelder–Mead with "
-        f"fminsearch's budget. Restart row: G = {a.restart_generations}, sGen = {a.restart_sl_generations}, "
-        "then Nelder–Mead restarted from "
-        f"its own result (at most {a.nm_restarts} restarts) within {a.budget} evaluations in total. "
-        "PSO (25 particles), CMA-ES (evosax, population 4 + ⌊3 ln D⌋, σ₀ = 0.3 box widths) and "
-        "CMA-ES→NM (80 % of the budget to CMA-ES, the rest to Nelder–Mead) get the largest evaluation "
-        "count of the paper row. Success: f ≤ 1e-8; "
-        "evaluations to success: median over the successful runs of the first history entry ≤ 1e-8. "
-        "Std and variance: sample (n − 1). Time: one call per row (all runs), split into compilation "
-        "(JAX's compile events) and the run of the whole batch; per run = batch / runs.",
+        f"D = {', '.join(map(str, dims))}; {a.runs} independent runs per function and solver (one vmapped call "
+        f"each), lattice 5×5, float64. Paper row: MAPSO G = {a.generations}, then Nelder–Mead with fminsearch's "
+        f"budget. Restart row: G = {a.restart_generations}, sGen = {a.restart_sl_generations}, then Nelder–Mead "
+        f"restarted from its own result (at most {a.nm_restarts} restarts) within {a.budget} evaluations in total. "
+        f"PSO (25 particles), CMA-ES (evosax, population 4 + ⌊3 ln D⌋, σ₀ = 0.3 box widths) and CMA-ES→NM (80 % of "
+        f"the budget to CMA-ES, the rest to Nelder–Mead) get the largest evaluation count of the paper row. "
+        f"Success: f ≤ 1e-8; evaluations to success: median over the successful runs of the first history entry ≤ "
+        f"1e-8. Std and variance: sample (n − 1). Time: one call per row (all runs), split into compilation (JAX's "
+        f"compile events) and the run of the whole batch; per run = batch / runs.",
         "",
         f"Machine: {machine()} (at the end); jaxfric {jf.__version__}; shared with other jobs, load average "
         f"{a.load:.1f} at the start, so times are noisy. Re-run: `python benchmarks/table1.py"
-        + (" --quick" if a.quick else "")
-        + (" --no-maga" if a.no_maga else "")
-        + "`."
+        f"{' --quick' if a.quick else ''}{' --no-maga' if a.no_maga else ''}`."
         + (f" This table was merged (`--merge`) from {len(a.merge.split(','))} processes that ran "
            "the same settings on parts of it at the same time (`--dims`, `--rows`, `--functions`), "
            "so their times are each other's load too." if a.merge else ""),
         "",
-        "| D | function | solver | mean | std | variance | best | worst | success | evals to success (median) "
-        "| evals/run (mean, max) | compile s | batch s | s/run |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in rows:
-        e2s = "–" if math.isnan(r["evals_to_success"]) else f"{r['evals_to_success']:.0f}"
-        lines.append(
-            f"| {r['dim']} | {r['function']} | {r['solver']} | {r['mean']:.3e} | {r['std']:.2e} | {r['variance']:.3e} | "
-            f"{r['best']:.3e} | {r['worst']:.3e} | {r['solved']}/{r['runs']} | {e2s} | "
-            f"{r['evals']}, {r['evals_max']} | {r['compile_s']:.1f} | {r['batch_s']:.1f} | {r['per_run_s']:.2f} |"
-        )
-    lines += ["", "## What each row reached", ""]
-    for (dim, name) in dict.fromkeys((r["dim"], r["function"]) for r in rows):
-        parts = []
-        for r in (r for r in rows if r["dim"] == dim and r["function"] == name):
-            e2s = "" if math.isnan(r["evals_to_success"]) else f" (median {r['evals_to_success']:.0f} evals)"
-            parts.append(f"{r['solver']} {r['solved']}/{r['runs']}{e2s}")
-        lines.append(f"- D = {dim}, {name}: " + "; ".join(parts) + ".")
+
+    def e2s(r, none, fmt="{:.0f}"):  # median evaluations to success
+        return none if math.isnan(r["evals_to_success"]) else fmt.format(r["evals_to_success"])
+
+    lines.append(markdown_table([{
+        "D": r["dim"], "function": r["function"], "solver": r["solver"], "mean": f"{r['mean']:.3e}",
+        "std": f"{r['std']:.2e}", "variance": f"{r['variance']:.3e}", "best": f"{r['best']:.3e}",
+        "worst": f"{r['worst']:.3e}", "success": f"{r['solved']}/{r['runs']}",
+        "evals to success (median)": e2s(r, "–"), "evals/run (mean, max)": f"{r['evals']}, {r['evals_max']}",
+        "compile s": f"{r['compile_s']:.1f}",
+        "batch s": f"{r['batch_s']:.1f}", "s/run": f"{r['per_run_s']:.2f}"} for r in rows]))
+    lines += ["", "## What each row reached", ""] + [
+        f"- D = {dim}, {name}: " + "; ".join(
+            f"{r['solver']} {r['solved']}/{r['runs']}{e2s(r, '', ' (median {:.0f} evals)')}"
+            for r in rows if r["dim"] == dim and r["function"] == name) + "."
+        for dim, name in dict.fromkeys((r["dim"], r["function"]) for r in rows)]
     if getattr(a, "missing", None):
         lines += ["", "## Not run (the processes were stopped at the deadline)", ""]
         lines += [f"- {m}" for m in a.missing]
@@ -277,13 +248,11 @@ def plot(path, curves, a):
     fig, axes = plt.subplots(len(dims), len(names), figsize=(4 * len(names), 3.4 * len(dims)), squeeze=False)
     for row, dim in zip(axes, dims):
         for ax, name in zip(row, names):
-            for (d, fn_name, label), (grid, med) in curves.items():
-                if fn_name == name and d == dim:
-                    ax.semilogy(grid, np.maximum(med, FLOOR), label=label)
-            ax.set_title(f"{name} (D = {dim})")
-            ax.set_xlabel("function evaluations")
+            for (grid, med), label in ((g, lab) for (d, fn, lab), g in curves.items() if fn == name and d == dim):
+                ax.semilogy(grid, np.maximum(med, FLOOR), label=label)
+            ax.set(title=f"{name} (D = {dim})", xlabel="function evaluations",
+                   ylabel=f"median best f (floored at {FLOOR:g})")
             ax.ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
-            ax.set_ylabel(f"median best f (floored at {FLOOR:g})")
             ax.grid(True, which="both", alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.suptitle(f"Convergence, median of {a.runs} runs")
