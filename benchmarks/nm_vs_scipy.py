@@ -67,11 +67,8 @@ def run_jaxfric(name, n, shift, x0s, budget, tol, **solver_kw):
         return np.stack([np.asarray(f, np.float64), np.asarray(ev, np.float64)], axis=1)
 
 
-VARIANTS = {
-    "jaxfric NelderMead()": {},
-    "jaxfric NelderMead(adaptive=True)": {"adaptive": True},
-    "jaxfric NelderMead(restarts=3)": {"restarts": 3},
-}
+VARIANTS = {"jaxfric NelderMead()": {}, "jaxfric NelderMead(adaptive=True)": {"adaptive": True},
+            "jaxfric NelderMead(restarts=3)": {"restarts": 3}}
 
 
 def compare(name, n, starts, budget, tol, solved, variants=VARIANTS, seed=0):
@@ -107,8 +104,7 @@ def main(argv=None):
               "median evaluations": f"{r['median_evals']:.0f}", "median f": f"{r['median_f']:.1e}",
               "worst f": f"{r['worst_f']:.1e}"} for r in rows]
     lines = [
-        "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead",
-        "",
+        "# Nelder–Mead: jaxfric against SciPy's adaptive Nelder–Mead", "",
         f"{a.starts} random starts per case (fixed seeds), budget {a.budget}·n evaluations, "
         f"xatol = fatol = {a.tol:g} (absolute), solved: f < {a.solved:g}; first simplex: fminsearch's "
         f"rule for both; float64. SciPy {scipy.__version__}, jaxfric {jf.__version__}; {machine()}. Re-run: `python benchmarks/nm_vs_scipy.py`.",
