@@ -52,6 +52,10 @@ Two proxies on real data (the same criteria, rows and summary; ``judge_emps.*``,
   parts), ``short`` (2 s windows of the whole records, each rolled out from the model's
   initial state, scored from sample 20), ``spread`` (``tail`` plus the members' variance on
   the tails), ``bic`` (``log sqrt(train MSE) + p log(n)/(2n)``). float32, `jaxfric.identify`'s default.
+
+Averaged predictions (issue 45 item 4; ``--rescore`` and the pneumatic rows): pseudo-candidates
+`AVERAGES` whose prediction of each unseen record is a weighted mean of the candidates' (the
+baseline's included; weights `average_weights`, from the training ``short`` scores), judged as one.
 """
 
 from __future__ import annotations
@@ -91,6 +95,8 @@ BASE = "baseline"
 CRITERIA = ("tail", "blocked", "short", "spread", "bic")
 #: The short-runs criterion at other window lengths [s], from saved fits (``--rescore``).
 WIDTHS = (0.5, 1.0, 4.0, 8.0)
+#: Pseudo-candidates of ``--rescore``: the candidates' free runs averaged (`average_weights`).
+AVERAGES = ("avg_all", "avg_beats_ls", "avg_top3", "avg_inv_var")
 STEMS = {"rig": "motion_judge", "emps-blocked": "judge_emps", "pneumatic": "judge_pneumatic"}
 
 
@@ -251,6 +257,26 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
     return judges, ens, choices
 
 
+def average_summary(rows) -> tuple[list, list]:
+    """(judge rows, the report's section) of the averaging rules (`AVERAGES`) by the criteria's
+    success rule, per key beside the single candidates' unseen error (best, median, worst)."""
+    out = []
+    for b in (r for r in rows if r["model"] == BASE):
+        one = sorted(float(q["unseen"]) for q in rows if int(q["key"]) == int(b["key"]))
+        out += [{"rule": a, "key": b["key"], "train": b["train"], "members": b[f"members_{a}"], "average_unseen": u,
+                 "best_single": one[0], "median_single": np.median(one), "worst_single": one[-1],
+                 "baseline_unseen": float(b["unseen"]), "within_10pct": u <= (1 + MARGIN) * one[0],
+                 "not_worse_than_baseline": u <= float(b["unseen"])}
+                for a in AVERAGES if b.get(f"unseen_{a}") not in (None, "") for u in [float(b[f"unseen_{a}"])]]
+    return [{"criterion": a, "keys": len(c), "within 10 % and not worse than baseline":
+             sum(x["within_10pct"] and x["not_worse_than_baseline"] for x in c),
+             "not worse than baseline": sum(x["not_worse_than_baseline"] for x in c)}
+            for a in AVERAGES if (c := [x for x in out if x["rule"] == a])], [] if not out else [
+        ("## Averaged predictions: each candidate's prediction of the unseen records (motion: a free run from each "
+         "record's first 20 samples) averaged with the weights `members` (`average_weights`, from the training short scores)"), "",
+        markdown_table(sorted(out, key=lambda x: AVERAGES.index(x["rule"])), fmt=_fmt), ""]
+
+
 def ensemble_summary(ens) -> list:
     """How often the kept members' average beats the best member (known only afterwards) and
     the member ``keys=K`` returns (lowest training RMSE), by more than 1 %."""
@@ -285,10 +311,27 @@ def variants(fit, rec, baseline) -> dict:
     return out
 
 
+def average_weights(short: dict, rule: str) -> dict:
+    """Weights (label -> w, sum 1) of ``rule`` from the ``short`` scores (the baseline's ``short[BASE]``):
+    ``avg_all`` all equal; ``avg_beats_ls`` the baseline and those below it, equal; ``avg_top3`` the three
+    lowest, equal; ``avg_inv_var`` w ~ 1/short^2 (minimum variance for independent errors of variance short^2)."""
+    w = {"avg_all": {k: 1.0 for k in short}, "avg_top3": {k: 1.0 for k in sorted(short, key=lambda k: (short[k], k))[:3]},
+         "avg_beats_ls": {k: 1.0 for k in short if k == BASE or short[k] < short[BASE]},
+         "avg_inv_var": {k: float(s) ** -2 for k, s in short.items()}}[rule]
+    return {k: w[k] / sum(w.values()) for k in sorted(w, key=lambda k: (-w[k], k))}
+
+
+def averaged_rmse(position, runs: dict, weights: dict, init=INIT) -> float:
+    """Position RMSE [mm] from sample ``init`` of ``sum_k weights[k] runs[k]`` (free runs [m])."""
+    return motion_metrics(position[init:], sum(w * np.asarray(runs[k]) for k, w in weights.items())[init:])["rmse_mm"]
+
+
 def rescore(rows, folder, proxy="rig", emps=None) -> list:
     """Add the ``short`` variants (`variants`) to every row from the fits saved in ``folder``
-    (no refit), and check that the saved fits reproduce the ``short`` column."""
-    cache, worst = {}, 0.0
+    (no refit), check that they reproduce the ``short`` and ``unseen`` columns, and add to each
+    key's baseline row ``unseen_<rule>`` (`AVERAGES`: the pooled unseen RMSE of the candidates'
+    free runs averaged) and ``members_<rule>`` (their weights)."""
+    cache, worst, runs = {}, 0.0, {}
     for r in rows:
         key = int(r["key"])
         recs = cache.setdefault(key if proxy == "rig" else 0, setup(proxy, key, False, emps)[0])
@@ -298,7 +341,17 @@ def rescore(rows, folder, proxy="rig", emps=None) -> list:
         fit = baseline_fit(fit) if r["model"] == BASE else fit
         worst = max(worst, abs(short_runs(fit, rec) / float(r["short"]) - 1.0))
         r.update(variants(fit, rec, r["model"] == BASE))
-    print(f"saved fits reproduce the short column within {worst:.2e} relative", flush=True)
+        x = runs.setdefault(key, {})[r["model"]] = {k: fit.simulate(u, init_window=INIT)["x"]
+                                                    for k, u in recs.items() if k != r["train"]}
+        worst = max(worst, abs(pooled([averaged_rmse(recs[k].position, x, {k: 1.0}) for k in x]) / float(r["unseen"]) - 1))
+    for r in (r for r in rows if r["model"] == BASE):
+        key, recs = int(r["key"]), cache[int(r["key"]) if proxy == "rig" else 0]
+        for rule in AVERAGES:
+            w = average_weights({q["model"]: float(q["short"]) for q in rows if int(q["key"]) == key}, rule)
+            r[f"unseen_{rule}"] = pooled([averaged_rmse(recs[k].position, {m: runs[key][m][k] for m in w}, w)
+                                          for k in runs[key][BASE]])
+            r[f"members_{rule}"] = " ".join(f"{m}:{v:.2f}" for m, v in w.items())
+    print(f"saved fits reproduce the short and unseen columns within {worst:.2e} relative", flush=True)
     return rows
 
 
@@ -353,6 +406,7 @@ def pneumatic_key(key, members, quick, on_row, folder=None, folds=3):
     def mse(pairs):  # pooled MSE % of the training friction's variance
         return scale * float(np.mean(np.concatenate([y - yh for y, yh in pairs]) ** 2))
 
+    on_held, short = {}, {}
     for label in PNEUMATIC_CANDIDATES + (BASE,):
         t0, fit = time.perf_counter(), _fitter(label, key, quick)
         pred, mem, p = fit(heads, members)
@@ -370,6 +424,11 @@ def pneumatic_key(key, members, quick, on_row, folder=None, folds=3):
             pairs += [(rec[f].friction[INIT:], pf(rec[f])[INIT:]) for rec in blocks]
         row["blocked"] = mse(pairs)
         row["unseen"] = float(friction_metrics(held.friction, pred(held))["mse_percent"])
+        on_held[label], short[label] = pred(held), row["short"]
+        for rule in AVERAGES if label == BASE else ():  # the candidates' predictions averaged (`AVERAGES`)
+            w = average_weights(short, rule)
+            row[f"unseen_{rule}"] = float(friction_metrics(held.friction, sum(w[m] * on_held[m] for m in w))["mse_percent"])
+            row[f"members_{rule}"] = " ".join(f"{m}:{v:.2f}" for m, v in w.items())
         row["seconds"] = time.perf_counter() - t0
         on_row(row)
 
@@ -419,24 +478,26 @@ def main(argv=None):
             else:
                 measure_key(key, a.members, a.quick, on_row, a.save_fits, a.proxy, emps)
     judges, ens, choices = summarise(rows, CRITERIA if a.members > 1 else tuple(c for c in CRITERIA if c != "spread"))
+    avg_judges, averages = average_summary(rows)
+    judges += avg_judges
     cmd = "python benchmarks/motion_judge.py" + (" --quick" if a.quick else "") + f" --keys {a.keys} --members {a.members}"
     made = f"; the fits were made with the search of commit {a.fits_from}" if a.fits_from else ""
     if a.proxy != "rig":
         return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows,
-                           None if a.rescore is None else made)
+                           None if a.rescore is None else made, averages)
     text = ["# Which judge predicts new excitation (rig proxy)", "",
             f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion's variants "
             f"from the saved fits, no refit{made}). Free-run position RMSE [mm]; "
             "`unseen`: pooled over the three families the fit never saw, each simulated from its first 20 samples. "
             "Module docstring: the proxy and the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
-            markdown_table(judges), "", "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
+            markdown_table(judges), "", *averages, "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
             "## Ensemble average against its members on unseen excitation (pooled free-run RMSE [mm])", "",
             markdown_table(ensemble_summary(ens), fmt=_fmt), "", markdown_table(ens, fmt=_fmt), ""]
     write_report(out, "motion_judge", text)
 
 
-def real_report(out, proxy, cmd, judges, choices, rows, rescored):
+def real_report(out, proxy, cmd, judges, choices, rows, rescored, averages=()):
     """The report of a real-data proxy: criteria, choices, every candidate's unseen score."""
     emps = proxy == "emps-blocked"
     unit = "free-run position RMSE [mm]" if emps else "MSE % of the friction's variance"
@@ -451,9 +512,9 @@ def real_report(out, proxy, cmd, judges, choices, rows, rescored):
     text = [f"# Which judge predicts new excitation ({proxy} proxy, real data)", "",
             f"Command: {cmds}. {head}. Module docstring of benchmarks/motion_judge.py: the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
-            markdown_table(judges), "", "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
+            markdown_table(judges), "", *averages, "## Choices per key", "", markdown_table(choices, fmt=_fmt), "",
             f"## Every candidate ({unit}; `unseen` is the truth)", "",
-            markdown_table(rows, ["key", "train", "model", "params", "unseen"] + [j["criterion"] for j in judges] + ["seconds"],
+            markdown_table(rows, ["key", "train", "model", "params", "unseen"] + [j["criterion"] for j in judges if j["criterion"] in rows[0]] + ["seconds"],
                            fmt=_fmt), ""]
     write_report(out, STEMS[proxy], text)
     return 0
