@@ -115,8 +115,7 @@ def rows_of(measured: list[Case]) -> list[dict]:
     t = {(c.meta["model"], c.meta["dtype"], c.meta["kind"]): c.median * c.meta.get("scale", 1.0) for c in measured}
     rows = []
     for c in measured:
-        m, d = c.meta["model"], c.meta["dtype"]
-        sec = c.median * c.meta.get("scale", 1.0)
+        (m, d), sec = (c.meta["model"], c.meta["dtype"]), c.median * c.meta.get("scale", 1.0)
         row = dict(model=m, implementation=c.label, dtype=d, first_call_s=c.first, median_ms=1e3 * sec,
                    calls=len(c.times), rollouts_per_s=CANDIDATES / sec)
         if c.meta["kind"] == "jax":

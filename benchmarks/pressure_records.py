@@ -42,14 +42,11 @@ def one_seal(folder, seal: str, key: int = 0) -> dict:
     y, _ = ls_coulomb_viscous(np.concatenate([v, held.velocity]), np.concatenate([f, held.friction]), v.size)
     ls = friction_metrics(held.friction, y[v.size:])["mse_percent"]
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a parameter on its bound is reported in the table
-        fit = jf.identify(Cylinder(offset=True), train=train, valid={f"{seal}_{VALID_BAR}bar": held},
-                          key=key)
+    with warnings.catch_warnings(action="ignore"):  # a parameter on its bound is reported in the table
+        fit = jf.identify(Cylinder(offset=True), train=train, valid={f"{seal}_{VALID_BAR}bar": held}, key=key)
     seconds = time.perf_counter() - t0
     on_bound = [d["name"] for d in fit.diagnostics.get("on_bound", [])]
-    return dict(seal=seal, train_samples=int(v.size), valid_samples=held.n_samples,
-                ls_valid_mse_percent=float(ls),
+    return dict(seal=seal, train_samples=int(v.size), valid_samples=held.n_samples, ls_valid_mse_percent=float(ls),
                 cylinder_valid_mse_percent=float(fit.metrics["valid"]["mse_percent"]),
                 cylinder_train_mse_percent=float(fit.metrics["train"]["mse_percent"]),
                 seconds_with_compile=seconds, on_bound=" ".join(on_bound) or "–",
