@@ -296,15 +296,8 @@ def write_report(out, data, fits: Mapping[str, Any], *, title: str, command: str
         "data": _data_summary(data),
         "validation_records": {k: _data_summary(v) for k, v in records.items()},
         "metric_definitions": METRIC_FORMULAS,
-        "models": {r["name"]: {"label": r["label"], "num_params": r["params"], "seconds": r["seconds"],
-                               "metrics": r["metrics"], "file": model_files.get(r["name"]),
-                               "records": _fit_records(fits[r["name"]]),
-                               "on_bound": list(fits[r["name"]].diagnostics.get("on_bound", [])),
-                               "unidentifiable": list(fits[r["name"]].diagnostics.get("unidentifiable", [])),
-                               "ensemble": _ensemble(fits[r["name"]]),
-                               "uncertainty": jsonable(report_summary(fits[r["name"]], data), finite=True),
-                               "record_figures": record_figs.get(r["name"], {}),
-                               "fit": fit_dict(fits[r["name"]])} for r in rows},
+        "models": {r["name"]: _model_results(r, fits[r["name"]], data, model_files.get(r["name"]),
+                                             record_figs.get(r["name"], {})) for r in rows},
         "figures": figs,
         "notes": list(notes or []),
         "sections": dict(sections or {}),
@@ -349,6 +342,16 @@ def _draw_figures(out: Path, data, fits: Mapping, rows: list[dict], records: dic
     except ValueError as e:  # a fit without an optimiser history (e.g. loaded from disk)
         return figs, record_figs, [f"no convergence figure: {e}"]
     return figs, record_figs, []
+
+
+def _model_results(r: dict, fit, data, file: str | None, record_figures: dict) -> dict:
+    """results.json's entry of one model: its comparison row ``r``, saved ``file`` and
+    figures on the validation records, and what the fit says of itself."""
+    return {"label": r["label"], "num_params": r["params"], "seconds": r["seconds"], "metrics": r["metrics"],
+            "file": file, "records": _fit_records(fit), "on_bound": list(fit.diagnostics.get("on_bound", [])),
+            "unidentifiable": list(fit.diagnostics.get("unidentifiable", [])), "ensemble": _ensemble(fit),
+            "uncertainty": jsonable(report_summary(fit, data), finite=True), "record_figures": record_figures,
+            "fit": fit_dict(fit)}
 
 
 def _fit_records(fit) -> list[dict]:
@@ -397,46 +400,7 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
     if "convergence.png" in results["figures"]:
         L += ["![convergence](convergence.png)", ""]
     for r in rows:
-        m = results["models"][r["name"]]
-        L += [f"## {r['label']}", "", f"![{r['label']}](fit_{slug(r['name'])}.png)", ""]
-        L += _md(("metric", "train", "valid", "all"), [
-            [key] + [_g5(r["metrics"].get(w, {}).get(key)) for w in WINDOWS]
-            for key in ("mse_percent", "max_abs", "fit_percent", "rmse", "mse_scaled_percent", "r2")])
-        fit = fits[r["name"]]
-        if m["records"]:
-            L += [""] + _md(("record", "role", "samples", "MSE %", "MAX [N]", "FIT %"), [
-                [rec["name"], rec["role"], rec["n_samples"]]
-                + [_g5((rec.get("all") or {}).get(k)) for k in ("mse_percent", "max_abs", "fit_percent")]
-                for rec in m["records"]])
-            L += ["", "Each record is rolled out from the model's initial state; the comparison table "
-                  "pools the samples of the training and of the validation records."]
-            for rec_name, fig in m["record_figures"].items():
-                L += ["", f"![{r['label']} on {rec_name}]({fig})"]
-        # the parameters, one verdict each (identifiable or not, and why), their intervals
-        L += report_markdown(m.get("uncertainty"))
-        if not fit.model.needs_scaling and fit.box is not None:
-            L += ["", f"Search box (SI; `Fs_ratio` = Fs/Fc): {fit.box}."]
-        for d in m["on_bound"]:
-            L += ["", f"**On a bound:** {d['message']}."]
-        e = m["ensemble"]
-        if e:
-            vm = [x for x in e.get("valid_mse_percent", []) if x is not None]
-            L += ["", f"Ensemble of {len(e['J'])} runs (one vmapped call); this fit is member "
-                  f"{e['best']}, the one with the lowest training cost"
-                  + (f"; validation MSE % over the members {min(vm):.4g} to {max(vm):.4g}" if vm else "") + "."]
-            if e.get("spread"):
-                L += [""] + _md(("parameter", "min", "5 %", "median", "95 %", "max"), [
-                    [k] + [_g5(sp[q]) for q in ("min", "p5", "median", "p95", "max")] for k, sp in e["spread"].items()])
-            band = f"band_{slug(r['name'])}.png"
-            if band in results["figures"]:
-                L += ["", f"![ensemble band]({band})"]
-        if fit.stages:
-            parts = [f"{name}: J = {J:.5g} ({n} {'evaluations' if evals else 'steps'})"
-                     for name, J, n, evals in fit.stage_counts()]
-            L += ["", "Optimiser stages: " + " → ".join(parts) + "."]
-        if m["file"]:
-            L += ["", f"Saved fit: `{m['file']}` (use `jaxfric predict {m['file']} DATA.csv`)."]
-        L.append("")
+        L += _model_markdown(r, results["models"][r["name"]], fits[r["name"]], results["figures"])
     for heading, body in results.get("sections", {}).items():
         L += [f"## {heading}", "", body.rstrip(), ""]
     if results["settings"]:
@@ -449,3 +413,47 @@ def _markdown(results: dict, rows: list[dict], fits: Mapping, *, python: str | N
     if python:
         L += ["In Python:", "", "```python", python.strip("\n"), "```", ""]
     return "\n".join(L)
+
+
+def _model_markdown(r: dict, m: dict, fit, figures: dict) -> list[str]:
+    """report.md's section of one model: its comparison row ``r``, its results.json entry
+    ``m``, the fit, and the report's figures."""
+    L = [f"## {r['label']}", "", f"![{r['label']}](fit_{slug(r['name'])}.png)", ""]
+    L += _md(("metric", "train", "valid", "all"), [
+        [key] + [_g5(r["metrics"].get(w, {}).get(key)) for w in WINDOWS]
+        for key in ("mse_percent", "max_abs", "fit_percent", "rmse", "mse_scaled_percent", "r2")])
+    if m["records"]:
+        L += [""] + _md(("record", "role", "samples", "MSE %", "MAX [N]", "FIT %"), [
+            [rec["name"], rec["role"], rec["n_samples"]]
+            + [_g5((rec.get("all") or {}).get(k)) for k in ("mse_percent", "max_abs", "fit_percent")]
+            for rec in m["records"]])
+        L += ["", "Each record is rolled out from the model's initial state; the comparison table "
+              "pools the samples of the training and of the validation records."]
+        for rec_name, fig in m["record_figures"].items():
+            L += ["", f"![{r['label']} on {rec_name}]({fig})"]
+    # the parameters, one verdict each (identifiable or not, and why), their intervals
+    L += report_markdown(m.get("uncertainty"))
+    if not fit.model.needs_scaling and fit.box is not None:
+        L += ["", f"Search box (SI; `Fs_ratio` = Fs/Fc): {fit.box}."]
+    for d in m["on_bound"]:
+        L += ["", f"**On a bound:** {d['message']}."]
+    e = m["ensemble"]
+    if e:
+        vm = [x for x in e.get("valid_mse_percent", []) if x is not None]
+        L += ["", f"Ensemble of {len(e['J'])} runs (one vmapped call); this fit is member "
+              f"{e['best']}, the one with the lowest training cost"
+              + (f"; validation MSE % over the members {min(vm):.4g} to {max(vm):.4g}" if vm else "") + "."]
+        if e.get("spread"):
+            L += [""] + _md(("parameter", "min", "5 %", "median", "95 %", "max"), [
+                [k] + [_g5(sp[q]) for q in ("min", "p5", "median", "p95", "max")] for k, sp in e["spread"].items()])
+        band = f"band_{slug(r['name'])}.png"
+        if band in figures:
+            L += ["", f"![ensemble band]({band})"]
+    if fit.stages:
+        parts = [f"{name}: J = {J:.5g} ({n} {'evaluations' if evals else 'steps'})"
+                 for name, J, n, evals in fit.stage_counts()]
+        L += ["", "Optimiser stages: " + " → ".join(parts) + "."]
+    if m["file"]:
+        L += ["", f"Saved fit: `{m['file']}` (use `jaxfric predict {m['file']} DATA.csv`)."]
+    L.append("")
+    return L
