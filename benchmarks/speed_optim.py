@@ -103,13 +103,9 @@ def timed_rounds(cases: list[Case], rounds: int) -> None:
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--function", choices=sorted(NUMPY_BATCH), default="rosenbrock")
-    p.add_argument("--dim", type=int, default=30)
-    p.add_argument("--agents", type=int, default=100)
-    p.add_argument("--generations", type=int, default=500)
-    p.add_argument("--nm-evals", type=int, default=20000)
-    p.add_argument("--repeats", type=int, default=7,
-                   help="timed rounds; each round times every implementation once, in turn")
-    p.add_argument("--seeds", type=int, default=8)
+    for name, default in (("--dim", 30), ("--agents", 100), ("--generations", 500), ("--nm-evals", 20000),
+                          ("--repeats", 7), ("--seeds", 8)):  # --repeats: timed rounds, every implementation once each
+        p.add_argument(name, type=int, default=default)
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32")
     add_output_arguments(p, "5-D, 16 agents, 10 generations (short: 10 and 20), 1 round", tag=True)
     p.add_argument("--short", action="store_true", help="the short default runs (speed_optim_short.md) instead")
