@@ -95,7 +95,7 @@ BASE = "baseline"
 CRITERIA = ("tail", "blocked", "short", "spread", "bic")
 #: The short-runs criterion at other window lengths [s], from saved fits (``--rescore``).
 WIDTHS = (0.5, 1.0, 4.0, 8.0)
-#: Pseudo-candidates of ``--rescore``: the candidates' free runs averaged (`average_weights`).
+#: Pseudo-candidates: the candidates' predictions averaged (`average_weights`; module docstring).
 AVERAGES = ("avg_all", "avg_beats_ls", "avg_top3", "avg_inv_var")
 STEMS = {"rig": "motion_judge", "emps-blocked": "judge_emps", "pneumatic": "judge_pneumatic"}
 
