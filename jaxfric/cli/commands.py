@@ -8,6 +8,7 @@ Ctrl-C can say what stayed on disk.
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import os
 import shlex
@@ -240,10 +241,7 @@ def cmd_identify(args, argv) -> int:
         data = data.with_split(None, n_train=data.n_samples)  # FILE whole for estimation
     # identify's own record checks (lengths, NaN, split, constant friction, sample times), now:
     # before any stage message, progress bar or report folder.
-    if valid:
-        as_records(train={args.file: data}, valid=valid)
-    else:
-        as_records(data)
+    as_records(train={args.file: data}, valid=valid) if valid else as_records(data)
     for note in notes:
         say(f"note: {note}")
     _choose_form(args, data, say)
@@ -275,18 +273,12 @@ def cmd_identify(args, argv) -> int:
 def cmd_predict(args, argv) -> int:
     """Load a saved fit and write its friction prediction for a velocity record."""
     from jaxfric.files import atomic_write_text, csv_text
+    from jaxfric.fit import load_fit
     from jaxfric.metrics import friction_metrics
 
     from .data import prediction_input
 
-    if not os.path.exists(args.model_file):
-        raise UserError(f"model file not found: {args.model_file}")
-    if args.out != "-" and os.path.isdir(args.out):
-        raise UserError(f"--out {args.out} is a folder; give a file name, e.g. {os.path.join(args.out, 'predictions.csv')}")
-    try:
-        from jaxfric.fit import load_fit
-    except ImportError:
-        raise UserError("this jaxfric installation has no jaxfric.fit.load_fit") from None
+    # precheck has refused a missing model file and an --out folder
     try:
         fit = load_fit(args.model_file)
     except (ValueError, KeyError, TypeError, OSError) as e:
@@ -392,22 +384,14 @@ def cmd_bench(args, argv) -> int:
     return 0 if status is None else int(status)
 
 
-COMMANDS = {"demo": cmd_demo, "identify": cmd_identify, "predict": cmd_predict, "bench": cmd_bench}
+def _imported_on_use(module: str, name: str):
+    """The command ``name`` of the submodule ``module``, imported when it runs."""
+    def command(args, argv) -> int:
+        return getattr(importlib.import_module(module, __package__), name)(args, argv)
+
+    return command
 
 
-def _identify_motion(args, argv) -> int:
-    from .motion import cmd_identify_motion
-
-    return cmd_identify_motion(args, argv)
-
-
-COMMANDS["identify-motion"] = _identify_motion
-
-
-def _sweep(args, argv) -> int:
-    from .sweep import cmd_sweep
-
-    return cmd_sweep(args, argv)
-
-
-COMMANDS["sweep"] = _sweep
+COMMANDS = {"demo": cmd_demo, "identify": cmd_identify, "predict": cmd_predict, "bench": cmd_bench,
+            "identify-motion": _imported_on_use(".motion", "cmd_identify_motion"),
+            "sweep": _imported_on_use(".sweep", "cmd_sweep")}

@@ -68,7 +68,6 @@ def _bytes(n: float) -> str:
         if n < 1000 or unit == "PB":
             return f"{n:.3g} {unit}"
         n /= 1000.0
-    return f"{n:.3g} PB"  # pragma: no cover
 
 
 def _n(n: int) -> str:

@@ -13,10 +13,10 @@ import sys
 from .checks import MODEL_NAMES
 from .errors import EXIT_USER_ERROR, error_line
 from .fitting import REFINE_CHOICES
+from .spec import SOLVERS
 from .units import UNITS
 
 DEFAULT_OUT = "jaxfric-report"
-SOLVERS = ("mapso-nmds", "mapso", "pso", "nelder-mead")
 
 
 class Parser(argparse.ArgumentParser):
@@ -271,6 +271,34 @@ def _columns(p: argparse.ArgumentParser) -> None:
     u.add_argument("--load-unit", default="N", metavar="UNIT", help="of the load column")
 
 
+def _predict_parser(sub) -> None:
+    """The ``predict`` sub-command."""
+    r = sub.add_parser("predict", help="predict friction with a saved fit",
+                       description="Predict friction for a velocity record with a saved fit and write a CSV.",
+                       epilog=PREDICT_EPILOG, formatter_class=_Formatter)
+    r.add_argument("model_file", metavar="MODEL_FILE", help="saved fit (models/*.npz of a report)")
+    r.add_argument("data", metavar="DATA_CSV", help="CSV with a velocity column")
+    g = r.add_argument_group("columns (header name or 0-based index)")
+    g.add_argument("--velocity-col", default="velocity", metavar="COL", help="piston velocity")
+    g.add_argument("--time-col", metavar="COL", help="time stamps (or give --dt)")
+    g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s] when there is no time column")
+    g.add_argument("--friction-col", metavar="COL", help="measured friction, to report the error")
+    g.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
+    g.add_argument("--skip-rows", type=int, default=0, metavar="N", help="data rows to drop after the header")
+    g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
+    g.add_argument("--velocity-unit", default="m/s", metavar="UNIT", help="of the velocity column")
+    g.add_argument("--friction-unit", default="N", metavar="UNIT", help="of the friction column")
+    f = r.add_argument_group("preprocessing")
+    f.add_argument("--filter-velocity", action="store_true",
+                   help="low-pass the velocity as the fit's training velocity was (zero-phase Butterworth; the "
+                   "cutoff and order saved with the fit, or --cutoff)")
+    f.add_argument("--cutoff", type=positive_float, default=None, metavar="HZ",
+                   help="cutoff [Hz] for --filter-velocity (default: the fit's)")
+    r.add_argument("--out", "-o", default="predictions.csv", metavar="FILE",
+                   help="output CSV ('-' for standard output)")
+    _common(r)
+
+
 def build_parser() -> Parser:
     """The full ``jaxfric`` parser (sub-commands demo, identify, predict, bench)."""
     from jaxfric import __version__
@@ -314,30 +342,7 @@ def build_parser() -> Parser:
     _fitting(i, default_models="elman,lugre")
     _common(i)
 
-    r = sub.add_parser("predict", help="predict friction with a saved fit",
-                       description="Predict friction for a velocity record with a saved fit and write a CSV.",
-                       epilog=PREDICT_EPILOG, formatter_class=_Formatter)
-    r.add_argument("model_file", metavar="MODEL_FILE", help="saved fit (models/*.npz of a report)")
-    r.add_argument("data", metavar="DATA_CSV", help="CSV with a velocity column")
-    g = r.add_argument_group("columns (header name or 0-based index)")
-    g.add_argument("--velocity-col", default="velocity", metavar="COL", help="piston velocity")
-    g.add_argument("--time-col", metavar="COL", help="time stamps (or give --dt)")
-    g.add_argument("--dt", type=positive_float, metavar="S", help="sample interval [s] when there is no time column")
-    g.add_argument("--friction-col", metavar="COL", help="measured friction, to report the error")
-    g.add_argument("--delimiter", default=",", help="column separator; 'whitespace' for spaces/tabs")
-    g.add_argument("--skip-rows", type=int, default=0, metavar="N", help="data rows to drop after the header")
-    g.add_argument("--time-unit", default="s", metavar="UNIT", help="of the time column")
-    g.add_argument("--velocity-unit", default="m/s", metavar="UNIT", help="of the velocity column")
-    g.add_argument("--friction-unit", default="N", metavar="UNIT", help="of the friction column")
-    f = r.add_argument_group("preprocessing")
-    f.add_argument("--filter-velocity", action="store_true",
-                   help="low-pass the velocity as the fit's training velocity was (zero-phase Butterworth; the "
-                   "cutoff and order saved with the fit, or --cutoff)")
-    f.add_argument("--cutoff", type=positive_float, default=None, metavar="HZ",
-                   help="cutoff [Hz] for --filter-velocity (default: the fit's)")
-    r.add_argument("--out", "-o", default="predictions.csv", metavar="FILE",
-                   help="output CSV ('-' for standard output)")
-    _common(r)
+    _predict_parser(sub)
 
     from .motion import add_parser as _add_motion
 

@@ -148,14 +148,12 @@ class FitSpec:
         """``jaxfric.identify(model, data, ...)`` as this specification says; with ``valid``
         (name -> record, from ``--valid``) ``identify(model, train={train_name: data},
         valid=valid, ...)``: ``data`` is used whole for estimation."""
-        import inspect
-
         import jax
 
         from jaxfric.identification import identify
 
         kwargs = {**self.options(), "key": jax.random.key(self.seed) if key is None else key}
-        if progress is not None and "progress" in inspect.signature(identify).parameters:
+        if progress is not None:
             kwargs["progress"] = progress
         if valid:
             return identify(self.model, train={train_name: data}, valid=valid, **kwargs)
