@@ -458,6 +458,8 @@ def test_rescaled_covariance_converges_at_pycmas_rate():
 
         def generations(rescale):
             state = es.init(jax.random.key(0), jnp.full(n, 0.5), params)
+            # strongly typed as tell returns it: ask and tell compile once (as in _plain_cmaes)
+            state = jax.tree_util.tree_map(lambda a: jnp.asarray(a, a.dtype), state)
             bests = []
             for g in range(150):
                 k_ask, k_tell = jax.random.split(jax.random.key(g))
