@@ -1,26 +1,14 @@
 """Ensembles against a loop of single fits: ``identify(..., keys=K)`` beside K calls ``identify(..., key=k)``.
 
-Usage::
-
     python benchmarks/ensembles.py --record emps|rig [--models elman,lugre,elman:map] [--sizes 1,8]
         [--loop-fits N] [--rounds 1] [--rollouts] [--tag gpu] [--append] [--quick] [--out DIR] [--data-dir DIR]
 
-For each model (every ``identify`` default, float32) and size K, in one process: the K single
-fits one after another (or the first ``--loop-fits`` N, the loop's time then estimated as K
-times their median, "est.") and the ensemble with the same keys; both compiled first, so the
-medians are warm wall times. ``NAME:map`` runs the gradient stage's members one after another
-(``GradientRefinement(batching="map")``, members equal to single fits to the bit). The report
-gives the ensemble's time over one fit's (targets: 2-core CPU, ENN K = 8 ≤ 3, LuGre ≤ 2; GPU
-K = 64 ≤ 2), in wall and CPU time and per stage, and checks member i against the single fit
-with key i (bitwise after the global stage and at the end, largest relative ΔJ and Δ valid. MSE).
-
-``--rollouts`` adds each stage's CPU time for one key and K keys, and the floor under those
-ratios: J of P candidates at once (``vmap`` of the cost) for P = 1 … 200 and, for the
-networks, J and gradient of 1 and of K networks. A stage whose cost per candidate does not fall
-with P costs K times one run for K members, whatever the layout.
-
-Writes ``ensembles_<record>[_<tag>].md``, ``.csv`` (and ``_floor``/``_stages`` CSVs, a ``.runs``
-list). The EMPS file: ``--data-dir``/DATA_EMPS.mat, else :func:`_harness.emps_file`.
+Every ``identify`` default, float32, warm: K single fits one after another (or ``--loop-fits`` N
+of them, the loop then K times their median, "est.") and the ensemble with the same keys, its
+time over one fit's in wall and CPU time and per stage, and member i against the fit with key i.
+``NAME:map`` runs the gradient stage's members one after another (bit-identical to single fits).
+``--rollouts``: each stage's CPU time for one key and K keys, and the floor under those ratios,
+the cost per candidate of P candidates at once (J, and the networks' J and gradient).
 """
 
 from __future__ import annotations
@@ -42,28 +30,6 @@ import numpy as np  # noqa: E402
 ROLLOUT_BATCHES = (1, 8, 25, 64, 200)
 
 
-def parse(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--record", choices=("emps", "rig"), default="emps")
-    p.add_argument("--models", default="elman,lugre",
-                   help="comma list of model names; NAME:map runs the gradient stage's members "
-                        "one after another (bit-identical to single fits)")
-    p.add_argument("--sizes", "--keys", dest="sizes", default="1,8",
-                   help="comma list of ensemble sizes K")
-    p.add_argument("--loop-fits", type=int, default=None,
-                   help="single fits timed per round (default K: the whole loop)")
-    p.add_argument("--rounds", type=int, default=1, help="timed rounds (medians over them)")
-    p.add_argument("--rollouts", action="store_true",
-                   help="also time the cost of P candidates at once (the floor of the ratios)")
-    p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
-    add_output_arguments(p, "tiny budgets (smoke test)", tag=True)
-    p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
-    p.add_argument("--append", action="store_true",
-                   help="keep the rows of the existing result files (a row of the same model and K "
-                        "is replaced) and the --note of the earlier run(s), adding this one's")
-    return p.parse_args(argv)
-
-
 def merge(old: list[dict], new: list[dict], keys: tuple[str, ...]) -> list[dict]:
     """``old`` with the rows of ``new`` added, a new row replacing an old one with the same ``keys``."""
     fresh = {tuple(r[k] for k in keys) for r in new}
@@ -79,45 +45,28 @@ def options(model: str, quick: bool) -> dict:
     from jaxfric.identification._api import FAST_REFINE_STEPS
 
     name, _, layout = model.partition(":")
-    kw = {}
-    if layout:
-        kw["refine"] = GradientRefinement(max_steps=10 if quick else FAST_REFINE_STEPS, batching=layout)
+    kw = {"refine": GradientRefinement(max_steps=10 if quick else FAST_REFINE_STEPS, batching=layout)} if layout else {}
     if not quick:
         return kw
     if name.startswith("elman"):
-        return {"solver": jf.MAPSO(lattice_size=8, num_generations=3),
-                "refine": GradientRefinement(max_steps=10), **kw}
-    return {"solver": jf.mapso_nmds(lattice_size=3, num_generations=5, nm_max_steps=40, nm_max_evals=40),
-            **kw}
-
-
-def _valid_mse(fit) -> float:
-    return float((fit.metrics.get("valid") or {}).get("mse_percent", np.nan))
-
-
-def _stage_s(fit, name: str) -> float:
-    return float(fit.timings.get(name, 0.0))
+        return {"solver": jf.MAPSO(lattice_size=8, num_generations=3), "refine": GradientRefinement(max_steps=10), **kw}
+    return {"solver": jf.mapso_nmds(lattice_size=3, num_generations=5, nm_max_steps=40, nm_max_evals=40), **kw}
 
 
 def compare_members(ens, singles) -> dict:
     """Member i of the ensemble ``ens`` against ``singles[i]`` (the fit with key i)."""
-    n = len(singles)
-    e = ens.ensemble
-    sol = ens.solution
+    n, e, sol = len(singles), ens.ensemble, ens.solution
     j_one = np.array([s.metrics["cost"] for s in singles])
     j_ens = np.asarray(e["J"][:n], np.float64)
-    v_one = np.array([_valid_mse(s) for s in singles])
+    v_one = np.array([float((s.metrics.get("valid") or {}).get("mse_percent", np.nan)) for s in singles])
     v_ens = np.asarray([np.nan if x is None else x for x in e["valid_mse_percent"][:n]], np.float64)
-    global_bitwise = sum(
-        bool(np.array_equal(np.asarray(sol.value[i]), np.asarray(s.solution.value))
-             and np.array_equal(np.asarray(sol.f[i]), np.asarray(s.solution.f)))
-        for i, s in enumerate(singles))
+    global_bitwise = sum(bool(np.array_equal(np.asarray(sol.value[i]), np.asarray(s.solution.value))
+                              and np.array_equal(np.asarray(sol.f[i]), np.asarray(s.solution.f)))
+                         for i, s in enumerate(singles))
     theta_bitwise = sum(bool(np.array_equal(np.asarray(e["theta"][i]), np.asarray(s.theta)))
                         for i, s in enumerate(singles))
     return {
-        "members_checked": n,
-        "global_bitwise": global_bitwise,
-        "theta_bitwise": theta_bitwise,
+        "members_checked": n, "global_bitwise": global_bitwise, "theta_bitwise": theta_bitwise,
         "rel_dJ": float(np.max(np.abs(j_ens - j_one) / np.abs(j_one))),
         "d_valid_mse": float(np.nanmax(np.abs(v_ens - v_one))) if n else float("nan"),
         "J_spread": float(j_one.max() / j_one.min() - 1.0) if n > 1 else float("nan"),
@@ -127,47 +76,40 @@ def compare_members(ens, singles) -> dict:
 def measure(model: str, data, k: int, rounds: int, quick: bool, loop_fits: int | None) -> dict:
     from jaxfric.identification import identify
 
-    kw = options(model, quick)
-    name = model.partition(":")[0]
+    kw, name = options(model, quick), model.partition(":")[0]
     n = k if loop_fits is None else max(1, min(loop_fits, k))
     first_one = timed(lambda: identify(name, data, key=0, **kw))[1]
     first_ens = timed(lambda: identify(name, data, keys=jax.random.split(jax.random.key(0), k), **kw))[1]
-    acc = {name: [] for name in ("one", "one_cpu", "loop", "loop_cpu", "ens", "ens_cpu", "g1", "gk",
-                                 "r1", "rk", "cmp")}
+    acc = {c: [] for c in ("one", "one_cpu", "loop", "loop_cpu", "ens", "ens_cpu", "g1", "gk", "r1", "rk", "cmp")}
+    stage = lambda fit, name: float(fit.timings.get(name, 0.0))  # noqa: E731
     for r in range(rounds):
         keys = jax.random.split(jax.random.key(100 + r), k)
         singles = [timed(lambda key=key: identify(name, data, key=key, **kw)) for key in keys[:n]]
         fit, wall, cpu = timed(lambda: identify(name, data, keys=keys, **kw))
         acc["one"] += [s[1] for s in singles]
         acc["one_cpu"] += [s[2] for s in singles]
-        scale = k / n  # the loop's time, estimated from n of its K fits when n < K
-        acc["loop"].append(scale * sum(s[1] for s in singles))
-        acc["loop_cpu"].append(scale * sum(s[2] for s in singles))
+        acc["loop"].append(k / n * sum(s[1] for s in singles))  # estimated from n of its K fits when n < K
+        acc["loop_cpu"].append(k / n * sum(s[2] for s in singles))
         acc["ens"].append(wall)
         acc["ens_cpu"].append(cpu)
-        acc["g1"] += [_stage_s(s[0], "run_s") for s in singles]
-        acc["r1"] += [_stage_s(s[0], "refine_run_s") for s in singles]
-        acc["gk"].append(_stage_s(fit, "run_s"))
-        acc["rk"].append(_stage_s(fit, "refine_run_s"))
+        acc["g1"] += [stage(s[0], "run_s") for s in singles]
+        acc["r1"] += [stage(s[0], "refine_run_s") for s in singles]
+        acc["gk"].append(stage(fit, "run_s"))
+        acc["rk"].append(stage(fit, "refine_run_s"))
         acc["cmp"].append(compare_members(fit, [s[0] for s in singles]))
     med = statistics.median
     ratio = lambda a, b: med(acc[a]) / med(acc[b]) if med(acc[b]) > 0 else float("nan")  # noqa: E731
     cmp = acc["cmp"]
     return {
-        "model": model, "K": k, "rounds": rounds, "loop_fits": n,
-        "one_fit_s": med(acc["one"]), "ensemble_s": med(acc["ens"]), "loop_s": med(acc["loop"]),
-        "loop_estimated": n < k,
+        "model": model, "K": k, "rounds": rounds, "loop_fits": n, "one_fit_s": med(acc["one"]),
+        "ensemble_s": med(acc["ens"]), "loop_s": med(acc["loop"]), "loop_estimated": n < k,
         "ensemble_over_one": ratio("ens", "one"), "loop_over_ensemble": ratio("loop", "ens"),
         "one_fit_cpu_s": med(acc["one_cpu"]), "ensemble_cpu_s": med(acc["ens_cpu"]),
         "ensemble_over_one_cpu": ratio("ens_cpu", "one_cpu"),
-        "global_one_s": med(acc["g1"]), "global_ensemble_s": med(acc["gk"]),
-        "global_over_one": ratio("gk", "g1"),
+        "global_one_s": med(acc["g1"]), "global_ensemble_s": med(acc["gk"]), "global_over_one": ratio("gk", "g1"),
         "gradient_one_s": med(acc["r1"]), "gradient_ensemble_s": med(acc["rk"]),
-        "gradient_over_one": ratio("rk", "r1"),
-        "first_one_s": first_one, "first_ensemble_s": first_ens,
-        "members_checked": sum(c["members_checked"] for c in cmp),
-        "global_bitwise": sum(c["global_bitwise"] for c in cmp),
-        "theta_bitwise": sum(c["theta_bitwise"] for c in cmp),
+        "gradient_over_one": ratio("rk", "r1"), "first_one_s": first_one, "first_ensemble_s": first_ens,
+        **{c: sum(x[c] for x in cmp) for c in ("members_checked", "global_bitwise", "theta_bitwise")},
         "member_max_rel_dJ": max(c["rel_dJ"] for c in cmp),
         "member_max_d_valid_mse": max(c["d_valid_mse"] for c in cmp),
         "J_spread_over_keys": max(c["J_spread"] for c in cmp),
@@ -211,24 +153,21 @@ def rollout_costs(model_name: str, data, reps: int) -> list[dict]:
     rng = np.random.default_rng(0)
     thetas = jnp.asarray(lo + (hi - lo) * rng.random((max(ROLLOUT_BATCHES), lo.size)), jnp.float32)
     cost = jax.jit(jax.vmap(obj.cost, (0, None)))
-    rows = []
+
+    def row(what, p, fn):
+        t = _median_cpu(fn, reps)
+        return {"model": model_name, "what": what, "P": p, "ms": 1e3 * t, "us_per_candidate": 1e6 * t / p}
+
     samples = int(obj.data_global.y.shape[0])
-    for p in ROLLOUT_BATCHES:
-        t = _median_cpu(lambda p=p: cost(thetas[:p], obj.data_global), reps)
-        rows.append({"model": model_name, "what": f"J of P candidates ({samples} samples)", "P": p,
-                     "ms": 1e3 * t, "us_per_candidate": 1e6 * t / p})
+    rows = [row(f"J of P candidates ({samples} samples)", p, lambda p=p: cost(thetas[:p], obj.data_global))
+            for p in ROLLOUT_BATCHES]
     if refine is not None and model.needs_scaling:
         grad = jax.jit(jax.vmap(jax.value_and_grad(obj.cost), (0, None)))
         one = jax.jit(jax.value_and_grad(obj.cost))
         samples = int(obj.data.y.shape[0])
-        t1 = _median_cpu(lambda: one(thetas[0], obj.data), reps)
-        rows.append({"model": model_name, "what": f"J and gradient, one network ({samples} samples)",
-                     "P": 1, "ms": 1e3 * t1, "us_per_candidate": 1e6 * t1})
-        for p in (2, 8):
-            t = _median_cpu(lambda p=p: grad(thetas[:p], obj.data), reps)
-            rows.append({"model": model_name,
-                         "what": f"J and gradient, P networks side by side ({samples} samples)",
-                         "P": p, "ms": 1e3 * t, "us_per_candidate": 1e6 * t / p})
+        rows.append(row(f"J and gradient, one network ({samples} samples)", 1, lambda: one(thetas[0], obj.data)))
+        rows += [row(f"J and gradient, P networks side by side ({samples} samples)", p,
+                     lambda p=p: grad(thetas[:p], obj.data)) for p in (2, 8)]
     return rows
 
 
@@ -242,28 +181,21 @@ def stage_costs(model_name: str, data, k: int) -> list[dict]:
     _, solver, refine, bounds, obj = _stages(model_name, data)
     keys = jax.random.split(jax.random.key(7), k)
 
-    def run(members):
-        sol, _ = stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)
-        ref = stages.gradient_stage(refine, obj, sol.value, bounds, jnp.float32,
-                                    ensemble=members.members is not None)[0]
-        return sol, ref
+    def glob(members):
+        return stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)[0]
+
+    def grad(members, sol):
+        return stages.gradient_stage(refine, obj, sol.value, bounds, jnp.float32, ensemble=members.members is not None)
 
     one, many = stages.resolve_keys(keys[0]), stages.resolve_keys(None, keys)
-    run(one), run(many)  # compiled
+    grad(one, glob(one)), grad(many, glob(many))  # compiled
     rows = []
-    for name in ("global", "gradient"):
-        if name == "gradient" and refine is None:
-            continue
+    for name in ("global", "gradient") if refine is not None else ("global",):
         cpu = {}
         for label, members in (("one", one), ("ensemble", many)):
-            sol = stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)[0] \
-                if name == "gradient" else None
+            sol = glob(members) if name == "gradient" else None
             c = time.process_time()
-            if name == "global":
-                stages.global_stage(obj, solver, bounds, members, dtype=jnp.float32)
-            else:
-                stages.gradient_stage(refine, obj, sol.value, bounds, jnp.float32,
-                                      ensemble=members.members is not None)
+            glob(members) if name == "global" else grad(members, sol)
             cpu[label] = time.process_time() - c
         rows.append({"model": model_name, "K": k, "stage": name, "one_cpu_s": cpu["one"],
                      "ensemble_cpu_s": cpu["ensemble"], "ratio": cpu["ensemble"] / cpu["one"]})
@@ -275,70 +207,62 @@ _fmt = cell(".3g")
 
 def report(rows, floor, args, desc: str, runs: list[str], costs=()) -> str:
     """The Markdown page of a run (``rows`` as :func:`measure` returns them)."""
-    for r in rows:
-        r["loop_shown"] = f"{r['loop_s']:.3g}" + (" est." if r["loop_estimated"] else "")
-        r["bitwise"] = f"{r['global_bitwise']}/{r['members_checked']}, {r['theta_bitwise']}/{r['members_checked']}"
-    columns = ["model", "K", "one_fit_s", "ensemble_s", "ensemble_over_one", "loop_shown",
-               "loop_over_ensemble", "ensemble_over_one_cpu", "global_over_one", "gradient_over_one",
-               "bitwise", "member_max_rel_dJ", "member_max_d_valid_mse", "J_spread_over_keys",
-               "first_one_s", "first_ensemble_s"]
-    headers = ["model", "K", "one fit [s]", "ensemble [s]", "ensemble / one fit", "loop of K [s]",
-               "loop / ensemble", "ensemble / one fit, CPU time", "global stage: ensemble / one",
-               "gradient stage: ensemble / one", "members bitwise (global stage, θ)",
-               "members: max rel. ΔJ", "members: max Δ valid. MSE [points]", "J spread over keys",
-               "first fit [s]", "first ensemble [s]"]
+    rows = [{**r, "loop_shown": f"{r['loop_s']:.3g}" + (" est." if r["loop_estimated"] else ""),
+             "bitwise": f"{r['global_bitwise']}/{r['members_checked']}, {r['theta_bitwise']}/{r['members_checked']}"}
+            for r in rows]
+    columns = {"model": "model", "K": "K", "one_fit_s": "one fit [s]", "ensemble_s": "ensemble [s]",
+               "ensemble_over_one": "ensemble / one fit", "loop_shown": "loop of K [s]",
+               "loop_over_ensemble": "loop / ensemble", "ensemble_over_one_cpu": "ensemble / one fit, CPU time",
+               "global_over_one": "global stage: ensemble / one", "gradient_over_one": "gradient stage: ensemble / one",
+               "bitwise": "members bitwise (global stage, θ)", "member_max_rel_dJ": "members: max rel. ΔJ",
+               "member_max_d_valid_mse": "members: max Δ valid. MSE [points]",
+               "J_spread_over_keys": "J spread over keys", "first_one_s": "first fit [s]",
+               "first_ensemble_s": "first ensemble [s]"}
     lines = [
-        f"# Ensembles against a loop of single fits ({args.record}{', ' + args.tag if args.tag else ''})",
-        "",
+        f"# Ensembles against a loop of single fits ({args.record}{', ' + args.tag if args.tag else ''})", "",
         f"Record: {desc}. Every `identify` default{' (--quick: tiny budgets)' if args.quick else ''}, "
-        "float32. Run(s), each row from the last run that measured it:",
-        "",
-        *[f"* {r}" for r in runs],
-        "",
-        f"Machine: {machine()}; device {getattr(jax.devices()[0], 'device_kind', '')}. Warm wall times, medians over {args.rounds} round(s); "
-        "'CPU time' is the process's CPU seconds (steadier on a loaded machine).",
-        "Stage columns: the global (derivative-free) stage's and the gradient stage's run time "
-        "(compilation apart), ensemble over one fit. Members: member i against the single fit "
-        "with key i — how many equal it to the bit after the global stage and at the end, the "
-        "largest relative difference of the training cost J and of the validation MSE; "
-        "'J spread over keys' (max/min − 1 over the single fits) gives their scale."
+        "float32. Run(s), each row from the last run that measured it:", "", *[f"* {r}" for r in runs], "",
+        f"Machine: {machine()}; device {getattr(jax.devices()[0], 'device_kind', '')}. Warm wall times, medians "
+        f"over {args.rounds} round(s); 'CPU time' is the process's CPU seconds (steadier on a loaded machine).",
+        "Stage columns: the global (derivative-free) stage's and the gradient stage's run time (compilation "
+        "apart), ensemble over one fit. Members: member i against the single fit with key i — how many equal it to "
+        "the bit after the global stage and at the end, the largest relative difference of the training cost J and "
+        "of the validation MSE; 'J spread over keys' (max/min − 1 over the single fits) gives their scale."
         + (" 'est.': the loop's time as K times the median of the single fits timed."
            if any(r["loop_estimated"] for r in rows) else ""),
-        "",
-        markdown_table(rows, columns, headers=headers, fmt=_fmt),
-        "",
-    ]
+        "", markdown_table(rows, list(columns), headers=list(columns.values()), fmt=_fmt), ""]
     if costs:
-        lines += [
-            "## Where the time goes: each stage's CPU time",
-            "",
-            "`identify`'s global and gradient stages run alone (defaults, warm), one key against "
-            "K keys; process CPU seconds, steadier than wall time on a loaded machine.",
-            "",
-            markdown_table(list(costs), ["model", "K", "stage", "one_cpu_s", "ensemble_cpu_s", "ratio"],
-                           headers=["model", "K", "stage", "one key, CPU [s]", "K keys, CPU [s]",
-                                    "K keys / one"], fmt=_fmt),
-            "",
-        ]
+        lines += ["## Where the time goes: each stage's CPU time", "",
+                  "`identify`'s global and gradient stages run alone (defaults, warm), one key against K keys; "
+                  "process CPU seconds, steadier than wall time on a loaded machine.", "",
+                  markdown_table(list(costs), ["model", "K", "stage", "one_cpu_s", "ensemble_cpu_s", "ratio"],
+                                 headers=["model", "K", "stage", "one key, CPU [s]", "K keys, CPU [s]", "K keys / one"],
+                                 fmt=_fmt), ""]
     if floor:
-        lines += [
-            "## The floor: cost per candidate against batch size",
-            "",
-            "CPU time of the global stage's evaluation (J of P candidates at once, `vmap` of the "
-            "cost, on the samples that stage sees) and, for the network, of the gradient stage's "
-            "J and gradient; medians. Where the cost per candidate does not fall as P grows, "
-            "the stage is bound by arithmetic, and K members cost K times one run whatever "
-            "their layout.",
-            "",
-            markdown_table(floor, ["model", "what", "P", "ms", "us_per_candidate"],
-                           headers=["model", "what", "P", "ms", "µs per candidate"], fmt=_fmt),
-            "",
-        ]
+        lines += ["## The floor: cost per candidate against batch size", "",
+                  "CPU time of the global stage's evaluation (J of P candidates at once, `vmap` of the cost, on the "
+                  "samples that stage sees) and, for the network, of the gradient stage's J and gradient; medians. "
+                  "Where the cost per candidate does not fall as P grows, the stage is bound by arithmetic, and K "
+                  "members cost K times one run whatever their layout.", "",
+                  markdown_table(floor, ["model", "what", "P", "ms", "us_per_candidate"],
+                                 headers=["model", "what", "P", "ms", "µs per candidate"], fmt=_fmt), ""]
     return "\n".join(lines)
 
 
 def main(argv=None):
-    args = parse(argv)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--record", choices=("emps", "rig"), default="emps")
+    p.add_argument("--models", default="elman,lugre", help="model names; NAME:map: members one after another")
+    p.add_argument("--sizes", "--keys", dest="sizes", default="1,8", help="ensemble sizes K")
+    p.add_argument("--loop-fits", type=int, default=None, help="single fits timed per round (default K)")
+    p.add_argument("--rounds", type=int, default=1, help="timed rounds (medians over them)")
+    p.add_argument("--rollouts", action="store_true", help="also the stages' CPU times and the per-candidate floor")
+    p.add_argument("--data-dir", default=None, help="folder of DATA_EMPS.mat")
+    add_output_arguments(p, "tiny budgets (smoke test)", tag=True)
+    p.add_argument("--note", default="", help="a sentence for the report (e.g. the machine's load)")
+    p.add_argument("--append", action="store_true", help="keep the existing files' rows (a new row of the same "
+                   "model and K replaces one) and runs")
+    args = p.parse_args(argv)
     data, desc = friction_record(args.record, args.data_dir)
     if data is None:
         return skipped("ensembles", desc)
@@ -365,12 +289,10 @@ def main(argv=None):
         runs = (notes.read_text().splitlines() if notes.is_file() else []) + runs
         rows.sort(key=lambda r: (str(r["model"]), int(r["K"])))
     notes.write_text("\n".join(runs) + "\n")
-    write_csv(rows, out / f"{stem}.csv")  # before report(), which adds display columns to the rows
-    if floor:
-        write_csv(floor, out / f"{stem}_floor.csv")
-    if costs:
-        write_csv(costs, out / f"{stem}_stages.csv")
-    write_report(out, stem, report(rows, floor, args, desc, runs, costs), echo=False)
+    for part, extra in (("floor", floor), ("stages", costs)):
+        if extra:
+            write_csv(extra, out / f"{stem}_{part}.csv")
+    write_report(out, stem, report(rows, floor, args, desc, runs, costs), rows, echo=False)
     return 0
 
 
