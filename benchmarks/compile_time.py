@@ -34,7 +34,7 @@ import jaxfric as jf  # before _harness, which puts this checkout first: --basel
 from jaxfric import functions as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # not on sys.path under `jaxfric bench`
-from _harness import (HERE, add_output_arguments, cell, command, markdown_table, results_dir, timed,  # noqa: E402
+from _harness import (HERE, add_output_arguments, cell, command, markdown_table, results_dir, tagged, timed,  # noqa: E402
                       write_csv, write_report)
 from baselines import NUMPY_BATCH, numpy_batch  # noqa: E402
 
@@ -119,16 +119,22 @@ def fresh_objective(name: str):
     return lambda y, args: fn(y)
 
 
-def measure_compile(solver, name: str, n: int, key: int) -> dict:
+#: a label ending in it measures the solver of the label before it with
+#: ``compiler_options="fast-compile"`` (``--solvers "PSO->NM,PSO->NM fast-compile"``)
+FAST = " fast-compile"
+
+
+def measure_compile(solver, name: str, n: int, key: int, options="auto") -> dict:
     fn = fresh_objective(name)
     bounds = (-2.0 * np.ones(n), 2.0 * np.ones(n))
     _seen.clear()
     _programs.clear()
-    sol, first, cpu = timed(lambda: jax.block_until_ready(jf.minimise(fn, solver, bounds, key=key)))
+    run = lambda k: jax.block_until_ready(jf.minimise(fn, solver, bounds, key=k, compiler_options=options))  # noqa: E731
+    sol, first, cpu = timed(lambda: run(key))
     row = {"first_s": first, "cpu_s": cpu, **{k: _seen.get(k, 0.0) for k in ("trace_s", "lower_s", "compile_s")},
            "programs": int(_seen.get("programs", 0)), "compiled": " ".join(_programs),
            "f": float(sol.f), "evals": int(sol.stats["num_evals"])}
-    row["second_s"] = timed(lambda: jax.block_until_ready(jf.minimise(fn, solver, bounds, key=key + 1)))[1]
+    row["second_s"] = timed(lambda: run(key + 1))[1]
     return row
 
 
@@ -197,8 +203,10 @@ def measure(label: str, functions, dim: int, seeds: int, dims=None) -> dict:
             return {"rows": [{"function": name, "dim": n, **peer_run(label, name, n, i)} for n in dims
                              for i, name in enumerate(per_dim)], "asks": []}
         _warm()
-        solver = solvers(quick)[label]
-        rows = [{"function": name, **({"dim": n} if dims else {}), **measure_compile(solver, name, n, key=i)}
+        solver = solvers(quick)[label.removesuffix(FAST)]
+        options = "fast-compile" if label.endswith(FAST) else "auto"
+        rows = [{"function": name, **({"dim": n} if dims else {}),
+                 **measure_compile(solver, name, n, key=i, options=options)}
                 for n in dims or [dim] for i, name in enumerate(per_dim if dims else functions)]
     asks = [{"route": route, "seeds": k, **dict(zip(("ms_per_host_call", "host_calls"), fn(solver, dim, k)))}
             for route, fn in (("ask/tell", ask_tell_ms), ("pure_callback", callback_ms)) for k in (1, seeds)
@@ -287,7 +295,7 @@ def summarise(label, pooled, dims) -> list[dict]:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_output_arguments(p)
+    add_output_arguments(p, tag=True)
     p.add_argument("--dim", type=int, default=5, help="dimension of ask/tell and of --dims ''")
     p.add_argument("--dims", default=None, help="dimensions of the per-dimension table (default 2,5,10,30; "
                    "--quick: 2,5); '' for the single-dimension table")
@@ -347,7 +355,7 @@ def main(argv=None):
                     demo += [{**row, "round": r} for row in demo_twice(label, cache, tmp, path)]
         write_csv(demo, out / "compile_time_cache_demo.csv")
     load = os.getloadavg()
-    stem = "compile_time_cache" if a.cache else "compile_time"
+    stem = tagged("compile_time_cache" if a.cache else "compile_time", a.tag)
     if asks:
         write_csv(asks, out / f"{stem}_asktell.csv")
     fmt = cell(".3g")
@@ -392,7 +400,7 @@ def _dims_text(summary, dims, a, load, fmt) -> list[str]:
     ]
     small = [d for d in dims if 2 <= d <= 10]
     for version in dict.fromkeys(r["version"] for r in summary):
-        for label in ("PSO->NM", "MAPSO-NMDS"):
+        for label in ("PSO->NM", "MAPSO-NMDS", "PSO->NM" + FAST, "MAPSO-NMDS" + FAST):
             if per := [r for r in summary if r["version"] == version and r["solver"] == label and r.get("dim") in small]:
                 first, cpu = (statistics.median(r[k] for r in per) for k in ("first_s", "cpu_s"))
                 lines.append(f"- {version}, {label}, {min(small)}-D to {max(small)}-D: median "
