@@ -1,61 +1,42 @@
 """Which judge predicts new excitation, and do ensembles beat their best member (issue 45 items 2, 4)?
 
-Usage::
-
     python benchmarks/motion_judge.py [--proxy rig|emps-blocked|pneumatic] [--keys 5] [--members 3]
-                                      [--quick] [--out DIR]
+                                      [--quick] [--out DIR] [--save-fits DIR | --rescore DIR]
 
-``--proxy rig`` (default): the simulated hydraulic rig (``jaxfric.rig``, true friction known, richer than
-every candidate) driven by four excitation families of the same length and amplitude
-scale, each with its own sensor noise: ``sweep`` (a chirp), ``steps`` (trapezoidal strokes
-with dwells at standstill), ``multisine`` (four tones) and ``reversals`` (slow motion
-through many reversals). Key ``k`` trains on family ``k mod 4`` (80 % trains, the tail is
-held back, as ``compare_motion``'s default data form) and scores every candidate on the
-other three families, each simulated from its own first 20 samples: the *truth*, pooled
-free-run position RMSE on unseen excitation. Candidates: Stribeck, LuGre, GMS, Elman(10)
-inside the mechanics (known mass, fitted offset) and the least-squares baseline.
+``--proxy rig`` (default): the simulated hydraulic rig (true friction known, richer than every
+candidate) driven by four excitation families of one length and amplitude scale, each with its
+own sensor noise: ``sweep`` (a chirp), ``steps`` (trapezoidal strokes, dwells at standstill),
+``multisine`` (four tones), ``reversals`` (slow motion, many reversals). Key ``k`` trains on
+family ``k mod 4`` (80 %; the tail held back, as ``compare_motion``'s data form) and scores
+every candidate on the other three, each simulated from its own first 20 samples: the *truth*,
+pooled free-run position RMSE on unseen excitation. Candidates: Stribeck, LuGre, GMS, Elman(10)
+in the mechanics (known mass, fitted offset) and the least-squares baseline.
+``--proxy emps-blocked``: DATA_EMPS.mat in 3 contiguous blocks (`emps_blocks`); key ``k`` trains
+Coulomb, Stribeck, LuGre and GMS (mass in [50, 200] kg, fitted offset) on block ``k mod 3`` and
+scores them on the two others. ``--proxy pneumatic``: force balance; key ``k`` is seal ``k`` of
+``pressure_records.py``: Stribeck, LuGre, GMS, ``Cylinder`` (each with an offset) and the
+least-squares asymmetric Coulomb + viscous + offset baseline train on the first 80 % of the 1, 5
+and 7 bar records, the truth is MSE % on 3 bar (criteria in MSE % of the training friction's
+variance, float32 as `jaxfric.identify`'s default).
 
-Criteria, each computed from the training family alone (lower is better):
+Criteria, from the training data alone (lower is better): ``tail``, free-run RMSE of the held-back
+20 % from the state at its start; ``blocked``, 3-fold blocked cross-validation of the 80 % (each
+held-out block from its own first 20 samples, ``jaxfric.motion.blocked_score``); ``short``, the
+whole training record cut into 2 s windows, each simulated from its own first 20 samples (no
+refit; pneumatic: rolled out from the model's initial state, scored from sample 20); ``spread``,
+``tail`` plus the ensemble members' RMS disagreement on the tail (``--members 1``: none); ``bic``,
+``log(rmse) + p log(n)/(2n)`` on the training free run. From saved fits (``--save-fits DIR``, then
+``--rescore DIR``): ``short_<samples>`` at other windows (`WIDTHS` seconds), ``short_median``
+(the median over the 2 s windows), ``short_reversals`` (2 s windows started 20 samples before a
+velocity reversal, `reversal_starts`), ``short_margin`` (the baseline kept unless a model is more
+than 10 % lower), and the averaged predictions `AVERAGES` (issue 45 item 4: a weighted mean of
+the candidates' predictions, the baseline's included, weights `average_weights` from the
+training ``short`` scores, judged as one candidate).
 
-* ``tail``: free-run RMSE of the held-back 20 % from the state at its start;
-* ``blocked``: blocked cross-validation of the training 80 % (3 folds, each held-out block
-  simulated from its own first 20 samples, ``jaxfric.motion.blocked_score``);
-* ``short``: many short free runs: the whole training record cut into windows of
-  ``SHORT`` samples, each simulated from its own first 20 samples (no refit);
-* ``spread``: ``tail`` plus the ensemble members' disagreement on the tail (RMS spread);
-* ``bic``: training free-run RMSE with a complexity penalty, ``log(rmse) + p log(n)/(2n)``.
-
-Variants of ``short`` from saved fits (``--save-fits DIR``, then ``--rescore DIR``: no refit):
-``short_<samples>`` at other window lengths (`WIDTHS` seconds); ``short_median``, the median
-instead of the pooled RMSE over its 2 s windows; ``short_reversals``, 2 s windows each started
-20 samples before a velocity reversal (`reversal_starts`); ``short_margin``, the baseline kept
-unless a model's ``short`` is more than 10 % lower.
-
-A criterion's choice (the lowest, the baseline included) *succeeds* on a key when its
-unseen RMSE is within 10 % of the best candidate's and not above the baseline's. Rows go
-to ``motion_judge.csv`` as they come (a cut run leaves data; a rerun skips keys done), the
-summary to ``motion_judge.md``. ``main`` switches x64 on (benchmarks choose it).
-
-Two proxies on real data (the same criteria, rows and summary; ``judge_emps.*``,
-``judge_pneumatic.*``):
-
-* ``--proxy emps-blocked``: DATA_EMPS.mat cut into 3 contiguous blocks (`emps_blocks`); key
-  ``k`` trains Coulomb, Stribeck, LuGre and GMS (mass in [50, 200] kg, fitted offset) on
-  block ``k mod 3`` (80 % / tail as above) and scores them on the two other blocks, each
-  simulated from its own first 20 samples. ``--members 1``: no ``spread``.
-* ``--proxy pneumatic``: force balance (the friction is measured, the piston's velocity
-  drives the model). Key ``k`` is seal ``k`` of ``benchmarks/pressure_records.py``: Stribeck,
-  LuGre, GMS, ``Cylinder`` (each with an offset) and the least-squares asymmetric Coulomb +
-  viscous + offset baseline train on the first 80 % of the 1, 5 and 7 bar records; the truth
-  is MSE % on the 3 bar record. Criteria in MSE % of the training friction's variance:
-  ``tail`` (the 20 % tails, rolled out through the record), ``blocked`` (3 folds of the 80 %
-  parts), ``short`` (2 s windows of the whole records, each rolled out from the model's
-  initial state, scored from sample 20), ``spread`` (``tail`` plus the members' variance on
-  the tails), ``bic`` (``log sqrt(train MSE) + p log(n)/(2n)``). float32, `jaxfric.identify`'s default.
-
-Averaged predictions (issue 45 item 4; ``--rescore`` and the pneumatic rows): pseudo-candidates
-`AVERAGES` whose prediction of each unseen record is a weighted mean of the candidates' (the
-baseline's included; weights `average_weights`, from the training ``short`` scores), judged as one.
+A criterion's choice (the lowest, the baseline included) *succeeds* on a key when its unseen
+RMSE is within 10 % of the best candidate's and not above the baseline's. Rows go to
+``<stem>.csv`` as they come (a rerun skips keys done), the summary to ``<stem>.md`` (`STEMS`).
+``main`` switches x64 on (benchmarks choose it).
 """
 
 from __future__ import annotations
@@ -158,8 +139,7 @@ def pooled(rmses) -> float:
     return float(np.sqrt(np.mean(r ** 2))) if np.all(np.isfinite(r)) else float("inf")
 
 
-def short_runs(fit, rec, width=SHORT) -> float:
-    """The ``short`` criterion: ``jaxfric.motion._compare.short_runs_score`` of the whole record."""
+def short_runs(fit, rec, width=SHORT) -> float:  # the ``short`` criterion of the whole record
     return short_runs_score(fit, [rec], width, INIT)
 
 
@@ -171,8 +151,7 @@ def tail_spread(fit, rec, n_train) -> float:
 
 def measure_key(key, members, quick, on_row, save=None, proxy="rig", emps=None):
     recs, train_name, candidates, opts = setup(proxy, key, quick, emps)
-    rec = recs[train_name]
-    unseen = {k: r for k, r in recs.items() if k != train_name}
+    rec, unseen = recs[train_name], {k: r for k, r in recs.items() if k != train_name}
     n_train = int(round(0.8 * rec.n_samples))
     base = None
     for label, (name, mopts) in candidates.items():
@@ -206,10 +185,8 @@ def measure_key(key, members, quick, on_row, save=None, proxy="rig", emps=None):
                     "train_rmse": fit.metrics["baseline"]["train"]["rmse_mm"], "short": short_runs(bf, rec),
                     "blocked": b_blocked, "unseen": pooled(list(bper.values())), "seconds": 0.0,
                     **{f"unseen_{k}": v for k, v in bper.items()}}
-            base["spread"] = base["tail"]
-            base["bic"] = math.log(base["train_rmse"]) + 4 * math.log(n_train) / (2 * n_train)
-            base["unseen_ensemble"] = base["unseen"]
-            base["unseen_members"] = ""
+            base.update(spread=base["tail"], bic=math.log(base["train_rmse"]) + 4 * math.log(n_train) / (2 * n_train),
+                        unseen_ensemble=base["unseen"], unseen_members="")
     on_row(base)
 
 
@@ -234,8 +211,7 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
             best = min(float(r["unseen"]) for r in rs)
             base = next(float(r["unseen"]) for r in rs if r["model"] == BASE)
             u = float(pick["unseen"])
-            ok_base = u <= base
-            within = u <= (1 + MARGIN) * best
+            ok_base, within = u <= base, u <= (1 + MARGIN) * best
             wins += within and ok_base
             never_worse += ok_base
             choices.append({"criterion": crit, "key": k, "train": rs[0]["train"], "pick": pick["model"],
@@ -355,8 +331,7 @@ def rescore(rows, folder, proxy="rig", emps=None) -> list:
     return rows
 
 
-def _cut(d, a, b):
-    """Samples ``[a, b)`` of a FrictionData as a record of its own (all for training)."""
+def _cut(d, a, b):  # samples [a, b) of a FrictionData as a record of its own (all for training)
     return d._view(slice(a, b), b - a)
 
 
@@ -376,7 +351,7 @@ def _fitter(label, key, quick):
         extra["solver"] = MAPSONMDS(mapso=MAPSO(lattice_size=3, num_generations=5),
                                     nelder_mead=NelderMead(max_steps=60, max_evals=60))
 
-    def run(fit):
+    def run(fit):  # a predictor of FrictionData records
         return lambda d: np.asarray(fit.predict(d.velocity, inputs=np.stack([d.p1, d.p2])), np.float64)
 
     def fit(recs, members=1):
@@ -393,8 +368,7 @@ def pneumatic_key(key, members, quick, on_row, folder=None, folds=3):
     """The pneumatic proxy's rows of seal ``SEALS[key]`` (module docstring)."""
     from pressure_records import SEALS, TRAIN_BAR, VALID_BAR
     seal = SEALS[key % len(SEALS)]
-    full = [pneumatic(seal, b, folder)[1] for b in TRAIN_BAR]
-    held = pneumatic(seal, VALID_BAR, folder)[1]
+    full, held = [pneumatic(seal, b, folder)[1] for b in TRAIN_BAR], pneumatic(seal, VALID_BAR, folder)[1]
     cuts = [round(0.8 * d.n_samples) for d in full]
     heads = [_cut(d, 0, n) for d, n in zip(full, cuts)]
     blocks = [[_cut(h, round(i * h.n_samples / folds), round((i + 1) * h.n_samples / folds)) for i in range(folds)]
