@@ -132,6 +132,10 @@ def test_gradient_stage_polishes_and_its_members_follow_the_single_runs():
         assert set(timings) == {"refine_compile_s", "refine_run_s"}
         np.testing.assert_array_equal(one.theta, singles[0].theta)
         assert float(one.f) < float(jax.jit(obj.cost)(starts[0], obj.data))  # it polished (one program)
+        # 'fast-compile' (LLVM at level 0) rounds differently, the same algorithm: the same point
+        fast, _ = stages.gradient_stage(settings, obj, starts[0], bounds, jnp.float64,
+                                        compiler_options="fast-compile")
+        np.testing.assert_allclose(fast.theta, one.theta, rtol=1e-7, atol=1e-9)
         # an ensemble of one runs the single run's program: to the bit
         alone, _ = stages.gradient_stage(settings, obj, starts[:1], bounds, jnp.float64,
                                          ensemble=True, compiler_options=None)

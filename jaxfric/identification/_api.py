@@ -245,7 +245,8 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
             at 100 % also when the solver converges early.
         compiler_options: XLA options for the optimiser run and the gradient stage
             (their executables only): ``"auto"`` (default, see
-            [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``None`` (XLA's defaults) or a dict.
+            [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]), ``"fast-compile"`` (LLVM
+            at level 0: less compilation, slower runs), ``None`` (XLA's defaults) or a dict.
         method: ``"jaxfric"`` (default, the best measured) or ``"paper"`` (MAPSO–NMDS exactly
             as the paper describes, no gradient stage): what each runs is
             [`default_solver`][jaxfric.identification.default_solver]'s. An explicit ``solver`` or ``refine`` wins.
