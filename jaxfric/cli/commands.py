@@ -241,7 +241,10 @@ def cmd_identify(args, argv) -> int:
         data = data.with_split(None, n_train=data.n_samples)  # FILE whole for estimation
     # identify's own record checks (lengths, NaN, split, constant friction, sample times), now:
     # before any stage message, progress bar or report folder.
-    as_records(train={args.file: data}, valid=valid) if valid else as_records(data)
+    if valid:
+        as_records(train={args.file: data}, valid=valid)
+    else:
+        as_records(data)
     for note in notes:
         say(f"note: {note}")
     _choose_form(args, data, say)
