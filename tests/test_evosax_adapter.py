@@ -230,6 +230,9 @@ def _steps(solver, fn, lower, upper, key, n):
 
     proto, flat, lo, hi, _ = _prepare(fn, solver, (lower, upper), None, None, None)
     state = jax.jit(lambda k: compiled_start(proto, flat, lo, hi, None, k))(check_key(key))
+    # strongly typed, as the driver's loop carries it (the start leaves some leaves weak and
+    # the step returns them strong: the step would compile twice); the same bits every step
+    state = jax.tree_util.tree_map(lambda a: jnp.asarray(a, a.dtype), state)
     step = jax.jit(lambda s: compiled_step(proto, flat, lo, hi, None, s))
     states = []
     for _ in range(n):
