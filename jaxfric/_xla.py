@@ -36,12 +36,13 @@ On other platforms (GPU, TPU) nothing is passed. Every entry point takes
 ``"fast-compile"`` is ``"auto"`` plus ``xla_backend_optimization_level = 0`` (LLVM
 without its optimisation passes), for many new cheap objectives, each run once (a
 benchmarking suite): on 2-D to 10-D test functions a new objective's first PSO→NM
-``minimise`` took 0.72 s of CPU instead of 1.27 s and MAPSO–NMDS 1.32 s instead of
-1.99 s (medians of 9 functions × dimensions), with the same 200-generation runs as fast
-(0.017 s against 0.019 s). Heavier programs run slower: 30-D Rosenbrock with 100
-particles, 300 PSO generations 7.6× and 100 MAPSO generations 3.8× the ``"auto"``
-run time, so it is never the default. Results agree with ``"auto"``'s to rounding,
-not to the bit (LLVM forms fewer fused multiply–adds). Options apply only to a
+``minimise`` took 0.73 s of CPU instead of 1.61 s and MAPSO–NMDS 1.56 s instead of
+2.27 s (medians over sphere, Rosenbrock and Rastrigin, both in one run:
+benchmarks/results/compile_time_fast.md), the 200-generation runs after it still in
+milliseconds. Heavier programs run slower: 30-D Rosenbrock with 100 particles, 300 PSO
+generations 7.6× and 100 MAPSO generations 3.8× the ``"auto"`` run time, so it is never
+the default. Results agree with ``"auto"``'s to rounding, not to the bit (LLVM's code
+without optimisation rounds differently). Options apply only to a
 top-level call: under a caller's ``jit``, ``vmap`` or ``grad`` (arguments that are
 tracers) the caller's compilation decides, and the call is a plain ``jit``.
 """
