@@ -162,13 +162,19 @@ class GMSStep(FrictionStep):
 
 
 class _ScaledStep(FrictionStep):
-    """A network on §2.4-scaled data: velocity in, newtons out through the scalers."""
+    """An Elman network on §2.4-scaled data: velocity in, newtons out through the scalers;
+    ``y = v.h (+ b_o)`` from the hidden layer ``h`` of the subclass's ``_hidden``."""
 
     velocity_scaler: Scaler
     friction_scaler: Scaler
 
     def _u(self, v):
         return self.velocity_scaler.scale(v)
+
+    def output(self, theta, c, v, dt):
+        p, h = self._hidden(theta, c, v)
+        y = jnp.sum(p["v"] * h) + (p["b_o"] if self.model.output_bias else 0.0)
+        return self.friction_scaler.unscale(y)
 
 
 class ElmanStep(_ScaledStep):
@@ -181,11 +187,6 @@ class ElmanStep(_ScaledStep):
     def _hidden(self, theta, c, v):
         p = self.model.to_physical(theta)
         return p, elman_hidden(self._u(v), c, p["w"], p["r"], p["b"])
-
-    def output(self, theta, c, v, dt):
-        p, h = self._hidden(theta, c, v)
-        y = jnp.sum(p["v"] * h) + (p["b_o"] if self.model.output_bias else 0.0)
-        return self.friction_scaler.unscale(y)
 
     def update(self, theta, c, v, dt):
         p, h = self._hidden(theta, c, v)
@@ -202,11 +203,6 @@ class ElmanFullStep(_ScaledStep):
     def _hidden(self, theta, c, v):
         p = self.model.to_physical(theta)
         return p, jnp.tanh(p["w"] * self._u(v) + p["W_c"] @ c + p["b"])
-
-    def output(self, theta, c, v, dt):
-        p, h = self._hidden(theta, c, v)
-        y = jnp.sum(p["v"] * h) + (p["b_o"] if self.model.output_bias else 0.0)
-        return self.friction_scaler.unscale(y)
 
     def update(self, theta, c, v, dt):
         return self._hidden(theta, c, v)[1]
