@@ -30,23 +30,11 @@ default pipeline therefore grows the simulation horizon:
    (``benchmarks/results/motion_keys.md``);
 5. **screening** — ``screen`` rounds around the best point (`screen_free_run`): the
    free-run cost is rough on a small scale, so Levenberg–Marquardt stops in a valley that
-   depends on the key; on the whole EMPS estimation file 8 rounds took the spread of the
-   training free-run RMSE over keys 0–4 from 6.8 % to 2.2 % (Coulomb), 7.3 % to 6.4 %
-   (Stribeck), 31 % to 25 % (LuGre) and 46 % to 39 % (GMS). With 16 rounds and 2
-   free-run-ranked starts (the default since issue 45; keys 0–4 one call each) no key of
-   any model ended higher: LuGre 2.090 2.072 2.088 2.170 2.154 mm (4.7 %; was 2.090 2.072
-   2.088 2.588 2.273), Coulomb 2.772 2.735 2.804 2.743 2.793 (2.5 %), Stribeck unchanged
-   (6.4 %: each key's first rounds lowered its winner, then none did), GMS 1.885 1.693 2.206 2.370
-   2.369 (was 1.885 2.480 2.617 2.370 2.587; the lower optimum of key 1 widens the spread
-   to 40 %: its screen still lowered J at round 15, while keys 3 and 4 sat in one valley,
-   J 8.2e-4 against 4.2e-4, that no round left).
+   depends on the key; each round draws points around the best one and continues from the
+   lowest, keeping its end only if it is lower.
 
-Measured on the EMPS estimation split (80 % trains, ``benchmarks/motion.py``): the
-earlier default (MAPSO for 200 generations, then up to 200·n Nelder–Mead evaluations of
-the free run) took 87 s (LuGre) and 136 s (GMS) per model; this pipeline took 8–25 s
-per model, compilation included, on a busier machine
-(``benchmarks/results/motion_timing.md``), with a lower held-back error for every
-physical model (``benchmarks/results/motion.md``).
+The measurements behind these defaults (spread over keys, timings against the pre-0.9
+MAPSO–NMDS default): docs/motion.md, "The default search".
 
 The budget ([`MotionBudget`][jaxfric.motion.MotionBudget]) is checked between the stages and after every
 Levenberg–Marquardt step, so a run stops with the best point so far.
@@ -112,9 +100,7 @@ class MotionSearch(eqx.Module):
         screen_cycle: after this many rounds in a row that found nothing lower, the
             screen's spread returns to ``screen_spread`` instead of growing 4x again (0, the
             class default: it keeps growing, up to a quarter of the box; `default_search` uses
-            4 for physical models). On the whole EMPS estimation file, keys 0–4, a cycle of 4
-            lowered or kept every key of LuGre, Coulomb, Stribeck and GMS (a cycle of 3 hurt
-            LuGre); ``benchmarks/results/motion_keys.md`` holds the table, docs/motion.md why.
+            4 for physical models; why: docs/motion.md).
     """
 
     particles: int = eqx.field(default=25, static=True)
@@ -222,11 +208,6 @@ class MotionBudget:
             raise ValueError(f"max_time must be None or a positive number of seconds, got {self.max_time!r}")
 
 
-def _lm_progress(progress, desc, total):
-    """``(on_step, close)`` for one Levenberg–Marquardt stage."""
-    return step_progress(progress, desc, total)
-
-
 class _Clock:
     def __init__(self, budget: MotionBudget):
         self.t0 = time.perf_counter()
@@ -314,8 +295,8 @@ def screen_free_run(search: MotionSearch, clock, residuals, y, f, lower, upper, 
         out = None
         if np.isfinite(J[i]):
             left = clock.left()
-            on_step, close = _lm_progress(progress, f"screen {rnd + 1}/{search.screen}, free run "
-                                          "(Levenberg-Marquardt)", search.screen_steps)
+            on_step, close = step_progress(progress, f"screen {rnd + 1}/{search.screen}, free run "
+                                           "(Levenberg-Marquardt)", search.screen_steps)
             try:
                 out = levenberg_marquardt(residuals, jnp.asarray(Y[i], dtype), lo, hi, data,
                                           max_steps=search.screen_steps, rtol=search.rtol,
@@ -437,7 +418,7 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
                 clock.stopped = "max_evals"
                 break
             label = name if len(starts) == 1 else f"{name} (start {index + 1}/{len(starts)})"
-            on_step, close = _lm_progress(progress, f"{label} (Levenberg-Marquardt)", steps)
+            on_step, close = step_progress(progress, f"{label} (Levenberg-Marquardt)", steps)
             t = time.perf_counter()
             try:
                 out = levenberg_marquardt(residuals, jnp.asarray(y, dtype), jnp.asarray(lower, dtype),
@@ -464,7 +445,7 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
     if search.polish and clock.stopped is None and not clock.out_of_time():
         left = clock.left()
         if left is None or left >= 2 + y_best.size:
-            on_step, close = _lm_progress(progress, "polish, free run (Levenberg-Marquardt)", search.polish)
+            on_step, close = step_progress(progress, "polish, free run (Levenberg-Marquardt)", search.polish)
             t = time.perf_counter()
             try:
                 out = levenberg_marquardt(residuals, jnp.asarray(y_best, dtype), jnp.asarray(lower, dtype),
