@@ -43,22 +43,14 @@ from .stages import (
 )
 
 #: Defaults applied when a model is given by *name* (explicit options win).
-#: The Elman context-weight box is |r| <= 1 instead of the spec's 5 (§2.4): with 5
-#: about 98 % of random networks are chaotic over 1600 samples (models/elman.py), and
-#: on the simulated rig (benchmarks/results/friction.md, 5 keys) no gradient-refined
-#: network with |r| <= 1 diverged on the validation window, while wider boxes did on
-#: some keys (worst validation MSE 0.41 % against 82 % for |r| <= 5).
+#: The Elman context-weight box is |r| <= 1 instead of the spec's 5 (docs/algorithms.md §2.4,
+#: "jaxfric default": wider boxes diverged on validation for some keys).
 NAMED_MODEL_DEFAULTS: dict[str, dict[str, Any]] = {
     "elman": {"context_weight_bound": 1.0},
 }
 
 #: MAPSO generations of the paper's solver for black-box models (§3.5: "300–1000 for
-#: the ENN"). 300 generations (48 600 evaluations) + Nelder–Mead's 36 000 take about
-#: 13 s for the 30-neuron network on an idle 2-core CPU, compile time apart. More
-#: generations did not help on the simulated rig: after BFGS, 9 keys at G = 300 gave
-#: validation MSE 0.15–0.28 %, 6 keys at G = 500 gave 0.24–0.46 % (a swarm that has
-#: converged further hands Nelder–Mead a smaller simplex, see
-#: ``MAPSONMDS.simplex_from_swarm``); benchmarks/friction.py compares 300, 500, 1000.
+#: the ENN"; more did not help on the simulated rig: docs/algorithms.md §3.5).
 DEFAULT_GENERATIONS_BLACK_BOX = 300
 #: MAPSO generations of the default solver for physical models (a few parameters).
 DEFAULT_GENERATIONS_PHYSICAL = 200
@@ -255,11 +247,8 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
     [−1, 1]-scaled data for the networks, divided by the friction variance for
     physical models (so J = training MSE % / 100 there).
 
-    Devices: the run goes where JAX puts it. One identification is mostly sequential (its
-    Nelder–Mead stage evaluates one rollout at a time), so on a GPU every step is a kernel
-    launch: the default ENN fit took 42 s on an H100 against 8–10 s on a 2-core CPU
-    (``benchmarks/results/peers_gpu.md``). For a single fit on a GPU machine, use
-    ``with jax.default_device(jax.devices("cpu")[0]): identify(...)``.
+    Devices: the run goes where JAX puts it; one fit is mostly sequential and runs faster
+    on a CPU than on a GPU (docs/scale.md, "Time loops per platform").
 
     The baseline (`jaxfric.pipeline`): every fit carries the least-squares Coulomb + viscous +
     offset solution on the same training windows, scored the same way, in

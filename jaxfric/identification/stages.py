@@ -362,9 +362,7 @@ def members_valid_mse(member_predictions, records: RecordSet) -> list:
     whose free run is not finite or where there is no validation window.
 
     ``member_predictions``: per record, the ``(K, T)`` free runs. One vectorised pass for
-    all members: the full metrics table ([`record_metrics`][jaxfric.identification.stages.record_metrics]) costs about 7 ms a window
-    on EMPS on the 2-core CPU, three windows a member, about 1.3 s for K = 64, where a
-    whole K = 64 LuGre ensemble took 1.9 s on an H100."""
+    all members, not the full metrics table per member (docs/scale.md)."""
     k = int(np.shape(member_predictions[0])[0])
     y = np.concatenate([np.asarray(r.friction, np.float64)[r.n_train:] for r in records.records])
     if y.size == 0 or not np.ptp(y) > 0:

@@ -1,27 +1,24 @@
 """The friction models' time loops, compiled the way each platform runs them fastest.
 
 A rollout is a loop over samples. On a CPU a step of ``lax.scan`` costs little to
-start. On a GPU each step is at least one kernel launch: on an H100 a 1600-sample
-Elman rollout took 19-22 ms at ``unroll`` 1-2, whether it held 1 candidate or 4096
-(``benchmarks/results/peers_gpu.md``). The model code is traced once. The loop's
-form is chosen when it is lowered for a platform, through
+start; on a GPU each step is at least one kernel launch. The model code is traced once.
+The loop's form is chosen when it is lowered for a platform, through
 ``jax.lax.platform_dependent``, so the same program is right wherever it runs. That
 covers ``jax.default_device``, arrays committed to a CPU on a GPU machine, and
 ahead-of-time lowering. The branch for the other platform is folded away by XLA.
 
 * `time_scan` (nonlinear recurrences: the Elman networks). Off the CPU it
-  unrolls `ACCELERATOR_UNROLL` steps per loop iteration. On the H100 that took
-  the rollout above to 1.1 ms (1 candidate), 1.5 ms (64) and 2.3 ms (4096). On the
-  CPU it keeps the model's own choice.
+  unrolls `ACCELERATOR_UNROLL` steps per loop iteration. On the CPU it keeps the
+  model's own choice.
 * `linear_recurrence` (``z_{k+1} = d_k z_k + g_k``: LuGre and Dahl's exact
   update). Off the CPU it runs as an associative (parallel-prefix) scan of ``log2 T``
-  levels: 0.15 ms against 23 ms for the sequential scan on the H100, equal to 5e-15
-  relative in float64 and 4e-6 in float32. On the CPU the sequential scan stays:
-  the prefix scan does twice the arithmetic there and ran 2x slower.
+  levels. On the CPU the sequential scan stays (the prefix scan does twice the
+  arithmetic there).
 * `reverse_affine_scan` (a loop run backwards whose carry is affine: the Elman
-  network's adjoint). Off the CPU the same prefix scan; on the H100 it took the EMPS
-  default fit from 9.1 to 6.45 s (``benchmarks/results/gpu_check_gpu.md``). On the CPU
-  the model's own loop, unchanged to the bit.
+  network's adjoint). Off the CPU the same prefix scan; on the CPU the model's own
+  loop, unchanged to the bit.
+
+The measurements behind each choice: docs/scale.md, "Time loops per platform".
 """
 
 from __future__ import annotations
@@ -31,9 +28,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
-#: ``lax.scan`` unroll of nonlinear time loops on GPUs and other accelerators. On the
-#: H100 32 was within 10 % of the best of 1-64 for 1, 64 and 4096 candidates (64 was
-#: no better at 4096 and compiles longer).
+#: ``lax.scan`` unroll of nonlinear time loops on GPUs and other accelerators (docs/scale.md).
 ACCELERATOR_UNROLL = 32
 
 

@@ -11,15 +11,9 @@ are simple and a block is a contiguous slice)::
     Elman      [ w | r | b | v | alpha | c0 ] (+ [b_o])              6N (+1)
     ElmanFull  [ w | W_c (row-major N*N) | b | v | c0 ] (+ [b_o])    N + N^2 + 3N (+1)
 
-Performance note (measured on the 2-core development CPU, 30 neurons, 1600
-samples, 64 candidates): scanning once over time with the state stored as an
-``(N, P)`` array -- candidates on the fast axis, held flat in the loop, which
-made 9-25 candidates 1.4-3x faster and 64 no slower -- takes about 2 ms in float32
-(``unroll=2``) and 4.7 ms in float64 (``unroll=1``; float64 ``tanh`` is more
-than half of it), against 5 ms / 6.8 ms for a ``(P, N)`` state and 7 ms for
-``vmap`` of a single-candidate scan. Hoisting ``w u + b`` out of the loop was
-slower (it materialises a (T, N, P) array), and exp/expm1-based tanh variants
-were slower than ``jnp.tanh``. Hence [`Elman.simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] is the
+Performance: one scan over time with the state stored as an ``(N, P)`` array
+(candidates on the fast axis, held flat in the loop) is the fastest measured form
+(docs/scale.md, "Time loops per platform"). Hence [`Elman.simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] is the
 primitive; [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] calls it with P = 1, and ``vmap(simulate)`` over
 theta is routed back to it by a custom batching rule (see
 [`AbstractFrictionModel.simulate`][jaxfric.models.AbstractFrictionModel.simulate]).
