@@ -259,13 +259,8 @@ def short_runs_score(fit, records, window: int | None = None, init_window: int =
 
     All windows run in one vmapped, compiled free run (`window_scores`), equal to a loop of
     ``fit.score`` calls (1e-9 relative in float64, tests/test_motion_judge.py) for a fit
-    whose free run is well conditioned; a chaotic one (the rig's key-4 GMS fit, where 1e-9
-    m/s of initial velocity becomes 1 mm over 512 samples) amplifies the two programs'
-    rounding differences alike (1.30 against 1.17 mm, docs/motion.md). On the EMPS
-    estimation file (12 windows of 2 000 samples, float64, a fresh process, median of 3 on
-    2 shared CPUs) the first call for a LuGre fit took 10.5 s as that loop (each window's
-    start recompiled the free run) and 2.6 s in one call; for the baseline 5.5 s and 1.3 s;
-    a repeated call 0.2 s and 0.05 s.
+    whose free run is well conditioned (a chaotic one amplifies the two programs' rounding
+    differences; its measurements and timings: docs/motion.md, "Choosing a model").
     """
     window, init_window = short_window(records[0].dt, window, init_window), int(init_window)
     metrics = window_scores(fit, records, window, init_window)
