@@ -10,22 +10,11 @@ combination and writes, under ``out_dir``:
 * ``sweep.json`` -- what each model and record label stands for (the model
   configuration with the identify options, a SHA-256 of each record's arrays).
 
-Resuming: a run whose fit file exists is not recomputed; its row is read back from the
-file. Every file is written atomically ([`jaxfric.files.atomic_write`][jaxfric.files.atomic_write]), so an
-interrupted sweep (Ctrl-C, a killed job, an exception) leaves only whole files, and
-calling the same sweep again finishes the rest. A label that already stands for other
-settings or other data in ``out_dir`` is refused before any run.
-
-Where the runs go: run ``i`` of the sweep's order belongs to process
-``i % process_count`` (``process_index``, ``process_count``: JAX's
-``jax.process_index()`` / ``jax.process_count()`` after ``jax.distributed.initialize``,
-or given, for a job array without JAX's runtime). Within a process the runs go one
-after another, and each one spreads its population over that process's devices as
-[`jaxfric.identify`][jaxfric.identification.identify] does. Runs of one (model, record) pair share one compiled
-program (the key is data), so only the first run of a pair compiles. Under JAX's
-distributed runtime the processes meet at a barrier at the end and process 0 writes
-the table of every run; the fit files must then lie on a file system all processes
-share (docs/scale.md).
+Every file is written atomically ([`jaxfric.files.atomic_write`][jaxfric.files.atomic_write]); a run whose
+fit file exists is read back, not recomputed, so calling the same sweep again finishes
+an interrupted one. Run ``i`` of the sweep's order belongs to process ``i % process_count``;
+under JAX's distributed runtime process 0 writes the table of every run at the end.
+Resuming, batching and several processes or hosts: docs/scale.md, "Sweeps".
 """
 
 from __future__ import annotations
