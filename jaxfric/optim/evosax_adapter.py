@@ -64,8 +64,7 @@ not checked (pycma's runs on Griewank and Schwefel 2.26 in benchmarks/cmaes_rest
 ended by ``tolfun``, ``tolfunhist``, ``tolflatfitness`` or the budget only). After
 each generation the CMA-ES state is rescaled, the same distribution ``N(m, σ²·C)`` with
 ``C``'s largest variance 1 (``_rescaled``): evosax adds ``1e-8·I`` to ``C`` at every ask,
-which otherwise stalls the shrinking of ``C`` with large populations (a run of λ = 96 on
-a 2-D sphere took 3× pycma's generations to stagnate; rescaled, pycma's number).
+which otherwise stalls the shrinking of ``C`` with large populations (docs/benchmarks.md).
 
 Everything stays inside the compiled run, with fixed shapes: each step evaluates one
 batch of ``P`` points, so a generation of population ``λ = P·2^j`` takes ``2^j`` steps
@@ -85,11 +84,9 @@ at every step, so on one CPU ``minimise_many`` runs the keys one after another
 (``batching="auto"``).
 
 **Cost in many dimensions.** Full CMA-ES eigendecomposes its D×D covariance every
-generation (``jnp.linalg.eigh``, O(D³)). On a 2-core CPU that took 3–7 ms at D = 30 but
-0.2–0.9 s at D = 180 (the 30-neuron Elman network): 40 ms per evaluation there, against
-0.75 ms for ``"Sep_CMA_ES"`` (diagonal covariance, O(D) per generation) and 0.16 ms for
-MAPSO's 64 agents (benchmarks/global_stages.py). For more than a few tens of parameters
-use ``Evosax("Sep_CMA_ES")`` (or another diagonal strategy such as ``"SNES"``).
+generation (``jnp.linalg.eigh``, O(D³); measured in docs/benchmarks.md). For more than a
+few tens of parameters use ``Evosax("Sep_CMA_ES")`` (diagonal covariance, O(D) per
+generation) or another diagonal strategy such as ``"SNES"``.
 
 **Keys.** Generation ``i`` uses ``fold_in(key, i)`` (split in two for ``ask`` and
 ``tell``), so the same key gives the same run, chunked (checkpoints) or not.
