@@ -28,7 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..records import SAMPLE_TIME_RTOL, same_sample_time
-from ._api import DEFAULT_INIT_WINDOW, _as_motion_data, _init_window, _split, identify_motion, motion_metrics
+from ._api import (DEFAULT_INIT_WINDOW, _as_motion_data, _init_window, _split, baseline_motion_fit,
+                   identify_motion, motion_metrics)
 from ._baseline import BASELINE_LABEL
 from ._forward import simulate_motion
 
@@ -283,17 +284,10 @@ def short_judge(fits: dict, records, window: int | None = None,
 def baseline_fit(fit):
     """The least-squares Coulomb + viscous + offset baseline of ``fit`` (its
     ``settings["motion"]["baseline"]``: ``M``, ``Fc``, ``Fv``, ``offset``) as a
-    [`MotionFit`][jaxfric.motion.MotionFit] of its own, to be simulated and scored like ``fit``."""
-    from ._api import MotionFit
-    from ._baseline import baseline_model
-
+    [`MotionFit`][jaxfric.motion.MotionFit] of its own ([`baseline_motion_fit`][jaxfric.motion.baseline_motion_fit]), to be
+    simulated and scored like ``fit``."""
     b = fit.settings["motion"]["baseline"]
-    model = baseline_model()
-    theta = np.asarray(model.from_physical(Fc=max(b["Fc"], 0.0), sigma2=max(b["Fv"], 1e-12)), np.float64)
-    return MotionFit(model=model, theta=theta, velocity_scaler=None, friction_scaler=None, dt=fit.dt,
-                     n_train=fit.n_train, n_samples=0, metrics={},
-                     settings={"model_name": "coulomb",
-                               "motion": {"mass": float(b["M"]), "offset": float(b["offset"]), "v0": 0.0}})
+    return baseline_motion_fit(b["M"], b["Fc"], b["Fv"], b["offset"], dt=fit.dt, n_train=fit.n_train)
 
 
 def _as_records(value) -> list:
