@@ -759,18 +759,8 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
         key, seed = run_keys.key, run_keys.seed
         dtype = search_dtype(dtype)
 
-        # the search vector: theta, then the mechanics identified (jaxfric.motion._layout)
-        layout = Layout(model.num_params, mass_range is not None, bool(fit_offset), bool(fit_v0))
-        rows = list(zip(*model.bounds(box)))
-        if mass_range is not None:
-            rows.append((np.log10(mass_range[0]), np.log10(mass_range[1])))
-        if fit_offset:
-            rows.append((-0.25 * f_level, 0.25 * f_level) if offset_range is None else offset_range)
-        if fit_v0:
-            vmax = 0.05 * float(np.max(np.abs(vt)))
-            rows.append((-vmax, vmax))
-        lower, upper = (np.asarray(b, np.float64) for b in zip(*rows))
-
+        layout, lower, upper = _search_vector(model, box, mass_range, fit_offset, offset_range, fit_v0,
+                                              f_level, vt)
         residuals, cost, free, glob, stage_data, search = _costs(
             model, layout, search, tr_records, scalers, mass0, dtype, error, horizon, legacy_cost)
         sol, stopped = None, None
@@ -832,6 +822,24 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
         data = data if data is not None else _concatenated(tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**fit.timings, "total_s": total.wall_s})
+
+
+def _search_vector(model, box, mass_range, fit_offset, offset_range, fit_v0, f_level, vt):
+    """``(layout, lower, upper)`` of [`identify_motion`][jaxfric.motion.identify_motion]'s search vector: θ, then
+    the mechanics identified (`._layout`): ``log10`` of the mass in ``mass_range``, the
+    offset in ``offset_range`` (default ±0.25 ``f_level``, the 95th percentile of
+    |net force|), the initial-velocity correction in ±0.05 max|``vt``|."""
+    layout = Layout(model.num_params, mass_range is not None, bool(fit_offset), bool(fit_v0))
+    rows = list(zip(*model.bounds(box)))
+    if mass_range is not None:
+        rows.append((np.log10(mass_range[0]), np.log10(mass_range[1])))
+    if fit_offset:
+        rows.append((-0.25 * f_level, 0.25 * f_level) if offset_range is None else offset_range)
+    if fit_v0:
+        vmax = 0.05 * float(np.max(np.abs(vt)))
+        rows.append((-vmax, vmax))
+    lower, upper = (np.asarray(b, np.float64) for b in zip(*rows))
+    return layout, lower, upper
 
 
 def _checked_windows(data, n_train, va_records, error, horizon, metric_horizon, init_window):
