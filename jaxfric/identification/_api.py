@@ -193,9 +193,7 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
             ``fit.ensemble`` holds every member (``theta``, ``J``, keys, validation
             MSE %, the spread of each parameter); ``fit.predict_band(v)`` is the
             members' min-max prediction band. Member ``i`` equals
-            ``identify(..., key=keys[i])``, on a CPU to the bit but for the networks'
-            batched gradient stage (``GradientRefinement(batching="map")`` makes that
-            one exact too; docs/identify.md).
+            ``identify(..., key=keys[i])`` (when to the bit: docs/identify.md).
         train: with ``data``: training samples (int) or fraction; default the data's
             ``n_train``, else 0.8 (the paper's 1600/2000); the rest is the validation
             window and must hold at least [`MIN_VALID_SAMPLES`][jaxfric.identification.MIN_VALID_SAMPLES]
@@ -250,12 +248,10 @@ def identify(model, data=None, *, solver: AbstractSolver | None = None, key=None
     Devices: the run goes where JAX puts it; one fit is mostly sequential and runs faster
     on a CPU than on a GPU (docs/scale.md, "Time loops per platform").
 
-    The baseline (`jaxfric.pipeline`): every fit carries the least-squares Coulomb + viscous +
-    offset solution on the same training windows, scored the same way, in
-    ``fit.metrics["baseline"]`` (``"train"``, ``"valid"``; its parameters in
-    ``fit.settings["baseline"]``) and in ``fit.summary()``; a fit whose training MSE exceeds
-    the baseline's warns with both numbers ([`BaselineWarning`][jaxfric.motion.BaselineWarning]): such a fit has
-    not earned its parameters.
+    The baseline: every fit carries the least-squares Coulomb + viscous + offset solution,
+    scored on the same windows, in ``fit.metrics["baseline"]`` (its parameters in
+    ``fit.settings["baseline"]``); a fit worse on its training data warns
+    ([`BaselineWarning`][jaxfric.motion.BaselineWarning]; docs/identify.md, "The baseline").
 
     Parameters on a bound: for physical models every parameter that ends on an edge
     of its search box is named with a [`BoundWarning`][jaxfric.identification.BoundWarning] (which box entry to widen,

@@ -17,12 +17,9 @@ search, member selection, the run's record) are [`jaxfric.pipeline`][jaxfric.pip
 the force balance's own.
 
 Ensembles (``keys=K``): the global stage runs the K members in one
-[`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call (on a CPU mostly one after another, member i then
-being the run with key i to the bit; [`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]) and the gradient stage
-runs their quasi-Newton iterations side by side (`refine_many`), so the Elman
-networks' K rollouts share each time loop; there member ``i`` equals the run with key
-``i`` up to floating-point reassociation in the batched sums, or to the bit with
-``GradientRefinement(batching="map")``.
+[`jaxfric.minimise_many`][jaxfric.optim.minimise_many] call ([`ensemble_batching`][jaxfric.identification.stages.ensemble_batching]) and the
+gradient stage their iterations side by side (`refine_many`); how the members share the
+machine and when member ``i`` is the run with key ``i`` to the bit: docs/identify.md, "Ensembles".
 """
 
 from __future__ import annotations
