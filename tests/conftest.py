@@ -173,6 +173,13 @@ SLOW_TESTS = {
 # 23, test_docs 19, test_export 11, test_verdicts 10 (test_sharding 34 and
 # test_identify_pipeline 33 on the same runs); unlisted, they came last in alphabetical
 # order, where one of them can keep a worker busy while the other has nothing left.
+# The tail placed again by the worker's CPU seconds in one serial run (`-n 0`, no
+# subprocess among them but test_export's, which keeps its place): test_ensembles 31 (it came
+# twelfth from the end), test_rng 19, test_nelder_mead 16, test_nelder_mead_vs_scipy 14,
+# test_report 13, test_models_base 13, test_asktell_many 11, test_models_realdrive 11,
+# test_models_gms 11, test_uncertainty_report 10, test_models_lugre 10, test_motion_costs 8,
+# test_identify_baseline 8, test_search_box 8, test_models_elman 6, test_verdicts 6,
+# test_functions 5; the files left unlisted take under 5 s each.
 LONGEST_FIRST = [
     "test_notebooks.py", "test_optim_protocol.py", "test_parallel_scan.py", "test_cli.py",
     "test_reproducibility.py", "test_motion_api.py", "test_motion_dependable.py", "test_evosax_adapter.py",
@@ -180,11 +187,13 @@ LONGEST_FIRST = [
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
     "test_identify.py", "test_sharding.py", "test_progress_cache.py", "test_reliability.py", "test_motion.py",
     "test_records.py", "test_rig_simulator.py", "test_identify_pipeline.py", "test_models_greybox.py",
-    "test_motion_judge.py", "test_pipeline_stages.py", "test_docs.py", "test_uncertainty.py",
-    "test_checkpoint.py", "test_models_scan.py", "test_sweep.py", "test_bad_input_catalogue.py",
-    "test_export.py", "test_verdicts.py", "test_ensembles.py", "test_rng.py", "test_nelder_mead.py",
-    "test_models_lugre.py", "test_models_base.py", "test_models_realdrive.py", "test_asktell_many.py",
-    "test_uncertainty_report.py",
+    "test_motion_judge.py", "test_ensembles.py", "test_pipeline_stages.py", "test_docs.py", "test_rng.py",
+    "test_uncertainty.py", "test_checkpoint.py", "test_models_scan.py", "test_sweep.py",
+    "test_bad_input_catalogue.py", "test_nelder_mead.py", "test_nelder_mead_vs_scipy.py", "test_report.py",
+    "test_models_base.py", "test_export.py", "test_asktell_many.py", "test_models_realdrive.py",
+    "test_models_gms.py", "test_uncertainty_report.py", "test_models_lugre.py", "test_motion_costs.py",
+    "test_identify_baseline.py", "test_search_box.py", "test_models_elman.py", "test_verdicts.py",
+    "test_functions.py",
 ]
 
 
