@@ -30,19 +30,35 @@ measurements are summarised in docs/solvers.md):
     did not change, and every run gave the same values to the bit.
 
 On other platforms (GPU, TPU) nothing is passed. Every entry point takes
-``compiler_options=``: ``"auto"`` (the default, the above), ``"fast-compile"``, ``None``
-(XLA's own defaults) or a dict of XLA debug options passed as given.
+``compiler_options=``: ``"auto"`` (the default, the above and the rule below),
+``"full"`` (the above at XLA's full optimisation, whatever the run), ``"fast-compile"``,
+``None`` (XLA's own defaults) or a dict of XLA debug options passed as given.
 
-``"fast-compile"`` is ``"auto"`` plus ``xla_backend_optimization_level = 0`` (LLVM
-without its optimisation passes), for many new cheap objectives, each run once (a
-benchmarking suite): on 2-D to 10-D test functions a new objective's first PSO→NM
-``minimise`` took 0.73 s of CPU instead of 1.61 s and MAPSO–NMDS 1.56 s instead of
-2.27 s (medians over sphere, Rosenbrock and Rastrigin, both in one run:
-benchmarks/results/compile_time_fast.md), the 200-generation runs after it still in
-milliseconds. Heavier programs run slower: 30-D Rosenbrock with 100 particles, 300 PSO
-generations 7.6× and 100 MAPSO generations 3.8× the ``"auto"`` run time, so it is never
-the default. Results agree with ``"auto"``'s to rounding, not to the bit (LLVM's code
-without optimisation rounds differently). Options apply only to a
+``"fast-compile"`` is ``"full"`` plus ``xla_backend_optimization_level = 0`` (LLVM
+without its optimisation passes): a solver's program compiles in about half the time
+and runs 2–8× slower. ``"auto"`` chooses between the two for each solver run from what
+is known before XLA runs, its *work*: the evaluations the run is expected to take (a
+swarm's or evosax strategy's budget, two per Nelder–Mead step, a chain's stages added)
+times the objective's size plus the number of parameters, the objective's size being
+the array elements its jaxpr computes for one point (a ``scan``'s body times its length;
+a ``while_loop``, whose trips are unknown, makes the work unknown). A run whose work is
+under `CHEAP_WORK` (10⁷) compiles at level 0, any other at full optimisation; off the
+CPU, and on a host with several CPU devices (where level 0 would round a run laid out
+over them apart from the same run on one, which full optimisation does not), nothing
+changes. The line lies between the runs of
+benchmarks/compile_time.py (a new objective's 200-generation PSO→NM or 100-generation
+MAPSO–NMDS, 2-D to 30-D: at most 5·10⁶), whose first call is compilation, and the speed
+table's 30-D Rosenbrock runs (benchmarks/speed_optim.py: 100 agents, 500 generations,
+1.6·10⁷ and 3.2·10⁷; Nelder–Mead's 20 000 evaluations, 1.3·10⁷), which stay at full
+optimisation; models' rollouts (``identify``) are long scans, far over it. Measured on
+30-D Rosenbrock, level 0 saved 0.3–1.2 s of compilation and cost 0.07–0.45 s of run
+time per first call, so between those the first call is still faster at level 0
+(100-particle PSO over 300 generations, 9.7·10⁶, is at level 0: its warm runs are about
+7× slower; pass ``"full"`` where a program is compiled once and run often). Level 0
+rounds differently from full optimisation (fewer fused multiply-adds), so a cheap run's
+result agrees with ``"full"``'s to rounding, not to the bit; ask/tell compiles with the
+same rule (its program has no objective), so it visits the points ``minimise`` visits
+for an objective of small size. Options apply only to a
 top-level call: under a caller's ``jit``, ``vmap`` or ``grad`` (arguments that are
 tracers) the caller's compilation decides, and the call is a plain ``jit``.
 """
@@ -59,6 +75,8 @@ import jax.numpy as jnp
 AUTO = "auto"
 #: ``"auto"`` plus LLVM at optimisation level 0 (see the module docstring)
 FAST_COMPILE = "fast-compile"
+#: ``"auto"``'s options at XLA's full optimisation whatever the run's work
+FULL = "full"
 
 #: Options for the CPU backend, per kind of computation (see the module docstring).
 CPU_OPTIONS: dict[str, dict[str, Any]] = {
@@ -85,20 +103,41 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
     return dict(supported(tuple(sorted(CPU_OPTIONS[kind].items())), platform))
 
 
-def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, Any], ...]:
+#: ``"auto"`` compiles a solver's run with LLVM at level 0 on CPU where its estimated work
+#: (`auto_level`) is below this: the 2-D to 30-D runs of benchmarks/compile_time.py (at most
+#: 5·10⁶) are under it, the speed table's 30-D runs (benchmarks/speed_optim.py, 1.6·10⁷ and
+#: more) over it
+CHEAP_WORK = 1e7
+
+
+def auto_level(work: float | None) -> int | None:
+    """LLVM's optimisation level ``"auto"`` picks for a solver's run of estimated
+    ``work`` (see the module docstring): ``0`` where ``work < CHEAP_WORK``, else ``None``
+    (XLA's own, full optimisation); unknown work (``None``) is never cheap."""
+    return 0 if work is not None and work < CHEAP_WORK else None
+
+
+def resolve(value, kind: str, platform: str | None = None,
+            work: float | None = None) -> tuple[tuple[str, Any], ...]:
     """Validate a user's ``compiler_options=`` and freeze it into a hashable tuple.
 
     ``"auto"`` → [`compiler_options`][jaxfric._xla.compiler_options] (which leaves out options this XLA does not
-    know); ``"fast-compile"`` → those plus ``xla_backend_optimization_level = 0`` on CPU
-    (nothing elsewhere); ``None`` or ``False`` →
+    know), plus ``xla_backend_optimization_level = 0`` on CPU for a solver whose run's
+    estimated ``work`` is cheap (`auto_level`; ``None``: unknown, never cheap);
+    ``"fast-compile"`` → those plus ``xla_backend_optimization_level = 0`` on CPU
+    whatever the work (nothing elsewhere); ``None`` or ``False`` →
     no options; a mapping of option names (str) to bool/int/float/str values → those, as
     given (checked by XLA on a trivial program first, see `check_known`). Raises
     ``ValueError`` for anything else, before the real computation is traced.
     """
-    if isinstance(value, str) and value in (AUTO, FAST_COMPILE):
+    if isinstance(value, str) and value in (AUTO, FAST_COMPILE, FULL):
         platform = platform or jax.default_backend()
         opts = compiler_options(kind, platform)
-        if value == FAST_COMPILE and platform == "cpu":
+        # one device only: level 0 rounds a program laid out over several devices and
+        # the same program on one apart, while at full optimisation they agree
+        cheap = (value == AUTO and kind == "solver" and auto_level(work) == 0
+                 and platform == "cpu" and jax.device_count(platform) == 1)
+        if (value == FAST_COMPILE or cheap) and platform == "cpu":
             opts = {**opts, **dict(supported((("xla_backend_optimization_level", 0),), platform))}
     elif value is None or value is False:
         opts = {}
@@ -116,7 +155,7 @@ def resolve(value, kind: str, platform: str | None = None) -> tuple[tuple[str, A
     else:
         raise ValueError(
             "compiler_options must be 'auto', None or a dict of XLA option names to "
-            f"values (or 'fast-compile'), got {value!r}")
+            f"values (or 'fast-compile', 'full'), got {value!r}")
     return tuple(sorted(opts.items()))
 
 

@@ -115,12 +115,14 @@ def test_bad_options_fail_before_the_run(bad, match):
     jf.mapso_nmds(lattice_size=3, num_generations=40, sl_generations=2, nm_max_steps=60),
 ], ids=["pso", "mapso", "mapso_nmds"])
 def test_options_change_speed_not_results(solver):
-    """'auto', XLA's defaults and (for PSO, the cheapest to compile) a hand-written set
-    reach the same run (the swarm's decisions are comparisons of sums: allow float32
-    reassociation, nothing more)."""
+    """'full' ('auto' at XLA's full optimisation), XLA's defaults and (for PSO, the
+    cheapest to compile) a hand-written set reach the same run (the swarm's decisions are
+    comparisons of sums: allow float32 reassociation, nothing more). 'auto' compiles runs
+    this cheap at LLVM level 0, which rounds differently (test_fast_compile_reaches_the_auto_run,
+    test_auto_picks_the_level_from_the_run_work)."""
     lo, hi = ROSENBROCK_6
     fn = F.objective("rosenbrock")
-    options = ["auto", None]
+    options = ["full", None]
     if isinstance(solver, jf.PSO):
         options.append({"xla_cpu_prefer_vector_width": 128})
     runs = [jf.minimise(fn, solver, (lo, hi), key=jax.random.key(3), compiler_options=o)
@@ -208,21 +210,26 @@ def _run_script(script):
 
 def test_mapso_without_self_learning_generations_runs_with_auto_options():
     """End to end, in a subprocess (0.4.0's one-kernel loop aborted the process here):
-    MAPSO(sl_generations=0) with the default options runs and equals XLA's defaults."""
+    MAPSO(sl_generations=0) with the default options runs (a run this cheap at LLVM level
+    0), and jaxfric's options at full optimisation ('full') equal XLA's defaults."""
     script = (
         "import jax, numpy as np, jaxfric as jf\n"
         "from jaxfric import functions as F\n"
         "lo, hi = F.get('rosenbrock').bounds(30, np.float32)\n"
         "s = jf.MAPSO(lattice_size=5, num_generations=20, sl_generations=0)\n"
-        "a = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0))\n"
+        "d = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0))\n"
+        "a = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0),"
+        " compiler_options='full')\n"
         "b = jf.minimise(F.objective('rosenbrock'), s, (lo, hi), key=jax.random.key(0),"
         " compiler_options=None)\n"
-        "print('RESULT', float(a.f), float(b.f), int(a.stats['num_evals']), s.evaluations())\n"
+        "print('RESULT', float(a.f), float(b.f), int(a.stats['num_evals']), s.evaluations(),"
+        " float(d.f), int(d.stats['num_evals']))\n"
     )
     proc = _run_script(script)
-    fa, fb, evals, expected = proc.stdout.split("RESULT")[1].split()
+    fa, fb, evals, expected, fd, evals_d = proc.stdout.split("RESULT")[1].split()
     assert np.isfinite(float(fa)) and float(fa) == float(fb)
     assert int(evals) == int(expected)
+    assert np.isfinite(float(fd)) and int(evals_d) == int(expected)
 
 
 def test_large_swarms_compile_once_without_xla_warnings():
@@ -256,3 +263,89 @@ def test_no_single_kernel_machinery_left():
         # the driver and ask/tell, which compile the run, may
         if path.parent.name == "optim" and path.name not in ("driver.py", "asktell.py"):
             assert "xla_cpu_small_call" not in text and "_xla" not in text, path
+
+
+def test_jaxpr_work_counts_loops_and_products():
+    """The work estimate behind 'auto' against hand counts: output elements, a matrix
+    product's contracted size, a scan's length, a cond's costlier branch; a while loop
+    (unknown trips) is infinite."""
+    from jaxfric.optim.problem import jaxpr_work
+
+    def work(f, *a):
+        return jaxpr_work(jax.make_jaxpr(f)(*a).jaxpr)
+
+    x = jnp.ones(7)
+    assert work(lambda x: x * 2.0, x) == 7
+    assert work(lambda x: jnp.sum(x * 2.0), x) == 7 + 1
+    assert work(lambda m: m @ m, jnp.ones((3, 3))) == 3 * 3 * 3
+    assert work(lambda x: jax.lax.scan(lambda c, _: (c * 2.0, None), x, None, length=100)[0], x) == 700
+    branches = lambda x: jax.lax.cond(x[0] > 0, lambda y: y * 2.0 + 1.0, lambda y: y, x)  # noqa: E731
+    assert work(branches, x) == 4 + 2 * 7  # x[0] (slice, squeeze), the test (gt, convert), the costlier branch
+    assert work(lambda x: jax.lax.while_loop(lambda c: c[0] < 3, lambda c: c + 1, x), x) == np.inf
+
+
+def test_auto_picks_the_level_from_the_run_work():
+    """'auto' compiles a cheap run (a new objective's 200-generation chain on 5-D
+    Rosenbrock) with LLVM at level 0 and the speed table's 30-D runs (100 agents, 500
+    generations; Nelder-Mead at 20 000 evaluations) at XLA's full optimisation, as it does
+    an objective whose work is unknown (a while loop) or heavy (a long scan); 'full'
+    never lowers the level, 'fast-compile' always does (CPU only)."""
+    from jaxfric.optim import driver
+    from jaxfric.optim.optx_adapter import as_protocol
+
+    def level(solver, n, fn=F.objective("rosenbrock"), options="auto", platform="cpu"):
+        lo, hi = F.get("rosenbrock").bounds(n, np.float64)
+        proto, flat, lower, _, _ = driver._prepare(fn, solver, (lo, hi), None, None, None)
+        layout = None
+        opts = dict(driver._options(options, proto, flat, lower, None, layout)
+                    if platform == "cpu" else _xla.resolve(options, "solver", platform, 0.0))
+        return opts.get("xla_backend_optimization_level")
+
+    cheap = [jf.chain(jf.PSO(num_generations=200), jf.NelderMead(max_steps=2000)),
+             jf.mapso_nmds(num_generations=100, nm_max_steps=2000)]
+    for solver in cheap:
+        for n in (2, 10, 30):
+            assert level(solver, n) == 0, (solver, n)
+        assert level(solver, 5, options="full") is None
+    speed = [jf.PSO(num_particles=100, num_generations=500), jf.MAPSO(lattice_size=10, num_generations=500),
+             jf.NelderMead(max_steps=20000, max_evals=20000)]
+    for solver in speed:
+        assert level(solver, 30) is None, solver
+        assert level(solver, 30, options="fast-compile") == 0
+    pso = jf.PSO(num_particles=8, num_generations=10)
+
+    def looping(y, args):  # a trip count XLA cannot know
+        return jax.lax.while_loop(lambda c: c[1] < 3, lambda c: (c[0] * 0.5, c[1] + 1), (jnp.sum(y), 0))[0]
+
+    def long_scan(y, args):  # a rollout of 10^5 steps per evaluation
+        return jax.lax.scan(lambda c, _: (c * 0.5 + jnp.sum(y), None), 0.0, None, length=100_000)[0]
+
+    assert level(pso, 5) == 0
+    assert level(pso, 5, fn=looping) is None and level(pso, 5, fn=long_scan) is None
+    assert level(pso, 5, platform="gpu") is None  # off the CPU nothing is passed
+    assert _xla.auto_level(None) is None and _xla.auto_level(_xla.CHEAP_WORK) is None
+    assert _xla.auto_level(_xla.CHEAP_WORK / 2) == 0
+    assert dict(_xla.resolve("full", "solver", "cpu", 0.0)) == jf.compiler_options("solver", "cpu")
+
+
+def test_auto_on_a_cheap_run_is_fast_compile_and_ask_tell_follows():
+    """On a cheap run 'auto' compiles what 'fast-compile' compiles (the same bits), and
+    ask/tell, whose program has no objective, picks the same level: it visits the points
+    minimise visits, to the bit."""
+    lo, hi = ROSENBROCK_6
+
+    def fn(y, args):  # a maximum of exact differences: NumPy's values are XLA's
+        return jnp.max(jnp.abs(y - 0.25))
+
+    solver = jf.chain(jf.PSO(num_particles=6, num_generations=5), jf.NelderMead(max_steps=30))
+    auto, fast = (jf.minimise(fn, solver, (lo, hi), key=jax.random.key(2), compiler_options=o)
+                  for o in ("auto", "fast-compile"))
+    np.testing.assert_array_equal(np.asarray(auto.value), np.asarray(fast.value))
+    assert int(auto.stats["num_evals"]) == int(fast.stats["num_evals"])
+    st = jf.ask_init(solver, lo, hi, jax.random.key(2))
+    while not jf.ask_done(st):
+        X, st = jf.ask(st)
+        st = jf.tell(st, X, np.max(np.abs(np.asarray(X) - np.float32(0.25)), axis=-1))
+    told = jf.ask_result(st)
+    np.testing.assert_array_equal(np.asarray(told.value), np.asarray(auto.value))
+    assert int(told.stats["num_evals"]) == int(auto.stats["num_evals"])

@@ -44,7 +44,9 @@ def test_same_key_same_result_different_key_different_run(name):
     b = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(3))
     c = jf.minimise(quad, solver, BOUNDS, args=TARGET, key=jax.random.key(4))
     assert bool(eqx.tree_equal(a, b))
-    assert not np.array_equal(np.asarray(a.value), np.asarray(c.value))
+    # another run: Nelder-Mead from two starts may end on the same (exact) minimum
+    assert not np.array_equal(np.asarray(a.value), np.asarray(c.value)) or (
+        int(a.stats["num_evals"]) != int(c.stats["num_evals"]))
 
 
 @pytest.mark.parametrize("name", sorted(SMALL))

@@ -60,7 +60,7 @@ from ._base import History, Solution, result_from_f
 from .contract import capabilities_of
 from .loop import NO_STOP, _run
 from .optx_adapter import as_protocol
-from .problem import _Flat, check_key, check_start, prepare_bounds
+from .problem import _Flat, check_key, check_start, prepare_bounds, run_work
 
 #: Open runs by token: the compiled objective finds its run through the token it gets
 #: in ``args``, so every run of one solver and problem shape shares one executable.
@@ -220,7 +220,10 @@ def _executable(fn, args):
     except TypeError:
         sig = None
     if sig is None or sig not in _EXECUTABLES:
-        compiled = _xla.filter_jit(fn, _xla.resolve("auto", "solver")).lower(*args).compile()
+        # "auto"'s rule on the run's work without an objective (its values come from
+        # Python), so a cheap JAX objective's minimise compiles alike (the same bits)
+        options = _xla.resolve("auto", "solver", work=run_work(solver, lo.shape[-1], 0.0))
+        compiled = _xla.filter_jit(fn, options).lower(*args).compile()
         if sig is None:
             return compiled
         if len(_EXECUTABLES) >= _EXECUTABLES_MAX:

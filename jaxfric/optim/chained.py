@@ -29,6 +29,7 @@ follows the compiled run's rule, and the evaluation counts are exact::
 
 # No ``from __future__ import annotations`` here: equinox recognises ``eqx.AbstractVar``
 # only in an evaluated annotation (a string one silently becomes a plain field).
+import functools
 from typing import Any
 
 import equinox as eqx
@@ -41,6 +42,7 @@ from ._base import (
     History,
     Solution,
     check_positive_int,
+    put,
     split_drawn,
 )
 from .contract import (
@@ -52,7 +54,7 @@ from .contract import (
     Capabilities,
     progress_of,
 )
-from .optx_adapter import as_protocol
+from .optx_adapter import OptxMinimiser, as_protocol
 from .rounds import drive, only_if, skipped
 from .swarm import AbstractSwarm
 
@@ -87,7 +89,7 @@ def _index(tree, i):
 
 
 def _put(tree, i, leaf_tree):
-    return jax.tree_util.tree_map(lambda a, b: a.at[i].set(b), tree, leaf_tree)
+    return jax.tree_util.tree_map(lambda a, b: put(a, i, b), tree, leaf_tree)
 
 
 class AbstractChain(AbstractStaged, AbstractStartDraws):
@@ -205,13 +207,10 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         typed = jnp.issubdtype(k_local.dtype, jax.dtypes.prng_key)
         impl = str(jax.random.key_impl(k_local)) if typed else None
         raw = jax.random.key_data(k_local)
-        bare = ChainState(jnp.array(0, jnp.int32), g, None, None, raw, impl)
         # The local states exist from the start (a loop carries fixed shapes): zeros
         # until the switch fills them.
-        local_shape = jax.eval_shape(
-            lambda: drive(self._switch(lower, upper, bare, objective), skipped))
         zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
-                                       (local_shape.second, local_shape.second_done))
+                                       self._local_shapes(lower, upper, g, raw, impl, objective))
         state = ChainState(jnp.array(0, jnp.int32), g, zeros[0], zeros[1], raw, impl)
         if _unfinished_at_start(self._global):
             # the switch would change nothing (its batches are not needed): leaving it
@@ -219,6 +218,20 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
             # the compiled program (issue 47)
             return state
         return (yield from self._switch(lower, upper, state, objective))
+
+    def _local_shapes(self, lower, upper, g, raw, impl, objective):
+        """``(second, second_done)`` of the switch's state, as shapes: traced once per
+        chain and shapes where the local solver is a jaxfric one (which never calls the
+        objective to start), not again for every new objective (issue 47)."""
+        like = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
+                                      (lower, upper, g, raw))
+        if isinstance(self.local_solver, eqx.Module) and not isinstance(
+                self._local, OptxMinimiser):
+            try:
+                return _switch_shapes(self, *like, impl, None)
+            except TypeError:  # an unhashable field: traced below
+                pass
+        return _switch_shapes.__wrapped__(self, *like, impl, objective)
 
     def step_rounds(self, lower, upper, state, stage=0, objective=None):
         """One step of stage ``stage`` (static), which ``state`` is known to be in."""
@@ -232,7 +245,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         done_i, _ = local.finished(s_i)
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
-            (_put(state.second, i, s_i), state.second_done.at[i].set(done_i)),
+            (_put(state.second, i, s_i), put(state.second_done, i, done_i)),
         )
 
     def _current(self, state):
@@ -240,9 +253,11 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         start, so XLA updates its state in place)."""
         return 0 if self.num_starts == 1 else jnp.argmin(state.second_done)
 
+    def done(self, state):
+        return (state.stage == 1) & jnp.all(state.second_done)
+
     def finished(self, state):
-        done = (state.stage == 1) & jnp.all(state.second_done)
-        return done, self._result(state)
+        return self.done(state), self._result(state)
 
     def _local_best(self, state):
         xs, fs = jax.vmap(self._local.best)(state.second)
@@ -297,6 +312,17 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
     def continued(self, state):
         raise ValueError("a finished two-stage run cannot be continued; warm-start its "
                          "global solver with the solution's first stage instead")
+
+
+@functools.lru_cache(maxsize=64)
+def _switch_shapes(chain, lower, upper, g, raw, impl, objective):
+    """`AbstractChain._local_shapes` of shapes ``lower``, ``upper``, ``g``, ``raw``."""
+    def switch(lower, upper, g, raw):
+        bare = ChainState(jnp.array(0, jnp.int32), g, None, None, raw, impl)
+        out = drive(chain._switch(lower, upper, bare, objective), skipped)
+        return out.second, out.second_done
+
+    return jax.eval_shape(switch, lower, upper, g, raw)
 
 
 class Chain(AbstractChain):

@@ -201,6 +201,11 @@ class AbstractStaged(AbstractSolver):
     def progress(self, state) -> tuple[Array, Array]:
         """``(phase, step)`` for a progress display (phase 0 global, 1 local)."""
 
+    def done(self, state) -> Array:
+        """``finished(state)[0]`` alone, for the loop's test (a chain's result, traced
+        and dropped there, is most of its ``finished``)."""
+        return self.finished(state)[0]
+
     def continued(self, state):
         """A finished run of several stages is not continued (each stage has its own budget)."""
         raise ValueError("a finished run of several stages cannot be continued")

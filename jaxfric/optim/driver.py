@@ -34,7 +34,7 @@ from .contract import AbstractStartDraws, capabilities_of, continued
 from .loop import NO_STOP, _begin, _chunk, _finish, blank_carry
 from .rounds import compiled_start
 from .optx_adapter import OptxMinimiser, as_protocol
-from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds
+from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds, run_work
 from .progress import Chunks, TqdmProgress
 from .sharding import Layout, resolve_devices, shard_keys
 
@@ -56,6 +56,16 @@ def _prepare(fn, solver, bounds, args, y0, dtype):
     x0 = None if y0 is None else check_start(y0, treedef, shapes, lower, upper,
                                              capabilities_of(proto, lower.shape[0]).population_size)
     return proto, flat, lower, upper, x0
+
+
+def _options(compiler_options, proto, flat, lower, args, layout):
+    """``compiler_options`` resolved for this run (`jaxfric._xla.resolve`): ``"auto"``
+    with the run's estimated work (`run_work`: one run's, so ``minimise`` and each run of
+    ``minimise_many`` compile alike)."""
+    work = None
+    if isinstance(compiler_options, str) and compiler_options == _xla.AUTO:
+        work = run_work(proto, lower.shape[0], _check_output(flat, lower, args))
+    return _xla.resolve(compiler_options, "solver", _platform(layout), work)
 
 
 # ---------------------------------------------------------------------- progress
@@ -439,10 +449,12 @@ def minimise(
             different problem is refused (see [`jaxfric.optim.checkpoint`][jaxfric.optim.checkpoint]).
         checkpoint_every: steps (generations, simplex steps) per chunk.
         compiler_options: XLA options for this run's executable only (never global):
-            ``"auto"`` (see [`jaxfric.compiler_options`][jaxfric._xla.compiler_options]),
-            ``"fast-compile"`` (about half the compilation for a new cheap objective, run
-            once; heavier runs are slower), ``None`` (XLA's defaults) or a dict of XLA
-            option names to values.
+            ``"auto"`` (see [`jaxfric.compiler_options`][jaxfric._xla.compiler_options];
+            a run whose estimated work is small, such as a new objective's short run,
+            compiles with LLVM at level 0: about half the compilation, a slower run),
+            ``"full"`` (the same options, always at full optimisation: for a program run
+            many times), ``"fast-compile"`` (level 0 whatever the run), ``None`` (XLA's
+            defaults) or a dict of XLA option names to values.
         warm_start: a [`Solution`][jaxfric.optim.Solution] of an earlier run with the same kind of solver:
             continue it (``solver`` with a larger ``num_generations``, say) instead of
             starting afresh.
@@ -459,7 +471,7 @@ def minimise(
         key = 0  # unused: the warm state carries its own
     key = check_key(key)
     layout = resolve_devices(devices)
-    options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    options = _options(compiler_options, proto, flat, lower, args, layout)
     if layout is not None:
         flat = eqx.tree_at(lambda f: f.layout, flat, layout, is_leaf=lambda x: x is None)
     warm = None
@@ -527,7 +539,7 @@ def minimise_many(
     proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = check_key(keys, "keys", batch=True)
     layout = resolve_devices(devices)
-    options = _xla.resolve(compiler_options, "solver", _platform(layout))
+    options = _options(compiler_options, proto, flat, lower, args, layout)
     mode = _batching(batching, proto, layout, lower.shape[0])
     keys, n = shard_keys(keys, layout)
     program = _xla.filter_jit(_run_many, options)

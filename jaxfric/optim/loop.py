@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._base import NO_STEP_CAP, History, Solution
-from .contract import capabilities_of, progress_of, stage_of
+from .contract import AbstractStaged, capabilities_of, progress_of, stage_of
 from .rounds import compiled_start, compiled_step
 
 
@@ -82,12 +82,17 @@ def blank_carry(like, impl):
     return jax.tree_util.tree_map(zero, like)
 
 
+def _done(proto, state):
+    """Whether the run has finished (``finished``'s first half; a staged solver's own
+    ``done``, which leaves the result untraced)."""
+    return proto.done(state) if isinstance(proto, AbstractStaged) else proto.finished(state)[0]
+
+
 def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at) -> Carry:
     """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
     for s in range(capabilities_of(proto, lower.shape[0]).num_stages):
         def cond(c, s=s):
-            done, _ = proto.finished(c.state)
-            return ~done & (stage_of(proto, c.state) == s) & (c.steps < stop_at)
+            return ~_done(proto, c.state) & (stage_of(proto, c.state) == s) & (c.steps < stop_at)
 
         def body(c, s=s):
             state = compiled_step(proto, flat, lower, upper, args, c.state, s)
@@ -124,8 +129,8 @@ class Report(eqx.Module):
 
 def _report(proto, carry: Carry) -> Report:
     phase, step = progress_of(proto, carry.state)
-    done, _ = proto.finished(carry.state)
-    return Report(phase, step, proto.num_evals(carry.state), proto.best(carry.state)[1], done)
+    return Report(phase, step, proto.num_evals(carry.state), proto.best(carry.state)[1],
+                  _done(proto, carry.state))
 
 
 def _chunk(proto, flat, lower, upper, args, key, x0, warm, carry, fresh, stop_at):

@@ -18,10 +18,11 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._base import check_positive_int, check_range, clip, count_dtype, linear_inertia
 from .pso import pso_move
-from .rng import counter_seed, counter_uniform
+from .rng import counter_seed, counter_uniform, extend_seed
 from .rounds import Scan
 from .swarm import AbstractSwarm, SwarmState, update_bests
 
@@ -45,13 +46,17 @@ def lattice_neighbours(values, side: int):
 
 
 def best_neighbour(x, f, side: int):
-    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``)."""
-    nx = lattice_neighbours(x, side)  # (4, P, D)
-    nf = lattice_neighbours(f, side)  # (4, P)
-    j = jnp.argmin(nf, axis=0)
-    m = jnp.take_along_axis(nx, j[None, :, None], axis=0)[0]
-    fm = jnp.take_along_axis(nf, j[None, :], axis=0)[0]
-    return m, fm
+    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``): the
+    first of up, down, left, right with the lowest fitness. The neighbours' indices are a
+    constant of the lattice (`lattice_neighbours` of ``0..P-1``), so only ``f``
+    and the chosen rows are gathered, not four rolled copies of ``x``."""
+    agents = np.arange(side * side)
+    grid = agents.reshape(side, side)  # lattice_neighbours' order, in NumPy: (4, P)
+    nb = np.stack([np.roll(grid, 1, 0), np.roll(grid, -1, 0), np.roll(grid, 1, 1),
+                   np.roll(grid, -1, 1)]).reshape(4, side * side)
+    j = jnp.argmin(f[nb], axis=0)
+    best = jnp.asarray(nb)[j, agents]
+    return x[best], f[best]
 
 
 def reverse_segment_index(u_a, u_b, dim: int, strict: bool):
@@ -257,11 +262,12 @@ class MAPSO(AbstractSwarm):
         dim, dt = x.shape[1], x.dtype
         width = self.random_width(dim)
         s = self.sl_size**2
-        main = counter_uniform(counter_seed(key, i, 0), (self.num_agents, width), dt)
+        seed = counter_seed(key, i)  # counter_seed(key, i, stream), the streams' work shared
+        main = counter_uniform(extend_seed(seed, 0), (self.num_agents, width), dt)
         if s <= 1:
             return main, None, None
-        u0 = counter_uniform(counter_seed(key, i, 1), (s, dim), dt)
-        inner = counter_uniform(counter_seed(key, i, 2), (self.sl_generations, s, width), dt)
+        u0 = counter_uniform(extend_seed(seed, 1), (s, dim), dt)
+        inner = counter_uniform(extend_seed(seed, 2), (self.sl_generations, s, width), dt)
         return main, u0, inner
 
     def generation(self, state, lower, upper):

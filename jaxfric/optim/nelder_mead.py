@@ -48,6 +48,7 @@ from ._base import (
     check_positive_int,
     check_range,
     count_dtype,
+    put,
     safe_value,
     split_drawn,
     uniform_flat,
@@ -360,7 +361,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
             )
 
         def do_replace(_):
-            return S.at[-1].set(x_new), F.at[-1].set(f_new), f_new, aux_new
+            return put(S, n, x_new), put(F, n, f_new), f_new, aux_new  # the worst, S[-1]
 
         S2, F2, f_cand, aux_cand = jax.lax.cond(shrink | restart, do_batch, do_replace, None)
         order = jnp.argsort(F2)  # stable: an old vertex wins ties against a new one

@@ -6,17 +6,19 @@ driver ([`jaxfric.optim.driver`][jaxfric.optim.driver]) and ask/tell call them."
 from __future__ import annotations
 
 import functools
+import math
 import numbers
 from typing import Any, Callable
 
 import equinox as eqx
 import jax
+import jax.extend.core
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
 from ._base import count_dtype
-from .contract import capabilities_of
+from .contract import AbstractLocal, capabilities_of
 from .sharding import Layout
 
 
@@ -173,8 +175,8 @@ def prepare_bounds(bounds, dtype=None):
 
 
 #: Signatures (objective, search vector, shapes and dtypes of ``args``) whose output
-#: was already checked: the check traces ``fn`` (about 2 ms), which would otherwise
-#: be paid by every call of `minimise`.
+#: was already checked, with the objective's `jaxpr_work`: the check traces ``fn``
+#: (about 2 ms), which would otherwise be paid by every call of `minimise`.
 _CHECKED: dict = {}
 _CHECKED_MAX = 256
 
@@ -199,14 +201,72 @@ def _signature(flat, lower, args):
     return key
 
 
-def _check_output(flat, lower, args):
-    """``fn(y, args)`` must return a floating scalar: checked by tracing (eval_shape)
-    once per signature, before any compilation."""
+def _sub_jaxprs(param):
+    if isinstance(param, jax.extend.core.ClosedJaxpr):
+        yield param.jaxpr
+    elif isinstance(param, jax.extend.core.Jaxpr):
+        yield param
+    elif isinstance(param, (tuple, list)):
+        for p in param:
+            yield from _sub_jaxprs(p)
+
+
+def jaxpr_work(jaxpr) -> float:
+    """Array elements one call of ``jaxpr`` computes, an estimate of its run time known
+    before XLA runs: every equation's output size (a matrix product's times its
+    contracted size), a ``scan``'s body times its length, a ``cond``'s costliest branch;
+    ``inf`` with a ``while`` loop, whose trip count is unknown."""
+    total = 0.0
+    for eqn in jaxpr.eqns:
+        name = eqn.primitive.name
+        subs = [j for p in eqn.params.values() for j in _sub_jaxprs(p)]
+        if name == "while":
+            return math.inf
+        if name == "scan":
+            total += eqn.params["length"] * sum(map(jaxpr_work, subs))
+        elif name == "cond":
+            total += max(map(jaxpr_work, subs))
+        elif subs:
+            total += sum(map(jaxpr_work, subs))
+        else:
+            size = sum(math.prod(getattr(v.aval, "shape", ())) for v in eqn.outvars)
+            if name == "dot_general":
+                (contracted, _), _ = eqn.params["dimension_numbers"]
+                size *= math.prod(eqn.invars[0].aval.shape[d] for d in contracted)
+            total += max(size, 1)
+    return total
+
+
+def _local_evaluations(solver, n: int) -> int | None:
+    """Evaluations a run of ``solver`` is expected to take (`run_work`): a local solver's
+    two a step (Nelder–Mead's reflection and at most one more; its budget counts a
+    shrink's ``n + 2`` at every step), a chain's stages added, any other's budget."""
+    if getattr(solver, "_local", None) is not None:  # a two-stage chain (chained.py)
+        g, loc = _local_evaluations(solver._global, n), _local_evaluations(solver._local, n)
+        return None if g is None or loc is None else g + solver.num_starts * loc
+    cap = capabilities_of(solver, n)
+    if isinstance(solver, AbstractLocal):
+        return None if cap.max_steps is None else n + 1 + 2 * cap.max_steps
+    return cap.max_evaluations
+
+
+def run_work(solver, n: int, per_evaluation: float) -> float | None:
+    """A run's estimated work, for ``compiler_options="auto"`` (its rule in docs/solvers.md):
+    its expected evaluations times (the objective's `jaxpr_work` + ``n``, the solver's own
+    arithmetic per point); ``None`` where the evaluations are unknown."""
+    evals = _local_evaluations(solver, n)
+    return None if evals is None else evals * (per_evaluation + n)
+
+
+def _check_output(flat, lower, args) -> float:
+    """``fn(y, args)`` must return a floating scalar: checked by tracing (make_jaxpr)
+    once per signature, before any compilation. Returns the objective's `jaxpr_work`."""
     key = _signature(flat, lower, args)
     if key is not None and key in _CHECKED:
-        return
+        return _CHECKED[key]
     try:
-        out = jax.eval_shape(flat, jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
+        jaxpr, out = jax.make_jaxpr(flat, return_shape=True)(
+            jax.ShapeDtypeStruct(lower.shape, lower.dtype), args)
     except Exception as e:
         raise ValueError(f"calling fn(y, args) on the bounds' shape failed: {e}") from e
     if not (
@@ -219,10 +279,12 @@ def _check_output(flat, lower, args):
             f"fn(y, args) must return a floating-point scalar, got {desc} "
             f"{getattr(out, 'dtype', '')}".rstrip()
         )
+    work = jaxpr_work(jaxpr.jaxpr)
     if key is not None:
         if len(_CHECKED) >= _CHECKED_MAX:
             _CHECKED.pop(next(iter(_CHECKED)))
-        _CHECKED[key] = True
+        _CHECKED[key] = work
+    return work
 
 
 def check_budget(solver, n: int):

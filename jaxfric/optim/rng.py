@@ -13,7 +13,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-__all__ = ["counter_seed", "counter_uniform"]
+__all__ = ["counter_seed", "counter_uniform", "extend_seed"]
 
 
 _GOLDEN = 0x9E3779B9  # 2^32 / golden ratio: the Weyl increment of the counter
@@ -38,10 +38,19 @@ def counter_seed(key, *words):
     ``counter_seed(key, i, stream)`` without splitting or advancing the key; a run
     resumed at generation ``i`` therefore draws what the uninterrupted run drew.
     """
-    a = jnp.uint32(0x243F6A88)
-    b = jnp.uint32(0x85A308D3)
     data = jax.random.key_data(key).reshape(-1).astype(jnp.uint32)
-    for w in [data[j] for j in range(data.shape[0])] + [jnp.asarray(w).astype(jnp.uint32) for w in words]:
+    seed = extend_seed((jnp.uint32(0x243F6A88), jnp.uint32(0x85A308D3)),
+                       *[data[j] for j in range(data.shape[0])])
+    return extend_seed(seed, *words)
+
+
+def extend_seed(seed, *words):
+    """``counter_seed(key, *w, *words)`` from ``seed = counter_seed(key, *w)``: the words
+    are folded in one after another, so seeds that share their first words (a generation's
+    streams) share that work: the same numbers, a smaller program."""
+    a, b = seed
+    for w in words:
+        w = jnp.asarray(w).astype(jnp.uint32)
         a = _fmix32(a ^ w)
         b = _fmix32(b + w * jnp.uint32(_GOLDEN))
     return a, b

@@ -171,21 +171,27 @@ class AbstractSwarm(AbstractGenerational, AbstractStartDraws):
 
     # ------------------------------------------------------------------ generators
     def start_draws(self, lower, upper, key):
-        """What the start draws from ``key`` (`first_draws`), for a ``Drawn`` key."""
-        return first_draws(key, self.num_agents, lower)
+        """What the start draws from ``key``, for a ``Drawn`` key: `first_draws`, and
+        generation 0's numbers (``draw``, a pure function of the key words `first_draws`
+        leaves), so neither is in a new objective's program (issue 47)."""
+        ux, uv, raw = first_draws(key, self.num_agents, lower)
+        shape = jax.ShapeDtypeStruct((self.num_agents, lower.shape[0]), lower.dtype)
+        return ux, uv, raw, self.draw(raw, jnp.array(0, jnp.int32), shape)
 
     def first(self, lower, upper, key, x0=None) -> Rounds:
         key, draws = split_drawn(key)
         x, v, key = first_population(key, self.num_agents, lower, upper,
-                                     self.vmax(lower, upper), x0, draws)
+                                     self.vmax(lower, upper), x0,
+                                     None if draws is None else draws[:3])
         f = yield x
-        return self._started(swarm_from(x, v, f, key))
+        return self._started(swarm_from(x, v, f, key), None if draws is None else draws[3])
 
-    def _started(self, s: SwarmState) -> SwarmState:
+    def _started(self, s: SwarmState, u=None) -> SwarmState:
+        """``s`` at generation 0, with its numbers ``u`` (drawn here when not given)."""
         zero = jnp.array(0, jnp.int32)
         return eqx.tree_at(
             lambda s: (s.generation, s.u, s.stall, s.stall_f), s,
-            (zero, self.draw(s.key, zero, s.x), zero, s.gbest_f),
+            (zero, self.draw(s.key, zero, s.x) if u is None else u, zero, s.gbest_f),
             is_leaf=lambda x: x is None,
         )
 
