@@ -18,7 +18,6 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ._base import check_positive_int, check_range, clip, count_dtype, linear_inertia
 from .pso import pso_move
@@ -46,17 +45,16 @@ def lattice_neighbours(values, side: int):
 
 
 def best_neighbour(x, f, side: int):
-    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``): the
-    first of up, down, left, right with the lowest fitness. The neighbours' indices are a
-    constant of the lattice (`lattice_neighbours` of ``0..P-1``), so only ``f``
-    and the chosen rows are gathered, not four rolled copies of ``x``."""
-    agents = np.arange(side * side)
-    grid = agents.reshape(side, side)  # lattice_neighbours' order, in NumPy: (4, P)
-    nb = np.stack([np.roll(grid, 1, 0), np.roll(grid, -1, 0), np.roll(grid, 1, 1),
-                   np.roll(grid, -1, 1)]).reshape(4, side * side)
-    j = jnp.argmin(f[nb], axis=0)
-    best = jnp.asarray(nb)[j, agents]
-    return x[best], f[best]
+    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``).
+
+    (Gathering ``x`` through a constant neighbour-index table instead of rolling four
+    copies traced and compiled less but ran 30-D, 100-agent MAPSO 5–10 % slower.)"""
+    nx = lattice_neighbours(x, side)  # (4, P, D)
+    nf = lattice_neighbours(f, side)  # (4, P)
+    j = jnp.argmin(nf, axis=0)
+    m = jnp.take_along_axis(nx, j[None, :, None], axis=0)[0]
+    fm = jnp.take_along_axis(nf, j[None, :], axis=0)[0]
+    return m, fm
 
 
 def reverse_segment_index(u_a, u_b, dim: int, strict: bool):
