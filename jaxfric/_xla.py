@@ -42,19 +42,21 @@ swarm's or evosax strategy's budget, two per Nelder–Mead step, a chain's stage
 times the objective's size plus the number of parameters, the objective's size being
 the array elements its jaxpr computes for one point (a ``scan``'s body times its length;
 a ``while_loop``, whose trips are unknown, makes the work unknown). A run whose work is
-under `CHEAP_WORK` (10⁷) compiles at level 0, any other at full optimisation; off the
-CPU, and on a host with several CPU devices (where level 0 would round a run laid out
+under `CHEAP_WORK` (2·10⁶) compiles at level 0, any other at full optimisation; off
+the CPU, and on a host with several CPU devices (where level 0 would round a run laid out
 over them apart from the same run on one, which full optimisation does not), nothing
-changes. The line lies between the runs of
-benchmarks/compile_time.py (a new objective's 200-generation PSO→NM or 100-generation
-MAPSO–NMDS, 2-D to 30-D: at most 5·10⁶), whose first call is compilation, and the speed
-table's 30-D Rosenbrock runs (benchmarks/speed_optim.py: 100 agents, 500 generations,
-1.6·10⁷ and 3.2·10⁷; Nelder–Mead's 20 000 evaluations, 1.3·10⁷), which stay at full
-optimisation; models' rollouts (``identify``) are long scans, far over it. Measured on
-30-D Rosenbrock, level 0 saved 0.3–1.2 s of compilation and cost 0.07–0.45 s of run
-time per first call, so between those the first call is still faster at level 0
-(100-particle PSO over 300 generations, 9.7·10⁶, is at level 0: its warm runs are about
-7× slower; pass ``"full"`` where a program is compiled once and run often). Level 0
+changes. The line lies between a new objective's 2-D to 10-D runs in
+benchmarks/compile_time.py (200-generation PSO→NM or 100-generation MAPSO–NMDS: at most
+1.7·10⁶), whose first call is mostly compilation, and the 30-D Rosenbrock runs of the
+speed tables (benchmarks/speed_optim.py, 100 agents: PSO over 100 and 300 generations
+3.2·10⁶ and 9.7·10⁶, MAPSO over 100 4.0·10⁶, the 500-generation runs 1.6·10⁷ and more),
+a program compiled once and called many times, which stays at full optimisation; models'
+rollouts (``identify``) are long scans, far over it. Below the line level 0 costs at most
+about 0.1 s of run time per call (30-D Rosenbrock: 0.07–0.45 s at 3·10⁶–10⁷) for about
+0.7 s of compilation saved; a single first call would gain up to about 10⁷, but the
+repeated calls of the short-runs table would lose (the 300-generation PSO runs about 7×
+slower at level 0), so the line is drawn for both. ``"fast-compile"`` takes level 0 and
+``"full"`` full optimisation whatever the run. Level 0
 rounds differently from full optimisation (fewer fused multiply-adds), so a cheap run's
 result agrees with ``"full"``'s to rounding, not to the bit; ask/tell compiles with the
 same rule (its program has no objective), so it visits the points ``minimise`` visits
@@ -104,10 +106,10 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
 
 
 #: ``"auto"`` compiles a solver's run with LLVM at level 0 on CPU where its estimated work
-#: (`auto_level`) is below this: the 2-D to 30-D runs of benchmarks/compile_time.py (at most
-#: 5·10⁶) are under it, the speed table's 30-D runs (benchmarks/speed_optim.py, 1.6·10⁷ and
-#: more) over it
-CHEAP_WORK = 1e7
+#: (`auto_level`) is below this: the 2-D to 10-D runs of benchmarks/compile_time.py (at most
+#: 1.7·10⁶) are under it, the speed tables' 30-D, 100-agent runs (benchmarks/speed_optim.py,
+#: 3.2·10⁶ and more) over it
+CHEAP_WORK = 2e6
 
 
 def auto_level(work: float | None) -> int | None:

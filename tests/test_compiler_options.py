@@ -285,9 +285,9 @@ def test_jaxpr_work_counts_loops_and_products():
 
 
 def test_auto_picks_the_level_from_the_run_work():
-    """'auto' compiles a cheap run (a new objective's 200-generation chain on 5-D
-    Rosenbrock) with LLVM at level 0 and the speed table's 30-D runs (100 agents, 500
-    generations; Nelder-Mead at 20 000 evaluations) at XLA's full optimisation, as it does
+    """'auto' compiles a cheap run (a new objective's 200-generation chain, 2-D to 10-D
+    Rosenbrock) with LLVM at level 0 and the speed tables' 30-D runs (100 agents over 100,
+    300 or 500 generations; Nelder-Mead at 20 000 evaluations) at XLA's full optimisation, as it does
     an objective whose work is unknown (a while loop) or heavy (a long scan); 'full'
     never lowers the level, 'fast-compile' always does (CPU only)."""
     from jaxfric.optim import driver
@@ -304,10 +304,12 @@ def test_auto_picks_the_level_from_the_run_work():
     cheap = [jf.chain(jf.PSO(num_generations=200), jf.NelderMead(max_steps=2000)),
              jf.mapso_nmds(num_generations=100, nm_max_steps=2000)]
     for solver in cheap:
-        for n in (2, 10, 30):
+        for n in (2, 5, 10):
             assert level(solver, n) == 0, (solver, n)
         assert level(solver, 5, options="full") is None
     speed = [jf.PSO(num_particles=100, num_generations=500), jf.MAPSO(lattice_size=10, num_generations=500),
+             jf.PSO(num_particles=100, num_generations=100), jf.PSO(num_particles=100, num_generations=300),
+             jf.MAPSO(lattice_size=10, num_generations=100),
              jf.NelderMead(max_steps=20000, max_evals=20000)]
     for solver in speed:
         assert level(solver, 30) is None, solver
