@@ -312,8 +312,8 @@ class MotionFit(Fit):
             f = f - _series("load", load)
         dt = self.dt if dt is None else float(dt)
         theta = jnp.asarray(self.theta)
-        out = _simulate_jit(self.friction_step(), theta, self.mass, jnp.asarray(f - self.offset, theta.dtype),
-                            dt, x0, v0, state0)
+        out = _simulate_jit(self.friction_step(), theta, jnp.asarray(self.mass, theta.dtype), jnp.asarray(f - self.offset, theta.dtype),
+                            jnp.asarray(dt, theta.dtype), jnp.asarray(x0, theta.dtype), jnp.asarray(v0, theta.dtype), state0)
         res = {k: np.asarray(v, np.float64) for k, v in out.items()}
         res["friction"] = res["friction"] + self.offset
         return res
@@ -341,7 +341,7 @@ class MotionFit(Fit):
         x_win = np.polyval(coef, tau)
         v_win = np.polyval(np.polyder(coef), tau)
         theta = jnp.asarray(self.theta)
-        states = _track_jit(self.friction_step(), theta, jnp.asarray(v_win, theta.dtype), dt)
+        states = _track_jit(self.friction_step(), theta, jnp.asarray(v_win, theta.dtype), jnp.asarray(dt, theta.dtype))
         s0 = jax.tree_util.tree_map(lambda a: a[n - 1], states)
         return {"x0": float(x_win[-1]), "v0": float(v_win[-1]), "state0": s0, "x_window": x_win, "v_window": v_win}
 
@@ -379,7 +379,7 @@ class MotionFit(Fit):
         theta = jnp.asarray(self.theta)
         s0 = None
         if start > 0:
-            states = _track_jit(step, theta, jnp.asarray(data.velocity[: start + 1], theta.dtype), self.dt)
+            states = _track_jit(step, theta, jnp.asarray(data.velocity[: start + 1], theta.dtype), jnp.asarray(self.dt, theta.dtype))
             s0 = jax.tree_util.tree_map(lambda a: a[start], states)
         v0 = data.velocity[start] + self.mechanics.get("v0", 0.0) * (start == 0)
         return self.simulate(data.net_force[start:stop], data.position[start], v0, state0=s0)
@@ -397,8 +397,8 @@ class MotionFit(Fit):
         data = _as_motion_data(data)
         step = self.friction_step()
         theta = jnp.asarray(self.theta)
-        return np.asarray(_kstep_jit(step, theta, self.mass,
-                                     jnp.asarray(data.net_force - self.offset, theta.dtype), self.dt,
+        return np.asarray(_kstep_jit(step, theta, jnp.asarray(self.mass, theta.dtype),
+                                     jnp.asarray(data.net_force - self.offset, theta.dtype), jnp.asarray(self.dt, theta.dtype),
                                      jnp.asarray(data.position, theta.dtype),
                                      jnp.asarray(data.velocity, theta.dtype), int(horizon)), np.float64)
 
@@ -410,8 +410,8 @@ class MotionFit(Fit):
         # simulate_from(data, 0, n_train), simulate_from(data, n_train) and k_step(data, horizon)
         # in one compiled call (one compilation instead of four)
         tr, va, ks = (np.asarray(a, np.float64) for a in _evaluate_jit(
-            self.friction_step(), theta, self.mass, jnp.asarray(data.net_force - self.offset, theta.dtype),
-            self.dt, jnp.asarray(x, theta.dtype), jnp.asarray(data.velocity, theta.dtype),
+            self.friction_step(), theta, jnp.asarray(self.mass, theta.dtype), jnp.asarray(data.net_force - self.offset, theta.dtype),
+            jnp.asarray(self.dt, theta.dtype), jnp.asarray(x, theta.dtype), jnp.asarray(data.velocity, theta.dtype),
             data.velocity[0] + self.mechanics.get("v0", 0.0), int(n_train), int(horizon)))
         out = {"train": motion_metrics(x[:n_train], tr), "valid": motion_metrics(x[n_train:], va),
                "horizon": int(horizon)}

@@ -241,8 +241,8 @@ def window_scores(fit, records, window: int, init_window: int = DEFAULT_INIT_WIN
     if not heads:
         return []
     theta = jnp.asarray(fit.theta)
-    x_hat = _window_runs(fit.friction_step(), theta, fit.mass, jnp.asarray(np.stack(forces), theta.dtype),
-                         fit.dt, jnp.asarray([h["x0"] for h in heads], theta.dtype),
+    x_hat = _window_runs(fit.friction_step(), theta, jnp.asarray(fit.mass, theta.dtype), jnp.asarray(np.stack(forces), theta.dtype),
+                         jnp.asarray(fit.dt, theta.dtype), jnp.asarray([h["x0"] for h in heads], theta.dtype),
                          jnp.asarray([h["v0"] for h in heads], theta.dtype),
                          jax.tree_util.tree_map(lambda *s: jnp.stack(s), *[h["state0"] for h in heads]))
     x_hat = np.asarray(x_hat, np.float64)[:, 1:]  # the run starts at sample n - 1; scored from n
