@@ -142,6 +142,10 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
             progress_totals=(g.progress_totals[0], loc.progress_totals[1]),
             ask_tell_refused=g.ask_tell_refused or loc.ask_tell_refused)
 
+    def expected_evaluations(self, n, of):
+        g, loc = of(self._global, n), of(self._local, n)
+        return None if g is None or loc is None else g + self.num_starts * loc
+
     # ------------------------------------------------------------------ stages
     def stage(self, state):
         return state.stage

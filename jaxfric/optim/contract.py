@@ -201,6 +201,12 @@ class AbstractStaged(AbstractSolver):
     def progress(self, state) -> tuple[Array, Array]:
         """``(phase, step)`` for a progress display (phase 0 global, 1 local)."""
 
+    @abc.abstractmethod
+    def expected_evaluations(self, n: int, of: Callable) -> int | None:
+        """Evaluations a run on ``n`` parameters is expected to take, its stages'
+        ``of(stage_solver, n)`` combined (``None``: unknown); ``compiler_options="auto"``
+        sizes a run's work with it."""
+
     def done(self, state) -> Array:
         """``finished(state)[0]`` alone, for the loop's test (a chain's result, traced
         and dropped there, is most of its ``finished``)."""

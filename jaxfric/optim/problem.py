@@ -18,7 +18,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ._base import count_dtype
-from .contract import AbstractLocal, capabilities_of
+from .contract import AbstractLocal, AbstractStaged, capabilities_of
 from .sharding import Layout
 
 
@@ -241,9 +241,8 @@ def _local_evaluations(solver, n: int) -> int | None:
     """Evaluations a run of ``solver`` is expected to take (`run_work`): a local solver's
     two a step (Nelder–Mead's reflection and at most one more; its budget counts a
     shrink's ``n + 2`` at every step), a chain's stages added, any other's budget."""
-    if getattr(solver, "_local", None) is not None:  # a two-stage chain (chained.py)
-        g, loc = _local_evaluations(solver._global, n), _local_evaluations(solver._local, n)
-        return None if g is None or loc is None else g + solver.num_starts * loc
+    if isinstance(solver, AbstractStaged):  # a chain: its stages' added
+        return solver.expected_evaluations(n, _local_evaluations)
     cap = capabilities_of(solver, n)
     if isinstance(solver, AbstractLocal):
         return None if cap.max_steps is None else n + 1 + 2 * cap.max_steps
