@@ -43,7 +43,7 @@ times the objective's size plus the number of parameters, the objective's size b
 the array elements its jaxpr computes for one point (a ``scan``'s body times its length;
 a ``while_loop``, whose trips are unknown, makes the work unknown). A run whose work is
 under `CHEAP_WORK` (2·10⁶) compiles at level 0, any other at full optimisation; off
-the CPU, and on a host with several CPU devices (where level 0 would round a run laid out
+the CPU, and on a process with several local CPU devices (where level 0 would round a run laid out
 over them apart from the same run on one, which full optimisation does not), nothing
 changes. The line lies between a new objective's 2-D to 10-D runs in
 benchmarks/compile_time.py (200-generation PSO→NM or 100-generation MAPSO–NMDS: at most
@@ -135,10 +135,12 @@ def resolve(value, kind: str, platform: str | None = None,
     if isinstance(value, str) and value in (AUTO, FAST_COMPILE, FULL):
         platform = platform or jax.default_backend()
         opts = compiler_options(kind, platform)
-        # one device only: level 0 rounds a program laid out over several devices and
-        # the same program on one apart, while at full optimisation they agree
+        # one local device only: level 0 rounds a program laid out over several devices
+        # and the same program on one apart, while at full optimisation they agree; local,
+        # as runs are laid out over a process's own devices (jax.distributed's processes
+        # then compile what one process alone compiles)
         cheap = (value == AUTO and kind == "solver" and auto_level(work) == 0
-                 and platform == "cpu" and jax.device_count(platform) == 1)
+                 and platform == "cpu" and jax.local_device_count(platform) == 1)
         if (value == FAST_COMPILE or cheap) and platform == "cpu":
             opts = {**opts, **dict(supported((("xla_backend_optimization_level", 0),), platform))}
     elif value is None or value is False:
