@@ -353,10 +353,15 @@ class Fit:
         unknown = sorted(set(changes) - set(self.FIELDS))
         if unknown:
             raise TypeError(f"{type(self).__name__}.replace: unknown field(s) {unknown}; fields are {list(self.FIELDS)}")
+        return type(self)(**{**self.fields(), **changes})
+
+    def fields(self) -> dict:
+        """The constructor's arguments that rebuild this fit (`FIELDS`; a pending
+        uncertainty stays pending): ``MotionFit(**fit.fields())`` reads a loaded fit as a
+        motion fit."""
         args = {name: getattr(self, name) for name in self.FIELDS if name != "uncertainty"}
         args["uncertainty"] = self._uncertainty
-        args.update(changes)
-        return type(self)(**args)
+        return args
 
     @classmethod
     def problem(cls) -> AbstractProblem:

@@ -572,9 +572,7 @@ def load_motion_fit(path) -> MotionFit:
     fit = load_fit(path)
     if "motion" not in fit.settings:
         raise ValueError(f"{path} holds a force-balance fit, not a motion fit: use jaxfric.load_fit")
-    out = MotionFit.__new__(MotionFit)
-    out.__dict__.update(fit.__dict__)
-    return out
+    return MotionFit(**fit.fields())
 
 
 def _mass_setting(mass):
