@@ -240,10 +240,12 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
           f"{ranked_by} (score a separate recording with "
           "`jaxfric.load_motion_fit(path).score(record, init_window=20)`). The last row is the "
           "least-squares Coulomb + viscous + offset baseline on the same data and judge.", "",
-          table, *kstep, "", "![free run](motion_free_run.png)", ""]
+          table, "", f"Choice (the lowest score, the baseline included): {ranked.choice_name}", *kstep, "", "![free run](motion_free_run.png)", ""]
     print(table)
+    print(f"choice: {ranked.choice_name}")
     results = {"command": ["jaxfric", *argv], "split": "held-back block (last "
                f"{100 * (1 - args.train_fraction):.0f} % of {args.file})", "ranking": ranked.rows(),
+               "choice": ranked.choice_name,
                "judge": judge if judge is not None else {"name": "tail", "scores": {
                    name: fits[name].metrics["valid"]["rmse_mm"] for name in ranked.ranking},
                    "baseline": first.metrics["baseline"]["valid"]["rmse_mm"]},
