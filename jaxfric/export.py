@@ -116,6 +116,18 @@ def _phi(x):
     return 1.0 - 0.5 * x if x < 1e-8 else -math.expm1(-x) / x
 
 
+def _elman_hidden(w, u, c):
+    """The Elman networks' hidden layer in NumPy: ``tanh(w u + r c + b)`` (§2.2) or
+    ``tanh(w u + W_c c + b)`` (§2.3). The one home of each recurrence is
+    ``jaxfric.models.elman_hidden`` / ``elman_full_hidden``; this is their deliberate twin,
+    as is the C of [`c_header`][jaxfric.export.c_header]: an exported step computes without JAX
+    (in a controller's loop, one float64 sample at a time, with NumPy or a C compiler
+    alone), and ``tests/test_export.py`` holds both twins to ``Fit.predict``."""
+    if "W_c" in w:
+        return np.tanh(w["w"] * u + w["W_c"] @ c + w["b"])
+    return np.tanh(w["w"] * u + w["r"] * c + w["b"])
+
+
 @dataclasses.dataclass(frozen=True)
 class NumpyStep:
     """Pure-NumPy per-sample friction of a fit (module docstring).
@@ -173,12 +185,8 @@ class NumpyStep:
             level = max(t, 0.0) * pos - max(-t, 0.0) * neg
             return float(level + _pick(w, "sigma2", v) * v), None
         u = 2.0 * (v - w["v_lo"]) / (w["v_hi"] - w["v_lo"]) - 1.0
-        if kind == "elman":
-            h = np.tanh(w["w"] * u + w["r"] * state + w["b"])
-            new = w["alpha"] * state + h
-        else:
-            h = np.tanh(w["w"] * u + w["W_c"] @ state + w["b"])
-            new = h
+        h = _elman_hidden(w, u, state)
+        new = w["alpha"] * state + h if kind == "elman" else h
         y = float(w["v"] @ h) + w["b_o"]
         return float((y + 1.0) * (0.5 * (w["f_hi"] - w["f_lo"])) + w["f_lo"]), new
 
@@ -316,7 +324,8 @@ def _c_static(c: _CText, w: dict, dt: float) -> list[str]:
 
 
 def _c_elman(c: _CText, w: dict, dt: float) -> list[str]:
-    """Elman / ElmanFull (§2.2, §2.3) with the §2.4 scalers."""
+    """Elman / ElmanFull (§2.2, §2.3) with the §2.4 scalers: the C twin of the hidden
+    layer (`_elman_hidden` says why export keeps twins)."""
     P, n, elman = c.P, int(np.asarray(w["w"]).size), w["kind"] == "elman"
     blocks = ("w", "b", "v", "c0") + (("r", "alpha") if elman else ("W_c",))
     lines = [f"#define {P.upper()}_N {n}", f"typedef struct {{ double c[{n}]; }} {P}_state;",

@@ -25,7 +25,7 @@ from ._box import DEFAULT_RANGES, RANGE_FLOORS, SearchBox, data_ranges, widened
 from ._physical import AbstractPhysicalModel, add_offset, by_direction, stribeck_curve
 from ._scaling import Scaler
 from ._scan import ACCELERATOR_UNROLL, time_loop, time_scan
-from .elman import Elman, ElmanFull, elman_hidden
+from .elman import Elman, ElmanFull, elman_full_hidden, elman_hidden
 from .gms import GMS
 from .greybox import GreyBox
 from .lugre import Dahl, LuGre, bristle_friction, bristle_phi
@@ -33,7 +33,7 @@ from .static import Coulomb, Cylinder, Stribeck
 
 __all__ = ["AbstractFrictionModel", "AbstractPhysicalModel", "Coulomb", "Cylinder", "DEFAULT_RANGES", "Dahl",
            "Elman", "ElmanFull", "GMS", "GreyBox", "LuGre", "Scaler", "SearchBox", "Stribeck",
-           "Unidentifiable", "available", "bristle_friction", "bristle_phi", "elman_hidden",
+           "Unidentifiable", "available", "bristle_friction", "bristle_phi", "elman_full_hidden", "elman_hidden",
            "ACCELERATOR_UNROLL", "RANGE_FLOORS", "add_offset", "by_direction", "time_loop", "time_scan",
            "widened", "check_theta", "data_ranges", "friction_scales", "get", "stribeck_curve"]
 

@@ -35,16 +35,27 @@ from jaxtyping import Array, ArrayLike, Float
 from ._base import AbstractFrictionModel
 from ._scan import reverse_affine_scan, time_scan
 
-__all__ = ["Elman", "ElmanFull", "elman_hidden"]
+__all__ = ["Elman", "ElmanFull", "elman_full_hidden", "elman_hidden"]
 
 
 def elman_hidden(u, c, w, r, b):
     """The diagonal-context Elman network's hidden layer, §2.2: ``h = tanh(w u + r c + b)``,
     elementwise over any broadcastable shapes (neurons, candidates, time). The one home of
     the recurrence: the rollouts and the adjoint here, the batched cost gradient of
-    ``jaxfric.identification``, the motion step and the parallel-in-time rollout call it;
-    the context then moves as ``c' = α c + h``."""
+    ``jaxfric.identification``, the motion step, the grey-box network and the
+    parallel-in-time rollout call it; the context then moves as ``c' = α c + h``.
+    ``jaxfric.export`` replays it in NumPy and C, outside JAX by design."""
     return jnp.tanh(w * u + r * c + b)
+
+
+def elman_full_hidden(u, c, w, W_c, b):
+    """The full-context Elman network's hidden layer, §2.3: ``h = tanh(w u + W_c c + b)``
+    with ``W_c`` of shape ``(..., N, N)`` (row i: the weights into hidden unit i) and
+    ``c``, ``w``, ``b`` of shape ``(..., N)``; leading axes (candidates) batch. The one home
+    of the recurrence: [`ElmanFull`][jaxfric.models.ElmanFull]'s batched rollout and the motion
+    step call it; the context then is ``c' = h``. ``jaxfric.export`` replays it in NumPy
+    and C, outside JAX by design."""
+    return jnp.tanh(w * u + jnp.einsum("...ij,...j->...i", W_c, c) + b)
 
 
 def _check_neurons(neurons) -> None:
@@ -376,7 +387,7 @@ class ElmanFull(AbstractFrictionModel):
         w, b, v, Wc = p["w"], p["b"], p["v"], p["W_c"]
 
         def step(c, uk):
-            h = jnp.tanh(w * uk + jnp.einsum("pij,pj->pi", Wc, c) + b)
+            h = elman_full_hidden(uk, c, w, Wc, b)
             return h, jnp.sum(v * h, axis=-1)
 
         y = time_scan(step, c0, u, 1, self.unroll).T

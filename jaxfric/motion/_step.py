@@ -39,7 +39,7 @@ from jaxtyping import Array
 
 from ..models import (GMS, AbstractFrictionModel, Dahl, Elman, ElmanFull, GreyBox, LuGre, Scaler,
                       stribeck_curve)
-from ..models import add_offset, bristle_phi, by_direction, elman_hidden
+from ..models import add_offset, bristle_phi, by_direction, elman_full_hidden, elman_hidden
 
 __all__ = ["FrictionStep", "StaticStep", "BristleStep", "GMSStep", "ElmanStep", "ElmanFullStep",
            "GreyBoxStep", "friction_step"]
@@ -202,7 +202,7 @@ class ElmanFullStep(_ScaledStep):
 
     def _hidden(self, theta, c, v):
         p = self.model.to_physical(theta)
-        return p, jnp.tanh(p["w"] * self._u(v) + p["W_c"] @ c + p["b"])
+        return p, elman_full_hidden(self._u(v), c, p["w"], p["W_c"], p["b"])
 
     def update(self, theta, c, v, dt):
         return self._hidden(theta, c, v)[1]
