@@ -42,7 +42,8 @@ from ._forward import k_step_positions, motion_prediction, simulate_motion, trac
 from ._layout import Layout
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search, start_costs
-from ._residuals import motion_coordinates, motion_residuals, motion_train_velocity, training_lengths
+from ._residuals import (SumOfSquares, motion_coordinates, motion_residual, motion_residuals, motion_train_velocity,
+                         training_lengths)
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
@@ -172,9 +173,9 @@ class MotionCost(eqx.Module):
         x_hat, v_hat, x, v = self.simulate(y, args)
         out = []
         if self.error in ("position", "both"):
-            out.append((x_hat - x) * jnp.sqrt(args["inv_var_x"] / x.shape[0]))
+            out.append(motion_residual(x_hat, x, args["inv_var_x"] / x.shape[0]))
         if self.error in ("velocity", "both") and v_hat is not None:
-            out.append((v_hat - v) * jnp.sqrt(args["inv_var_v"] / v.shape[0]))
+            out.append(motion_residual(v_hat, v, args["inv_var_v"] / v.shape[0]))
         out.append(self.model.penalty(y[:self.model.num_params]))  # the model's own rows (GreyBox's ridge)
         return jnp.concatenate(out)
 
@@ -182,16 +183,16 @@ class MotionCost(eqx.Module):
         x_hat, v_hat, x, v = self.simulate(y, args)
         j = 0.0
         if self.error in ("position", "both"):
-            j = j + jnp.mean((x_hat - x) ** 2) * args["inv_var_x"]
+            j = j + jnp.mean(motion_residual(x_hat, x) ** 2) * args["inv_var_x"]
         if self.error in ("velocity", "both") and v_hat is not None:
-            j = j + jnp.mean((v_hat - v) ** 2) * args["inv_var_v"]
+            j = j + jnp.mean(motion_residual(v_hat, v) ** 2) * args["inv_var_v"]
         pen = self.model.penalty(y[:self.model.num_params])
         return j + jnp.sum(pen * pen)
 
 
 class ShootingResiduals(eqx.Module):
     """Weighted position errors of `jaxfric.motion._shooting.shoot` over the
-    concatenated training records: ``r_k = sqrt(w_k) (x̂_k - x̃_k)``. With the
+    concatenated training records: ``r_k = sqrt(w_k) (x̂_k - x̃_k)`` (`motion_residual`). With the
     per-record weights ``1 / (var(x_r) N)`` (``N`` all training samples) the sum of
     squares is the pooled ``1 - R^2`` of `MotionCost`."""
 
@@ -205,17 +206,7 @@ class ShootingResiduals(eqx.Module):
         v = args["v"] + dv0 * plan.reset
         x_hat = shoot(step, theta, mass, args["force"] - offset, args["dt"], args["x"], v, plan)
         # the model's own regularisation rows (GreyBox's ridge; none for the other models)
-        return jnp.concatenate([jnp.sqrt(plan.weight) * (x_hat - args["x"]), self.model.penalty(theta)])
-
-
-class SumOfSquares(eqx.Module):
-    """``J = sum(residuals(y, args)**2)``: the scalar cost of a residual function."""
-
-    residuals: eqx.Module
-
-    def __call__(self, y, args):
-        r = self.residuals(y, args)
-        return jnp.sum(r * r)
+        return jnp.concatenate([motion_residual(x_hat, args["x"], plan.weight), self.model.penalty(theta)])
 
 
 def motion_metrics(x, x_hat) -> dict:

@@ -56,6 +56,7 @@ from ..models import GreyBox
 from ..optim import PSO, minimise
 from ..optim.progress import step_progress
 from ._lm import levenberg_marquardt
+from ._residuals import SumOfSquares
 
 __all__ = ["MotionBudget", "MotionSearch", "default_search"]
 
@@ -242,7 +243,7 @@ def distinct_starts(points, values, count: int, lower, upper, *, tol: float = 1e
 
 
 def _sumsq_batch(residuals, Y, data):
-    return jax.vmap(lambda y: jnp.sum(residuals(y, data) ** 2))(Y)
+    return jax.vmap(lambda y: SumOfSquares(residuals)(y, data))(Y)
 
 
 def _jacobian(residuals, y, data):

@@ -1,9 +1,16 @@
-"""The training residuals of an [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] fit, for its parameter
-uncertainty ([`jaxfric.uncertainty`][jaxfric.uncertainty], docs/uncertainty.md): the fit's own cost's
-residuals as a function of its search coordinates (the model's, then the mechanics it
-identified), so that their Jacobian is that of what the search minimised.
+"""The motion residual and the training residuals of an [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] fit.
 
-The residual function is an ``eqx.Module`` (`MotionResiduals`) whose arrays are
+`motion_residual` is the one definition of what every motion cost compares, §13.2: the
+weighted error ``√w_k (x̂_k − x̃_k)`` of a simulated position (or velocity) against the
+measurement, and `SumOfSquares` the one scalar cost made of residuals. The
+multiple-shooting residuals and the free-run / k-step cost of the search
+(``motion/_api.py``), the search's batched costs (``motion/_pipeline.py``) and the
+uncertainty's residuals below call them.
+
+For a fit's parameter uncertainty ([`jaxfric.uncertainty`][jaxfric.uncertainty], docs/uncertainty.md):
+the fit's own cost's residuals as a function of its search coordinates (the model's,
+then the mechanics it identified), so that their Jacobian is that of what the search
+minimised. The residual function is an ``eqx.Module`` (`MotionResiduals`) whose arrays are
 the record and the constants, so the uncertainty code's one compiled linearisation is
 reused by every motion fit of the same model, cost and record length."""
 
@@ -22,6 +29,27 @@ from ._step import friction_step
 
 #: A motion fit's mechanics coordinates: search name -> (physical name, kind).
 MECHANICS = {"log10_mass": ("mass", "log10"), "offset": ("offset", "linear"), "v0": ("v0", "linear")}
+
+
+def motion_residual(x_hat, x, weight=None):
+    """The motion residual, §13.2: ``r_k = √w_k (x̂_k − x̃_k)``, the simulated minus the
+    measured position [m] (or velocity) of each sample, weighted by ``w_k`` (a scalar or
+    one per sample; ``None``: unweighted, ``r_k = x̂_k − x̃_k``). The one definition every
+    motion cost uses (module docstring): the shooting cost weighs each sample by its
+    record's ``1 / (var(x_r) N)`` (0 on forced samples), the free-run cost by
+    ``1 / (var(x) T)``, so that ``Σ r²`` is ``1 − R²``."""
+    error = x_hat - x
+    return error if weight is None else jnp.sqrt(weight) * error
+
+
+class SumOfSquares(eqx.Module):
+    """``J = sum(residuals(y, args)**2)``: the scalar cost of a residual function."""
+
+    residuals: eqx.Module
+
+    def __call__(self, y, args):
+        r = self.residuals(y, args)
+        return jnp.sum(r * r)
 
 
 def _layout(fit) -> tuple[Layout, list]:
@@ -124,15 +152,16 @@ class MotionResiduals(eqx.Module):
         if self.records is not None and self.horizon is None:  # whole records, each from its own start
             cuts = np.cumsum((0,) + self.records)
             return jnp.concatenate([
-                motion_prediction(step, theta, mass, u[a:b], dt, xs[a:b], vs[a:b], dv0, None)[0] - xs[a:b]
+                motion_residual(motion_prediction(step, theta, mass, u[a:b], dt, xs[a:b], vs[a:b], dv0, None)[0],
+                                xs[a:b])
                 for a, b in zip(cuts[:-1], cuts[1:])])
         x_hat, v_hat, x, v = motion_prediction(step, theta, mass, u, dt, xs, vs, dv0, self.horizon)
         if self.horizon is not None or self.error == "position":
-            return x_hat - x
+            return motion_residual(x_hat, x)
         if self.error == "velocity":
-            return v_hat - v
+            return motion_residual(v_hat, v)
         sx, sv = jnp.asarray(self.scale[0], y.dtype), jnp.asarray(self.scale[1], y.dtype)
-        return jnp.concatenate([(x_hat - x) / sx, (v_hat - v) / sv])
+        return jnp.concatenate([motion_residual(x_hat, x) / sx, motion_residual(v_hat, v) / sv])
 
 
 def motion_train_velocity(fit, data) -> np.ndarray:
