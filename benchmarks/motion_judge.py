@@ -68,8 +68,7 @@ FS, N = 128.0, 2000
 INIT = 20
 SHORT = None  # compare_motion's default window: 2 s (256 samples at 128 Hz, 2 000 at 1 kHz)
 MARGIN = 0.10
-CANDIDATES = {"stribeck": ("stribeck", None), "lugre": ("lugre", None), "gms": ("gms", None),
-              "elman": ("elman", {"neurons": 10})}
+CANDIDATES = {**{m: (m, None) for m in ("stribeck", "lugre", "gms")}, "elman": ("elman", {"neurons": 10})}
 EMPS_CANDIDATES = {m: (m, None) for m in ("coulomb", "stribeck", "lugre", "gms")}
 PNEUMATIC_CANDIDATES = ("stribeck", "lugre", "gms", "cylinder")
 BASE = "baseline"
@@ -201,10 +200,13 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
     for r in rows:
         by_key.setdefault(int(r["key"]), []).append(r)
     done = {k: v for k, v in by_key.items() if any(r["model"] == BASE for r in v)}
+    for rs in done.values():  # short among the models whose blocked cross-validation beats the baseline's
+        b = next(float(r["blocked"]) for r in rs if r["model"] == BASE)
+        rs[:] = [{**r, "short_gated": r["short"] if r["model"] == BASE or float(r["blocked"]) < b else math.inf} for r in rs]
     choices, judges = [], []
-    extra = sorted({c for r in rows for c in r if c.startswith("short_")},
+    extra = sorted({c for rs in done.values() for r in rs for c in r if c.startswith("short_")},
                    key=lambda c: (not c[6:].isdigit(), int(c[6:]) if c[6:].isdigit() else 0, c))
-    for crit in criteria + tuple(c for c in extra if all(r.get(c) not in (None, "") for r in rows)):
+    for crit in criteria + tuple(c for c in extra if all(r.get(c) not in (None, "") for v in done.values() for r in v)):
         wins = never_worse = 0
         for k, rs in sorted(done.items()):
             pick = min(rs, key=lambda r: (float(r[crit]), r["model"]))
@@ -266,8 +268,7 @@ def ensemble_summary(ens) -> list:
 
 
 def reversal_starts(v, width, init=INIT) -> list:
-    """Starts of non-overlapping windows of ``width`` samples, each ``init`` samples before a
-    sign change of the velocity ``v`` (the first of a cluster)."""
+    """Starts of non-overlapping windows of ``width`` samples, ``init`` before a velocity ``v`` sign change."""
     out = []
     for i in np.flatnonzero(np.sign(v[1:]) * np.sign(v[:-1]) < 0) + 1 - init:
         if i >= (out[-1] + width if out else 0) and i + width <= v.size:
@@ -288,9 +289,8 @@ def variants(fit, rec, baseline) -> dict:
 
 
 def average_weights(short: dict, rule: str) -> dict:
-    """Weights (label -> w, sum 1) of ``rule`` from the ``short`` scores (the baseline's ``short[BASE]``):
-    ``avg_all`` all equal; ``avg_beats_ls`` the baseline and those below it, equal; ``avg_top3`` the three
-    lowest, equal; ``avg_inv_var`` w ~ 1/short^2 (minimum variance for independent errors of variance short^2)."""
+    """Weights (label -> w, sum 1) of ``rule`` from the ``short`` scores (the baseline's ``short[BASE]``): ``avg_all``
+    equal; ``avg_beats_ls`` the baseline and those below it; ``avg_top3`` the three lowest; ``avg_inv_var`` 1/short^2."""
     w = {"avg_all": {k: 1.0 for k in short}, "avg_top3": {k: 1.0 for k in sorted(short, key=lambda k: (short[k], k))[:3]},
          "avg_beats_ls": {k: 1.0 for k in short if k == BASE or short[k] < short[BASE]},
          "avg_inv_var": {k: float(s) ** -2 for k, s in short.items()}}[rule]
@@ -458,7 +458,7 @@ def main(argv=None):
     made = f"; the fits were made with the search of commit {a.fits_from}" if a.fits_from else ""
     if a.proxy != "rig":
         return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows,
-                           None if a.rescore is None else made, averages)
+                           None if a.rescore is None and not a.fits_from else made, averages)
     text = ["# Which judge predicts new excitation (rig proxy)", "",
             f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion's variants "
             f"from the saved fits, no refit{made}). Free-run position RMSE [mm]; "

@@ -327,6 +327,17 @@ def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
     assert cmp.judge == "blocked"
     assert cmp.scores["coulomb"] == pytest.approx(math.sqrt(errs / n), rel=1e-9)
     assert "blocked RMSE [mm]" in cmp.table()
+    # the gated judge: the short score where blocked cross-validation beats the baseline's
+    from jaxfric.motion._compare import gated_scores, short_judge
+
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gated = compare_motion(["coulomb"], rec, key=0, judge="gated", folds=2, window=300, **opts)
+        short, short_base = short_judge(gated.fits, [rec], 300)
+    passes = cmp.scores["coulomb"] < cmp.baseline_score
+    assert gated.scores["coulomb"] == (short["coulomb"] if passes else math.inf)
+    assert gated.baseline_score == short_base
+    assert gated_scores({"a": 1.0, "b": 2.0}, {"a": 5.0, "b": 3.0}, 4.0) == {"a": math.inf, "b": 2.0}
     with pytest.raises(ValueError, match="judge must be one of"):
         compare_motion(["coulomb"], rec, key=0, judge="oracle", **opts)
 

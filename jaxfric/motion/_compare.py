@@ -184,7 +184,7 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
     return MotionComparison(dict(fits), ranking, overfit, judge, scores if judged else {}, baseline_score)
 
 
-JUDGES = ("tail", "blocked", "short")
+JUDGES = ("tail", "blocked", "short", "gated")
 #: Seconds per window of the ``"short"`` judge (`short_runs_score`): measured as 256 samples
 #: at the rig proxy's 128 Hz (benchmarks/results/motion_judge.md); on the EMPS estimation
 #: file (1 kHz) 256-sample windows ranked the least-squares baseline first and 2 s windows
@@ -311,6 +311,13 @@ def short_judge(fits: dict, records, window: int | None = None,
     return scores, short_runs_score(baseline_fit(next(iter(fits.values()))), records, window, init_window)
 
 
+def gated_scores(short: dict, blocked: dict, base_blocked: float) -> dict:
+    """The ``"gated"`` judge's scores: each model's short score where its blocked
+    cross-validation beats the baseline's (``blocked[name] < base_blocked``), else inf (the
+    model is not chosen over the baseline; ``choice`` falls to the baseline when none passes)."""
+    return {k: v if blocked[k] < base_blocked else math.inf for k, v in short.items()}
+
+
 def baseline_fit(fit):
     """The least-squares Coulomb + viscous + offset baseline of ``fit`` (its
     ``settings["motion"]["baseline"]``: ``M``, ``Fc``, ``Fv``, ``offset``) as a
@@ -345,7 +352,11 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     * ``"blocked"`` ranks by blocked cross-validation of the training part (`blocked_score`,
       ``folds`` blocks per record, each held-out block simulated from its own first 20
       samples): ``folds`` more fits per model, and every block is scored on motion its fit
-      never saw.
+      never saw;
+    * ``"gated"``: the short score of each model whose blocked cross-validation beats the
+      baseline's, inf for the others (`gated_scores`; ``folds`` more fits per model): on the
+      three proxies of benchmarks/results/ never a choice worse than least squares, where
+      ``"short"`` chose one once.
 
     ``window``: samples per window of the short judge (default ``None``: `SHORT_WINDOW_S`
     = 2 s of samples, 256 at 128 Hz, 2 000 at 1 kHz); a shorter rest at the end of a record is not scored. The table shows the judge's score beside the validation RMSE, and the baseline's under
@@ -368,7 +379,7 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
         raise ValueError("compare_motion ranks by validation error: keep a block back (train < 1)")
     if data is None and kwargs.get("valid") is None:
         raise ValueError("compare_motion ranks by validation error: pass valid=[records...] with train=[...]")
-    if judge == "short":  # every record, whole: checked before any fit
+    if judge in ("short", "gated"):  # every record, whole: checked before any fit
         everything = [_as_motion_data(data)] if data is not None else \
             _as_records(kwargs["train"]) + _as_records(kwargs["valid"])
         window = short_window(everything[0].dt, window, init_window)
@@ -391,4 +402,8 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     for label, model in items.items():
         scores[label], b = blocked_score(model, records, folds, key=key, mass=mass, **options)
         base.append(b)
+    if judge == "gated":
+        short, short_base = short_judge(fits, everything, window, init_window)
+        return rank_fits(fits, stacklevel=2, scores=gated_scores(short, scores, base[0]), judge=judge,
+                         baseline_score=short_base)
     return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base[0])
