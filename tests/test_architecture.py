@@ -271,3 +271,72 @@ def test_no_module_uses_another_package_private_names():
     """Issue 46: what one package needs of another is public there (its ``__init__`` or a
     public module, documented); a private name is its own package's business."""
     assert not private_reaches(), private_reaches()
+
+
+#: Issue 46, one home per concept: where the Elman recurrence (a ``tanh`` of a sum,
+#: ``tanh(w u + r c + b)`` §2.2 or ``tanh(w u + W_c c + b)`` §2.3) and the motion residual
+#: (a difference with a simulated ``*_hat`` series in ``jaxfric.motion``, ``√w (x̂ − x̃)``
+#: §13.2; the force balance's ``y_hat - y`` is another concept) may be written.
+#: ``export._elman_hidden`` is the one named twin: an exported step computes without JAX
+#: (its docstring; test_export holds it to ``Fit.predict``).
+CONCEPT_HOMES = {"Elman recurrence": {("models/elman.py", "elman_hidden"), ("models/elman.py", "elman_full_hidden"),
+                                      ("export.py", "_elman_hidden")},
+                 "motion residual": {("motion/_residuals.py", "motion_residual")}}
+
+
+def _is_hat(node) -> bool:
+    """``x_hat`` or ``x_hat[...]``: a simulated series."""
+    while isinstance(node, ast.Subscript):
+        node = node.value
+    return isinstance(node, ast.Name) and node.id.endswith("_hat")
+
+
+def concept_places() -> dict[str, set]:
+    """``concept -> {(file, enclosing function)}`` of every place the library writes an
+    Elman recurrence or a motion residual (see `CONCEPT_HOMES`), found on the source."""
+    found: dict[str, set] = {name: set() for name in CONCEPT_HOMES}
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+
+        def visit(node, function):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                function = node.name
+            if (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.BinOp)
+                    and isinstance(node.args[0].op, ast.Add)
+                    and getattr(node.func, "attr", getattr(node.func, "id", None)) == "tanh"):
+                found["Elman recurrence"].add((rel, function))
+            if rel.startswith("motion/") and isinstance(node, ast.BinOp) and isinstance(node.op, ast.Sub) and (
+                    _is_hat(node.left) or _is_hat(node.right)):
+                found["motion residual"].add((rel, function))
+            for child in ast.iter_child_nodes(node):
+                visit(child, function)
+
+        visit(ast.parse(path.read_text()), None)
+    return found
+
+
+def test_the_concept_finder_finds_a_second_home(tmp_path, monkeypatch):
+    """The finder flags a full-context and a diagonal recurrence and a weighted or plain
+    motion residual wherever they are written, and leaves ``tanh(v / v_eps)``, metrics
+    and the force balance's errors alone."""
+    root = tmp_path / "jaxfric"
+    (root / "motion").mkdir(parents=True)
+    (root / "step.py").write_text(
+        "import jax.numpy as jnp\n"
+        "def full(p, u, c):\n    return jnp.tanh(p['w'] * u + p['W_c'] @ c + p['b'])\n"
+        "def diag(w, u, r, c, b):\n    return np.tanh(w * u + r * c + b)\n"
+        "def sign(v, v_eps):\n    return jnp.tanh(v / v_eps)\n")
+    (root / "motion" / "cost.py").write_text(
+        "def cost(x_hat, x, w):\n    return jnp.sqrt(w) * (x_hat[1:] - x)\n"
+        "def score(x, x_hat):\n    return rmse(x, x_hat)\n")
+    (root / "balance.py").write_text("def error(y_hat, y):\n    return y_hat - y\n")
+    monkeypatch.setattr(__import__(__name__), "ROOT", root)
+    assert concept_places() == {"Elman recurrence": {("step.py", "full"), ("step.py", "diag")},
+                                "motion residual": {("motion/cost.py", "cost")}}
+
+
+def test_one_home_per_concept():
+    """Issue 46: the Elman recurrences and the motion residual are each written in one
+    function (the export's NumPy twin named), which every rollout, step and cost calls."""
+    places = concept_places()
+    assert places == CONCEPT_HOMES, {k: sorted(places[k] ^ CONCEPT_HOMES[k]) for k in places}
