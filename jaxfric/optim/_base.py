@@ -84,8 +84,11 @@ class History(eqx.Module):
             counter=jnp.array(n, jnp.int32),
         )
 
-    def record(self, num_evals, f_best) -> "History":
-        """Append ``(num_evals, f_best)`` under the stride-doubling rule (jit-safe)."""
+    def record(self, num_evals, f_best, fills: bool = True) -> "History":
+        """Append ``(num_evals, f_best)`` under the stride-doubling rule (jit-safe).
+        ``fills=False`` (static): the caller knows the buffer holds every entry of the
+        run, so the compression that a full buffer takes is left out of the program (the
+        same arrays: it would never run)."""
         size = self.f.shape[0]
         take = (self.counter % self.stride) == 0
         idx = jnp.minimum(self.length, size - 1)
@@ -97,6 +100,8 @@ class History(eqx.Module):
         f_k = jnp.where(take, jnp.asarray(f_best).astype(self.f.dtype), self.f[idx])
         evals, f = put(self.evals, idx, ev_k), put(self.f, idx, f_k)
         length = self.length + take.astype(jnp.int32)
+        if not fills:
+            return History(evals, f, length, self.stride, self.counter + 1)
 
         def compress(ev, fv):
             # Keep every other entry, so the buffer is half full again.

@@ -179,8 +179,12 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         for x0 in starts:
             runs.append((yield from only_if(done, local.init_rounds(
                 lower, upper, state.local_key(), x0, objective, **extra))))
-        second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
-        second_done = jax.vmap(lambda s: local.finished(s)[0])(second)
+        if len(runs) == 1:  # one start: the same arrays without a batch of one (issue 47)
+            second = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], runs[0])
+            second_done = local.finished(runs[0])[0][None]
+        else:
+            second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
+            second_done = jax.vmap(lambda s: local.finished(s)[0])(second)
         if state.second is None:  # the placeholders' shapes (see init_rounds)
             return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
                               state.key_impl)
@@ -247,6 +251,11 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         i = self._current(state)
         s_i = yield from local.step_rounds(lower, upper, _index(state.second, i), 0, objective)
         done_i, _ = local.finished(s_i)
+        if self.num_starts == 1:  # the whole batch of one: no update in place to write
+            second = jax.tree_util.tree_map(lambda a, b: jnp.asarray(b).astype(a.dtype)[None],
+                                            state.second, s_i)
+            return eqx.tree_at(lambda s: (s.second, s.second_done), state,
+                               (second, jnp.asarray(done_i).astype(state.second_done.dtype)[None]))
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
             (_put(state.second, i, s_i), put(state.second_done, i, done_i)),
@@ -264,14 +273,22 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         return self.done(state), self._result(state)
 
     def _local_best(self, state):
+        """``(i, x, f)``: the best of the local runs (``i`` a static 0 for one start: the
+        batch of one read directly, no argmin and gather in the program, issue 47)."""
+        if self.num_starts == 1:
+            x, f = self._local.best(_index(state.second, 0))
+            return 0, x, f
         xs, fs = jax.vmap(self._local.best)(state.second)
         i = jnp.argmin(fs)
         return i, xs[i], fs[i]
 
     def _result(self, state):
         i, _, _ = self._local_best(state)
-        _, results = jax.vmap(self._local.finished)(state.second)
-        local = _index(results, i)
+        if self.num_starts == 1:
+            local = self._local.finished(_index(state.second, 0))[1]
+        else:
+            _, results = jax.vmap(self._local.finished)(state.second)
+            local = _index(results, i)
         _, gf = self._global.best(state.first)
         return RESULTS.where(state.stage == 1, local,
                              RESULTS.where(jnp.isfinite(gf), RESULTS.successful, RESULTS.nonfinite))
@@ -283,7 +300,10 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         return jnp.where(use_local, lx, gx), jnp.where(use_local, lf, gf)
 
     def num_evals(self, state):
-        local = jnp.sum(jax.vmap(self._local.num_evals)(state.second))
+        if self.num_starts == 1:
+            local = self._local.num_evals(_index(state.second, 0))
+        else:
+            local = jnp.sum(jax.vmap(self._local.num_evals)(state.second))
         g = self._global.num_evals(state.first)
         return g + jnp.where(state.stage == 1, local, 0).astype(g.dtype)
 

@@ -37,6 +37,7 @@ from .optx_adapter import OptxMinimiser, as_protocol
 from .problem import _check_output, _Flat, check_budget, check_key, check_start, prepare_bounds, run_work
 from .progress import Chunks, TqdmProgress
 from .sharding import Layout, resolve_devices, shard_keys
+from .template import templated
 
 # ------------------------------------------------------------------ validation
 def _prepare(fn, solver, bounds, args, y0, dtype):
@@ -485,9 +486,12 @@ def minimise(
                          checkpoint_every)
     program = _xla.filter_jit(_chunk, options)
     drawn = _drawn(proto, lower, upper, key, options)
+    free = objective_free(proto, flat, args)[0] is not flat
+    chunk = templated(_chunk, free, flat, _output_type(flat, lower, args) if free else None,
+                      options, program, lambda operands: _xla._traced(operands, {}))
 
     def call(carry, fresh, stop_at):
-        return program(proto, flat, lower, upper, args, drawn, x0, warm, carry, fresh, stop_at)
+        return chunk(proto, flat, lower, upper, args, drawn, x0, warm, carry, fresh, stop_at)
 
     sink = _display(progress, proto, lower.shape[0])
     with _closing(sink):

@@ -44,9 +44,16 @@ class Carry(eqx.Module):
 
 
 # -------------------------------------------------------------------- the loop
-def _record(proto, state, history):
+def _history_size(proto, n: int) -> int:
+    """Entries of a run's history buffer: the run's steps, its first entry and room for
+    one more, at most `HISTORY_SIZE`."""
+    cap = capabilities_of(proto, n).max_steps
+    return min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)
+
+
+def _record(proto, state, history, fills: bool = True):
     _, f = proto.best(state)
-    return history.record(proto.num_evals(state), f)
+    return history.record(proto.num_evals(state), f, fills)
 
 
 def _strong(tree):
@@ -59,8 +66,7 @@ def _strong(tree):
 
 def _begin(proto, flat, lower, upper, args, key, x0, warm) -> Carry:
     state = compiled_start(proto, flat, lower, upper, args, key, x0) if warm is None else warm
-    cap = capabilities_of(proto, lower.shape[0]).max_steps
-    size = min((NO_STEP_CAP if cap is None else cap) + 2, HISTORY_SIZE)  # + the first entry, + room
+    size = _history_size(proto, lower.shape[0])
     _, f = proto.best(state)
     history = History.first(size, proto.num_evals(state), jnp.asarray(f).astype(lower.dtype))
     return _strong(Carry(state, history, jnp.array(0, jnp.int32)))
@@ -90,13 +96,17 @@ def _done(proto, state):
 
 def _loop(proto, flat, lower, upper, args, carry: Carry, stop_at) -> Carry:
     """Steps until the solver terminates or ``carry.steps == stop_at``, stage by stage."""
-    for s in range(capabilities_of(proto, lower.shape[0]).num_stages):
+    n = lower.shape[0]
+    # A buffer below HISTORY_SIZE holds the first entry and one per step of the run (at
+    # most its max_steps), so it never fills: its compression stays out of the program
+    fills = _history_size(proto, n) >= HISTORY_SIZE
+    for s in range(capabilities_of(proto, n).num_stages):
         def cond(c, s=s):
             return ~_done(proto, c.state) & (stage_of(proto, c.state) == s) & (c.steps < stop_at)
 
         def body(c, s=s):
             state = compiled_step(proto, flat, lower, upper, args, c.state, s)
-            return Carry(state, _record(proto, state, c.history), c.steps + 1)
+            return Carry(state, _record(proto, state, c.history, fills), c.steps + 1)
 
         carry = jax.lax.while_loop(cond, body, carry)
     return carry

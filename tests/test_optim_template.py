@@ -1,0 +1,104 @@
+"""The solver's program traced once per solver and shape, each new objective filled in
+(jaxfric.optim.template, issue 47): the same results to the bit as tracing the program
+with the objective, the template found again for a new objective, and the usual trace
+wherever the template cannot serve."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfric as jf
+from jaxfric import functions as F
+from jaxfric.optim import driver, template
+
+
+def leaves(sol):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(
+        (sol.value, sol.f, sol.stats, sol.history))]
+
+
+def same(a, b):
+    la, lb = leaves(a), leaves(b)
+    assert len(la) == len(lb)
+    for x, y in zip(la, lb):
+        np.testing.assert_array_equal(x, y)
+
+
+def untemplated(monkeypatch):
+    """The driver's usual trace of the program with the objective in it."""
+    monkeypatch.setattr(driver, "templated", lambda *a: a[5])
+
+
+SOLVERS = {
+    "mapso_nmds": lambda: jf.mapso_nmds(num_generations=6, nm_max_steps=60),
+    "pso_nm": lambda: jf.chain(jf.PSO(num_generations=10), jf.NelderMead(max_steps=60)),
+    "pso": lambda: jf.PSO(num_generations=10),
+    "nelder_mead": lambda: jf.NelderMead(max_steps=60),
+    "mapso_3_starts": lambda: jf.mapso_nmds(num_generations=6, nm_max_steps=40, num_starts=3),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SOLVERS))
+@pytest.mark.parametrize("options", ["full", "auto"])
+def test_filled_in_objective_gives_the_traced_programs_result(name, options, monkeypatch):
+    bounds = F.get("rosenbrock").bounds(3, np.float32)
+    jf.minimise(lambda y, a: F.sphere(y), SOLVERS[name](), bounds, key=0,
+                compiler_options=options)  # the template, traced with another objective
+    before = len(template._TEMPLATES)
+    filled = jf.minimise(lambda y, a: F.rosenbrock(y), SOLVERS[name](), bounds, key=1,
+                         compiler_options=options)
+    assert len(template._TEMPLATES) == before  # found again, not traced again
+    untemplated(monkeypatch)
+    traced = jf.minimise(lambda y, a: F.rosenbrock(y), SOLVERS[name](), bounds, key=1,
+                         compiler_options=options)
+    same(filled, traced)
+
+
+def test_pytree_bounds_args_and_start_in_float64(monkeypatch):
+    def fn(y, a):
+        return jnp.sum((y["a"] - a) ** 2) + jnp.sum(jnp.cos(y["b"]) * y["b"] ** 2)
+
+    bounds = ({"a": -np.ones(3), "b": -np.ones((2, 2))}, {"a": np.ones(3), "b": np.ones((2, 2))})
+    y0 = {"a": np.zeros(3), "b": np.full((2, 2), 0.5)}
+    args = np.array([0.1, -0.2, 0.3])
+    with jax.enable_x64(True):
+        runs = [jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=args, key=2, y0=y0,
+                            compiler_options="full")]
+        assert template._PROGRAMS.get(fn), "the template served this run"
+        untemplated(monkeypatch)
+        runs.append(jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=args, key=2, y0=y0,
+                                compiler_options="full"))
+    assert runs[0].f.dtype == np.float64
+    same(*runs)
+
+
+def test_second_call_of_an_objective_compiles_nothing():
+    compiled = []
+
+    def listen(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(kw.get("fun_name"))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        bounds = F.get("rastrigin").bounds(2, np.float32)
+        fn = lambda y, a: F.rastrigin(y)
+        first = jf.minimise(fn, SOLVERS["pso_nm"](), bounds, key=0)
+        n = len(compiled)
+        again = jf.minimise(fn, SOLVERS["pso_nm"](), bounds, key=0)
+        assert len(compiled) == n
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    same(first, again)
+
+
+def test_where_the_template_cannot_serve_the_usual_trace_runs():
+    bounds = F.get("sphere").bounds(2, np.float32)
+    # a Python number in args (static in a trace), and a weakly typed output
+    scaled = jf.minimise(lambda y, a: a * F.sphere(y), SOLVERS["pso"](), bounds, args=2.0, key=0)
+    weak = jf.minimise(lambda y, a: 1.0, SOLVERS["pso"](), bounds, key=0)
+    np.testing.assert_allclose(float(scaled.f), 2.0 * float(F.sphere(scaled.value)), rtol=1e-6)
+    assert float(weak.f) == 1.0
