@@ -1,5 +1,8 @@
 """The default search's screening stage (jaxfric/motion/_pipeline.py): the screen's spread
-returns close after a number of widenings (MotionSearch.screen_cycle)."""
+returns close after a number of widenings (MotionSearch.screen_cycle); the slow-attraction
+starts (MotionSearch.slow_starts, motion._baseline.slow_attraction_grid)."""
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -68,3 +71,136 @@ def test_the_screen_cycle_setting_is_checked():
     for bad in (MotionSearch(screen_cycle=-1), MotionSearch(screen_cycle=True), MotionSearch(screen_cycle=1.5)):
         with pytest.raises(ValueError, match="MotionSearch"):
             bad.check()
+
+
+def test_the_slow_attraction_grid_changes_only_stiffness_attraction_rate_and_peak():
+    """GMS: 27 variants of the start, each coordinate log10_k*, log10_C, Fs_over_Fc on its
+    grid fraction of the box, every other coordinate (and the mechanics) left as it was;
+    a model without an attraction rate gets none."""
+    from jaxfric import models
+    from jaxfric.motion._baseline import SLOW_GRID, slow_attraction_grid
+
+    model = models.GMS(num_elements=3)
+    names = model.param_names
+    n = model.num_params
+    rng = np.random.default_rng(0)
+    lo = np.concatenate([-rng.uniform(1, 2, n), [1.0, -5.0]])
+    hi = np.concatenate([rng.uniform(1, 2, n), [2.0, 5.0]])
+    start = rng.uniform(lo, hi)
+    grid = np.array(slow_attraction_grid(model, start, lo, hi))
+    assert grid.shape == (27, n + 2)
+    k = [names.index(f"log10_k{i}") for i in (1, 2, 3)]
+    c, r = names.index("log10_C"), names.index("Fs_over_Fc")
+    other = [i for i in range(n + 2) if i not in (*k, c, r)]
+    np.testing.assert_array_equal(grid[:, other], np.broadcast_to(start[other], (27, len(other))))
+    frac = (grid - lo) / (hi - lo)
+    np.testing.assert_allclose(frac[:, k], np.repeat(frac[:, k[:1]], 3, axis=1), rtol=0, atol=1e-12)
+    got = {(round(a, 9), round(b, 9), round(d, 9)) for a, b, d in frac[:, [k[0], c, r]]}
+    want = {(round(a, 9), round(b, 9), round(d, 9)) for a in SLOW_GRID["k"] for b in SLOW_GRID["C"]
+            for d in SLOW_GRID["Fs_over_Fc"]}
+    assert got == want
+    for other_model in (models.LuGre(), models.Coulomb(), models.Stribeck()):
+        m = other_model.num_params
+        assert slow_attraction_grid(other_model, np.zeros(m + 2), -np.ones(m + 2), np.ones(m + 2)) == []
+    assert slow_attraction_grid(model, None, lo, hi) == []
+
+
+def test_the_slow_starts_are_the_grids_points_of_lowest_whole_cost():
+    """grid_ranked ranks the grid by the cost itself (the rough bowl, recomputed in NumPy)."""
+    from jaxfric.motion._pipeline import grid_ranked
+
+    data = (jnp.array([1.0, -0.5]), 0.3, 15.0)
+    pool = np.random.default_rng(4).uniform(-2, 2, (9, 2))
+    ref = np.sum((pool - [1.0, -0.5]) ** 2 + 0.09 * np.sin(15.0 * pool) ** 2, axis=1)
+    lo, hi = np.array([-4.0, -4.0]), np.array([4.0, 4.0])
+    with jax.enable_x64(True):
+        stages, clock = [], _Clock(MotionBudget())
+        got = grid_ranked(MotionSearch(slow_starts=3), clock, _rough, data, list(pool), lo, hi, jnp.float64,
+                          stages)
+    np.testing.assert_array_equal(np.array(got), pool[np.argsort(ref)[:3]])
+    assert stages[0]["stage"] == "rank_slow" and stages[0]["J"] == pytest.approx(ref.min(), rel=1e-12)
+    assert clock.evals == 9
+
+
+def _rough_total(y, data):
+    return jnp.sum(_rough(y, data) ** 2)
+
+
+def test_the_slow_starts_run_the_free_run_stages_only():
+    """run_search: the swarm's and the caller's starts run every stage (shooting, then free
+    run), the grid's only the free run; the winner is the lowest end of all."""
+    from jaxfric.motion._pipeline import run_search, start_costs
+
+    data = (jnp.array([1.0, -0.5]), 0.3, 15.0)
+    lo, hi = np.array([-4.0, -4.0]), np.array([4.0, 4.0])
+    grid = [np.array([1.0, -0.5]) + d for d in ([0.02, 0.01], [2.0, 2.0], [-3.0, 1.0])]
+    search = MotionSearch(particles=6, generations=3, horizons=(300, None), steps=(5, 5), starts=2,
+                          slow_starts=2)
+    with jax.enable_x64(True):
+        y, stages, stopped = run_search(search, MotionBudget(), _rough, _rough_total, lo, hi, global_data=data,
+                                        stage_data=lambda h: data, key=jax.random.key(0), dtype=jnp.float64,
+                                        extra_starts=[np.array([3.0, 3.0])], grid_starts=grid)
+    assert stopped is None
+    ran = {}
+    for s in stages:
+        if s["start"] is not None:
+            ran.setdefault(s["start"], []).append(s["stage"])
+    last = max(ran)
+    assert [ran[i] for i in (last - 1, last)] == [["free_run"], ["free_run"]]
+    assert all(ran[i] == ["shooting_300", "free_run"] for i in range(last - 1))
+    assert "rank_slow" in [s["stage"] for s in stages]
+    best = start_costs(stages)[0]
+    assert best["start"] in (last - 1, last)  # the grid point beside the bowl's minimum wins
+    assert float(np.sum(np.asarray(_rough(jnp.asarray(y), data)) ** 2)) == pytest.approx(best["J"], rel=1e-6)
+    plain = dataclasses.replace(search, slow_starts=0)
+    with jax.enable_x64(True):
+        _, stages0, _ = run_search(plain, MotionBudget(), _rough, _rough_total, lo, hi, global_data=data,
+                                   stage_data=lambda h: data, key=jax.random.key(0), dtype=jnp.float64,
+                                   extra_starts=[np.array([3.0, 3.0])], grid_starts=grid)
+    assert "rank_slow" not in [s["stage"] for s in stages0]
+    assert max(s["start"] for s in stages0 if s["start"] is not None) == last - 2
+
+
+def test_the_slow_starts_setting_is_checked():
+    for bad in (MotionSearch(slow_starts=-1), MotionSearch(slow_starts=True), MotionSearch(slow_starts=1.5)):
+        with pytest.raises(ValueError, match="MotionSearch"):
+            bad.check()
+
+
+def test_identify_motion_passes_the_grid_to_gms_only():
+    """identify_motion: a GMS fit with slow_starts=2 ranks the grid and runs 2 more starts on
+    the free run only; a LuGre fit with the same search gets no grid (its search unchanged:
+    the same stages and the same parameters as with slow_starts=0)."""
+    import warnings
+
+    from jaxfric import models
+    from jaxfric.motion import (
+        MotionData,
+        friction_step,
+        identify_motion,
+        simulate_motion,
+    )
+
+    n, dt = 800, 1e-3
+    t = np.arange(n) * dt
+    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
+    truth = models.Coulomb(v_eps=1e-3)
+    with jax.enable_x64(True):
+        out = simulate_motion(friction_step(truth), jnp.asarray(truth.from_physical(Fc=8.0, sigma2=20.0), jnp.float64),
+                              2.5, u - 3.0, dt, 0.0, 0.0)
+    rec = MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    search = MotionSearch(particles=4, generations=2, horizons=(200, None), steps=(3, 3), starts=1,
+                          least_squares_start=True, slow_starts=2)
+    fits = {}
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, s in (("gms", search), ("lugre", search), ("lugre0", dataclasses.replace(search, slow_starts=0))):
+            fits[name] = identify_motion(name.rstrip("0"), rec, key=0, mass=(1.0, 5.0), fit_offset=True, train=1.0,
+                                         search=s, dtype=jnp.float64)
+    gms = [(s["stage"], s["start"]) for s in fits["gms"].stages]
+    assert ("rank_slow", None) in gms
+    assert [st for st, i in gms if i in (2, 3)] == ["free_run", "free_run"]
+    assert [st for st, i in gms if i in (0, 1)] == ["shooting_200", "free_run"] * 2
+    assert [s["stage"] for s in fits["lugre"].stages] == [s["stage"] for s in fits["lugre0"].stages]
+    assert "rank_slow" not in [s["stage"] for s in fits["lugre"].stages]
+    np.testing.assert_array_equal(fits["lugre"].theta, fits["lugre0"].theta)

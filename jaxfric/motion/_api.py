@@ -37,7 +37,7 @@ from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, che
                        same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import assess_fit
-from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start
+from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start, slow_attraction_grid
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
 from ._lm import _res_jit
@@ -760,16 +760,18 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
                 y = np.asarray(sol.value)
                 stages = solver_stages(sol, solver)
             else:
-                extra, y0, before = [], None, []
+                extra, y0, before, grid = [], None, [], []
                 if search.least_squares_start and not legacy_cost:
                     start = least_squares_start(model, est, vt, box, layout, lower, upper)
                     extra = [] if start is None else [start]
+                    if search.slow_starts:
+                        grid = slow_attraction_grid(model, start, lower, upper)
                 if isinstance(model, GreyBox):  # from its physical model's fit, correction off
                     y0, before = _greybox_start(model, box, lower, upper, physical_options)
                 y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
                                                 global_data=glob, stage_data=stage_data,
                                                 key=key, dtype=dtype, progress=progress,
-                                                y0=y0, extra_starts=extra)
+                                                y0=y0, extra_starts=extra, grid_starts=grid)
                 stages = before + stages
         y = np.asarray(y, np.float64)
         j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)

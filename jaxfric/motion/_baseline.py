@@ -12,13 +12,15 @@ start of the search that does not depend on the key.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..models import AbstractPhysicalModel, Coulomb
 from ..pipeline import BASELINE_LABEL
 from ..rig.emps import IDIMResult, idim_ls
 
-__all__ = ["BASELINE_LABEL", "baseline_model", "least_squares", "least_squares_start"]
+__all__ = ["BASELINE_LABEL", "baseline_model", "least_squares", "least_squares_start", "slow_attraction_grid"]
 
 #: Samples dropped at each end of a record: the zero-phase filter's edges.
 EDGE = 20
@@ -58,3 +60,38 @@ def least_squares_start(model, est: IDIMResult, velocity, box, layout, lower, up
     if layout.fit_v0:
         y.append(0.0)
     return np.clip(np.asarray(y, np.float64), lower, upper)
+
+
+#: The grid of `slow_attraction_grid`, as fractions of each coordinate's search range: the
+#: element stiffnesses (all alike), the attraction rate ``log10 C``, and ``Fs/Fc``.
+SLOW_GRID = {"k": (0.1, 0.2, 0.3), "C": (0.002, 0.02, 0.1), "Fs_over_Fc": (0.05, 0.25, 0.5)}
+
+
+def slow_attraction_grid(model, start, lower, upper) -> list:
+    """Variants of the least-squares start ``start`` (a search vector) for a model with
+    Maxwell-slip elements and an attraction rate (coordinates ``log10_k*`` and ``log10_C``:
+    [`GMS`][jaxfric.models.GMS]): every element stiffness, ``log10 C`` and ``Fs/Fc`` set on the
+    grid `SLOW_GRID` (fractions of their ranges in ``[lower, upper]``: soft elements, slow
+    attraction near the floor of ``C``, a weak Stribeck peak), 27 points; ``[]`` for any other
+    model. The swarm's short windows cannot see a slow attraction (its time constant is
+    seconds at the floor of ``C``), and Levenberg-Marquardt on 5 000-sample shooting segments
+    pulls a point out of that basin (docs/motion.md): these starts run on the free run only."""
+    names = getattr(model, "param_names", ())
+    k = [i for i, n in enumerate(names) if re.fullmatch(r"log10_k\d+", n)]
+    c = [i for i, n in enumerate(names) if n.startswith("log10_C")]
+    r = [i for i, n in enumerate(names) if n.startswith("Fs_over_Fc")]
+    if start is None or not k or not c:
+        return []
+    start = np.asarray(start, np.float64)
+    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    out = []
+    for qk in SLOW_GRID["k"]:
+        for qc in SLOW_GRID["C"]:
+            for qr in SLOW_GRID["Fs_over_Fc"] if r else (None,):
+                y = start.copy()
+                y[k] = lo[k] + qk * (hi[k] - lo[k])
+                y[c] = lo[c] + qc * (hi[c] - lo[c])
+                if qr is not None:
+                    y[r] = lo[r] + qr * (hi[r] - lo[r])
+                out.append(y)
+    return out

@@ -24,8 +24,11 @@ default pipeline therefore grows the simulation horizon:
 4. **several starts** — stages 2–3 run from ``starts`` points: the swarm's best
    distinct personal bests, ``free_run_starts`` more of the swarm's points ranked by their
    whole free-run cost (`free_run_ranked`: the window cost put a point first whose free
-   run drifted), and the deterministic starts the caller adds (the least-squares
-   Coulomb + viscous + offset solution, `._baseline`); the start whose final cost is
+   run drifted), the deterministic starts the caller adds (the least-squares
+   Coulomb + viscous + offset solution, `._baseline`) and, for a model with an attraction
+   rate (GMS), ``slow_starts`` points of a grid around that solution with soft elements and
+   a slow attraction (`._baseline.slow_attraction_grid`, ranked by `grid_ranked`), which run
+   the free-run stage only; the start whose final cost is
    lowest wins, and ``polish`` more free-run steps continue from it
    (``benchmarks/results/motion_keys.md``);
 5. **screening** — ``screen`` rounds around the best point (`screen_free_run`): the
@@ -102,6 +105,13 @@ class MotionSearch(eqx.Module):
             screen's spread returns to ``screen_spread`` instead of growing 4x again (0, the
             class default: it keeps growing, up to a quarter of the box; `default_search` uses
             4 for physical models; why: docs/motion.md).
+        slow_starts: more starts for models with an attraction rate (GMS): the ``slow_starts``
+            lowest, by their whole free-run cost (one vectorised call), of the 27 variants of
+            the least-squares start with soft elements and a slow attraction
+            (`._baseline.slow_attraction_grid`), distinct from each other; each runs only the
+            free-run stages of ``horizons`` (the shooting segments pull a point out of that
+            basin; docs/motion.md). 0 (the class default): none; `default_search` uses 3 for
+            physical models (the grid is empty for a model without an attraction rate).
     """
 
     particles: int = eqx.field(default=25, static=True)
@@ -120,6 +130,7 @@ class MotionSearch(eqx.Module):
     screen_spread: float = eqx.field(default=0.1, static=True)
     free_run_starts: int = eqx.field(default=0, static=True)
     screen_cycle: int = eqx.field(default=0, static=True)
+    slow_starts: int = eqx.field(default=0, static=True)
 
     def check(self) -> None:
         for name, least in (("particles", 2), ("generations", 1), ("global_window", 2), ("starts", 1)):
@@ -153,6 +164,8 @@ class MotionSearch(eqx.Module):
                              f"{self.free_run_starts!r}")
         if isinstance(self.screen_cycle, bool) or not isinstance(self.screen_cycle, int) or self.screen_cycle < 0:
             raise ValueError(f"MotionSearch.screen_cycle must be a non-negative integer, got {self.screen_cycle!r}")
+        if isinstance(self.slow_starts, bool) or not isinstance(self.slow_starts, int) or self.slow_starts < 0:
+            raise ValueError(f"MotionSearch.slow_starts must be a non-negative integer, got {self.slow_starts!r}")
         if self.starts > self.particles:
             raise ValueError(f"MotionSearch.starts ({self.starts}) cannot exceed particles ({self.particles})")
 
@@ -168,7 +181,8 @@ def default_search(model) -> MotionSearch:
     Physical models (a dozen parameters at most): Levenberg–Marquardt on 5 000-sample
     segments (at most 60 steps), then on the free run of each whole training record (at
     most 100 steps), from 3 of the swarm's personal bests, 2 more of its points ranked by
-    their whole free-run cost (`free_run_ranked`) and the least-squares start; the lowest
+    their whole free-run cost (`free_run_ranked`), the least-squares start and, for GMS, 3
+    slow-attraction starts on the free run only (`grid_ranked`); the lowest
     training free-run cost wins, up to 200 more free-run steps polish it, and 16 rounds of
     screening (`screen_free_run`, its spread back to the first after 4 fruitless widenings) follow (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
     parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
@@ -185,7 +199,7 @@ def default_search(model) -> MotionSearch:
     if model.num_params > NETWORK_PARAMS:
         return MotionSearch(horizons=(1000, 5000), steps=(60, 150))
     return MotionSearch(horizons=(5000, None), steps=(60, 100), starts=3, least_squares_start=True, polish=200,
-                        screen=16, free_run_starts=2, screen_cycle=4)
+                        screen=16, free_run_starts=2, screen_cycle=4, slow_starts=3)
 
 
 @dataclasses.dataclass
@@ -351,6 +365,21 @@ def free_run_ranked(search: MotionSearch, clock, solver, sol, residuals, data, t
     return kept
 
 
+def grid_ranked(search: MotionSearch, clock, residuals, data, grid, lower, upper, dtype, stages) -> list:
+    """The ``search.slow_starts`` points of ``grid`` (clipped into the box) with the lowest
+    whole free-run cost (one vectorised call), lowest first and distinct (`distinct_starts`);
+    appends a ``"rank_slow"`` stage."""
+    t = time.perf_counter()
+    pool = np.clip(np.asarray(grid, np.float64), lower, upper)
+    J = np.asarray(_sumsq_batch_jit(residuals, jnp.asarray(pool, dtype), data), np.float64)
+    clock.evals += pool.shape[0]
+    kept = distinct_starts(pool, J, search.slow_starts, lower, upper)
+    stages.append({"stage": "rank_slow", "start": None, "J": float(np.min(np.where(np.isfinite(J), J, np.inf))),
+                   "num_evals": pool.shape[0], "num_steps": 0, "seconds": time.perf_counter() - t,
+                   "reason": "done"})
+    return kept
+
+
 def start_costs(stages) -> list:
     """Each start's final cost from run_search's ``stages``: ``[{"start": i, "J": J}]``
     (the cost of the last Levenberg–Marquardt stage the start ran), best first."""
@@ -362,15 +391,17 @@ def start_costs(stages) -> list:
 
 
 def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost, lower, upper, *,
-               global_data, stage_data, key, dtype, progress=None, y0=None, extra_starts=()):
+               global_data, stage_data, key, dtype, progress=None, y0=None, extra_starts=(), grid_starts=()):
     """Run the stages (module docstring; ``stage_data(horizon)``: the cost's data for one
     horizon) and return ``(y, stages, stopped)``: the best search vector, one dict per stage
     (``stage``, ``start``, ``J``, ``num_evals``, ``num_steps``, ``seconds``, ``reason``) and
     why the budget ended the run (``None`` when it did not).
 
     Starts: ``y0`` alone when given; otherwise ``search.starts`` distinct personal bests of
-    the swarm, then ``extra_starts`` (clipped into the box). Each start runs every
-    Levenberg–Marquardt stage; the one whose last stage ends lowest is returned."""
+    the swarm, then ``extra_starts`` (clipped into the box), then the ``search.slow_starts``
+    lowest of ``grid_starts`` by their whole free-run cost (`grid_ranked`), which run the
+    free-run stages only. Each start runs every Levenberg–Marquardt stage; the one whose
+    last stage ends lowest is returned."""
     clock = _Clock(budget)
     stages = []
     lower = np.asarray(lower, np.float64)
@@ -405,12 +436,17 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
             starts += free_run_ranked(search, clock, solver, sol, residuals, stage_data(None), starts, lower,
                                       upper, dtype, stages)
         starts += [np.clip(np.asarray(y, np.float64), lower, upper) for y in extra_starts]
+    free_only = len(starts)  # starts from this index on run the free-run stages only
+    left = clock.left()
+    if y0 is None and search.slow_starts and len(grid_starts) and not clock.out_of_time() \
+            and (left is None or left >= len(grid_starts)):
+        starts += grid_ranked(search, clock, residuals, stage_data(None), grid_starts, lower, upper, dtype, stages)
     plan = [(("free_run" if h is None else f"shooting_{h}"), stage_data(h), k)
             for h, k in zip(search.horizons, search.steps) if k > 0]
     y_best, f_best = starts[0], np.inf
     for index, y in enumerate(starts):
         f_end = np.inf
-        for name, data, steps in plan:
+        for name, data, steps in (plan if index < free_only else [p for p in plan if p[0] == "free_run"]):
             if clock.out_of_time():
                 clock.stopped = "max_time"
                 break
