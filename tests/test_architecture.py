@@ -67,7 +67,7 @@ def test_imports_go_down():
 OPTIM_ORDER = ["rng", "progress", "sharding", "checkpoint", "_base", "rounds", "contract",
                "problem", "loop",
                "swarm", "nelder_mead", "pso", "mapso", "optx_adapter", "asktell", "chained",
-               "hybrid", "evosax_adapter", "driver", "__init__"]
+               "hybrid", "evosax_adapter", "template", "driver", "__init__"]
 
 
 def _imported_modules(path: Path, package: str):
