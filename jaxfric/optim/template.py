@@ -74,22 +74,33 @@ def _stand_in(out_dtype, shapes):
 
 
 # -------------------------------------------------------------------- filling in
-def _objective_eqn(fn, y_tree, args_tree, eqn):
-    """A ``jit`` equation of ``fn`` vmapped as the stand-in ``eqn`` is, on its operands."""
+def _objective_eqn(fn, y_tree, args_tree, eqn, singles):
+    """A ``jit`` equation of ``fn`` vmapped as the stand-in ``eqn`` is, on its operands.
+    ``singles``: the objective's jaxpr on one point, traced once per call of `templated`
+    and vmapped from there for each batch shape (the operations ``vmap`` of ``fn`` binds)."""
     p = eqn.params
     num_y = p["num_y"]
     avals = [v.aval for v in eqn.invars]
     depth = avals[0].ndim - len(p["shapes"][0])
+    point = [jax.ShapeDtypeStruct(a.shape[depth:] if i < num_y else a.shape, a.dtype,
+                                  weak_type=a.weak_type) for i, a in enumerate(avals)]
+    known = tuple((s.shape, str(s.dtype), s.weak_type) for s in point)
+    if known not in singles:
+        def one(*leaves):
+            y = jtu.tree_unflatten(y_tree, leaves[:num_y])
+            args = jtu.tree_unflatten(args_tree, leaves[num_y:])
+            return fn(y, args)
 
-    def one(*leaves):
-        y = jtu.tree_unflatten(y_tree, leaves[:num_y])
-        args = jtu.tree_unflatten(args_tree, leaves[num_y:])
-        return fn(y, args)
+        singles[known] = jax.make_jaxpr(one)(*point)
+    run = jaxpr_as_fun(singles[known])
+
+    def batched(*leaves):
+        return run(*leaves)[0]
 
     for _ in range(depth):
-        one = jax.vmap(one, in_axes=(0,) * num_y + (None,) * (len(avals) - num_y))
+        batched = jax.vmap(batched, in_axes=(0,) * num_y + (None,) * (len(avals) - num_y))
     spec = [jax.ShapeDtypeStruct(a.shape, a.dtype, weak_type=a.weak_type) for a in avals]
-    closed = jax.make_jaxpr(lambda *v: jax.jit(one, keep_unused=True)(*v))(*spec)
+    closed = jax.make_jaxpr(lambda *v: jax.jit(batched, keep_unused=True)(*v))(*spec)
     if closed.consts or len(closed.jaxpr.eqns) != 1 or closed.jaxpr.effects:
         raise _Unsupported("the objective is not one pure call")
     call = closed.jaxpr.eqns[0]
@@ -218,12 +229,12 @@ def templated(chunk, free: bool, flat, out_type, options, fallback, traced):
         if not all(eqx.is_array(a) for a in args_leaves):
             raise _Unsupported("args holds values that are not arrays (static in a trace)")
 
-        made = {}
+        made, singles = {}, {}
 
-        def make(eqn):  # one trace of the objective per batch shape
+        def make(eqn):  # one equation per batch shape
             sig = (tuple(v.aval for v in eqn.invars), tuple(sorted(eqn.params.items())))
             if sig not in made:
-                made[sig] = _objective_eqn(flat.fn, flat.treedef, args_tree, eqn)
+                made[sig] = _objective_eqn(flat.fn, flat.treedef, args_tree, eqn, singles)
             return made[sig].replace(invars=list(eqn.invars), outvars=list(eqn.outvars))
 
         filled = ClosedJaxpr(_fill(closed.jaxpr, make), closed.consts)
