@@ -116,11 +116,15 @@ def run_cache_size():
     program every call runs, with the default ``compiler_options``): a test counts
     recompilations with it."""
     from jaxfric import _xla
+    from jaxfric.optim import template
     from jaxfric.optim.loop import _chunk
 
     def size():  # "auto" picks one of two option sets by the run's work: both counted
-        return sum(_xla.filter_jit(_chunk, _xla.resolve("auto", "solver", work=w))._cached._cache_size()
-                   for w in (0.0, None))
+        traced = sum(_xla.filter_jit(_chunk, _xla.resolve("auto", "solver", work=w))._cached._cache_size()
+                     for w in (0.0, None))
+        # and the programs filled in from a template (jaxfric.optim.template), per objective
+        return traced + sum(program._cache_size() for per_fn in list(template._PROGRAMS.values())
+                            for program, _, _ in per_fn.values())
 
     return size
 
