@@ -372,19 +372,17 @@ fit_offset=True, dtype=float64)` with the default search (docs/motion.md: PSO on
 Levenberg-Marquardt on 5 000-sample shooting segments and on the whole free run, from 3 of the
 swarm's personal bests, 2 more of its points ranked by their whole free-run cost and the
 least-squares start, for GMS 3 slow-attraction starts on the free run alone (the least-squares
-start with soft elements and log10 C near its floor, the 3 lowest of a 27-point grid), a
-200-step polish of the lowest, then 16 rounds of screening: 64 whole
-free-run costs around the best point per round, Levenberg-Marquardt from the lowest, the spread
-back to the first after 4 fruitless widenings). Member i
-is the fit of key i. "whole
-file": trained on all 24 841 samples of DATA_EMPS.mat, training free-run RMSE [mm] from the
-first sample; "80 % / tail": trained on the first 19 873 samples, "tail" = the held-back last
-20 %, free run from the state at its start (the same excitation as the training part: it is
-not a score on new motion). Spread = max/min - 1 over the keys. Ensemble = the average of the
-kept members' trajectories (members with a training RMSE above 1.5x the best are dropped).
-Baseline = least-squares Coulomb + viscous + offset (IDIM-LS on the training part) simulated
-the same way. seconds_per_key: wall time of the call / K, compilation included, on the shared
-2-core machine (load in the file's header)."""
+start with soft elements and log10 C near its floor, the 3 lowest of a 27-point grid), a 200-step
+polish of the lowest, then 16 rounds of screening: 64 whole free-run costs around the best point
+per round, Levenberg-Marquardt from the lowest, the spread back to the first after 4 fruitless
+widenings). Member i is the fit of key i. "whole file": trained on all 24 841 samples of
+DATA_EMPS.mat, training free-run RMSE [mm] from the first sample; "80 % / tail": trained on the first
+19 873 samples, "tail" = the held-back last 20 %, free run from the state at its start (the same
+excitation as the training part: it is not a score on new motion). Spread = max/min - 1 over the
+keys. Ensemble = the average of the kept members' trajectories (members with a training RMSE above
+1.5x the best are dropped). Baseline = least-squares Coulomb + viscous + offset (IDIM-LS on the
+training part) simulated the same way. seconds_per_key: wall time of the call / K, compilation
+included, on the shared 2-core machine (load in the file's header)."""
 
 
 def main(argv=None):
