@@ -72,7 +72,7 @@ CANDIDATES = {**{m: (m, None) for m in ("stribeck", "lugre", "gms")}, "elman": (
 EMPS_CANDIDATES = {m: (m, None) for m in ("coulomb", "stribeck", "lugre", "gms")}
 PNEUMATIC_CANDIDATES = ("stribeck", "lugre", "gms", "cylinder")
 BASE = "baseline"
-CRITERIA = ("tail", "blocked", "short", "spread", "bic")
+CRITERIA = ("tail", "blocked", "short", "spread", "bic", "gated")
 #: The short-runs criterion at other window lengths [s], from saved fits (``--rescore``).
 WIDTHS = (0.5, 1.0, 4.0, 8.0)
 #: Pseudo-candidates: the candidates' predictions averaged (`average_weights`; module docstring).
@@ -202,7 +202,7 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
     done = {k: v for k, v in by_key.items() if any(r["model"] == BASE for r in v)}
     for rs in done.values():  # short among the models whose blocked cross-validation beats the baseline's
         b = next(float(r["blocked"]) for r in rs if r["model"] == BASE)
-        rs[:] = [{**r, "short_gated": r["short"] if r["model"] == BASE or float(r["blocked"]) < b else math.inf} for r in rs]
+        rs[:] = [{**r, "gated": r["short"] if r["model"] == BASE or float(r["blocked"]) < b else math.inf} for r in rs]
     choices, judges = [], []
     extra = sorted({c for rs in done.values() for r in rs for c in r if c.startswith("short_")},
                    key=lambda c: (not c[6:].isdigit(), int(c[6:]) if c[6:].isdigit() else 0, c))
