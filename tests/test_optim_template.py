@@ -41,8 +41,9 @@ SOLVERS = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(SOLVERS))
-@pytest.mark.parametrize("options", ["full", "auto"])
+# every solver at "auto" (level 0 here: cheap to compile); the two chains at full optimisation too
+@pytest.mark.parametrize("name,options", [(name, "auto") for name in sorted(SOLVERS)]
+                         + [("mapso_nmds", "full"), ("pso_nm", "full")])
 def test_filled_in_objective_gives_the_traced_programs_result(name, options, monkeypatch):
     bounds = F.get("rosenbrock").bounds(3, np.float32)
     jf.minimise(lambda y, a: F.sphere(y), SOLVERS[name](), bounds, key=0,
