@@ -360,7 +360,9 @@ show(fig, comparison="motion, held-back tail")
 #
 # `compare_motion` fits several models on the same data and ranks them by a judge, here the
 # error on the held-back tail (`judge="tail"`; the default judges many short free runs); a
-# richer model that predicts worse than a simpler one raises an `OverfitWarning`. Both models
+# richer model that predicts worse than a simpler one raises an `OverfitWarning`. The tail shares
+# the record's excitation: it ranks the models on motion like the training part, not on new
+# motion (docs/motion.md measures the judges on new excitation). Both models
 # here are symmetric with a fitted offset, the form these data need. A difference smaller than the position noise cannot be told apart from it, so the cell
 # picks the simplest model within that margin of the best, and says which.
 
