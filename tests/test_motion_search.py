@@ -204,3 +204,16 @@ def test_identify_motion_passes_the_grid_to_gms_only():
     assert [s["stage"] for s in fits["lugre"].stages] == [s["stage"] for s in fits["lugre0"].stages]
     assert "rank_slow" not in [s["stage"] for s in fits["lugre"].stages]
     np.testing.assert_array_equal(fits["lugre"].theta, fits["lugre0"].theta)
+
+
+def test_the_default_search_has_no_slow_attraction_starts():
+    """The slow-attraction starts lower GMS's training cost and raise its error on new
+    excitation (docs/motion.md, "Deeper on training, worse on new motion"): off by default,
+    for GMS as for every physical model; the screen stays."""
+    from jaxfric import models
+    from jaxfric.motion import default_search
+
+    for model in (models.GMS(), models.LuGre(), models.Stribeck()):
+        search = default_search(model)
+        assert search.slow_starts == 0
+        assert search.screen == 16 and search.least_squares_start

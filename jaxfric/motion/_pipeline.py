@@ -25,10 +25,11 @@ default pipeline therefore grows the simulation horizon:
    distinct personal bests, ``free_run_starts`` more of the swarm's points ranked by their
    whole free-run cost (`free_run_ranked`: the window cost put a point first whose free
    run drifted), the deterministic starts the caller adds (the least-squares
-   Coulomb + viscous + offset solution, `._baseline`) and, for a model with an attraction
-   rate (GMS), ``slow_starts`` points of a grid around that solution with soft elements and
-   a slow attraction (`._baseline.slow_attraction_grid`, ranked by `grid_ranked`), which run
-   the free-run stage only; the start whose final cost is
+   Coulomb + viscous + offset solution, `._baseline`) and, when asked for a model with an
+   attraction rate (GMS), ``slow_starts`` points of a grid around that solution with soft
+   elements and a slow attraction (`._baseline.slow_attraction_grid`, ranked by
+   `grid_ranked`), which run the free-run stage only (off by default: they lower GMS's
+   training cost and raise its error on new excitation, docs/motion.md); the start whose final cost is
    lowest wins, and ``polish`` more free-run steps continue from it
    (``benchmarks/results/motion_keys.md``);
 5. **screening** — ``screen`` rounds around the best point (`screen_free_run`): the
@@ -110,8 +111,12 @@ class MotionSearch(eqx.Module):
             the least-squares start with soft elements and a slow attraction
             (`._baseline.slow_attraction_grid`), distinct from each other; each runs only the
             free-run stages of ``horizons`` (the shooting segments pull a point out of that
-            basin; docs/motion.md). 0 (the class default): none; `default_search` uses 3 for
-            physical models (the grid is empty for a model without an attraction rate).
+            basin; docs/motion.md). 0 (the default, also `default_search`'s): none. With 3,
+            GMS's training free run on the EMPS file fell (mean over keys 0-4 2.07 -> 1.79 mm)
+            and its error on excitation it never saw rose (rig proxy mean 6.45 -> 9.45 mm,
+            EMPS blocks 3.93 -> 5.97 mm; docs/motion.md, "Deeper on training, worse on new
+            motion"): a slow attraction fits the training record's drift. The grid is empty
+            for a model without an attraction rate.
     """
 
     particles: int = eqx.field(default=25, static=True)
@@ -181,8 +186,8 @@ def default_search(model) -> MotionSearch:
     Physical models (a dozen parameters at most): Levenberg–Marquardt on 5 000-sample
     segments (at most 60 steps), then on the free run of each whole training record (at
     most 100 steps), from 3 of the swarm's personal bests, 2 more of its points ranked by
-    their whole free-run cost (`free_run_ranked`), the least-squares start and, for GMS, 3
-    slow-attraction starts on the free run only (`grid_ranked`); the lowest
+    their whole free-run cost (`free_run_ranked`) and the least-squares start (no
+    slow-attraction starts: `MotionSearch.slow_starts`); the lowest
     training free-run cost wins, up to 200 more free-run steps polish it, and 16 rounds of
     screening (`screen_free_run`, its spread back to the first after 4 fruitless widenings) follow (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
     parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
@@ -199,7 +204,7 @@ def default_search(model) -> MotionSearch:
     if model.num_params > NETWORK_PARAMS:
         return MotionSearch(horizons=(1000, 5000), steps=(60, 150))
     return MotionSearch(horizons=(5000, None), steps=(60, 100), starts=3, least_squares_start=True, polish=200,
-                        screen=16, free_run_starts=2, screen_cycle=4, slow_starts=3)
+                        screen=16, free_run_starts=2, screen_cycle=4)
 
 
 @dataclasses.dataclass
