@@ -113,9 +113,10 @@ class MotionSearch(eqx.Module):
             free-run stages of ``horizons`` (the shooting segments pull a point out of that
             basin; docs/motion.md). 0 (the default, also `default_search`'s): none. With 3,
             GMS's training free run on the EMPS file fell (mean over keys 0-4 2.07 -> 1.79 mm)
-            and its error on excitation it never saw rose (rig proxy mean 6.45 -> 9.45 mm,
-            EMPS blocks 3.93 -> 5.97 mm; docs/motion.md, "Deeper on training, worse on new
-            motion"): a slow attraction fits the training record's drift. The grid is empty
+            and its error on excitation it never saw rose (keys 0-4, mean: rig proxy 7.22 ->
+            9.46 mm, EMPS blocks 4.58 -> 5.97 mm; no key lower on EMPS, one on the rig;
+            docs/motion.md, "Deeper on training, worse on new motion"): a slow attraction
+            fits the training record's drift. The grid is empty
             for a model without an attraction rate.
     """
 
