@@ -371,8 +371,7 @@ KEYS_NOTE = """Every row: `identify_motion(model, data, keys=[key(0), ..., key(K
 fit_offset=True, dtype=float64)` with the default search (docs/motion.md: PSO on windows, then
 Levenberg-Marquardt on 5 000-sample shooting segments and on the whole free run, from 3 of the
 swarm's personal bests, 2 more of its points ranked by their whole free-run cost and the
-least-squares start, for GMS 3 slow-attraction starts on the free run alone (the least-squares
-start with soft elements and log10 C near its floor, the 3 lowest of a 27-point grid), a 200-step
+least-squares start (no slow-attraction starts: `MotionSearch.slow_starts=0`), a 200-step
 polish of the lowest, then 16 rounds of screening: 64 whole free-run costs around the best point
 per round, Levenberg-Marquardt from the lowest, the spread back to the first after 4 fruitless
 widenings). Member i is the fit of key i. "whole file": trained on all 24 841 samples of
