@@ -217,3 +217,35 @@ def test_the_default_search_has_no_slow_attraction_starts():
         search = default_search(model)
         assert search.slow_starts == 0
         assert search.screen == 16 and search.least_squares_start
+
+
+def test_a_motion_fits_attraction_rate_starts_at_the_friction_scale_per_second():
+    """identify_motion's data-centred box bounds GMS's attraction rate C below by
+    F / ATTRACTION_TIME_S (F = friction_scales of the training velocity and net force), not by
+    the force-balance box's 0.1 F; a C the caller gives is kept; force balance is unchanged."""
+    import warnings
+
+    from jaxfric import models
+    from jaxfric.models import friction_scales
+    from jaxfric.motion import ATTRACTION_TIME_S, MotionData, friction_step, identify_motion, simulate_motion
+
+    n, dt = 600, 1e-3
+    t = np.arange(n) * dt
+    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
+    truth = models.Coulomb(v_eps=1e-3)
+    with jax.enable_x64(True):
+        out = simulate_motion(friction_step(truth), jnp.asarray(truth.from_physical(Fc=8.0, sigma2=20.0), jnp.float64),
+                              2.5, u - 3.0, dt, 0.0, 0.0)
+    rec = MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    f = float(friction_scales(rec.velocity, rec.net_force)[0])
+    search = MotionSearch(particles=3, generations=1, horizons=(None,), steps=(1,), starts=1)
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = identify_motion("gms", rec, key=0, mass=2.5, train=1.0, search=search, dtype=jnp.float64)
+        given = identify_motion("gms", rec, key=0, mass=2.5, train=1.0, search=search, dtype=jnp.float64,
+                                box={"C": (2.0, 3e3)})
+    assert fit.box["C"] == (f / ATTRACTION_TIME_S, 1e4 * f)
+    assert 10.0 ** fit.settings["motion"]["search_bounds"][0][models.GMS().param_names.index("log10_C")] \
+        == pytest.approx(f / ATTRACTION_TIME_S)
+    assert given.box["C"] == (2.0, 3e3)
+    assert models.GMS().search_box(None, rec.velocity, rec.net_force)["C"][0] == pytest.approx(0.1 * f)

@@ -18,7 +18,7 @@
 """
 
 from .._warnings import BaselineWarning
-from ._api import (DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
+from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
                    identify_motion, load_motion_fit, motion_metrics)
 from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, compare_motion, rank_fits,
                        short_judge, short_runs_score, short_window)
@@ -28,6 +28,7 @@ from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep
                     friction_step)
 
 __all__ = [
+    "ATTRACTION_TIME_S",
     "BaselineWarning",
     "DEFAULT_INIT_WINDOW",
     "MotionBudget",
