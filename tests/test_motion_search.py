@@ -167,28 +167,30 @@ def test_the_slow_starts_setting_is_checked():
             bad.check()
 
 
-def test_identify_motion_passes_the_grid_to_gms_only():
-    """identify_motion: a GMS fit with slow_starts=2 ranks the grid and runs 2 more starts on
-    the free run only; a LuGre fit with the same search gets no grid (its search unchanged:
-    the same stages and the same parameters as with slow_starts=0)."""
-    import warnings
-
+def _coulomb_drive(n: int, dt: float = 1e-3):
+    """A 2.5 kg drive with Coulomb + viscous friction (Fc 8 N, 20 N s/m) and a -3 N load under
+    two sines, simulated in float64: n samples of force and position."""
     from jaxfric import models
-    from jaxfric.motion import (
-        MotionData,
-        friction_step,
-        identify_motion,
-        simulate_motion,
-    )
+    from jaxfric.motion import MotionData, friction_step, simulate_motion
 
-    n, dt = 800, 1e-3
     t = np.arange(n) * dt
     u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
     truth = models.Coulomb(v_eps=1e-3)
     with jax.enable_x64(True):
         out = simulate_motion(friction_step(truth), jnp.asarray(truth.from_physical(Fc=8.0, sigma2=20.0), jnp.float64),
                               2.5, u - 3.0, dt, 0.0, 0.0)
-    rec = MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    return MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+
+
+def test_identify_motion_passes_the_grid_to_gms_only():
+    """identify_motion: a GMS fit with slow_starts=2 ranks the grid and runs 2 more starts on
+    the free run only; a LuGre fit with the same search gets no grid (its search unchanged:
+    the same stages and the same parameters as with slow_starts=0)."""
+    import warnings
+
+    from jaxfric.motion import identify_motion
+
+    rec = _coulomb_drive(800)
     search = MotionSearch(particles=4, generations=2, horizons=(200, None), steps=(3, 3), starts=1,
                           least_squares_start=True, slow_starts=2)
     fits = {}
@@ -227,16 +229,9 @@ def test_a_motion_fits_attraction_rate_starts_at_the_friction_scale_per_second()
 
     from jaxfric import models
     from jaxfric.models import friction_scales
-    from jaxfric.motion import ATTRACTION_TIME_S, MotionData, friction_step, identify_motion, simulate_motion
+    from jaxfric.motion import ATTRACTION_TIME_S, identify_motion
 
-    n, dt = 600, 1e-3
-    t = np.arange(n) * dt
-    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0)
-    truth = models.Coulomb(v_eps=1e-3)
-    with jax.enable_x64(True):
-        out = simulate_motion(friction_step(truth), jnp.asarray(truth.from_physical(Fc=8.0, sigma2=20.0), jnp.float64),
-                              2.5, u - 3.0, dt, 0.0, 0.0)
-    rec = MotionData.from_arrays(u, np.asarray(out["x"]), dt)
+    rec = _coulomb_drive(600)
     f = float(friction_scales(rec.velocity, rec.net_force)[0])
     search = MotionSearch(particles=3, generations=1, horizons=(None,), steps=(1,), starts=1)
     with jax.enable_x64(True), warnings.catch_warnings():

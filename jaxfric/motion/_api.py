@@ -831,7 +831,7 @@ def _motion_box(model, box, vt, ut, data_bounds: bool) -> SearchBox:
     ``C``. In a free run an attraction of seconds is a slow memory that follows one record's
     drift: on the judge proxies GMS then predicted excitation it never saw worse (rig 7.22 ->
     6.97 mm, EMPS blocks 4.58 -> 3.86 mm mean over keys 0-4 with this floor), and on the whole
-    EMPS file its training free run varied 37 % over keys 0-4 without it, 2.4 % with it
+    EMPS file its training free run varied 37 % over keys 0-4 without it, 2.5 % with it
     (docs/motion.md, "Deeper on training, worse on new motion")."""
     full = model.search_box(box, *((vt, ut) if data_bounds else ()))
     given = box if isinstance(box, SearchBox) else SearchBox(box)
