@@ -4,6 +4,7 @@ command line's checks (docs/motion.md, docs/algorithms.md §13.2)."""
 
 import dataclasses
 import json
+import math
 import warnings
 
 import jax
@@ -267,6 +268,40 @@ def test_cli_ranks_by_the_short_judge_by_default_and_by_the_tail_on_request(tmp_
     assert main([cmd[0], str(short), *cmd[2:], "--window", "0.01", "--out", str(tmp_path / "none")]) != 0
     assert "window must be an integer >= init_window + 2" in capsys.readouterr().err
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.slow
+def test_cli_gated_judge_keeps_the_short_score_only_where_blocked_folds_beat_least_squares(tmp_path):
+    """``--judge gated``: each model's 3-fold blocked cross-validation of the training block
+    (the library's ``blocked_score`` with the command's settings) against least squares'; the
+    score is the short one where it is lower, inf otherwise, and the choice is the lowest score,
+    least squares' short score included."""
+    from jaxfric.cli import main
+    from jaxfric.motion import MotionSearch, blocked_score, load_motion_fit
+
+    n = 4200
+    path = _csv(tmp_path, n)
+    rec = _record(n, dt=2.0**-10)
+    cmd = ["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t", "--mass-range",
+           "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet", "--no-cache",
+           "--judge", "gated", "--out", str(tmp_path / "gated")]
+    assert main(cmd) == 0
+    results = json.loads((tmp_path / "gated" / "results.json").read_text())
+    judge = results["judge"]
+    assert judge["name"] == "gated" and set(judge["blocked"]) == {"coulomb", "stribeck"}
+    for m in ("coulomb", "stribeck"):
+        gate = judge["blocked"][m] < judge["baseline_blocked"]
+        assert judge["scores"][m] == (judge["short"][m] if gate else math.inf)
+    candidates = {**judge["scores"], BASELINE_LABEL: judge["baseline"]}
+    assert results["choice"] == min(candidates, key=candidates.get)
+    n_train = load_motion_fit(tmp_path / "gated" / "models" / "coulomb.npz").n_train
+    with jax.enable_x64(True):
+        ref, base = blocked_score("coulomb", [rec.window(0, n_train)], 3, key=0, mass=(0.5, 10.0), fit_offset=True,
+                                  search=MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,)),
+                                  dtype=jnp.float64)
+    assert judge["blocked"]["coulomb"] == pytest.approx(ref, rel=1e-9)
+    assert judge["baseline_blocked"] == pytest.approx(base, rel=1e-9)
+    assert "`--judge gated`" in (tmp_path / "gated" / "motion.md").read_text()
 
 
 QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))

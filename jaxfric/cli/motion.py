@@ -9,8 +9,8 @@ and k-step, per model, the judge's score), ``results.json`` (the ranking's rows,
 and its scores), ``models/<model>.npz`` (load with
 [`jaxfric.motion.load_motion_fit`][jaxfric.motion.load_motion_fit]) and ``motion_free_run.png``.
 
-``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s (``short``, the default, or ``tail``;
-[`jaxfric.motion.short_runs_score`][jaxfric.motion.short_runs_score]); ``--max-time``/``--max-evals`` bound each model's search.
+``--judge`` is [`jaxfric.motion.compare_motion`][jaxfric.motion.compare_motion]'s (``short``, the default, ``tail`` or
+``gated``; [`jaxfric.motion.short_runs_score`][jaxfric.motion.short_runs_score], [`jaxfric.motion.gated_scores`][jaxfric.motion.gated_scores]); ``--max-time``/``--max-evals`` bound each model's search.
 """
 
 from __future__ import annotations
@@ -72,10 +72,13 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--neurons", type=positive_int, default=10, help="hidden neurons of an Elman network")
     f.add_argument("--train-fraction", type=fraction, default=0.8, metavar="F",
                    help="leading fraction of the record used for estimation; the rest validates")
-    f.add_argument("--judge", choices=("short", "tail"), default="short",
+    f.add_argument("--judge", choices=("short", "tail", "gated"), default="short",
                    help="how the fits are ranked: 'short' (compare_motion's default) pools the free-run "
                         "RMSE of every --window seconds of the whole record, each run from its own first "
-                        "20 samples; 'tail' the held-back block's free-run RMSE")
+                        "20 samples; 'tail' the held-back block's free-run RMSE; 'gated' the short score "
+                        "of the models whose 3-fold blocked cross-validation of the training block beats "
+                        "least squares' (3 more fits per model; never worse than least squares on "
+                        "benchmarks/results' three proxies)")
     f.add_argument("--window", type=positive_float, default=None, metavar="S",
                    help="seconds per window of the short judge (default 2; the record must hold one)")
     f.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
@@ -124,7 +127,7 @@ def _data(args):
 def _judge_window(args, data):
     """Samples per window of the short judge (``None`` for ``--judge tail``); a UserError
     when the record holds no whole window."""
-    if args.judge != "short":
+    if args.judge == "tail":
         return None
     from jaxfric.motion import SHORT_WINDOW_S, short_window
 
@@ -140,19 +143,27 @@ def _judge_window(args, data):
     return window
 
 
-def _judge(args, fits, data, window, say):
+def _judge(args, fits, data, window, say, blocked=None):
     """The short judge's scores of the fits and of the least-squares baseline over the
     whole record (``None`` for ``--judge tail``): ``{"name", "window_samples", "window_s",
-    "init_window", "windows", "scores": name -> mm, "baseline": mm}``."""
+    "init_window", "windows", "scores": name -> mm, "baseline": mm}``; with ``--judge gated``
+    also ``"short"`` (the short scores), ``"blocked"`` (name -> mm) and ``"baseline_blocked"``
+    (``blocked()``'s scores), ``"scores"`` then being `gated_scores`'."""
     if window is None:
         return None
     from jaxfric.motion import DEFAULT_INIT_WINDOW, short_judge
+    from jaxfric.motion import gated_scores
 
     say(f"judging by short free runs: {data.n_samples // window} windows of {window} samples")
     scores, base = short_judge(fits, [data], window)
-    return {"name": "short", "window_samples": window, "window_s": window * data.dt,
-            "init_window": DEFAULT_INIT_WINDOW, "windows": data.n_samples // window, "scores": scores,
-            "baseline": base}
+    out = {"name": "short", "window_samples": window, "window_s": window * data.dt,
+           "init_window": DEFAULT_INIT_WINDOW, "windows": data.n_samples // window, "scores": scores,
+           "baseline": base}
+    if args.judge == "gated":
+        cv, cv_base = blocked()
+        out.update(name="gated", short=scores, blocked=cv, baseline_blocked=cv_base,
+                   scores=gated_scores(scores, cv, cv_base))
+    return out
 
 
 def cmd_identify_motion(args, argv) -> int:
@@ -162,7 +173,7 @@ def cmd_identify_motion(args, argv) -> int:
     import warnings
 
     from jaxfric._warnings import BaselineWarning
-    from jaxfric.motion import MotionSearch, OverfitWarning, identify_motion, rank_fits
+    from jaxfric.motion import MotionSearch, OverfitWarning, blocked_score, identify_motion, rank_fits
 
     say = _say(args)
     data = _data(args)
@@ -170,21 +181,20 @@ def cmd_identify_motion(args, argv) -> int:
     out = _prepare_out(args.out)
     (out / "models").mkdir(exist_ok=True)
     mass = args.mass if args.mass is not None else args.mass_range
-    fits = {}
+    fits, models = {}, {}
+    search = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,)) if args.quick else None
+    options = dict(key=args.seed, mass=mass, search=search, horizon=args.horizon, fit_offset=args.offset,
+                   dtype=jnp.float64 if args.x64 else None, max_time=args.max_time, max_evals=args.max_evals)
     for name in args.models:
         from jaxfric import models as _models
 
         opts = {"neurons": args.neurons} if name.startswith("elman") else {}
-        model = _models.get(name, **opts)
-        search = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,)) if args.quick else None
+        model = models[name] = _models.get(name, **opts)
         say(f"identifying {name} inside the mechanics ({data.n_samples} samples)")
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", BaselineWarning)
-                fit = identify_motion(model, data, key=args.seed, mass=mass, train=args.train_fraction,
-                                      search=search, horizon=args.horizon, fit_offset=args.offset,
-                                      dtype=jnp.float64 if args.x64 else None, max_time=args.max_time,
-                                      max_evals=args.max_evals, progress=not args.quiet)
+                fit = identify_motion(model, data, train=args.train_fraction, progress=not args.quiet, **options)
         except ValueError as e:
             raise UserError(str(e)) from None
         for w in caught:  # said even under --quiet, without a source line
@@ -199,13 +209,23 @@ def cmd_identify_motion(args, argv) -> int:
         if fit.settings["motion"].get("stopped"):
             say(f"{name}: the search stopped at its budget ({fit.settings['motion']['stopped']})")
         print(fit.summary())
-    judge = _judge(args, fits, data, window, say)
+    def blocked():  # --judge gated: 3-fold blocked cross-validation of the training block
+        train = [data.window(0, next(iter(fits.values())).n_train)]
+        cv, base = {}, None
+        for name, model in models.items():
+            say(f"blocked cross-validation of {name} (3 more fits)")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BaselineWarning)
+                cv[name], base = blocked_score(model, train, 3, **options)
+        return cv, base
+
+    judge = _judge(args, fits, data, window, say, blocked)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OverfitWarning)
         if judge is None:
             ranked = rank_fits(fits)
         else:
-            ranked = rank_fits(fits, scores=judge["scores"], judge="short", baseline_score=judge["baseline"])
+            ranked = rank_fits(fits, scores=judge["scores"], judge=judge["name"], baseline_score=judge["baseline"])
     for w in caught:  # said even under --quiet: it changes which model to use
         print_warning(w.message)
     _write_report(args, argv, out, data, fits, ranked, judge, window)
@@ -230,6 +250,13 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
         ranked_by = (f"Ranked by the held-back block's free-run RMSE (`--judge tail`: {held}, simulated "
                      "from the state at its start). The held-back block shares the training record's "
                      "excitation: it ranks models, it does not measure how they predict new motion")
+    elif judge["name"] == "gated":
+        ranked_by = (f"Ranked by the gated judge (`--judge gated`): the short score (the whole record in "
+                     f"{judge['windows']} windows of {judge['window_s']:.4g} s, each from its own first "
+                     f"{judge['init_window']} samples) of the models whose 3-fold blocked cross-validation of "
+                     f"the training block beats least squares' ({judge['baseline_blocked']:.4g} mm; blocked: "
+                     + ", ".join(f"{k} {v:.4g}" for k, v in judge["blocked"].items())
+                     + " mm), inf for the others. The blocked folds are scored on motion their fits never saw")
     else:
         ranked_by = (f"Ranked by many short free runs (`--judge short`, the default): the whole record cut "
                      f"into {judge['windows']} windows of {judge['window_s']:.4g} s ({window} samples), each "

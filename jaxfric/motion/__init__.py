@@ -20,8 +20,8 @@
 from .._warnings import BaselineWarning
 from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
                    identify_motion, load_motion_fit, motion_metrics)
-from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, compare_motion, rank_fits,
-                       short_judge, short_runs_score, short_window)
+from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, compare_motion,
+                       gated_scores, rank_fits, short_judge, short_runs_score, short_window)
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
@@ -39,6 +39,8 @@ __all__ = [
     "rank_fits",
     "SHORT_WINDOW_S",
     "baseline_fit",
+    "blocked_score",
+    "gated_scores",
     "short_judge",
     "short_runs_score",
     "short_window",
