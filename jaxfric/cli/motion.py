@@ -214,9 +214,12 @@ def cmd_identify_motion(args, argv) -> int:
         cv, base = {}, None
         for name, model in models.items():
             say(f"blocked cross-validation of {name} (3 more fits)")
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", BaselineWarning)
-                cv[name], base = blocked_score(model, train, 3, **options)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", BaselineWarning)
+                    cv[name], base = blocked_score(model, train, 3, **options)
+            except ValueError as e:  # e.g. a fold too short for the model's windows
+                raise UserError(f"--judge gated, blocked cross-validation of {name}: {e}") from None
         return cv, base
 
     judge = _judge(args, fits, data, window, say, blocked)
