@@ -834,9 +834,8 @@ def _motion_box(model, box, vt, ut, data_bounds: bool) -> SearchBox:
     EMPS file its training free run varied 37 % over keys 0-4 without it, 2.5 % with it
     (docs/motion.md, "Deeper on training, worse on new motion")."""
     full = model.search_box(box, *((vt, ut) if data_bounds else ()))
-    given = box if isinstance(box, SearchBox) else SearchBox(box)
-    if not data_bounds or "C" not in full or "C" in given:
-        return full
+    if not data_bounds or not isinstance(full, SearchBox) or "C" not in full or (box is not None and "C" in box):
+        return full  # a network has no box (None); no attraction rate; or the caller's C
     f = float(friction_scales(vt, ut)[0])
     lo, hi = full["C"]
     return SearchBox({**full, "C": (max(lo, f / ATTRACTION_TIME_S), hi)})
