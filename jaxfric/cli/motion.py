@@ -173,7 +173,7 @@ def cmd_identify_motion(args, argv) -> int:
     import warnings
 
     from jaxfric._warnings import BaselineWarning
-    from jaxfric.motion import MotionSearch, OverfitWarning, blocked_score, identify_motion, rank_fits
+    from jaxfric.motion import MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
 
     say = _say(args)
     data = _data(args)
@@ -210,17 +210,13 @@ def cmd_identify_motion(args, argv) -> int:
             say(f"{name}: the search stopped at its budget ({fit.settings['motion']['stopped']})")
         print(fit.summary())
     def blocked():  # --judge gated: 3-fold blocked cross-validation of the training block
-        train = [data.window(0, next(iter(fits.values())).n_train)]
-        cv, base = {}, None
-        for name, model in models.items():
-            say(f"blocked cross-validation of {name} (3 more fits)")
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", BaselineWarning)
-                    cv[name], base = blocked_score(model, train, 3, **options)
-            except ValueError as e:  # e.g. a fold too short for the model's windows
-                raise UserError(f"--judge gated, blocked cross-validation of {name}: {e}") from None
-        return cv, base
+        say(f"blocked cross-validation of {', '.join(models)} (3 more fits each)")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", BaselineWarning)
+                return blocked_scores(models, [data.window(0, next(iter(fits.values())).n_train)], 3, **options)
+        except ValueError as e:  # e.g. a fold too short for a model's windows
+            raise UserError(f"--judge gated, blocked cross-validation: {e}") from None
 
     judge = _judge(args, fits, data, window, say, blocked)
     with warnings.catch_warnings(record=True) as caught:

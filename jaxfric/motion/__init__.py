@@ -20,7 +20,7 @@
 from .._warnings import BaselineWarning
 from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
                    identify_motion, load_motion_fit, motion_metrics)
-from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, compare_motion,
+from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, blocked_scores, compare_motion,
                        gated_scores, rank_fits, short_judge, short_runs_score, short_window)
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
@@ -40,6 +40,7 @@ __all__ = [
     "SHORT_WINDOW_S",
     "baseline_fit",
     "blocked_score",
+    "blocked_scores",
     "gated_scores",
     "short_judge",
     "short_runs_score",

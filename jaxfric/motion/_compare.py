@@ -311,6 +311,15 @@ def short_judge(fits: dict, records, window: int | None = None,
     return scores, short_runs_score(baseline_fit(next(iter(fits.values()))), records, window, init_window)
 
 
+def blocked_scores(models: dict, records, folds: int, **options) -> tuple[dict, float]:
+    """`blocked_score` of each of ``models`` (label -> model) on ``records``:
+    ``({label: mm}, baseline mm)``; the baseline's score depends on the records alone."""
+    scores, base = {}, math.inf
+    for label, model in models.items():
+        scores[label], base = blocked_score(model, records, folds, **options)
+    return scores, base
+
+
 def gated_scores(short: dict, blocked: dict, base_blocked: float) -> dict:
     """The ``"gated"`` judge's scores: each model's short score where its blocked
     cross-validation beats the baseline's (``blocked[name] < base_blocked``), else inf (the
@@ -398,12 +407,9 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "short", folds:
     else:
         records = _as_records(kwargs["train"])
     options = {k: v for k, v in kwargs.items() if k not in ("train", "valid", "metric_horizon")}
-    scores, base = {}, []
-    for label, model in items.items():
-        scores[label], b = blocked_score(model, records, folds, key=key, mass=mass, **options)
-        base.append(b)
+    scores, base = blocked_scores(items, records, folds, key=key, mass=mass, **options)
     if judge == "gated":
         short, short_base = short_judge(fits, everything, window, init_window)
-        return rank_fits(fits, stacklevel=2, scores=gated_scores(short, scores, base[0]), judge=judge,
+        return rank_fits(fits, stacklevel=2, scores=gated_scores(short, scores, base), judge=judge,
                          baseline_score=short_base)
-    return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base[0])
+    return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base)
