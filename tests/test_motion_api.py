@@ -249,6 +249,9 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
             out = rank_fits(fits)
         assert out.ranking == ["coulomb", "stribeck"] and out.overfit == [("stribeck", "coulomb")]
         assert "worse than a simpler model" in out.table()
+        # under the gated judge a model that fails the gate scores inf: the warning names the gate
+        with pytest.warns(OverfitWarning, match="stribeck .*'gated' judge.* does not beat the least-squares"):
+            rank_fits(fits, scores={"coulomb": 1.0, "stribeck": float("inf")}, judge="gated")
         good = strib(12.0)  # Fs = Fc: the Coulomb model itself
         good = good.replace(metrics={**good.evaluate_records([train], [valid]), "num_params": 6})
         with warnings.catch_warnings():

@@ -176,11 +176,13 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
                 overfit.append((rich, simple))
     worse = "predicts the validation data worse" if judge == "tail" else f"is judged worse ({judge!r} judge)"
     for rich, simple in overfit:
+        why = (f"{scores[rich]:.4g} mm against {scores[simple]:.4g} mm free-run RMSE" if math.isfinite(scores[rich])
+               else "its blocked cross-validation does not beat the least-squares baseline's (the gate), "
+                    f"{simple}'s scores {scores[simple]:.4g} mm")
         warnings.warn(
             f"{rich} ({fits[rich].metrics['num_params']} parameters) {worse} "
-            f"than {simple} ({fits[simple].metrics['num_params']}): {scores[rich]:.4g} mm against "
-            f"{scores[simple]:.4g} mm free-run RMSE; prefer the simpler model unless it fails elsewhere",
-            OverfitWarning, stacklevel=stacklevel + 1)
+            f"than {simple} ({fits[simple].metrics['num_params']}): {why}; prefer the simpler model unless it "
+            "fails elsewhere", OverfitWarning, stacklevel=stacklevel + 1)
     return MotionComparison(dict(fits), ranking, overfit, judge, scores if judged else {}, baseline_score)
 
 
