@@ -113,6 +113,16 @@ class GMS(AbstractPhysicalModel):
             ("log10_sigma2", "sigma2", "log10"),
         ), self.asymmetric, self.offset)
 
+    @property
+    def slow_coordinates(self) -> dict[str, tuple[int, ...]]:
+        """Indices in ``theta`` of the coordinates that set how slowly the model relaxes
+        (``"k"``: every ``log10_k*``; ``"C"``: ``log10_C`` (both directions when asymmetric);
+        ``"Fs_over_Fc"``): the coordinates `jaxfric.motion`'s slow-attraction starts vary."""
+        names = self.param_names
+        return {"k": tuple(range(self.num_elements)),
+                "C": tuple(i for i, n in enumerate(names) if n.startswith("log10_C")),
+                "Fs_over_Fc": tuple(i for i, n in enumerate(names) if n.startswith("Fs_over_Fc"))}
+
     def _range_key(self, phys: str, kind: str) -> str:
         match = _ELEMENT.match(phys)
         return match.group(1) if match else super()._range_key(phys, kind)

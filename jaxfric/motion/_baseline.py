@@ -12,11 +12,10 @@ start of the search that does not depend on the key.
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 
-from ..models import AbstractPhysicalModel, Coulomb
+from ..models import GMS, AbstractPhysicalModel, Coulomb
 from ..pipeline import BASELINE_LABEL
 from ..rig.emps import IDIMResult, idim_ls
 
@@ -69,19 +68,16 @@ SLOW_GRID = {"k": (0.1, 0.2, 0.3), "C": (0.002, 0.02, 0.1), "Fs_over_Fc": (0.05,
 
 def slow_attraction_grid(model, start, lower, upper) -> list:
     """Variants of the least-squares start ``start`` (a search vector) for a model with
-    Maxwell-slip elements and an attraction rate (coordinates ``log10_k*`` and ``log10_C``:
-    [`GMS`][jaxfric.models.GMS]): every element stiffness, ``log10 C`` and ``Fs/Fc`` set on the
+    Maxwell-slip elements and an attraction rate ([`GMS`][jaxfric.models.GMS]: its
+    [`slow_coordinates`][jaxfric.models.GMS.slow_coordinates]): every element stiffness, ``log10 C`` and ``Fs/Fc`` set on the
     grid `SLOW_GRID` (fractions of their ranges in ``[lower, upper]``: soft elements, slow
     attraction near the floor of ``C``, a weak Stribeck peak), 27 points; ``[]`` for any other
     model. The swarm's short windows cannot see a slow attraction (its time constant is
     seconds at the floor of ``C``), and Levenberg-Marquardt on 5 000-sample shooting segments
     pulls a point out of that basin (docs/motion.md): these starts run on the free run only."""
-    names = getattr(model, "param_names", ())
-    k = [i for i, n in enumerate(names) if re.fullmatch(r"log10_k\d+", n)]
-    c = [i for i, n in enumerate(names) if n.startswith("log10_C")]
-    r = [i for i, n in enumerate(names) if n.startswith("Fs_over_Fc")]
-    if start is None or not k or not c:
+    if start is None or not isinstance(model, GMS):
         return []
+    k, c, r = (list(i) for i in model.slow_coordinates.values())
     start = np.asarray(start, np.float64)
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
     out = []
