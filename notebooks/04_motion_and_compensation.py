@@ -359,7 +359,8 @@ show(fig, comparison="motion, held-back tail")
 # ### Choosing a model by validation
 #
 # `compare_motion` fits several models on the same data and ranks them by a judge, here the
-# error on the held-back tail (`judge="tail"`; the default judges many short free runs); a
+# error on the held-back tail (`judge="tail"`; the default, `"gated"`, judges many short free runs of
+# the models whose blocked folds beat least squares'); a
 # richer model that predicts worse than a simpler one raises an `OverfitWarning`. The tail shares
 # the record's excitation: it ranks the models on motion like the training part, not on new
 # motion (docs/motion.md measures the judges on new excitation). Both models

@@ -213,8 +213,8 @@ def _loop_short_score(fit, rec, window, init=20):
 
 
 @pytest.mark.slow
-def test_cli_ranks_by_the_short_judge_by_default_and_by_the_tail_on_request(tmp_path, capsys):
-    """identify-motion's default judge is the library's, ``short``: 2 s windows of the whole
+def test_cli_ranks_by_the_short_judge_and_by_the_tail_on_request(tmp_path, capsys):
+    """identify-motion's ``--judge short``: 2 s windows of the whole
     record (2 048 samples at 1 024 Hz), the fits and the baseline ranked by the pooled RMSE
     of their free runs, each from its window's first 20 samples; results.json holds the
     judge, its scores and the baseline's row; ``--judge tail`` ranks by the held-back
@@ -227,7 +227,7 @@ def test_cli_ranks_by_the_short_judge_by_default_and_by_the_tail_on_request(tmp_
     path = _csv(tmp_path, n)
     rec = _record(n, dt=2.0**-10)
     cmd = ["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t", "--mass-range",
-           "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet", "--no-cache"]
+           "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet", "--no-cache", "--judge", "short"]
     assert main([*cmd, "--out", str(tmp_path / "short")]) == 0
     printed = capsys.readouterr().out
     results = json.loads((tmp_path / "short" / "results.json").read_text())
@@ -272,7 +272,7 @@ def test_cli_ranks_by_the_short_judge_by_default_and_by_the_tail_on_request(tmp_
 
 @pytest.mark.slow
 def test_cli_gated_judge_keeps_the_short_score_only_where_blocked_folds_beat_least_squares(tmp_path):
-    """``--judge gated``: each model's 3-fold blocked cross-validation of the training block
+    """The default judge, ``gated`` (no ``--judge``): each model's 3-fold blocked cross-validation of the training block
     (the library's ``blocked_score`` with the command's settings) against least squares'; the
     score is the short one where it is lower, inf otherwise, and the choice is the lowest score,
     least squares' short score included."""
@@ -284,7 +284,7 @@ def test_cli_gated_judge_keeps_the_short_score_only_where_blocked_folds_beat_lea
     rec = _record(n, dt=2.0**-10)
     cmd = ["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t", "--mass-range",
            "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet", "--no-cache",
-           "--judge", "gated", "--out", str(tmp_path / "gated")]
+           "--out", str(tmp_path / "gated")]
     assert main(cmd) == 0
     results = json.loads((tmp_path / "gated" / "results.json").read_text())
     judge = results["judge"]
@@ -362,12 +362,14 @@ def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
     assert cmp.judge == "blocked"
     assert cmp.scores["coulomb"] == pytest.approx(math.sqrt(errs / n), rel=1e-9)
     assert "blocked RMSE [mm]" in cmp.table()
-    # the gated judge: the short score where blocked cross-validation beats the baseline's
+    # the gated judge, the default: the short score where blocked cross-validation beats the baseline's
     from jaxfric.motion._compare import gated_scores, short_judge
 
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        gated = compare_motion(["coulomb"], rec, key=0, judge="gated", folds=2, window=300, **opts)
+        gated = compare_motion(["coulomb"], rec, key=0, folds=2, window=300, **opts)
+    assert gated.judge == "gated"
+    with jax.enable_x64(True):
         short, short_base = short_judge(gated.fits, [rec], 300)
     passes = cmp.scores["coulomb"] < cmp.baseline_score
     assert gated.scores["coulomb"] == (short["coulomb"] if passes else math.inf)

@@ -9,8 +9,9 @@
   the default search ([`MotionSearch`][jaxfric.motion.MotionSearch]) with a budget (``max_evals``, ``max_time``);
 * [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
   with an [`OverfitWarning`][jaxfric.motion.OverfitWarning] when a richer model validates worse than a simpler one,
-  the least-squares baseline as a row, and a judge (by default many short free runs,
-  [`short_runs_score`][jaxfric.motion.short_runs_score] over windows of [`SHORT_WINDOW_S`][jaxfric.motion.SHORT_WINDOW_S]; or the held-back tail, or blocked folds);
+  the least-squares baseline as a row, and a judge (by default ``"gated"``: many short free runs,
+  [`short_runs_score`][jaxfric.motion.short_runs_score] over windows of [`SHORT_WINDOW_S`][jaxfric.motion.SHORT_WINDOW_S], for the models whose
+  blocked folds beat least squares', [`gated_scores`][jaxfric.motion.gated_scores]; or the short runs alone, the held-back tail, or blocked folds);
 * [`MotionProblem`][jaxfric.motion.MotionProblem] — the motion problem of [`jaxfric.problem`][jaxfric.problem] (a motion fit's
   search coordinates, training records, residuals and score);
 * [`BaselineWarning`][jaxfric.motion.BaselineWarning] — a fit worse than the least-squares Coulomb + viscous + offset
