@@ -2,6 +2,7 @@
 (docs/motion.md, docs/algorithms.md §13.2)."""
 
 import json
+import math
 import warnings
 
 import jax
@@ -281,6 +282,17 @@ def test_choice_is_the_baseline_where_it_scores_lowest():
     assert cmp.best is fit and base is not fit
     assert base.mass == ls["M"] and base.offset == ls["offset"]
     assert base.params["Fc"] == pytest.approx(ls["Fc"]) and base.params["sigma2"] == pytest.approx(ls["Fv"])
+    # gated out (its blocked folds no better than least squares'): the table and the warning say so
+    from jaxfric.motion._baseline import BASELINE_LABEL
+
+    full = fit.replace(metrics={"num_params": 8, "train": {"rmse_mm": 1.5}, "valid": {"rmse_mm": 2.0, "fit_percent": 90.0},
+                                "baseline": {"train": {"rmse_mm": 1.0}, "valid": {"rmse_mm": 3.0, "fit_percent": 80.0}}})
+    gated = MotionComparison({"lugre": full}, ["lugre"], [], "gated", {"lugre": math.inf}, 2.5, {"lugre": 4.5}, 4.0)
+    assert gated.choice_name == BASELINE_LABEL
+    assert "gated out: blocked 4.5 mm, least squares' 4" in gated.table()
+    assert [r["blocked_rmse_mm"] for r in gated.rows()] == [4.5, 4.0]
+    with pytest.warns(BaselineWarning, match="no model's blocked cross-validation beats least squares', 4 mm"):
+        gated.choice
 
 
 @pytest.mark.slow

@@ -373,6 +373,7 @@ def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
         short, short_base = short_judge(gated.fits, [rec], 300)
     passes = cmp.scores["coulomb"] < cmp.baseline_score
     assert gated.scores["coulomb"] == (short["coulomb"] if passes else math.inf)
+    assert gated.blocked == cmp.scores and gated.baseline_blocked == cmp.baseline_score  # kept on the comparison
     assert gated.baseline_score == short_base
     assert gated_scores({"a": 1.0, "b": 2.0}, {"a": 5.0, "b": 3.0}, 4.0) == {"a": math.inf, "b": 2.0}
     with pytest.raises(ValueError, match="judge must be one of"):

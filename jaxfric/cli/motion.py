@@ -223,7 +223,8 @@ def cmd_identify_motion(args, argv) -> int:
         if judge is None:
             ranked = rank_fits(fits)
         else:
-            ranked = rank_fits(fits, scores=judge["scores"], judge=judge["name"], baseline_score=judge["baseline"])
+            ranked = rank_fits(fits, scores=judge["scores"], judge=judge["name"], baseline_score=judge["baseline"],
+                               blocked=judge.get("blocked"), baseline_blocked=judge.get("baseline_blocked"))
     for w in caught:  # said even under --quiet: it changes which model to use
         print_warning(w.message)
     _write_report(args, argv, out, data, fits, ranked, judge, window)

@@ -50,7 +50,9 @@ class MotionComparison:
     """Fits of [`compare_motion`][jaxfric.motion.compare_motion]. ``fits``: name -> [`MotionFit`][jaxfric.motion.MotionFit] in the order
     given; ``ranking``: names from the lowest judge's score (``scores``; the validation RMSE
     for ``judge="tail"``); ``overfit``: ``(richer,
-    simpler)`` pairs where the richer model validates worse."""
+    simpler)`` pairs where the richer model validates worse; ``blocked`` and
+    ``baseline_blocked``: the blocked cross-validation scores [mm] of the models and of the
+    baseline under ``judge="gated"`` or ``"blocked"`` (empty and ``None`` otherwise)."""
 
     fits: dict
     ranking: list
@@ -58,6 +60,8 @@ class MotionComparison:
     judge: str = "tail"
     scores: dict = dataclasses.field(default_factory=dict)
     baseline_score: float | None = None
+    blocked: dict = dataclasses.field(default_factory=dict)
+    baseline_blocked: float | None = None
 
     @property
     def best(self):
@@ -82,8 +86,10 @@ class MotionComparison:
         if self.choice_name != BASELINE_LABEL:
             return self.best
         name = self.ranking[0]
-        warnings.warn(f"no model beats the least-squares baseline under the {self.judge!r} judge "
-                      f"({self._baseline_score():.4g} mm against {name}'s {self._score(name):.4g} mm): "
+        why = (f"{self._baseline_score():.4g} mm against {name}'s {self._score(name):.4g} mm" if
+               math.isfinite(self._score(name)) else
+               f"no model's blocked cross-validation beats least squares', {self.baseline_blocked:.4g} mm")
+        warnings.warn(f"no model beats the least-squares baseline under the {self.judge!r} judge ({why}): "
                       "the choice is the baseline", BaselineWarning, stacklevel=2)
         return baseline_fit(self.best)
 
@@ -106,8 +112,8 @@ class MotionComparison:
     def rows(self) -> list[dict]:
         """One dict per ranked fit, then the baseline: ``rank`` (``None`` for the
         baseline), ``model``, ``parameters``, ``mass_kg``, ``offset_N``, ``train_rmse_mm``,
-        ``valid_rmse_mm``, ``valid_fit_percent``, ``beats_baseline`` (validation),
-        ``worse_than_simpler``."""
+        ``valid_rmse_mm``, ``valid_fit_percent``, ``judge_rmse_mm``, ``beats_baseline`` (under
+        the judge), ``worse_than_simpler``; with blocked scores also ``blocked_rmse_mm``."""
         base, base_score = self.baseline, self._baseline_score()
         out = []
         for i, name in enumerate(self.ranking, 1):
@@ -119,14 +125,16 @@ class MotionComparison:
                         "valid_rmse_mm": m["valid"]["rmse_mm"], "valid_fit_percent": m["valid"]["fit_percent"],
                         "judge_rmse_mm": score,
                         "beats_baseline": None if base is None else bool(score < base_score),
-                        "worse_than_simpler": any(r == name for r, _ in self.overfit)})
+                        "worse_than_simpler": any(r == name for r, _ in self.overfit),
+                        **({"blocked_rmse_mm": self.blocked[name]} if self.blocked else {})})
         if base is None:
             return out
         settings = next(iter(self.fits.values())).settings["motion"]["baseline"]
         out.append({"rank": None, "model": BASELINE_LABEL, "parameters": 4, "mass_kg": settings["M"],
                     "offset_N": settings["offset"], "train_rmse_mm": base["train"]["rmse_mm"],
                     "valid_rmse_mm": base["valid"]["rmse_mm"], "valid_fit_percent": base["valid"]["fit_percent"],
-                    "judge_rmse_mm": base_score, "beats_baseline": None, "worse_than_simpler": False})
+                    "judge_rmse_mm": base_score, "beats_baseline": None, "worse_than_simpler": False,
+                    **({"blocked_rmse_mm": self.baseline_blocked} if self.blocked else {})})
         return out
 
     def table(self) -> str:
@@ -140,7 +148,10 @@ class MotionComparison:
             flags = []
             if r["worse_than_simpler"]:
                 flags.append("worse than a simpler model")
-            if r["beats_baseline"] is False:
+            if self.judge == "gated" and r["rank"] is not None and not math.isfinite(r["judge_rmse_mm"]):
+                flags.append(f"gated out: blocked {r['blocked_rmse_mm']:.4g} mm, least squares' "
+                             f"{self.baseline_blocked:.4g}")
+            elif r["beats_baseline"] is False:
                 flags.append("not better than the baseline")
             name = r["model"] + (f" ({'; '.join(flags)})" if flags else "")
             lines.append(f"| {'' if r['rank'] is None else r['rank']} | {name} | {r['parameters']} | "
@@ -164,11 +175,13 @@ OVERFIT_MARGIN = 1e-3
 
 
 def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, judge: str = "tail",
-              baseline_score: float | None = None) -> MotionComparison:
+              baseline_score: float | None = None, blocked: dict | None = None,
+              baseline_blocked: float | None = None) -> MotionComparison:
     """Rank named motion fits by validation RMSE (or by the judge's ``scores``, name -> mm)
     and warn about overfitting (module docstring): a model with more search parameters
     (``metrics["num_params"]``) whose score exceeds a simpler one's by more than
-    `OVERFIT_MARGIN`."""
+    `OVERFIT_MARGIN`. ``blocked``/``baseline_blocked``: blocked cross-validation scores
+    kept on the comparison (``judge="gated"`` or ``"blocked"``)."""
     judged = scores is not None
     scores = dict(scores) if judged else {name: _valid_rmse(fit) for name, fit in fits.items()}
     ranking = sorted(fits, key=lambda k: (scores[k], k))
@@ -187,7 +200,8 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
             f"{rich} ({fits[rich].metrics['num_params']} parameters) {worse} "
             f"than {simple} ({fits[simple].metrics['num_params']}): {why}; prefer the simpler model unless it "
             "fails elsewhere", OverfitWarning, stacklevel=stacklevel + 1)
-    return MotionComparison(dict(fits), ranking, overfit, judge, scores if judged else {}, baseline_score)
+    return MotionComparison(dict(fits), ranking, overfit, judge, scores if judged else {}, baseline_score,
+                            dict(blocked or {}), baseline_blocked)
 
 
 JUDGES = ("tail", "blocked", "short", "gated")
@@ -418,5 +432,6 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds:
     if judge == "gated":
         short, short_base = short_judge(fits, everything, window, init_window)
         return rank_fits(fits, stacklevel=2, scores=gated_scores(short, scores, base), judge=judge,
-                         baseline_score=short_base)
-    return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base)
+                         baseline_score=short_base, blocked=scores, baseline_blocked=base)
+    return rank_fits(fits, stacklevel=2, scores=scores, judge=judge, baseline_score=base, blocked=scores,
+                     baseline_blocked=base)
