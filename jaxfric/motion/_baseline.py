@@ -12,7 +12,6 @@ start of the search that does not depend on the key.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..models import GMS, AbstractPhysicalModel, Coulomb
