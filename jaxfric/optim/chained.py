@@ -61,7 +61,8 @@ from .swarm import AbstractSwarm
 
 class ChainState(eqx.Module):
     """``stage`` (0 global, 1 local), the global state, the ``num_starts`` local states
-    (stacked; placeholders until stage 1) and which of them have finished."""
+    (stacked; with one start, that run's state itself; placeholders until stage 1) and
+    which of them have finished."""
 
     stage: Any
     first: Any
@@ -179,9 +180,8 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         for x0 in starts:
             runs.append((yield from only_if(done, local.init_rounds(
                 lower, upper, state.local_key(), x0, objective, **extra))))
-        if len(runs) == 1:  # one start: the same arrays without a batch of one (issue 47)
-            second = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], runs[0])
-            second_done = local.finished(runs[0])[0][None]
+        if len(runs) == 1:  # one start: its state itself, no batch of one to index
+            second, second_done = runs[0], local.finished(runs[0])[0]
         else:
             second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
             second_done = jax.vmap(lambda s: local.finished(s)[0])(second)
@@ -249,13 +249,13 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
             return (yield from self._switch(lower, upper, state, objective))
         local = self._local
         i = self._current(state)
-        s_i = yield from local.step_rounds(lower, upper, _index(state.second, i), 0, objective)
+        s_i = yield from local.step_rounds(lower, upper, self._run(state, i), 0, objective)
         done_i, _ = local.finished(s_i)
-        if self.num_starts == 1:  # the whole batch of one: no update in place to write
-            second = jax.tree_util.tree_map(lambda a, b: jnp.asarray(b).astype(a.dtype)[None],
+        if self.num_starts == 1:  # the run itself: no update in place to write
+            second = jax.tree_util.tree_map(lambda a, b: jnp.asarray(b).astype(a.dtype),
                                             state.second, s_i)
             return eqx.tree_at(lambda s: (s.second, s.second_done), state,
-                               (second, jnp.asarray(done_i).astype(state.second_done.dtype)[None]))
+                               (second, jnp.asarray(done_i).astype(state.second_done.dtype)))
         return eqx.tree_at(
             lambda s: (s.second, s.second_done), state,
             (_put(state.second, i, s_i), put(state.second_done, i, done_i)),
@@ -265,6 +265,11 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         """The local run being stepped: the first not yet finished (a static 0 for one
         start, so XLA updates its state in place)."""
         return 0 if self.num_starts == 1 else jnp.argmin(state.second_done)
+
+    def _run(self, state, i):
+        """Local run ``i``'s state: with one start ``state.second`` holds that run itself
+        (no batch of one, whose reads would each be a slice in the program, issue 47)."""
+        return state.second if self.num_starts == 1 else _index(state.second, i)
 
     def done(self, state):
         return (state.stage == 1) & jnp.all(state.second_done)
@@ -276,7 +281,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         """``(i, x, f)``: the best of the local runs (``i`` a static 0 for one start: the
         batch of one read directly, no argmin and gather in the program, issue 47)."""
         if self.num_starts == 1:
-            x, f = self._local.best(_index(state.second, 0))
+            x, f = self._local.best(state.second)
             return 0, x, f
         xs, fs = jax.vmap(self._local.best)(state.second)
         i = jnp.argmin(fs)
@@ -285,7 +290,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
     def _result(self, state):
         i, _, _ = self._local_best(state)
         if self.num_starts == 1:
-            local = self._local.finished(_index(state.second, 0))[1]
+            local = self._local.finished(state.second)[1]
         else:
             _, results = jax.vmap(self._local.finished)(state.second)
             local = _index(results, i)
@@ -301,7 +306,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
 
     def num_evals(self, state):
         if self.num_starts == 1:
-            local = self._local.num_evals(_index(state.second, 0))
+            local = self._local.num_evals(state.second)
         else:
             local = jnp.sum(jax.vmap(self._local.num_evals)(state.second))
         g = self._global.num_evals(state.first)
@@ -312,7 +317,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         g_sol = self._global.solution(fn, lower, upper, args, state.first,
                                       self._global.finished(state.first)[1])
         i, _, _ = self._local_best(state)
-        best_local = _index(state.second, i)
+        best_local = self._run(state, i)
         local_steps = jnp.where(state.stage == 1, progress_of(self._local, best_local)[1], 0)
         return Solution(
             value=x, f=f, result=result,
@@ -328,7 +333,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
     def progress(self, state):
         _, g_step = progress_of(self._global, state.first)
         i = self._current(state)
-        _, l_step = progress_of(self._local, _index(state.second, i))
+        _, l_step = progress_of(self._local, self._run(state, i))
         # the step that switched stages is the global stage's last generation
         local = (state.stage == 1) & ((l_step > 0) | jnp.all(state.second_done))
         return local.astype(jnp.int32), jnp.where(local, l_step, g_step)
