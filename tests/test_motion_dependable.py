@@ -186,6 +186,13 @@ def test_cli_mass_option_is_required_and_says_so(capsys):
     args = parser.parse_args(["identify-motion", "f.csv", "--force-col", "F", "--x-col", "x", "--mass", "2",
                               "--float32"])
     assert args.x64 is False
+    import inspect
+
+    from jaxfric.motion import compare_motion
+
+    assert args.keys == (inspect.signature(compare_motion).parameters["keys"].default or 1)  # the same default
+    assert parser.parse_args(["identify-motion", "f.csv", "--force-col", "F", "--x-col", "x", "--mass", "2",
+                              "--keys", "3"]).keys == 3
 
 
 @pytest.mark.slow
@@ -195,13 +202,16 @@ def test_cli_prints_the_ranking_with_the_baseline_and_writes_results_json(tmp_pa
     out = tmp_path / "r"
     rc = main(["identify-motion", str(_csv(tmp_path)), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb", "--quick", "--quiet", "--no-cache",
-               "--window", "0.25", "--out", str(out)])  # 800 samples at 1024 Hz: 3 windows of 256
+               "--window", "0.25", "--keys", "2", "--out", str(out)])  # 800 samples at 1024 Hz: 3 windows of 256
     printed = capsys.readouterr().out
     assert rc == 0
     assert "| rank | model |" in printed and BASELINE_LABEL in printed
     results = json.loads((out / "results.json").read_text())
     assert [r["model"] for r in results["ranking"]] == ["coulomb", BASELINE_LABEL]
     assert results["float64"] is True and "held-back" in results["split"]
+    from jaxfric.motion import load_motion_fit
+
+    assert len(load_motion_fit(out / "models" / "coulomb.npz").ensemble["train_rmse_mm"]) == 2  # --keys 2
 
 
 def _loop_short_score(fit, rec, window, init=20):
@@ -375,6 +385,14 @@ def test_blocked_judge_scores_each_block_with_a_fit_that_never_saw_it():
     assert gated.scores["coulomb"] == (short["coulomb"] if passes else math.inf)
     assert gated.blocked == cmp.scores and gated.baseline_blocked == cmp.baseline_score  # kept on the comparison
     assert gated.baseline_score == short_base
+    # keys=K: K members per model, judged by the member of lowest training error; the folds stay one fit each
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ens = compare_motion(["coulomb"], rec, key=0, folds=2, window=300, keys=2, **opts)
+        alone = identify_motion("coulomb", rec, key=0, keys=2, **opts)
+    assert len(ens.fits["coulomb"].ensemble["train_rmse_mm"]) == 2
+    np.testing.assert_array_equal(ens.fits["coulomb"].ensemble["theta"], alone.ensemble["theta"])
+    assert ens.blocked == cmp.scores and ens.baseline_blocked == cmp.baseline_score
     assert gated_scores({"a": 1.0, "b": 2.0}, {"a": 5.0, "b": 3.0}, 4.0) == {"a": math.inf, "b": 2.0}
     with pytest.raises(ValueError, match="judge must be one of"):
         compare_motion(["coulomb"], rec, key=0, judge="oracle", **opts)

@@ -22,6 +22,9 @@ import numpy as np
 
 from .errors import KEPT, UserError, _prepare_out, _say, print_warning
 
+#: members per model, as `jaxfric.motion.compare_motion`'s ``keys`` (tests/test_cli.py holds the two equal)
+KEYS = 1
+
 EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
       --mass-range 50,200 --offset --model coulomb,stribeck,lugre,gms
@@ -80,6 +83,9 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
                         "'tail' the held-back block's free-run RMSE")
     f.add_argument("--window", type=positive_float, default=None, metavar="S",
                    help="seconds per window of the short judge (default 2; the record must hold one)")
+    f.add_argument("--keys", type=positive_int, default=KEYS, metavar="K",
+                   help=f"members per model (identify_motion's keys=K; default {KEYS}, compare_motion's): each "
+                        "model is ranked and saved as its member of lowest training error; 1: one fit of --seed")
     f.add_argument("--seed", type=seed, default=0, help="random seed (same seed, same result)")
     f.add_argument("--max-time", type=positive_float, default=None, metavar="S",
                    help="budget per model: wall seconds; the search then stops with the best so far")
@@ -193,7 +199,8 @@ def cmd_identify_motion(args, argv) -> int:
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", BaselineWarning)
-                fit = identify_motion(model, data, train=args.train_fraction, progress=not args.quiet, **options)
+                fit = identify_motion(model, data, train=args.train_fraction, progress=not args.quiet,
+                                      keys=args.keys if args.keys > 1 else None, **options)
         except ValueError as e:
             raise UserError(str(e)) from None
         for w in caught:  # said even under --quiet, without a source line

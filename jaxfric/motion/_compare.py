@@ -363,7 +363,7 @@ def _as_records(value) -> list:
 
 
 def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds: int = 3,
-                   window: int | None = None, **kwargs) -> MotionComparison:
+                   window: int | None = None, keys=None, **kwargs) -> MotionComparison:
     """Fit each of ``models`` (names or instances, or a mapping label -> model) with
     [`identify_motion`][jaxfric.motion.identify_motion] on the same data, key and options, rank them by the
     judge and warn ([`OverfitWarning`][jaxfric.motion.OverfitWarning]) when a model with more search
@@ -388,6 +388,11 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds:
       ``folds`` blocks per record, each held-out block simulated from its own first 20
       samples): ``folds`` more fits per model, and every block is scored on motion its fit
       never saw.
+
+    ``keys``: ``K`` members per model ([`identify_motion`][jaxfric.motion.identify_motion]'s ``keys``); each
+    model is judged, and predicts, by its member of lowest training error (``fit.member(i)``
+    gives the others, ``fit.simulate_ensemble`` their average and band). The blocked folds
+    stay one fit each, as measured (docs/motion.md, "Ensembles in the comparison").
 
     ``window``: samples per window of the short judge (default ``None``: `SHORT_WINDOW_S`
     = 2 s of samples, 256 at 128 Hz, 2 000 at 1 kHz); a shorter rest at the end of a record is not scored. The table shows the judge's score beside the validation RMSE, and the baseline's under
@@ -417,7 +422,8 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds:
         if max(r.n_samples for r in everything) < window:
             raise ValueError(f"the short-runs judge needs a record of at least window={window} samples, "
                              f"the longest has {max(r.n_samples for r in everything)}")
-    fits = {label: identify_motion(model, data, key=key, mass=mass, **kwargs) for label, model in items.items()}
+    fits = {label: identify_motion(model, data, key=key, mass=mass, keys=keys, **kwargs)
+            for label, model in items.items()}
     if judge == "tail":
         return rank_fits(fits, stacklevel=2)
     if judge == "short":
