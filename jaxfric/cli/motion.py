@@ -22,7 +22,7 @@ import numpy as np
 
 from .errors import KEPT, UserError, _prepare_out, _say, print_warning
 
-#: members per model, as `jaxfric.motion.compare_motion`'s ``keys`` (tests/test_cli.py holds the two equal)
+#: members per model, as `jaxfric.motion.compare_motion`'s ``keys`` (tests/test_motion_dependable.py holds the two equal)
 KEYS = 1
 
 EPILOG = """examples:

@@ -268,7 +268,7 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
 
     def _run(self, state, i):
         """Local run ``i``'s state: with one start ``state.second`` holds that run itself
-        (no batch of one, whose reads would each be a slice in the program, issue 47)."""
+        (no batch of one, whose reads would each be a slice in the program)."""
         return state.second if self.num_starts == 1 else _index(state.second, i)
 
     def done(self, state):
@@ -278,8 +278,8 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         return self.done(state), self._result(state)
 
     def _local_best(self, state):
-        """``(i, x, f)``: the best of the local runs (``i`` a static 0 for one start: the
-        batch of one read directly, no argmin and gather in the program, issue 47)."""
+        """``(i, x, f)``: the best of the local runs (``i`` a static 0 for one start: that
+        run itself, no argmin and gather in the program)."""
         if self.num_starts == 1:
             x, f = self._local.best(state.second)
             return 0, x, f
