@@ -454,14 +454,15 @@ def main(argv=None):
     judges, ens, choices = summarise(rows, CRITERIA if a.members > 1 else tuple(c for c in CRITERIA if c != "spread"))
     avg_judges, averages = average_summary(rows)
     judges += avg_judges
-    cmd = "python benchmarks/motion_judge.py" + (" --quick" if a.quick else "") + f" --keys {a.keys} --members {a.members}"
+    cmd = " ".join(["python benchmarks/motion_judge.py --proxy", a.proxy, *(["--quick"] if a.quick else []), *(
+        ["--start", str(a.start)] if a.start else []), "--keys", str(a.keys), "--members", str(a.members)])
     made = f"; the fits were made with the search of commit {a.fits_from}" if a.fits_from else ""
+    rescored = None if a.rescore is None and not a.fits_from else made
     if a.proxy != "rig":
-        return real_report(out, a.proxy, cmd + f" --proxy {a.proxy}", judges, choices, rows,
-                           None if a.rescore is None and not a.fits_from else made, averages)
-    text = ["# Which judge predicts new excitation (rig proxy)", "",
-            f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion's variants "
-            f"from the saved fits, no refit{made}). Free-run position RMSE [mm]; "
+        return real_report(out, a.proxy, cmd, judges, choices, rows, rescored, averages)
+    text = ["# Which judge predicts new excitation (rig proxy)", "", (f"Command: `{cmd}`" if rescored is None else (
+            f"Commands: `{cmd} --save-fits FITS`, then `{cmd} --rescore FITS` (the short criterion's variants from "
+            f"the saved fits, no refit{made})")) + ". Free-run position RMSE [mm]; "
             "`unseen`: pooled over the three families the fit never saw, each simulated from its first 20 samples. "
             "Module docstring: the proxy and the criteria.", "",
             "## Criteria: choice within 10 % of the best on unseen excitation, never worse than the baseline", "",
