@@ -14,8 +14,9 @@ import pytest
 
 from jaxfric import models
 from jaxfric._warnings import BaselineWarning
+from jaxfric.fit import ExtrapolationWarning
 from jaxfric.motion import (MotionData, MotionSearch, baseline_motion_fit, compare_motion, friction_step,
-                            identify_motion, simulate_motion)
+                            identify_motion, load_motion_fit, simulate_motion)
 from jaxfric.motion._baseline import BASELINE_LABEL, least_squares, least_squares_start
 from jaxfric.motion._layout import Layout
 from jaxfric.motion._pipeline import distinct_starts
@@ -27,11 +28,12 @@ SMALL = MotionSearch(particles=10, generations=6, global_window=150, horizons=(3
                      starts=2, least_squares_start=True)
 
 
-def _record(n=1500, dt=1e-3, seed=0, v_eps=1e-3):
-    """Noise-free motion of a Coulomb + viscous axis (2.5 kg, offset 3 N) under two tones."""
+def _record(n=1500, dt=1e-3, seed=0, v_eps=1e-3, gain=1.0):
+    """Noise-free motion of a Coulomb + viscous axis (2.5 kg, offset 3 N) under two tones
+    (their amplitudes times ``gain``)."""
     model = models.Coulomb(v_eps=v_eps)
     t = np.arange(n) * dt
-    u = 30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0 + seed)
+    u = gain * (30 * np.sin(2 * np.pi * 1.3 * t) + 12 * np.sin(2 * np.pi * 3.1 * t + 1.0 + seed))
     with jax.enable_x64(True):
         out = simulate_motion(friction_step(model), jnp.asarray(model.from_physical(**TRUTH), jnp.float64),
                               MASS, u - OFFSET, dt, 0.0, 0.0)
@@ -151,6 +153,28 @@ def test_one_sample_time_tolerance(small_fit):
         far = MotionData.from_arrays(rec.force, rec.position, rec.dt * 1.01)
         with pytest.raises(ValueError, match="differs from the fit's"):
             fit.score(far, init_window=20)
+
+
+def test_a_record_faster_than_the_training_motion_is_warned(small_fit, tmp_path):
+    """A motion fit keeps its training velocity range (saved and loaded with it), and
+    simulating a record that moves outside it says so: the one failure no judge computed on
+    the training data can see. Inside the range it stays silent."""
+    fit, _ = small_fit
+    rec = _record()
+    v_train = rec.velocity[:fit.n_train]
+    assert fit.velocity_range == (pytest.approx(v_train.min()), pytest.approx(v_train.max()))
+    fast = _record(gain=3.0)
+    assert np.mean(np.abs(fast.velocity) > 1.2 * np.abs(v_train).max()) > 0.1  # the record is faster
+    with jax.enable_x64(True):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ExtrapolationWarning)
+            inside = fit.score(rec.window(0, fit.n_train), init_window=20)
+        with pytest.warns(ExtrapolationWarning, match=r"% of the record's velocity samples lie outside the "
+                                                      r"training range .* velocities it was never trained on"):
+            outside = fit.score(fast, init_window=20)
+    assert np.isfinite(inside["rmse_mm"]) and np.isfinite(outside["rmse_mm"])  # a warning, not a refusal
+    fit.save(tmp_path / "fit.npz")
+    assert load_motion_fit(tmp_path / "fit.npz").velocity_range == fit.velocity_range
 
 
 def _csv(tmp_path, n=800):

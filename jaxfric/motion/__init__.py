@@ -19,8 +19,8 @@
 """
 
 from .._warnings import BaselineWarning
-from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, MotionData, MotionFit, MotionProblem, baseline_motion_fit,
-                   identify_motion, load_motion_fit, motion_metrics)
+from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, EXTRAPOLATION_MARGIN, EXTRAPOLATION_SHARE, MotionData,
+                   MotionFit, MotionProblem, baseline_motion_fit, identify_motion, load_motion_fit, motion_metrics)
 from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, blocked_scores, compare_motion,
                        gated_scores, rank_fits, short_judge, short_runs_score, short_window)
 from ._pipeline import MotionBudget, MotionSearch, default_search
@@ -32,6 +32,8 @@ __all__ = [
     "ATTRACTION_TIME_S",
     "BaselineWarning",
     "DEFAULT_INIT_WINDOW",
+    "EXTRAPOLATION_MARGIN",
+    "EXTRAPOLATION_SHARE",
     "MotionBudget",
     "MotionComparison",
     "MotionSearch",

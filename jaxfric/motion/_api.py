@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+import warnings
 from typing import ClassVar
 
 import equinox as eqx
@@ -24,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._warnings import ExtrapolationWarning
 from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
@@ -56,6 +58,14 @@ DEFAULT_METRIC_HORIZON = 10
 DEFAULT_INIT_WINDOW = 20
 #: Degree of the polynomial the initial-state rule fits to the window's positions.
 INIT_DEGREE = 2
+#: A simulated record warns (`ExtrapolationWarning`) where more than this share of its
+#: filtered velocity samples lie outside the fit's training range by more than
+#: `EXTRAPOLATION_MARGIN` of that range's width: motion faster than any the fit was trained
+#: on (or in a direction it never moved), where no judge computed on the training data can say
+#: how the model predicts.
+EXTRAPOLATION_SHARE = 0.01
+#: See `EXTRAPOLATION_SHARE` (a fraction of the training velocity range's width).
+EXTRAPOLATION_MARGIN = 0.05
 ERRORS = ("position", "velocity", "both")
 _CHANNELS = ("force", "position", "load", "velocity")
 
@@ -286,7 +296,9 @@ class MotionFit(Fit):
           [`initial_state`][jaxfric.motion.MotionFit.initial_state]; the outputs cover the whole record (samples before
           ``N - 1`` are the rule's smoothed estimates, the free run starts at ``N - 1``).
           The record's positions after sample ``N - 1`` and its filtered ``velocity``
-          are never read; its force is (it is the input).
+          are never read for the run (the velocity only to warn, with an
+          [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning], where the record moves outside the
+          training velocity range, [`EXTRAPOLATION_SHARE`][jaxfric.motion.EXTRAPOLATION_SHARE]); its force is (it is the input).
         """
         if isinstance(force, MotionData):
             if init_window is None:
@@ -344,13 +356,34 @@ class MotionFit(Fit):
         n = _init_window(init_window)
         if data.n_samples <= n:
             raise ValueError(f"init_window={n} leaves nothing to simulate in a record of {data.n_samples} samples")
+        self._warn_new_motion(data.velocity)
         st = self.initial_state(data.position[:n], n)
         out = self.simulate(data.net_force[n - 1:], st["x0"], st["v0"], state0=st["state0"])
         head = n - 1
-        fr = self.predict(st["v_window"][:head]) if head else np.zeros(0)
+        with warnings.catch_warnings():  # the record as a whole was checked above
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            fr = self.predict(st["v_window"][:head]) if head else np.zeros(0)
         return {"x": np.concatenate([st["x_window"][:head], out["x"]]),
                 "v": np.concatenate([st["v_window"][:head], out["v"]]),
                 "friction": np.concatenate([np.asarray(fr, np.float64), out["friction"]])}
+
+    def _warn_new_motion(self, velocity) -> None:
+        """`ExtrapolationWarning` where a record's motion leaves the training velocity range
+        (faster, or in a direction the training record never moved): more than
+        `EXTRAPOLATION_SHARE` of its samples beyond it by `EXTRAPOLATION_MARGIN` of its width."""
+        if self.velocity_range is None:
+            return
+        lo, hi = self.velocity_range
+        v = np.asarray(velocity, np.float64)
+        pad = EXTRAPOLATION_MARGIN * (hi - lo)
+        share = float(np.mean((v < lo - pad) | (v > hi + pad)))
+        if share > EXTRAPOLATION_SHARE:
+            warnings.warn(
+                f"{share:.0%} of the record's velocity samples lie outside the training range "
+                f"[{lo:.4g}, {hi:.4g}] m/s (this record: {v.min():.4g} to {v.max():.4g} m/s): the "
+                f"{type(self.model).__name__} fit predicts velocities it was never trained on, where no "
+                "judge of the training data can say how it predicts; compare with the least-squares "
+                "baseline on this record (docs/motion.md)", ExtrapolationWarning, stacklevel=4)
 
     def simulate_from(self, data: MotionData, start: int = 0, stop: int | None = None) -> dict:
         """Free run over ``data[start:stop]`` from the state estimated at ``start``.
@@ -394,8 +427,10 @@ class MotionFit(Fit):
                                      jnp.asarray(data.velocity, theta.dtype), int(horizon)), np.float64)
 
     def evaluate(self, data: MotionData, n_train: int, horizon: int = DEFAULT_METRIC_HORIZON) -> dict:
-        """Free-run and k-step position metrics on ``[0, n_train)`` and ``[n_train, T)``."""
+        """Free-run and k-step position metrics on ``[0, n_train)`` and ``[n_train, T)`` (an
+        `ExtrapolationWarning` where the held-back part moves outside the training velocities)."""
         data = _as_motion_data(data)
+        self._warn_new_motion(data.velocity[n_train:])
         x = data.position
         theta = jnp.asarray(self.theta)
         # simulate_from(data, 0, n_train), simulate_from(data, n_train) and k_step(data, horizon)
@@ -785,6 +820,7 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
         fit = MotionFit(
             model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
             dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
+            velocity_range=(float(vt.min()), float(vt.max())),
             history=history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
             timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
             settings={
