@@ -172,6 +172,8 @@ def test_a_record_faster_than_the_training_motion_is_warned(small_fit, tmp_path)
         with pytest.warns(ExtrapolationWarning, match=r"% of the record's velocity samples lie outside the "
                                                       r"training range .* velocities it was never trained on"):
             outside = fit.score(fast, init_window=20)
+        with pytest.warns(ExtrapolationWarning, match="outside the training range"):
+            fit.evaluate(fast, fit.n_train)  # a held-back tail is checked as a record is
     assert np.isfinite(inside["rmse_mm"]) and np.isfinite(outside["rmse_mm"])  # a warning, not a refusal
     fit.save(tmp_path / "fit.npz")
     assert load_motion_fit(tmp_path / "fit.npz").velocity_range == fit.velocity_range

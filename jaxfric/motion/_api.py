@@ -297,8 +297,9 @@ class MotionFit(Fit):
           ``N - 1`` are the rule's smoothed estimates, the free run starts at ``N - 1``).
           The record's positions after sample ``N - 1`` and its filtered ``velocity``
           are never read for the run (the velocity only to warn, with an
-          [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning], where the record moves outside the
-          training velocity range, [`EXTRAPOLATION_SHARE`][jaxfric.motion.EXTRAPOLATION_SHARE]); its force is (it is the input).
+          [`ExtrapolationWarning`][jaxfric.fit.ExtrapolationWarning], where the record moves outside
+          the training velocity range,
+          [`EXTRAPOLATION_SHARE`][jaxfric.motion.EXTRAPOLATION_SHARE]); its force is (it is the input).
         """
         if isinstance(force, MotionData):
             if init_window is None:
