@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._warnings import ExtrapolationWarning
-from ..fit import Fit, load_fit, model_config, model_name, uncertainty_lines
+from ..fit import Fit, load_fit, model_config, model_name, predict, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
 from ..metrics import friction_metrics
@@ -361,9 +361,9 @@ class MotionFit(Fit):
         st = self.initial_state(data.position[:n], n)
         out = self.simulate(data.net_force[n - 1:], st["x0"], st["v0"], state0=st["state0"])
         head = n - 1
-        with warnings.catch_warnings():  # the record as a whole was checked above
-            warnings.simplefilter("ignore", ExtrapolationWarning)
-            fr = self.predict(st["v_window"][:head]) if head else np.zeros(0)
+        # the window's friction without predict's per-sample range check: the record was checked above
+        fr = (predict(self.model, self.theta, (self.velocity_scaler, self.friction_scaler), st["v_window"][:head],
+                      self.dt) + self.offset) if head else np.zeros(0)
         return {"x": np.concatenate([st["x_window"][:head], out["x"]]),
                 "v": np.concatenate([st["v_window"][:head], out["v"]]),
                 "friction": np.concatenate([np.asarray(fr, np.float64), out["friction"]])}
