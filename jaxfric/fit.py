@@ -38,7 +38,8 @@ from .models import AbstractFrictionModel, Scaler
 from .problem import AbstractProblem, ForceBalanceProblem, rollout
 from .records import check_sample_time, same_sample_time
 
-__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "LazyUncertainty", "ResamplingWarning", "load_fit"]
+__all__ = ["FORMAT_VERSION", "ExtrapolationWarning", "Fit", "FitKindError", "LazyUncertainty", "ResamplingWarning",
+           "load_fit"]
 
 FORMAT_NAME = "jaxfric.fit"
 #: Version of the file layout written by `Fit.save`; `load_fit` reads
@@ -244,6 +245,11 @@ class LazyUncertainty:
         return self._value
 
 
+class FitKindError(ValueError):
+    """A fit file holds another kind of fit than the loader reads (a motion fit given to
+    [`load_fit`][jaxfric.fit.load_fit], a force-balance fit to ``jaxfric.motion.load_motion_fit``)."""
+
+
 class Fit:
     """An identified friction model and its report (returned by [`jaxfric.identify`][jaxfric.identification.identify]).
 
@@ -364,6 +370,24 @@ class Fit:
         return args
 
     @classmethod
+    def load(cls, path) -> "Fit":
+        """Read a fit of this kind written by [`save`][jaxfric.fit.Fit.save] (errors: [`load_fit`][jaxfric.fit.load_fit])."""
+        fields = _file_fields(path)
+        try:
+            return cls.from_fields(fields, path)
+        except (KeyError, TypeError, IndexError) as err:
+            raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None
+
+    @classmethod
+    def from_fields(cls, fields: dict, path="the fit") -> "Fit":
+        """A fit of this kind from the constructor fields a file holds (``settings`` as
+        written); a subclass reads its own entries out of them. A force-balance fit refuses
+        a motion fit's fields (they carry ``settings["motion"]``, the mechanics)."""
+        if "motion" in (fields.get("settings") or {}):
+            raise FitKindError(f"{path} holds a motion fit: read it with jaxfric.motion.load_motion_fit")
+        return cls(**fields)
+
+    @classmethod
     def problem(cls) -> AbstractProblem:
         """The problem this kind of fit solves ([`jaxfric.problem.AbstractProblem`][jaxfric.problem.AbstractProblem]): how
         its data, search coordinates, residuals and score are read. A force-balance fit's is
@@ -431,9 +455,6 @@ class Fit:
         residual variance holds on the new record (docs/uncertainty.md)."""
         _check_level(level)
         u = self._need_uncertainty()
-        if "motion" in self.settings:
-            raise ValueError("prediction_interval gives friction bands of a force-balance fit; a motion "
-                             "fit's uncertainty is about position")
         method = u._method(method)
         theta = jnp.asarray(self.theta)
         dt = self.dt if dt is None else dt
@@ -749,21 +770,8 @@ def _finite_array(path, name: str, a: np.ndarray) -> np.ndarray:
     return a
 
 
-def load_fit(path) -> Fit:
-    """Read a fit written by [`Fit.save`][jaxfric.fit.Fit.save].
-
-    A file written by jaxfric 0.6/0.7 kept the search box in the model configuration
-    (``Fc_range``, ``sigma0_range``, ...): those entries become [`Fit.box`][jaxfric.fit.Fit.box] (the
-    unset ones its defaults, as they were then).
-
-    Raises:
-        ValueError: ``path`` is not a file name (an int would be a file descriptor); the
-            file is not an ``.npz`` archive, is corrupted or truncated, is not a
-            jaxfric fit, was written in a newer (or unknown) format version than this
-            jaxfric reads, or holds non-finite (or, for the scalers, empty-range)
-            weights, scalers or sample time.
-        FileNotFoundError: no such file.
-    """
+def _file_fields(path) -> dict:
+    """The constructor fields of the fit stored at ``path`` (`load_fit` says what is checked)."""
     header, arrays = _read(path)
     version = header.get("format_version")
     if not isinstance(version, int) or version < 1:
@@ -801,7 +809,7 @@ def load_fit(path) -> Fit:
         if vrange is not None and not (len(vrange) == 2 and np.all(np.isfinite(np.asarray(vrange, float)))):
             raise ValueError(f"{path}: the training velocity range {vrange!r} is not two finite numbers")
         key = header.get("key") or {}
-        return Fit(
+        return dict(
             model=model, theta=theta, velocity_scaler=scaler("velocity_scaler"),
             friction_scaler=scaler("friction_scaler"), dt=header["dt"], n_train=header["n_train"],
             n_samples=header["n_samples"], metrics=header["metrics"], stages=header.get("stages", ()),
@@ -811,3 +819,22 @@ def load_fit(path) -> Fit:
             diagnostics=header.get("diagnostics"), ensemble=ensemble, box=box, uncertainty=uncertainty)
     except (KeyError, TypeError, IndexError) as err:
         raise ValueError(f"{path}: the fit file is incomplete or corrupted ({err!r})") from None
+
+
+def load_fit(path) -> Fit:
+    """Read a force-balance fit written by [`Fit.save`][jaxfric.fit.Fit.save]
+    ([`Fit.load`][jaxfric.fit.Fit.load]; a motion fit's file: ``jaxfric.motion.load_motion_fit``).
+
+    A file written by jaxfric 0.6/0.7 kept the search box in the model configuration
+    (``Fc_range``, ``sigma0_range``, ...): those entries become [`Fit.box`][jaxfric.fit.Fit.box] (the
+    unset ones its defaults, as they were then).
+
+    Raises:
+        ValueError: ``path`` is not a file name (an int would be a file descriptor); the
+            file is not an ``.npz`` archive, is corrupted or truncated, is not a
+            jaxfric fit, holds a motion fit ([`FitKindError`][jaxfric.fit.FitKindError]), was written in a newer (or unknown) format
+            version than this jaxfric reads, or holds non-finite (or, for the scalers,
+            empty-range) weights, scalers or sample time.
+        FileNotFoundError: no such file.
+    """
+    return Fit.load(path)

@@ -182,9 +182,9 @@ class ForceBalanceProblem(AbstractProblem):
     def residuals(self, fit, data) -> Residuals:
         """Prediction minus measured friction over the training samples the fit was made
         on, each record run from its own initial state (`_ForceBalance`)."""
-        if "motion" in fit.settings:
-            raise ValueError("a motion fit read as a force-balance Fit (load_fit): read it with "
-                             "jaxfric.motion.load_motion_fit for its uncertainty")
+        if not isinstance(fit.problem(), ForceBalanceProblem):
+            raise ValueError(f"a {type(fit).__name__} solves {type(fit.problem()).__name__}, not the force "
+                             "balance: ask fit.problem() for its residuals")
         model = fit.model
         records = []
         for r in self.training_records(fit, data):

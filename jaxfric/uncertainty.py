@@ -38,6 +38,7 @@ from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_
                          hac_covariance, interval_text, jacobian_covariance, number_text)
 from .fit import NOT_IDENTIFIABLE_MEANING, Fit, diagnostic_flags, grouped_reasons, parameter_verdicts
 from .plausibility import check_plausibility, warn_implausible
+from .problem import ForceBalanceProblem
 
 __all__ = ["METHODS", "ParameterUncertainty", "andrews_bandwidth", "assess_fit", "block_bootstrap_covariance",
            "coverage", "hac_covariance", "jacobian_covariance", "parameter_uncertainty", "prediction_interval"]
@@ -199,7 +200,7 @@ def report_summary(fit, data, level: float = DEFAULT_LEVEL) -> dict | None:
     implausible = list(fit.diagnostics.get("implausible", []))
     verdicts = parameter_verdicts(fit, level)
     one_record = (getattr(data, "velocity", None) is not None and len(data.velocity) == fit.n_samples
-                  and "motion" not in fit.settings)
+                  and isinstance(fit.problem(), ForceBalanceProblem))
     ensemble = _ensemble_band(fit, data) if one_record and fit.ensemble else None
     if u is None and not implausible and not verdicts and ensemble is None:
         return None

@@ -273,7 +273,7 @@ class LSMotion:
     when the fit carries them, so that the notebook and the fit's table agree."""
 
     def __init__(self, d, n_train, fit=None):
-        got = (fit.settings.get("motion") or {}).get("baseline") if fit is not None else None
+        got = fit.mechanics.baseline if fit is not None else None
         if got:
             self.M, self.Fc, self.Fv, self.offset = (float(got[k]) for k in ("M", "Fc", "Fv", "offset"))
         else:

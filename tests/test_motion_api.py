@@ -115,7 +115,7 @@ def test_default_search_recovers_mass_offset_and_friction(default_fit):
     assert abs(fit.offset - OFFSET) <= 0.01 * OFFSET
     assert [s["stage"] for s in fit.stages] == ["pso", "shooting_300", "free_run"]
     assert fit.metrics["valid"]["fit_percent"] > 99.0
-    assert fit.settings["motion"]["stopped"] is None
+    assert fit.mechanics.stopped is None
 
 
 @pytest.mark.slow
@@ -162,12 +162,12 @@ def test_records_form_refuses_mixed_and_missing_input():
 def test_budget_stops_the_run_with_the_best_so_far():
     rec = _record(1200)
     fit = _fit(data=rec, max_evals=150)
-    assert fit.settings["motion"]["stopped"] == "max_evals"
+    assert fit.mechanics.stopped == "max_evals"
     assert sum(s["num_evals"] for s in fit.stages) <= 150
     assert np.isfinite(fit.metrics["cost"])
     # the stages never make it worse: the final J is at most the global stage's on the same cost
     timed = _fit(data=rec, max_time=1e-6)
-    assert timed.settings["motion"]["stopped"] == "max_time"
+    assert timed.mechanics.stopped == "max_time"
     assert [s["stage"] for s in timed.stages] == ["pso"]
     assert np.isfinite(timed.metrics["valid"]["rmse_mm"])
     with pytest.raises(ValueError, match="no room"):
@@ -269,7 +269,7 @@ def test_choice_is_the_baseline_where_it_scores_lowest():
     ls = {"M": 2.4, "Fc": 11.0, "Fv": 55.0, "offset": 2.0}
     fit = MotionFit.given(models.get("lugre"), dict(sigma0=1e5, sigma1=300.0, sigma2=60.0, Fc=12.0, Fs=15.0,
                                                     vs=0.01), mass=MASS, offset=OFFSET, dt=1e-3,
-                          settings={"motion": {"baseline": ls}})
+                          mechanics={"baseline": ls})
     fit = fit.replace(metrics={"num_params": 8, "valid": {"rmse_mm": 2.0},
                                "baseline": {"train": {"rmse_mm": 1.0}, "valid": {"rmse_mm": 3.0}}})
     with warnings.catch_warnings():
@@ -404,7 +404,7 @@ def test_emps_official_benchmark_skips_cleanly_without_the_test_recording(tmp_pa
 
 def test_a_motion_fit_of_given_parameters_is_the_one_built_by_hand():
     """``MotionFit.given`` (published parameters, a baseline, a test's truth) holds the
-    parameters as θ, the mechanics in settings, and predicts friction plus the offset;
+    parameters as θ, the mechanics in ``fit.mechanics``, and predicts friction plus the offset;
     ``baseline_motion_fit`` is the least-squares baseline's model with those values."""
     from jaxfric.motion import baseline_motion_fit
 
@@ -412,7 +412,7 @@ def test_a_motion_fit_of_given_parameters_is_the_one_built_by_hand():
     by_name = MotionFit.given(model, TRUTH, mass=MASS, offset=OFFSET, dt=1e-3, settings={"model_name": "x"})
     by_theta = MotionFit.given(model, np.asarray(model.from_physical(**TRUTH)), mass=MASS, offset=OFFSET, dt=1e-3)
     np.testing.assert_array_equal(by_name.theta, by_theta.theta)
-    assert by_name.mechanics == {"mass": MASS, "offset": OFFSET, "v0": 0.0} and by_name.settings["model_name"] == "x"
+    assert (by_name.mechanics.mass, by_name.mechanics.offset, by_name.mechanics.v0) == (MASS, OFFSET, 0.0) and by_name.settings["model_name"] == "x"
     v = np.linspace(-0.02, 0.02, 7)
     expected = TRUTH["Fc"] * np.tanh(v / 1e-3) + TRUTH["sigma2"] * v + OFFSET
     np.testing.assert_allclose(np.asarray(by_name.predict(v)), expected, rtol=1e-5, atol=1e-4)
@@ -420,3 +420,32 @@ def test_a_motion_fit_of_given_parameters_is_the_one_built_by_hand():
     assert base.mass == 2.0 and base.offset == 0.5 and base.n_train == 5
     assert base.params["Fc"] == pytest.approx(0.0, abs=1e-6)  # a negative Coulomb level is held at zero
     assert base.params["sigma2"] == pytest.approx(3.0, rel=1e-6)
+
+
+def test_a_motion_fit_predicts_its_offset_on_every_path_and_through_the_cli(tmp_path):
+    """The fitted offset is in every friction prediction of a motion fit: ``predict`` at the
+    fit's sample time, at another (resampled: ``predict_at``, once), ``predict_at`` itself, and
+    ``jaxfric predict`` on the saved file (which ``load_fit`` alone refuses: a motion fit)."""
+    from jaxfric.cli import main
+    from jaxfric.fit import Fit, ResamplingWarning
+
+    lugre = dict(sigma0=1e5, sigma1=300.0, sigma2=60.0, Fc=12.0, Fs=15.0, vs=0.01)
+    fit = MotionFit.given(models.get("lugre"), lugre, mass=MASS, offset=OFFSET, dt=1e-3)
+    plain = Fit(model=fit.model, theta=fit.theta, velocity_scaler=None, friction_scaler=None, dt=1e-3,
+                n_train=0, n_samples=0, metrics={})  # the same friction without the offset
+    t = np.arange(400) * 1e-3
+    v = 0.02 * np.sin(2 * np.pi * 2.0 * t)
+    np.testing.assert_allclose(np.asarray(fit.predict(v)), np.asarray(plain.predict(v)) + OFFSET, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(fit.predict_at(t, v)), np.asarray(plain.predict(v)) + OFFSET, rtol=1e-12)
+    with pytest.warns(ResamplingWarning):
+        slow = np.asarray(fit.predict(v[::2], 2e-3))
+    with pytest.warns(ResamplingWarning):
+        expect = np.asarray(plain.predict(v[::2], 2e-3)) + OFFSET
+    np.testing.assert_allclose(slow, expect, rtol=1e-12)
+    fit.save(tmp_path / "motion.npz")
+    csv = tmp_path / "v.csv"
+    np.savetxt(csv, np.column_stack([t, v]), delimiter=",", header="t,v", comments="")
+    assert main(["predict", str(tmp_path / "motion.npz"), str(csv), "--velocity-col", "v", "--time-col", "t",
+                 "--quiet", "--out", str(tmp_path / "pred.csv")]) == 0
+    table = np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(table["friction_predicted"], np.asarray(fit.predict(v)), rtol=1e-6)

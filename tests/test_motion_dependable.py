@@ -113,7 +113,7 @@ def test_every_fit_carries_the_least_squares_baseline_and_beats_it_here(small_fi
     base = fit.metrics["baseline"]
     assert set(base) == {"train", "valid"}
     assert fit.metrics["train"]["rmse_mm"] <= base["train"]["rmse_mm"]
-    assert fit.settings["motion"]["baseline"]["M"] == pytest.approx(MASS, rel=0.05)
+    assert fit.mechanics.baseline["M"] == pytest.approx(MASS, rel=0.05)
 
 
 def test_a_fit_worse_than_the_baseline_on_its_training_data_warns_with_both_numbers():
@@ -492,9 +492,9 @@ def test_every_key_recovers_the_drive_and_reports_each_starts_cost():
                                   search=search, dtype=jnp.float64)
             assert fit.params["Fc"] == pytest.approx(TRUTH["Fc"], rel=1e-3)
             assert fit.params["sigma2"] == pytest.approx(TRUTH["sigma2"], rel=1e-3)
-            assert fit.settings["motion"]["mass"] == pytest.approx(MASS, rel=1e-3)
-            assert fit.settings["motion"]["offset"] == pytest.approx(OFFSET, rel=1e-3)
-            starts = fit.settings["motion"]["starts"]
+            assert fit.mechanics.mass == pytest.approx(MASS, rel=1e-3)
+            assert fit.mechanics.offset == pytest.approx(OFFSET, rel=1e-3)
+            starts = fit.mechanics.starts
             assert sorted(s["start"] for s in starts) == [0, 1, 2]  # 2 personal bests + least squares
             assert [s["J"] for s in starts] == sorted(s["J"] for s in starts)
             assert fit.metrics["cost"] <= starts[0]["J"] * (1 + 1e-9)  # polish and screen only go lower
@@ -589,5 +589,5 @@ def test_free_run_starts_are_polished_beside_the_swarms_best():
     plain, ranked = fits
     assert "rank" not in [s["stage"] for s in plain.stages]
     assert [s["stage"] for s in ranked.stages][:2] == ["pso", "rank"]
-    assert sorted(s["start"] for s in ranked.settings["motion"]["starts"]) == [0, 1, 2, 3]
+    assert sorted(s["start"] for s in ranked.mechanics.starts) == [0, 1, 2, 3]
     assert ranked.metrics["cost"] <= plain.metrics["cost"] * (1 + 1e-12)

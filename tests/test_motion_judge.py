@@ -74,7 +74,7 @@ def test_short_judge_pools_windows_each_simulated_from_its_own_first_samples():
                              offset=fit.offset)
     assert cmp.judge == "short"
     assert cmp.scores["coulomb"] == pytest.approx(ref, rel=1e-7)
-    b = fit.settings["motion"]["baseline"]
+    b = fit.mechanics.baseline
     base = _numpy_short_score(rec, 300, Fc=max(b["Fc"], 0.0), Fv=b["Fv"], eps=1e-4, mass=b["M"], offset=b["offset"])
     assert cmp.baseline_score == pytest.approx(base, rel=1e-7)
     rows = cmp.rows()
@@ -217,7 +217,7 @@ def test_a_window_whose_run_is_not_finite_makes_the_short_score_inf():
         warnings.simplefilter("ignore")
         recs = [_record(700), _record(950).window(50)]
         fit = _given("lugre")
-        fit = fit.replace(settings={**fit.settings, "motion": {**fit.mechanics, "mass": 1e-300}})
+        fit = fit.replace(mechanics=fit.mechanics.replace(mass=1e-300))
         force = recs[0].force.copy()
         force[450:452] = [1e300, -1e300]
         broken = [dataclasses.replace(recs[0], force=force), recs[1]]

@@ -240,7 +240,7 @@ def test_a_motion_fits_attraction_rate_starts_at_the_friction_scale_per_second()
         given = identify_motion("gms", rec, key=0, mass=2.5, train=1.0, search=search, dtype=jnp.float64,
                                 box={"C": (2.0, 3e3)})
     assert fit.box["C"] == (f / ATTRACTION_TIME_S, 1e4 * f)
-    assert 10.0 ** fit.settings["motion"]["search_bounds"][0][models.GMS().param_names.index("log10_C")] \
+    assert 10.0 ** fit.mechanics.search_bounds[0][models.GMS().param_names.index("log10_C")] \
         == pytest.approx(f / ATTRACTION_TIME_S)
     assert given.box["C"] == (2.0, 3e3)
     assert models.GMS().search_box(None, rec.velocity, rec.net_force)["C"][0] == pytest.approx(0.1 * f)

@@ -117,7 +117,7 @@ def test_global_search_stage_is_a_direct_minimise_run_and_the_fit_is_made_from_i
     direct = jf.minimise(cost, solver, (lower, upper), args=data, key=jax.random.key(SEED), dtype=kwargs["dtype"])
     np.testing.assert_array_equal(np.asarray(sol.value), np.asarray(direct.value))
     assert float(sol.f) == float(direct.f) and set(timings) == {"compile_s", "run_s"}
-    y = fit.theta if problem == "force_balance" else np.asarray(fit.settings["motion"]["y"])
+    y = fit.theta if problem == "force_balance" else np.asarray(fit.mechanics.y)
     np.testing.assert_allclose(y, np.asarray(direct.value, np.float64), rtol=1e-6)
     # the run's record: the solver's stages (global, then Nelder-Mead) and its history
     rows = fit.stages

@@ -104,8 +104,8 @@ def _motion_fit(n=800, n_train=600):
     # slightly off the truth: the residuals are the fit's error, not only the noise
     y = [theta[0] * 1.05, theta[1], np.log10(2.6), 3.0]
     fit = MotionFit.given(model, np.asarray(y[:2]), mass=2.6, offset=3.0, dt=DT, n_train=n_train, n_samples=n,
-                          settings={"motion": {"error": "position", "horizon": None, "y": y,
-                                               "search_names": list(model.param_names) + ["log10_mass", "offset"]}})
+                          mechanics={"error": "position", "horizon": None, "y": y,
+                                     "search_names": list(model.param_names) + ["log10_mass", "offset"]})
     return fit, data
 
 
@@ -135,16 +135,38 @@ def test_motion_problem_against_the_fits_own_free_run():
 
 def test_motion_problem_cuts_whole_training_records():
     fit, data = _motion_fit()
-    fit = fit.replace(settings={**fit.settings, "motion": {**fit.mechanics,
-                                                           "records": {"train": [250, 350], "valid": []}}})
+    fit = fit.replace(mechanics=fit.mechanics.replace(records={"train": [250, 350], "valid": []}))
     first, second = fit.problem().training_records(fit, data)
     np.testing.assert_array_equal(first.force, data.force[:250])
     np.testing.assert_array_equal(second.force, data.force[250:600])
 
 
-def test_a_motion_fit_read_as_a_force_balance_fit_is_told_so():
+def test_a_motion_fit_read_as_a_force_balance_fit_is_told_so(tmp_path):
+    """A motion fit's file read by load_fit is refused naming load_motion_fit (it used to come
+    back as a plain Fit without its mechanics); load_motion_fit reads every field of the
+    mechanics back and refuses a force-balance file; the force-balance residuals refuse a
+    motion fit by its problem; the mechanics are as immutable as the fit."""
+    import dataclasses
+
+    from jaxfric.fit import FitKindError, load_fit
+    from jaxfric.motion import load_motion_fit
+
     fit, data = _motion_fit()
+    fit = fit.replace(mechanics=fit.mechanics.replace(baseline={"M": 2.4, "Fc": 1.0, "Fv": 2.0, "offset": 0.5},
+                                                      stopped="max_time", records={"train": [600], "valid": []}))
+    fit.save(tmp_path / "motion.npz")
+    with pytest.raises(FitKindError, match="load_motion_fit"):
+        load_fit(tmp_path / "motion.npz")
+    back = load_motion_fit(tmp_path / "motion.npz")
+    assert back.mechanics == fit.mechanics and "motion" not in back.settings
     plain = Fit(**{k: getattr(fit, k) for k in Fit.FIELDS if k != "uncertainty"})
-    assert isinstance(plain.problem(), ForceBalanceProblem)
-    with pytest.raises(ValueError, match="load_motion_fit"):
-        plain.problem().residuals(plain, _static_record())
+    assert isinstance(plain.problem(), ForceBalanceProblem) and not isinstance(fit.problem(), ForceBalanceProblem)
+    plain.save(tmp_path / "plain.npz")
+    with pytest.raises(FitKindError, match="load_fit"):
+        load_motion_fit(tmp_path / "plain.npz")
+    with pytest.raises(ValueError, match="MotionProblem"):
+        ForceBalanceProblem().residuals(fit, _static_record())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fit.mechanics.mass = 1.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fit.mechanics = fit.mechanics

@@ -26,8 +26,8 @@ def _motion_fit():
     data = MotionData.from_arrays(u, x, DT)
     y = list(theta) + [np.log10(2.5), 3.0]
     fit = MotionFit.given(model, theta, mass=2.5, offset=3.0, dt=DT, n_train=N_TRAIN, n_samples=N,
-                          settings={"motion": {"error": "position", "horizon": None, "y": y,
-                                               "search_names": list(model.param_names) + ["log10_mass", "offset"]}})
+                          mechanics={"error": "position", "horizon": None, "y": y,
+                                     "search_names": list(model.param_names) + ["log10_mass", "offset"]})
     return model, fit, data, np.asarray(y)
 
 
@@ -74,8 +74,8 @@ def test_motion_fit_on_several_records_runs_each_from_its_own_start():
         first = MotionData.from_arrays(data.force[:N_TRAIN], data.position[:N_TRAIN], DT)
         both = dataclasses.replace(first, **{k: np.concatenate([getattr(first, k), getattr(second, k)])
                                              for k in ("force", "position", "load", "velocity")})
-        fit = fit.replace(n_train=2 * N_TRAIN, settings={**fit.settings, "motion": {
-            **fit.mechanics, "records": {"train": [N_TRAIN, N_TRAIN], "valid": []}}})
+        fit = fit.replace(n_train=2 * N_TRAIN, mechanics=fit.mechanics.replace(
+            records={"train": [N_TRAIN, N_TRAIN], "valid": []}))
         u = parameter_uncertainty(fit, both)
     assert u.segments == (N_TRAIN, N_TRAIN) and u.n == 2 * N_TRAIN
     assert np.sqrt(u.s2) < 1e-4          # 2 µm noise plus filter edges, not a 5 cm jump

@@ -276,14 +276,18 @@ def cmd_identify(args, argv) -> int:
 def cmd_predict(args, argv) -> int:
     """Load a saved fit and write its friction prediction for a velocity record."""
     from jaxfric.files import atomic_write_text, csv_text
-    from jaxfric.fit import load_fit
+    from jaxfric.fit import FitKindError, load_fit
     from jaxfric.metrics import friction_metrics
+    from jaxfric.motion import load_motion_fit
 
     from .data import prediction_input
 
     # precheck has refused a missing model file and an --out folder
     try:
-        fit = load_fit(args.model_file)
+        try:
+            fit = load_fit(args.model_file)
+        except FitKindError:  # a motion fit: its friction, offset included
+            fit = load_motion_fit(args.model_file)
     except (ValueError, KeyError, TypeError, OSError) as e:
         raise UserError(f"cannot load the fit {args.model_file}: {e}") from None
     t, v, dt, measured, notes = prediction_input(args)

@@ -212,8 +212,8 @@ def cmd_identify_motion(args, argv) -> int:
         path = out / "models" / f"{name}.npz"
         fit.save(path)
         KEPT.add(path)
-        if fit.settings["motion"].get("stopped"):
-            say(f"{name}: the search stopped at its budget ({fit.settings['motion']['stopped']})")
+        if fit.mechanics.stopped:
+            say(f"{name}: the search stopped at its budget ({fit.mechanics.stopped})")
         print(fit.summary())
     def blocked():  # --judge gated: 3-fold blocked cross-validation of the training block
         say(f"blocked cross-validation of {', '.join(models)} (3 more fits each)")

@@ -4,7 +4,7 @@
 * [`simulate_motion`][jaxfric.motion.simulate_motion] — ``m dv/dt = F_act - F_f - F_load``, ``dx/dt = v`` in one ``lax.scan``;
 * [`k_step_positions`][jaxfric.motion.k_step_positions], [`track_states`][jaxfric.motion.track_states] — k-step-ahead prediction from measured states;
 * [`identify_motion`][jaxfric.motion.identify_motion] → [`MotionFit`][jaxfric.motion.MotionFit] (``simulate``, ``simulate(record, init_window=N)``,
-  metrics in mm and FIT %, save / [`load_motion_fit`][jaxfric.motion.load_motion_fit]), from [`MotionData`][jaxfric.motion.MotionData] (force and
+  metrics in mm and FIT %, the identified [`Mechanics`][jaxfric.motion.Mechanics], save / [`load_motion_fit`][jaxfric.motion.load_motion_fit]), from [`MotionData`][jaxfric.motion.MotionData] (force and
   position, no friction signal), one record split or several (``train=[...]``, ``valid=[...]``);
   the default search ([`MotionSearch`][jaxfric.motion.MotionSearch]) with a budget (``max_evals``, ``max_time``);
 * [`compare_motion`][jaxfric.motion.compare_motion] → [`MotionComparison`][jaxfric.motion.MotionComparison]: several models ranked by validation error,
@@ -23,6 +23,7 @@ from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, EXTRAPOLATION_MARGIN,
                    MotionFit, MotionProblem, baseline_motion_fit, identify_motion, load_motion_fit, motion_metrics)
 from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, blocked_scores, compare_motion,
                        gated_scores, rank_fits, short_judge, short_runs_score, short_window)
+from ._mechanics import Mechanics
 from ._pipeline import MotionBudget, MotionSearch, default_search
 from ._forward import advance_motion, k_step_positions, motion_start, simulate_motion, track_states
 from ._step import (BristleStep, ElmanFullStep, ElmanStep, FrictionStep, GMSStep, StaticStep,
@@ -34,6 +35,7 @@ __all__ = [
     "DEFAULT_INIT_WINDOW",
     "EXTRAPOLATION_MARGIN",
     "EXTRAPOLATION_SHARE",
+    "Mechanics",
     "MotionBudget",
     "MotionComparison",
     "MotionSearch",

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._warnings import ExtrapolationWarning
-from ..fit import Fit, load_fit, model_config, model_name, predict, uncertainty_lines
+from ..files import jsonable
+from ..fit import Fit, FitKindError, model_config, model_name, predict, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
 from ..metrics import friction_metrics
@@ -42,6 +43,7 @@ from ..uncertainty import assess_fit
 from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start, slow_attraction_grid
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
+from ._mechanics import Mechanics
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search, start_costs
 from ._residuals import (SumOfSquares, motion_coordinates, motion_residual, motion_residuals, motion_train_velocity,
@@ -241,41 +243,79 @@ class MotionFit(Fit):
     ``"train_kstep"``, ``"valid_kstep"``: k-step-ahead), see [`motion_metrics`][jaxfric.motion.motion_metrics].
     """
 
+    #: The constructor's arguments: `Fit`'s, and the mechanics.
+    FIELDS = Fit.FIELDS + ("mechanics",)
+
+    def __init__(self, *, mechanics: Mechanics, **fields):
+        if not isinstance(mechanics, Mechanics):
+            raise TypeError(f"mechanics must be a jaxfric.motion.Mechanics, got {type(mechanics).__name__}")
+        if "motion" in (fields.get("settings") or {}):
+            raise ValueError("a MotionFit keeps its mechanics in mechanics=Mechanics(...), not in settings['motion'] "
+                             "(a fit file's form: load_motion_fit reads it)")
+        super().__init__(**fields)
+        object.__setattr__(self, "mechanics", mechanics)  # after Fit's fields, before anyone reads it
+
     @classmethod
     def given(cls, model, params, *, mass: float, dt: float, offset: float = 0.0, v0: float = 0.0,
-              n_train: int = 0, n_samples: int = 0, settings: dict | None = None) -> "MotionFit":
+              n_train: int = 0, n_samples: int = 0, settings: dict | None = None,
+              mechanics: dict | None = None) -> "MotionFit":
         """A motion fit holding given parameters rather than identified ones (published
         values, a least-squares baseline, a test's truth), to be simulated and scored like
         an identified fit. ``params``: physical values by name (``model.from_physical``) or
         ``theta`` in search coordinates; ``mass`` [kg], ``offset`` [N] (added to the
-        friction), ``v0`` [m/s] the initial-velocity correction; ``settings`` more entries."""
+        friction), ``v0`` [m/s] the initial-velocity correction; ``settings`` more entries;
+        ``mechanics`` more fields of [`Mechanics`][jaxfric.motion.Mechanics] by name."""
         theta = model.from_physical(**params) if isinstance(params, dict) else params
-        motion = {"mass": float(mass), "offset": float(offset), "v0": float(v0)}
-        extra = dict(settings or {})
         return cls(model=model, theta=np.asarray(theta, np.float64), velocity_scaler=None, friction_scaler=None,
-                   dt=dt, n_train=n_train, n_samples=n_samples, metrics={},
-                   settings={**extra, "motion": {**motion, **extra.get("motion", {})}})
+                   dt=dt, n_train=n_train, n_samples=n_samples, metrics={}, settings=settings,
+                   mechanics=Mechanics(mass=mass, offset=offset, v0=v0, **(mechanics or {})))
 
     @classmethod
     def problem(cls) -> "MotionProblem":
         """[`MotionProblem`][jaxfric.motion.MotionProblem]: how a motion fit's data, coordinates, residuals and score are read."""
         return MotionProblem()
 
-    @property
-    def mechanics(self) -> dict:
-        return self.settings["motion"]
+    @classmethod
+    def from_fields(cls, fields: dict, path="the fit") -> "MotionFit":
+        """A motion fit from a file's constructor fields: its ``settings["motion"]`` entries
+        become [`Mechanics`][jaxfric.motion.Mechanics]; a force-balance fit's fields are refused."""
+        settings = dict(fields.get("settings") or {})
+        if "motion" not in settings:
+            raise FitKindError(f"{path} holds a force-balance fit, not a motion fit: use jaxfric.load_fit")
+        mechanics = Mechanics.from_json(settings.pop("motion"))
+        return cls(**{**fields, "settings": settings}, mechanics=mechanics)
 
     @property
     def mass(self) -> float:
-        return float(self.mechanics["mass"])
+        """The moving mass [kg] (``mechanics.mass``)."""
+        return self.mechanics.mass
 
     @property
     def offset(self) -> float:
-        return float(self.mechanics["offset"])
+        """The constant force added to the friction [N] (``mechanics.offset``)."""
+        return self.mechanics.offset
+
+    def to_dict(self, include_theta: bool = True) -> dict:
+        """`Fit.to_dict`'s summary, the mechanics as ``settings["motion"]`` (the file's form)."""
+        out = super().to_dict(include_theta)
+        out["settings"] = {**out["settings"], "motion": jsonable(self.mechanics.to_json())}
+        return out
+
+    def prediction_interval(self, *args, **kwargs):
+        """Not for a motion fit: its uncertainty is about position (``ValueError``)."""
+        raise ValueError("prediction_interval gives friction bands of a force-balance fit; a motion "
+                         "fit's uncertainty is about position")
 
     def predict(self, velocity, dt=None):
         """Friction [N] for a velocity record, the fitted constant offset included."""
+        dt = self.dt if dt is None else dt
+        if self.model.uses_dt and not same_sample_time(check_sample_time(dt), self.dt):
+            return self.predict_at(np.arange(np.shape(velocity)[-1]) * dt, velocity)  # the offset added there
         return super().predict(velocity, dt) + self.offset
+
+    def predict_at(self, t, velocity):
+        """[`Fit.predict_at`][jaxfric.fit.Fit.predict_at]'s friction [N], the fitted constant offset included."""
+        return super().predict_at(t, velocity) + self.offset
 
     def friction_step(self):
         """The per-sample [`jaxfric.motion.FrictionStep`][jaxfric.motion.FrictionStep] of this fit's model."""
@@ -406,7 +446,7 @@ class MotionFit(Fit):
         if start > 0:
             states = _track_jit(step, theta, jnp.asarray(data.velocity[: start + 1], theta.dtype), jnp.asarray(self.dt, theta.dtype))
             s0 = jax.tree_util.tree_map(lambda a: a[start], states)
-        v0 = data.velocity[start] + self.mechanics.get("v0", 0.0) * (start == 0)
+        v0 = data.velocity[start] + self.mechanics.v0 * (start == 0)
         return self.simulate(data.net_force[start:stop], data.position[start], v0, state0=s0)
 
     def score(self, data: MotionData, init_window: int = 20) -> dict:
@@ -439,7 +479,7 @@ class MotionFit(Fit):
         tr, va, ks = (np.asarray(a, np.float64) for a in _evaluate_jit(
             self.friction_step(), theta, jnp.asarray(self.mass, theta.dtype), jnp.asarray(data.net_force - self.offset, theta.dtype),
             jnp.asarray(self.dt, theta.dtype), jnp.asarray(x, theta.dtype), jnp.asarray(data.velocity, theta.dtype),
-            data.velocity[0] + self.mechanics.get("v0", 0.0), int(n_train), int(horizon)))
+            data.velocity[0] + self.mechanics.v0, int(n_train), int(horizon)))
         out = {"train": motion_metrics(x[:n_train], tr), "valid": motion_metrics(x[n_train:], va),
                "horizon": int(horizon)}
         target = x[horizon:]
@@ -465,8 +505,7 @@ class MotionFit(Fit):
         # the best member's uncertainty is not this member's: none
         return self.replace(
             theta=np.asarray(e["theta"][i], np.float64), ensemble=None, uncertainty=None,
-            settings={**self.settings, "motion": {**self.mechanics, "mass": float(e["mass"][i]),
-                                                  "offset": float(e["offset"][i]), "v0": float(e["v0"][i])}})
+            mechanics=self.mechanics.replace(mass=e["mass"][i], offset=e["offset"][i], v0=e["v0"][i]))
 
     def simulate_ensemble(self, record, init_window: int = DEFAULT_INIT_WINDOW) -> dict:
         """The kept ensemble members' free runs of ``record`` ([`simulate`][jaxfric.motion.MotionFit.simulate] with
@@ -595,11 +634,10 @@ def _evaluate_jit(step, theta, mass, force, dt, x, v, v0_train, n_train, horizon
 
 
 def load_motion_fit(path) -> MotionFit:
-    """Read a [`MotionFit`][jaxfric.motion.MotionFit] written by ``MotionFit.save``."""
-    fit = load_fit(path)
-    if "motion" not in fit.settings:
-        raise ValueError(f"{path} holds a force-balance fit, not a motion fit: use jaxfric.load_fit")
-    return MotionFit(**fit.fields())
+    """Read a [`MotionFit`][jaxfric.motion.MotionFit] written by ``MotionFit.save``
+    ([`MotionFit.load`][jaxfric.fit.Fit.load]; errors as [`jaxfric.load_fit`][jaxfric.fit.load_fit]'s, and a
+    force-balance fit's file is refused)."""
+    return MotionFit.load(path)
 
 
 def _mass_setting(mass):
@@ -733,7 +771,7 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
         init_window: leading samples of each validation record that set its state.
         max_evals, max_time: a budget (cost evaluations, wall seconds) checked between
             stages and after every gradient step; the run then ends with the best point
-            so far and ``fit.settings["motion"]["stopped"]`` says why ([`MotionBudget`][jaxfric.motion.MotionBudget]).
+            so far and ``fit.mechanics.stopped`` says why ([`MotionBudget`][jaxfric.motion.MotionBudget]).
         progress: ``True`` for progress bars (the global stage's, then one per
             Levenberg–Marquardt stage), or a callable sink (as [`jaxfric.minimise`][jaxfric.optim.minimise]).
         keys: an ensemble: ``K`` members (their keys ``jax.random.split(key, K)``) or a
@@ -828,17 +866,15 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
                 "model_name": model_name(model), "model_config": model_config(model),
                 "solver": repr(solver) if solver is not None else repr(search),
                 "dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
-                "motion": {"mass": float(m_hat), "mass_range": mass_range, "offset": float(off),
-                           "v0": float(dv0), "error": error, "horizon": horizon,
-                           "cutoff": tr_records[0].cutoff,
-                           "search_names": list(model.param_names) + list(layout.names()),
-                           "search_bounds": [lower.tolist(), upper.tolist()],
-                           "y": [float(a) for a in y], "stopped": stopped,
-                           "starts": start_costs(stages) if solver is None else [],
-                           "records": None if data is not None else
-                           {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in va_records]},
-                           "init_window": init_window},
             },
+            mechanics=Mechanics(
+                mass=m_hat, mass_range=mass_range, offset=off, v0=dv0, error=error, horizon=horizon,
+                cutoff=tr_records[0].cutoff, search_names=list(model.param_names) + list(layout.names()),
+                search_bounds=[lower.tolist(), upper.tolist()], y=[float(a) for a in y], stopped=stopped,
+                starts=start_costs(stages) if solver is None else [],
+                records=None if data is not None else
+                {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in va_records]},
+                init_window=init_window),
         )
         scoring = (data, n_train, metric_horizon, tr_records, va_records, init_window)
         metrics = _scored(fit, *scoring)
@@ -847,8 +883,7 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
         # the fit above only simulates for its metrics; the one returned carries them
         fit = fit.replace(
             metrics={**metrics, "num_params": int(y.size), "cost": j_final},
-            settings={**fit.settings, "motion": {**fit.mechanics, "baseline": {
-                "M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}}})
+            mechanics=fit.mechanics.replace(baseline={"M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}))
         fit = baseline_stage(fit, base.metrics, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
         data = data if data is not None else _concatenated(tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
@@ -960,7 +995,7 @@ def _ensemble(model, data, members, options) -> MotionFit:
         kept = kept_members(train)
         fit = fits[best].replace(ensemble={
             "theta": np.stack([f.theta for f in fits]), "mass": [f.mass for f in fits],
-            "offset": [f.offset for f in fits], "v0": [float(f.mechanics.get("v0", 0.0)) for f in fits],
+            "offset": [f.offset for f in fits], "v0": [f.mechanics.v0 for f in fits],
             "train_rmse_mm": train.tolist(),
             "valid_rmse_mm": [f.metrics["valid"]["rmse_mm"] if "valid" in f.metrics else None for f in fits],
             "best": best, "kept": kept, "dropped": [i for i in range(count) if i not in kept],
@@ -989,7 +1024,7 @@ def _greybox_start(model: GreyBox, box, lower, upper, options: dict):
     ``stages`` is one row for the physical fit, put before the grey-box's own."""
     phys = model.physical
     fit = identify_motion(phys, **{**options, "box": {k: box[k] for k in phys.box_keys}})
-    y = np.asarray(fit.settings["motion"]["y"], np.float64)
+    y = np.asarray(fit.mechanics.y, np.float64)
     y0 = np.concatenate([y[:phys.num_params], model.network_start(box), y[phys.num_params:]])
     row = {"stage": f"physical {type(phys).__name__} fit", "start": None, "J": fit.metrics["cost"],
            "num_evals": int(sum(s.get("num_evals", 0) for s in fit.stages or [])),

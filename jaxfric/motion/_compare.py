@@ -130,7 +130,7 @@ class MotionComparison:
                         **({"blocked_rmse_mm": self.blocked[name]} if self.blocked else {})})
         if base is None:
             return out
-        settings = next(iter(self.fits.values())).settings["motion"]["baseline"]
+        settings = next(iter(self.fits.values())).mechanics.baseline
         out.append({"rank": None, "model": BASELINE_LABEL, "parameters": 4, "mass_kg": settings["M"],
                     "offset_N": settings["offset"], "train_rmse_mm": base["train"]["rmse_mm"],
                     "valid_rmse_mm": base["valid"]["rmse_mm"], "valid_fit_percent": base["valid"]["fit_percent"],
@@ -352,10 +352,10 @@ def gated_scores(short: dict, blocked: dict, base_blocked: float) -> dict:
 
 def baseline_fit(fit):
     """The least-squares Coulomb + viscous + offset baseline of ``fit`` (its
-    ``settings["motion"]["baseline"]``: ``M``, ``Fc``, ``Fv``, ``offset``) as a
+    ``mechanics.baseline``: ``M``, ``Fc``, ``Fv``, ``offset``) as a
     [`MotionFit`][jaxfric.motion.MotionFit] of its own ([`baseline_motion_fit`][jaxfric.motion.baseline_motion_fit]), to be
     simulated and scored like ``fit``."""
-    b = fit.settings["motion"]["baseline"]
+    b = fit.mechanics.baseline
     return baseline_motion_fit(b["M"], b["Fc"], b["Fv"], b["offset"], dt=fit.dt, n_train=fit.n_train)
 
 

@@ -54,11 +54,11 @@ class SumOfSquares(eqx.Module):
 
 def _layout(fit) -> tuple[Layout, list]:
     """Where the fit's search vector puts its mechanics, and their search names."""
-    mech = fit.settings["motion"]
-    names = list(mech.get("search_names") or [])
+    mech = fit.mechanics
+    names = list(mech.search_names)
     extra = names[fit.model.num_params:]
     layout = Layout(fit.model.num_params, "log10_mass" in extra, "offset" in extra, "v0" in extra)
-    if layout.names() != tuple(extra) or "y" not in mech or len(mech["y"]) != len(names):
+    if layout.names() != tuple(extra) or len(mech.y) != len(names):
         raise ValueError(f"motion fit with search coordinates {names} not understood by the "
                          f"uncertainty code (mechanics it knows: {sorted(MECHANICS)})")
     return layout, extra
@@ -68,19 +68,19 @@ def motion_coordinates(fit) -> SearchCoordinates:
     """A motion fit's search vector (the model's coordinates, then the mechanics it
     identified) with their names, kinds and box (the mechanics' box as searched; unbounded
     when the fit did not record it)."""
-    mech = fit.settings["motion"]
+    mech = fit.mechanics
     _, extra = _layout(fit)
     coords = tuple(fit.model._coords)
     lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
     if extra:
-        sb = mech.get("search_bounds")
+        sb = mech.search_bounds
         if sb is not None:
             lower = np.asarray(sb[0], np.float64)
             upper = np.asarray(sb[1], np.float64)
         else:  # bounds of the mechanics were not recorded: treat them as unbounded
             lower = np.concatenate([lower, np.full(len(extra), -np.inf)])
             upper = np.concatenate([upper, np.full(len(extra), np.inf)])
-    return SearchCoordinates(y=np.asarray(mech["y"], np.float64),
+    return SearchCoordinates(y=np.asarray(mech.y, np.float64),
                              names=tuple(c[1] for c in coords) + tuple(MECHANICS[e][0] for e in extra),
                              kinds=tuple(c[2] for c in coords) + tuple(MECHANICS[e][1] for e in extra),
                              lower=lower, upper=upper)
@@ -91,12 +91,12 @@ def motion_residuals(fit, data) -> Residuals:
     [`jaxfric.motion.MotionData`][jaxfric.motion.MotionData]): free-run position and/or velocity, each divided
     by its standard deviation for ``error="both"``; k-step positions for a k-step fit;
     each training record run from its own start for a fit on whole records."""
-    mech = fit.settings["motion"]
+    mech = fit.mechanics
     n = fit.n_train
     layout, _ = _layout(fit)
     # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
     records = training_lengths(fit)
-    error, horizon = mech.get("error", "position"), mech.get("horizon")
+    error, horizon = mech.error or "position", mech.horizon
     if records is not None and (sum(records) != n or error != "position" or horizon is not None):
         raise ValueError("motion fit on several records with a velocity or k-step cost: no uncertainty")
     x, v = np.asarray(data.position[:n]), np.asarray(data.velocity[:n])
@@ -105,7 +105,7 @@ def motion_residuals(fit, data) -> Residuals:
         layout=layout, error=error,
         horizon=None if horizon is None else int(horizon),
         records=records,
-        mass=np.asarray(float(mech["mass"]), np.float64), dt=np.asarray(float(fit.dt), np.float64),
+        mass=np.asarray(mech.mass, np.float64), dt=np.asarray(float(fit.dt), np.float64),
         force=np.asarray(data.net_force[:n]), x=x, v=v,
         scale=np.asarray([np.std(x), max(np.std(v), 1e-300)], np.float64))
     unit = {"position": "position [m]", "velocity": "velocity [m/s]"}.get(error, "scaled position+velocity")
@@ -121,7 +121,7 @@ def training_lengths(fit) -> tuple[int, ...] | None:
     """The lengths of the whole training records a fit on several records
     (``identify_motion(train=[...])``) was made on, concatenated in its data; ``None`` for
     a fit on one split record."""
-    records = (fit.settings["motion"].get("records") or {}).get("train")
+    records = (fit.mechanics.records or {}).get("train")
     return None if records is None else tuple(int(r) for r in records)
 
 
