@@ -25,7 +25,8 @@ held-out block from its own first 20 samples, ``jaxfric.motion.blocked_score``);
 whole training record cut into 2 s windows, each simulated from its own first 20 samples (no
 refit; pneumatic: rolled out from the model's initial state, scored from sample 20); ``spread``,
 ``tail`` plus the ensemble members' RMS disagreement on the tail (``--members 1``: none); ``bic``,
-``log(rmse) + p log(n)/(2n)`` on the training free run. From saved fits (``--save-fits DIR``, then
+``log(rmse) + p log(n)/(2n)`` on the training free run; ``gated`` (`compare_motion`'s default), ``short``
+among the models whose ``blocked`` beats the baseline's, the baseline only where none does. From saved fits (``--save-fits DIR``, then
 ``--rescore DIR``): ``short_<samples>`` at other windows (`WIDTHS` seconds), ``short_median``
 (the median over the 2 s windows), ``short_reversals`` (2 s windows started 20 samples before a
 velocity reversal, `reversal_starts`), ``short_margin`` (the baseline kept unless a model is more
@@ -64,10 +65,8 @@ from jaxfric.motion import (MotionData, baseline_fit, identify_motion, load_moti
 from jaxfric.motion._compare import blocked_score, short_window, window_scores  # noqa: E402
 from jaxfric.rig.emps import EMPS_CUTOFF_HZ, load_emps  # noqa: E402
 
-FS, N = 128.0, 2000
-INIT = 20
+FS, N, INIT, MARGIN = 128.0, 2000, 20, 0.10
 SHORT = None  # compare_motion's default window: 2 s (256 samples at 128 Hz, 2 000 at 1 kHz)
-MARGIN = 0.10
 CANDIDATES = {**{m: (m, None) for m in ("stribeck", "lugre", "gms")}, "elman": ("elman", {"neurons": 10})}
 EMPS_CANDIDATES = {m: (m, None) for m in ("coulomb", "stribeck", "lugre", "gms")}
 PNEUMATIC_CANDIDATES = ("stribeck", "lugre", "gms", "cylinder")
@@ -200,9 +199,10 @@ def summarise(rows, criteria=CRITERIA) -> tuple[list, list, list]:
     for r in rows:
         by_key.setdefault(int(r["key"]), []).append(r)
     done = {k: v for k, v in by_key.items() if any(r["model"] == BASE for r in v)}
-    for rs in done.values():  # short among the models whose blocked cross-validation beats the baseline's
+    for rs in done.values():  # short among the models whose blocked cross-validation beats the baseline's, else it
         b = next(float(r["blocked"]) for r in rs if r["model"] == BASE)
-        rs[:] = [{**r, "gated": r["short"] if r["model"] == BASE or float(r["blocked"]) < b else math.inf} for r in rs]
+        gate = {r["model"]: float(r["blocked"]) < b for r in rs if r["model"] != BASE}
+        rs[:] = [{**r, "gated": r["short"] if gate.get(r["model"], not any(gate.values())) else math.inf} for r in rs]
     choices, judges = [], []
     extra = sorted({c for rs in done.values() for r in rs for c in r if c.startswith("short_")},
                    key=lambda c: (not c[6:].isdigit(), int(c[6:]) if c[6:].isdigit() else 0, c))

@@ -24,6 +24,9 @@ from .errors import KEPT, UserError, _prepare_out, _say, print_warning
 
 #: members per model, as `jaxfric.motion.compare_motion`'s ``keys`` (tests/test_motion_dependable.py holds the two equal)
 KEYS = 1
+#: How each judge's choice is made, as the report says it.
+CHOICE_RULE = {"gated": "the lowest score among the models that pass the gate; the baseline where none does",
+               "short": "the lowest score, the baseline included", "tail": "the lowest score, the baseline included"}
 
 EPILOG = """examples:
   jaxfric identify-motion emps.csv --force-col vir --force-gain 35.15 --x-col qm --dt 0.001 \\
@@ -273,7 +276,7 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
           f"{ranked_by} (score a separate recording with "
           "`jaxfric.load_motion_fit(path).score(record, init_window=20)`). The last row is the "
           "least-squares Coulomb + viscous + offset baseline on the same data and judge.", "",
-          table, "", f"Choice (the lowest score, the baseline included): {ranked.choice_name}", *kstep, "", "![free run](motion_free_run.png)", ""]
+          table, "", f"Choice ({CHOICE_RULE[ranked.judge]}): {ranked.choice_name}", *kstep, "", "![free run](motion_free_run.png)", ""]
     print(table)
     print(f"choice: {ranked.choice_name}")
     results = {"command": ["jaxfric", *argv], "split": "held-back block (last "

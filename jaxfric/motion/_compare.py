@@ -9,11 +9,13 @@ parameters is judged worse than one with fewer.
 The default judge, ``"gated"``, scores many short free runs over the records, each started
 from its own first 20 samples (`short_runs_score`), for the models whose blocked
 cross-validation of the training part beats the least-squares baseline's (`gated_scores`);
-the others are not chosen over the baseline. On the three proxies of
+the others are not chosen over the baseline. The gate alone decides between the models and
+the baseline (both sides of it are out of sample); the short runs rank the models that pass.
+On the three proxies of
 ``benchmarks/motion_judge.py`` (the simulated rig trained on one excitation family and scored
 on the three others, the EMPS estimation file in blocks, the pneumatic seals at a held-out
 pressure) its choice was within 10 % of the best on the unseen excitation more often than
-every other criterion's, 26 of 40 keys against the short runs' 23, though not in every group of
+every other criterion's, 38 of 60 keys against the short runs' 32, though not in every group of
 keys (docs/motion.md; ``benchmarks/results/motion_judge*.md``, ``judge_emps*.md``,
 ``judge_pneumatic.md``): the tail of one record shares its excitation, one long free run
 measures drift more than dynamics, and short windows alone do not see where least squares
@@ -73,8 +75,12 @@ class MotionComparison:
     @property
     def choice_name(self) -> str:
         """The label of [`choice`][jaxfric.motion.MotionComparison.choice]: the first-ranked
-        model's, or ``BASELINE_LABEL`` where the baseline scores lower under the same judge."""
+        model's, or ``BASELINE_LABEL`` where the baseline scores lower under the same judge;
+        under ``"gated"``, where no model passes the gate (every score inf), whatever the
+        baseline's short score: a model whose blocked folds beat least squares' is chosen over it."""
         base, name = self._baseline_score(), self.ranking[0]
+        if self.judge == "gated":
+            return name if math.isfinite(self._score(name)) else BASELINE_LABEL
         return BASELINE_LABEL if base is not None and base < self._score(name) else name
 
     @property
@@ -114,7 +120,8 @@ class MotionComparison:
         """One dict per ranked fit, then the baseline: ``rank`` (``None`` for the
         baseline), ``model``, ``parameters``, ``mass_kg``, ``offset_N``, ``train_rmse_mm``,
         ``valid_rmse_mm``, ``valid_fit_percent``, ``judge_rmse_mm``, ``beats_baseline`` (under
-        the judge), ``worse_than_simpler``; with blocked scores also ``blocked_rmse_mm``."""
+        the judge; under ``"gated"``: passes the gate), ``worse_than_simpler``; with blocked
+        scores also ``blocked_rmse_mm``."""
         base, base_score = self.baseline, self._baseline_score()
         out = []
         for i, name in enumerate(self.ranking, 1):
@@ -125,7 +132,8 @@ class MotionComparison:
                         "offset_N": fit.offset, "train_rmse_mm": m["train"]["rmse_mm"],
                         "valid_rmse_mm": m["valid"]["rmse_mm"], "valid_fit_percent": m["valid"]["fit_percent"],
                         "judge_rmse_mm": score,
-                        "beats_baseline": None if base is None else bool(score < base_score),
+                        "beats_baseline": None if base is None else bool(
+                            math.isfinite(score) if self.judge == "gated" else score < base_score),
                         "worse_than_simpler": any(r == name for r, _ in self.overfit),
                         **({"blocked_rmse_mm": self.blocked[name]} if self.blocked else {})})
         if base is None:
@@ -346,7 +354,8 @@ def blocked_scores(models: dict, records, folds: int, **options) -> tuple[dict, 
 def gated_scores(short: dict, blocked: dict, base_blocked: float) -> dict:
     """The ``"gated"`` judge's scores: each model's short score where its blocked
     cross-validation beats the baseline's (``blocked[name] < base_blocked``), else inf (the
-    model is not chosen over the baseline; ``choice`` falls to the baseline when none passes)."""
+    model is not chosen over the baseline; ``choice`` falls to the baseline when none passes,
+    and only then)."""
     return {k: v if blocked[k] < base_blocked else math.inf for k, v in short.items()}
 
 
@@ -378,9 +387,9 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds:
 
     * ``"gated"`` (default): the short score of each model whose blocked cross-validation
       beats the baseline's, inf for the others (`gated_scores`; ``folds`` more fits per model,
-      so about ``1 + folds`` times ``"short"``'s time): the judge whose choice was within 10 % of
-      the best on unseen excitation most often on the proxies of benchmarks/results/
-      (docs/motion.md, "Choosing a model");
+      so about ``1 + folds`` times ``"short"``'s time); ``choice`` is the baseline only where no
+      model passes: the judge whose choice was within 10 % of the best on unseen excitation
+      most often on the proxies of benchmarks/results/ (docs/motion.md, "Choosing a model");
     * ``"short"``: many short free runs (`short_runs_score`): every record
       (``data`` whole, or the ``train`` and ``valid`` records) cut into windows of ``window``
       samples, each simulated from its own first ``init_window`` samples; no refit;
