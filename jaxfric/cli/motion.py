@@ -81,7 +81,7 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--judge", choices=("gated", "short", "tail"), default="gated",
                    help="how the fits are ranked: 'gated' (compare_motion's default) the short score of "
                         "the models whose 3-fold blocked cross-validation of the training block beats "
-                        "least squares' (3 more fits per model); 'short' pools the free-run RMSE of every "
+                        "least squares' (3 more fits per model), least squares where none does; 'short' pools the free-run RMSE of every "
                         "--window seconds of the whole record, each run from its own first 20 samples; "
                         "'tail' the held-back block's free-run RMSE")
     f.add_argument("--window", type=positive_float, default=None, metavar="S",
