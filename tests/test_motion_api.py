@@ -336,9 +336,12 @@ def test_cli_ranks_models_by_validation_and_takes_a_budget(tmp_path, capsys):
              or line.startswith("| 2 ")]
     assert sorted(ranks) == ["coulomb", "stribeck"]
     res = json.loads((tmp_path / "r" / "results.json").read_text())
-    scores = [r["judge_rmse_mm"] for r in res["ranking"]]  # the models', then the baseline's
-    lowest = res["ranking"][int(np.argmin(scores))]["model"]
-    assert res["choice"] == lowest and f"Choice (the lowest score, the baseline included): {lowest}" in text
+    assert res["judge"]["name"] == "gated"  # the default: the baseline only where no model passes the gate
+    models = [r for r in res["ranking"] if r["rank"] is not None]
+    first = min(models, key=lambda r: r["judge_rmse_mm"])
+    chosen = first["model"] if math.isfinite(first["judge_rmse_mm"]) else res["ranking"][-1]["model"]
+    assert res["choice"] == chosen and (f"Choice (the lowest score among the models that pass the gate; the "
+                                        f"baseline where none does): {chosen}") in text
     from jaxfric.motion import load_motion_fit
 
     for name in ranks:
