@@ -263,7 +263,8 @@ def test_overfit_warning_fires_when_a_richer_model_validates_worse():
 def test_choice_is_the_baseline_where_it_scores_lowest():
     """``choice`` is the judge's pick with the least-squares baseline among the candidates
     (what benchmarks/motion_judge.py counts): the best model where it scores lower than the
-    baseline, else the baseline's own fit, with its least-squares parameters, and a warning."""
+    baseline, else the baseline's own fit, with its least-squares parameters, and a warning;
+    under the gated judge the baseline only where no model passes the gate."""
     from jaxfric.motion import BaselineWarning, MotionComparison
 
     ls = {"M": 2.4, "Fc": 11.0, "Fv": 55.0, "offset": 2.0}
