@@ -15,7 +15,7 @@ On the three proxies of
 ``benchmarks/motion_judge.py`` (the simulated rig trained on one excitation family and scored
 on the three others, the EMPS estimation file in blocks, the pneumatic seals at a held-out
 pressure) its choice was within 10 % of the best on the unseen excitation more often than
-every other criterion's, 38 of 60 keys against the short runs' 32, though not in every group of
+every other criterion's, 43 of 70 keys against the short runs' 36, though not in every group of
 keys (docs/motion.md; ``benchmarks/results/motion_judge*.md``, ``judge_emps*.md``,
 ``judge_pneumatic.md``): the tail of one record shares its excitation, one long free run
 measures drift more than dynamics, and short windows alone do not see where least squares
