@@ -26,7 +26,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._warnings import ExtrapolationWarning
-from ..files import jsonable
 from ..fit import Fit, FitKindError, model_config, model_name, predict, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
@@ -298,7 +297,7 @@ class MotionFit(Fit):
     def to_dict(self, include_theta: bool = True) -> dict:
         """`Fit.to_dict`'s summary, the mechanics as ``settings["motion"]`` (the file's form)."""
         out = super().to_dict(include_theta)
-        out["settings"] = {**out["settings"], "motion": jsonable(self.mechanics.to_json())}
+        out["settings"] = {**out["settings"], "motion": self.mechanics.to_json()}
         return out
 
     def prediction_interval(self, *args, **kwargs):

@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from ..files import jsonable
+
 __all__ = ["Mechanics"]
 
 
@@ -17,15 +19,6 @@ def _tuple(value):
     """Lists (a JSON file's form) as tuples, nested, so the record stays immutable."""
     if isinstance(value, (list, tuple)):
         return tuple(_tuple(v) for v in value)
-    return value
-
-
-def _plain(value):
-    """Tuples back as lists, nested (the JSON form)."""
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
     return value
 
 
@@ -86,9 +79,9 @@ class Mechanics:
                    extra={k: v for k, v in entries.items() if k not in known})
 
     def to_json(self) -> dict[str, Any]:
-        """The entries a fit file keeps (``settings["motion"]``): `from_json` reads them back."""
-        out = {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self) if f.name != "extra"}
-        return {**out, **self.extra}
+        """The entries a fit file keeps (``settings["motion"]``, JSON types): `from_json` reads them back."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "extra"}
+        return jsonable({**out, **self.extra})
 
     def replace(self, **changes) -> "Mechanics":
         """A copy with ``changes``."""
