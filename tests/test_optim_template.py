@@ -32,6 +32,13 @@ def untemplated(monkeypatch):
     monkeypatch.setattr(driver, "templated", lambda *a: a[5])
 
 
+def spliced(fn):
+    """Whether ``fn``'s programs were compiled from the template's lowered text (not
+    lowered again whole)."""
+    return all(isinstance(program, template._Compiled)
+               for program, _, _ in template._PROGRAMS.get(fn, {}).values())
+
+
 SOLVERS = {
     "mapso_nmds": lambda: jf.mapso_nmds(num_generations=6, nm_max_steps=60),
     "pso_nm": lambda: jf.chain(jf.PSO(num_generations=10), jf.NelderMead(max_steps=60)),
@@ -49,9 +56,10 @@ def test_filled_in_objective_gives_the_traced_programs_result(name, options, mon
     jf.minimise(lambda y, a: F.sphere(y), SOLVERS[name](), bounds, key=0,
                 compiler_options=options)  # the template, traced with another objective
     before = len(template._TEMPLATES)
-    filled = jf.minimise(lambda y, a: F.rosenbrock(y), SOLVERS[name](), bounds, key=1,
-                         compiler_options=options)
+    fn = lambda y, a: F.rosenbrock(y)  # noqa: E731
+    filled = jf.minimise(fn, SOLVERS[name](), bounds, key=1, compiler_options=options)
     assert len(template._TEMPLATES) == before  # found again, not traced again
+    assert spliced(fn), "the template's lowering served this run"
     untemplated(monkeypatch)
     traced = jf.minimise(lambda y, a: F.rosenbrock(y), SOLVERS[name](), bounds, key=1,
                          compiler_options=options)
@@ -68,7 +76,7 @@ def test_pytree_bounds_args_and_start_in_float64(monkeypatch):
     with jax.enable_x64(True):
         runs = [jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=args, key=2, y0=y0,
                             compiler_options="full")]
-        assert template._PROGRAMS.get(fn), "the template served this run"
+        assert template._PROGRAMS.get(fn) and spliced(fn), "the template served this run"
         untemplated(monkeypatch)
         runs.append(jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=args, key=2, y0=y0,
                                 compiler_options="full"))
@@ -103,3 +111,41 @@ def test_where_the_template_cannot_serve_the_usual_trace_runs():
     weak = jf.minimise(lambda y, a: 1.0, SOLVERS["pso"](), bounds, key=0)
     np.testing.assert_allclose(float(scaled.f), 2.0 * float(F.sphere(scaled.value)), rtol=1e-6)
     assert float(weak.f) == 1.0
+
+
+def test_objectives_with_their_own_functions_constants_and_unused_data(monkeypatch):
+    """The lowered template takes objectives whose own lowering holds functions of theirs
+    (``jnp.where``, ``clip``: named as some of the solver's are), constants, data they
+    read and data they ignore; each run equals the traced program's to the bit."""
+    table = np.linspace(0.5, 2.0, 7)
+
+    def helpers(y, a):
+        return jnp.sum(jnp.where(y > 0, y, -2.0 * y)) + jnp.max(jnp.clip(y, -0.5, 0.5))
+
+    def constants(y, a):
+        return jnp.sum(table[: y.shape[0]] * y ** 2) + jnp.sum(a * y)
+
+    def ignores(y, a):
+        return jnp.sum(y ** 2)
+
+    args = np.array([0.3, -0.1, 0.2])
+    cases = [(helpers, None), (constants, args), (ignores, args)]
+    bounds = F.get("sphere").bounds(3, np.float32)
+    runs = [jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=a, key=5) for fn, a in cases]
+    assert spliced(helpers) and spliced(constants)
+    untemplated(monkeypatch)
+    for (fn, a), run in zip(cases, runs):
+        same(run, jf.minimise(fn, SOLVERS["mapso_nmds"](), bounds, args=a, key=5))
+
+
+def test_a_template_whose_lowering_cannot_be_spliced_is_lowered_whole(monkeypatch):
+    """Where the lowered text cannot serve, the filled program is lowered whole: the
+    same result as before, by the other path."""
+    bounds = F.get("sphere").bounds(2, np.float32)
+    fn = lambda y, a: F.rastrigin(y)  # noqa: E731
+    monkeypatch.setattr(template, "_slot_functions", lambda eqns: {})  # nothing found
+    whole = jf.minimise(fn, SOLVERS["pso_nm"](), bounds, key=3)
+    assert template._PROGRAMS.get(fn) and not spliced(fn)
+    monkeypatch.undo()
+    untemplated(monkeypatch)
+    same(whole, jf.minimise(fn, SOLVERS["pso_nm"](), bounds, key=3))
