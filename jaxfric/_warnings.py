@@ -34,3 +34,11 @@ class BaselineWarning(UserWarning):
     """A motion fit predicts its own training data worse than the least-squares Coulomb +
     viscous + offset baseline: its search did not reach the optimum of its cost, or its
     model cannot express what the baseline does. Do not use it over the baseline."""
+
+
+class NarrowGateWarning(BaselineWarning):
+    """The gated judge's choice beats the least-squares baseline's blocked
+    cross-validation by less than [`jaxfric.motion.NARROW_GATE`][jaxfric.motion.NARROW_GATE]: on the
+    judge's proxies such narrow passes predicted new motion worse than least squares
+    more often than the others (docs/motion.md). A ``BaselineWarning``, so one filter
+    takes both."""

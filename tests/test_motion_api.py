@@ -301,8 +301,18 @@ def test_choice_is_the_baseline_where_it_scores_lowest():
         warnings.simplefilter("error", BaselineWarning)
         assert passed.choice_name == "lugre" and passed.choice is full
     assert passed.rows()[0]["beats_baseline"] is True and "not better than the baseline" not in passed.table()
+    assert passed.gate_margin == pytest.approx(0.125) and "narrowly" not in passed.table()
+    # a narrow pass (blocked 2.5 % under least squares', under NARROW_GATE): still the choice, with a warning
+    from jaxfric.motion import NARROW_GATE, NarrowGateWarning
+
+    narrow = MotionComparison({"lugre": full}, ["lugre"], [], "gated", {"lugre": 2.0}, 1.5, {"lugre": 3.9}, 4.0)
+    assert narrow.gate_margin == pytest.approx(0.025) and narrow.gate_margin < NARROW_GATE
+    with pytest.warns(NarrowGateWarning, match=r"\(3.9 mm\) beats least squares' \(4 mm\) by 2.5 %"):
+        assert narrow.choice is full
+    assert "passes narrowly: blocked 2.5 % under least squares'" in narrow.table()
     short = MotionComparison({"lugre": full}, ["lugre"], [], "short", {"lugre": 2.0}, 1.5)
     assert short.choice_name == BASELINE_LABEL  # the same scores under the short judge: the baseline
+    assert gated.gate_margin is None and short.gate_margin is None  # the baseline chosen; another judge
 
 
 @pytest.mark.slow

@@ -15,7 +15,7 @@ import pytest
 from jaxfric import models
 from jaxfric._warnings import BaselineWarning
 from jaxfric.fit import ExtrapolationWarning
-from jaxfric.motion import (MotionData, MotionSearch, baseline_motion_fit, compare_motion, friction_step,
+from jaxfric.motion import (NARROW_GATE, MotionData, MotionSearch, baseline_motion_fit, compare_motion, friction_step,
                             identify_motion, load_motion_fit, simulate_motion)
 from jaxfric.motion._baseline import BASELINE_LABEL, least_squares, least_squares_start
 from jaxfric.motion._layout import Layout
@@ -330,6 +330,11 @@ def test_cli_gated_judge_keeps_the_short_score_only_where_blocked_folds_beat_lea
         assert judge["scores"][m] == (judge["short"][m] if gate else math.inf)
     best = min(judge["scores"], key=judge["scores"].get)
     assert results["choice"] == (best if math.isfinite(judge["scores"][best]) else BASELINE_LABEL)
+    margin = results["gate_margin"]  # how far the chosen model passes; None where the baseline is chosen
+    assert margin == (None if results["choice"] == BASELINE_LABEL else
+                      pytest.approx(1 - judge["blocked"][best] / judge["baseline_blocked"]))
+    assert ("passes the gate narrowly" in (tmp_path / "gated" / "motion.md").read_text()) == (
+        margin is not None and margin < NARROW_GATE)
     n_train = load_motion_fit(tmp_path / "gated" / "models" / "coulomb.npz").n_train
     with jax.enable_x64(True):
         ref, base = blocked_score("coulomb", [rec.window(0, n_train)], 3, key=0, mass=(0.5, 10.0), fit_offset=True,

@@ -302,3 +302,32 @@ def test_the_averaged_pseudo_candidates_weights_and_rmse():
     assert averaged_rmse(x, runs, {"a": 1.0}, init=2) == pytest.approx(np.sqrt(17.0), rel=1e-12)
     with pytest.raises(KeyError):
         average_weights(short, "avg_median")
+
+
+def test_the_narrow_gate_counts_are_the_committed_rows():
+    """`NARROW_COUNTS`, which `MotionComparison.choice`'s narrow-pass warning quotes, follows
+    from the committed rows of every one-fit-per-candidate judge table: per key where a model
+    passes the gate, the gated pick's margin ``1 − blocked / least squares' blocked`` below
+    or above `NARROW_GATE`, and whether its unseen error exceeds least squares'."""
+    from jaxfric.motion._compare import NARROW_COUNTS, NARROW_GATE
+
+    tables = sorted(p for p in RESULTS.parent.glob("*judge*.csv") if "members" not in p.name)
+    if not tables:
+        pytest.skip("no judge tables written yet")
+    counts = {"narrow": [0, 0], "wide": [0, 0]}
+    keys = 0
+    for path in tables:
+        rows = list(csv.DictReader(path.open()))
+        for k in sorted({r["key"] for r in rows}):
+            rs = [r for r in rows if r["key"] == k]
+            base = next(r for r in rs if r["model"] == "baseline")
+            keys += 1
+            passed = [r for r in rs if r["model"] != "baseline" and float(r["blocked"]) < float(base["blocked"])]
+            if not passed:
+                continue
+            pick = min(passed, key=lambda r: float(r["short"]))
+            side = counts["narrow" if 1 - float(pick["blocked"]) / float(base["blocked"]) < NARROW_GATE else "wide"]
+            side[0] += 1
+            side[1] += float(pick["unseen"]) > float(base["unseen"])
+    assert keys == 70
+    assert {k: tuple(v) for k, v in counts.items()} == NARROW_COUNTS

@@ -181,7 +181,7 @@ def cmd_identify_motion(args, argv) -> int:
     import warnings
 
     from jaxfric._warnings import BaselineWarning
-    from jaxfric.motion import MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
+    from jaxfric.motion import NARROW_GATE, MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
 
     say = _say(args)
     data = _data(args)
@@ -272,16 +272,21 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
                      f"simulated from its own first {judge['init_window']} samples, the RMSE pooled (the "
                      f"last column; the windows include the training part). The valid RMSE is the held-back "
                      f"block's ({held}) free run. Both share the record's excitation: neither is new motion")
+    margin = ranked.gate_margin
+    narrow = ([f"(passes the gate narrowly: blocked {100 * margin:.1f} % under least squares'; "
+               "compare it with the baseline on motion it was not fitted on)"]
+              if margin is not None and margin < NARROW_GATE else [])
     md = ["# jaxfric identify-motion", "", f"Command: `jaxfric {' '.join(argv)}`", "",
           f"{ranked_by} (score a separate recording with "
           "`jaxfric.load_motion_fit(path).score(record, init_window=20)`). The last row is the "
           "least-squares Coulomb + viscous + offset baseline on the same data and judge.", "",
-          table, "", f"Choice ({CHOICE_RULE[ranked.judge]}): {ranked.choice_name}", *kstep, "", "![free run](motion_free_run.png)", ""]
+          table, "", f"Choice ({CHOICE_RULE[ranked.judge]}): {ranked.choice_name}", *narrow, *kstep, "",
+          "![free run](motion_free_run.png)", ""]
     print(table)
-    print(f"choice: {ranked.choice_name}")
+    print(f"choice: {ranked.choice_name}", *narrow)
     results = {"command": ["jaxfric", *argv], "split": "held-back block (last "
                f"{100 * (1 - args.train_fraction):.0f} % of {args.file})", "ranking": ranked.rows(),
-               "choice": ranked.choice_name,
+               "choice": ranked.choice_name, "gate_margin": margin,
                "judge": judge if judge is not None else {"name": "tail", "scores": {
                    name: fits[name].metrics["valid"]["rmse_mm"] for name in ranked.ranking},
                    "baseline": first.metrics["baseline"]["valid"]["rmse_mm"]},

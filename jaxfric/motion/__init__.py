@@ -15,13 +15,14 @@
 * [`MotionProblem`][jaxfric.motion.MotionProblem] — the motion problem of [`jaxfric.problem`][jaxfric.problem] (a motion fit's
   search coordinates, training records, residuals and score);
 * [`BaselineWarning`][jaxfric.motion.BaselineWarning] — a fit worse than the least-squares Coulomb + viscous + offset
-  baseline on its own training data.
+  baseline on its own training data; [`NarrowGateWarning`][jaxfric.motion.NarrowGateWarning] — the gated judge's choice beats
+  least squares' blocked folds by less than [`NARROW_GATE`][jaxfric.motion.NARROW_GATE].
 """
 
-from .._warnings import BaselineWarning
+from .._warnings import BaselineWarning, NarrowGateWarning
 from ._api import (ATTRACTION_TIME_S, DEFAULT_INIT_WINDOW, EXTRAPOLATION_MARGIN, EXTRAPOLATION_SHARE, MotionData,
                    MotionFit, MotionProblem, baseline_motion_fit, identify_motion, load_motion_fit, motion_metrics)
-from ._compare import (SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, blocked_scores, compare_motion,
+from ._compare import (NARROW_GATE, SHORT_WINDOW_S, MotionComparison, OverfitWarning, baseline_fit, blocked_score, blocked_scores, compare_motion,
                        gated_scores, rank_fits, short_judge, short_runs_score, short_window)
 from ._mechanics import Mechanics
 from ._pipeline import MotionBudget, MotionSearch, default_search
@@ -39,6 +40,8 @@ __all__ = [
     "MotionBudget",
     "MotionComparison",
     "MotionSearch",
+    "NARROW_GATE",
+    "NarrowGateWarning",
     "OverfitWarning",
     "compare_motion",
     "rank_fits",

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._warnings import BaselineWarning, ExtrapolationWarning
+from .._warnings import BaselineWarning, ExtrapolationWarning, NarrowGateWarning
 from ..records import SAMPLE_TIME_RTOL, same_sample_time
 from ._api import (DEFAULT_INIT_WINDOW, _as_motion_data, _init_window, _split, baseline_motion_fit,
                    identify_motion, motion_metrics)
@@ -46,6 +46,16 @@ __all__ = ["MotionComparison", "OverfitWarning", "compare_motion", "short_runs_s
 
 class OverfitWarning(UserWarning):
     """A model with more parameters is worse on validation than a simpler one."""
+
+
+#: Under the gated judge a chosen model whose blocked cross-validation beats least squares'
+#: by less than this share (1 − blocked / least squares' blocked) passes *narrowly*, and
+#: ``choice`` says so (`NarrowGateWarning`). Measured on the committed rows of the judge's
+#: 70 proxy keys (tests/test_motion_judge.py recounts them): the gate passed a model in 59;
+#: of the 9 picks that passed by less than 5 %, 3 predicted the unseen excitation worse
+#: than least squares (EMPS block 2, 2.2–2.5 % and 0.3 %), of the 50 others 7.
+NARROW_GATE = 0.05
+NARROW_COUNTS = {"narrow": (9, 3), "wide": (50, 7)}  # (picks, worse than least squares)
 
 
 @dataclasses.dataclass
@@ -91,6 +101,17 @@ class MotionComparison:
         the baseline as a [`MotionFit`][jaxfric.motion.MotionFit] of its own (`baseline_fit`),
         with a ``BaselineWarning`` giving both scores."""
         if self.choice_name != BASELINE_LABEL:
+            margin = self.gate_margin
+            if margin is not None and margin < NARROW_GATE:
+                (n, worse), (m, worse_wide) = NARROW_COUNTS["narrow"], NARROW_COUNTS["wide"]
+                warnings.warn(
+                    f"{self.choice_name} passes the gate narrowly: its blocked cross-validation "
+                    f"({self.blocked[self.choice_name]:.4g} mm) beats least squares' "
+                    f"({self.baseline_blocked:.4g} mm) by {100 * margin:.1f} %, under "
+                    f"{100 * NARROW_GATE:.0f} %. On the judge's proxies {worse} of {n} such picks "
+                    f"predicted new motion worse than least squares ({worse_wide} of {m} wider "
+                    "passes): check it against `baseline_fit(comparison.best)` on motion it was "
+                    "not fitted on", NarrowGateWarning, stacklevel=2)
             return self.best
         name = self.ranking[0]
         why = (f"{self._baseline_score():.4g} mm against {name}'s {self._score(name):.4g} mm" if
@@ -99,6 +120,16 @@ class MotionComparison:
         warnings.warn(f"no model beats the least-squares baseline under the {self.judge!r} judge ({why}): "
                       "the choice is the baseline", BaselineWarning, stacklevel=2)
         return baseline_fit(self.best)
+
+    @property
+    def gate_margin(self) -> float | None:
+        """How far the chosen model passes the gated judge's gate: ``1 − blocked /
+        baseline_blocked`` (0.1: its blocked cross-validation is 10 % under least squares');
+        ``None`` under another judge or where the choice is the baseline. Under
+        `NARROW_GATE` the choice passes narrowly (see [`choice`][jaxfric.motion.MotionComparison.choice])."""
+        if self.judge != "gated" or not self.baseline_blocked or self.choice_name == BASELINE_LABEL:
+            return None
+        return 1.0 - self.blocked[self.choice_name] / self.baseline_blocked
 
     def _score(self, name) -> float:
         return self.scores.get(name, self.fits[name].metrics["valid"]["rmse_mm"])
@@ -162,6 +193,8 @@ class MotionComparison:
                              f"{self.baseline_blocked:.4g}")
             elif r["beats_baseline"] is False:
                 flags.append("not better than the baseline")
+            elif r["model"] == self.choice_name and (self.gate_margin or 1.0) < NARROW_GATE:
+                flags.append(f"passes narrowly: blocked {100 * self.gate_margin:.1f} % under least squares'")
             name = r["model"] + (f" ({'; '.join(flags)})" if flags else "")
             lines.append(f"| {'' if r['rank'] is None else r['rank']} | {name} | {r['parameters']} | "
                          f"{r['mass_kg']:.4g} | {r['offset_N']:.4g} | {r['train_rmse_mm']:.4g} | "
