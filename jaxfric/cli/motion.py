@@ -181,7 +181,7 @@ def cmd_identify_motion(args, argv) -> int:
     import warnings
 
     from jaxfric._warnings import BaselineWarning
-    from jaxfric.motion import NARROW_GATE, MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
+    from jaxfric.motion import MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
 
     say = _say(args)
     data = _data(args)
@@ -245,6 +245,7 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
     """``motion.md``, ``results.json`` and ``motion_free_run.png`` of the ranked fits; the
     ranking table printed."""
     from jaxfric.files import atomic_write_text, jsonable
+    from jaxfric.motion import NARROW_GATE
     from jaxfric.report import save_figure
 
     table = ranked.table()
