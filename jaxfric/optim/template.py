@@ -248,13 +248,8 @@ class _Lowering:
                 for v in closed.jaxpr.invars]
         self.lowered = _program(filled, options).lower(*spec)
         self.text = self.lowered.as_text()
-        slots = {n: _types(h) for n, (h, _) in _functions(self.text).items()
-                 if re.fullmatch(_SLOT + r"(_\d+)?", n)}
-        found = _slot_functions(list(made.values()))
-        self.types = [_types(found[f"{_SLOT}_slot{k}"][0]) for k in range(len(made))]
-        if len(set(self.types)) != len(self.types) or not set(slots.values()) <= set(self.types):
-            raise _Unsupported("stand-ins that the lowered program cannot tell apart")
-        self.slots = slots
+        self.slots = {n: _types(h) for n, (h, _) in _functions(self.text).items()
+                      if re.fullmatch(_SLOT + r"(_\d+)?", n)}  # stand-in function -> its types
 
     def fill(self, make):
         """The compiled program with ``make(eqn)``'s objective in place of each stand-in."""
@@ -267,12 +262,13 @@ class _Lowering:
                 raise _Unsupported("a sharding inside the objective")
             return rename.sub(lambda m: "@jaxfric_obj_" + m.group(1), line)
 
-        bodies = {}
-        for k, types in enumerate(self.types):
+        bodies = {}  # the objective's function per stand-in signature, found by its types
+        for k in range(len(self.stand_ins)):
             header, body = found[f"{_SLOT}_slot{k}"]
-            if _types(header) != types:
-                raise _Unsupported("the objective lowers to other operands than its stand-in")
-            bodies[types] = [moved(line) for line in body]
+            bodies[_types(header)] = [moved(line) for line in body]
+        if len(bodies) != len(self.stand_ins) or not set(self.slots.values()) <= set(bodies):
+            raise _Unsupported("stand-ins the lowered program cannot tell apart, or an objective "
+                               "that lowers to other operands than its stand-in")
         helpers = [moved(line) for n in names if not n.startswith(f"{_SLOT}_slot")
                    for line in (found[n][0], *found[n][1], "  }")]
         out, lines, i = [], self.text.splitlines(), 0
