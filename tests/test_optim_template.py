@@ -149,3 +149,24 @@ def test_a_template_whose_lowering_cannot_be_spliced_is_lowered_whole(monkeypatc
     monkeypatch.undo()
     untemplated(monkeypatch)
     same(whole, jf.minimise(fn, SOLVERS["pso_nm"](), bounds, key=3))
+
+
+def test_a_template_that_cannot_be_lowered_for_splicing_is_tried_once(monkeypatch):
+    """A template whose lowering fails is remembered: later objectives of the same shape
+    go straight to lowering the filled program (the same results as the usual trace)."""
+    tries = []
+
+    def refuse(self, *a):
+        tries.append(1)
+        raise RuntimeError("no")
+
+    monkeypatch.setattr(template._Lowering, "__init__", refuse)
+    monkeypatch.setattr(template, "_LOWERINGS", type(template._LOWERINGS)())
+    bounds = F.get("sphere").bounds(4, np.float32)
+    fns = [lambda y, a: F.sphere(y), lambda y, a: F.rastrigin(y)]
+    runs = [jf.minimise(fn, SOLVERS["pso"](), bounds, key=2) for fn in fns]
+    assert len(tries) == 1 and not any(spliced(fn) for fn in fns)
+    monkeypatch.undo()
+    untemplated(monkeypatch)
+    for fn, run in zip(fns, runs):
+        same(run, jf.minimise(fn, SOLVERS["pso"](), bounds, key=2))

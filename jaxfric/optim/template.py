@@ -15,8 +15,8 @@ tracing the solver again.
 Lowering the filled program to StableHLO cost about as much again (0.2–0.26 s of a
 5-D MAPSO–NMDS run's 1.05 s). So the template is also lowered once, with a stand-in
 objective that reads every operand, and kept as text; for a new objective only the
-objective is lowered (one small module per stand-in batch shape) and its functions take
-the stand-ins' place in that text (`_Lowering`). The program is the same text JAX would
+objective is lowered (one small module, a function per stand-in batch shape) and its
+functions take the stand-ins' place in that text (`_Lowering`). The program is the same text JAX would
 lower from the filled jaxpr but for function names, and compiles to the same
 executable: the tests check the results to the bit. Whatever the splice cannot serve
 (JAX's internals not as expected, an objective whose lowering adds operands, a
@@ -290,6 +290,8 @@ class _Lowering:
         lowering._hlo, lowering._executable = module, None
         lowered = copy.copy(self.lowered)
         object.__setattr__(lowered, "_lowering", lowering)
+        if lowered.compiler_ir("stablehlo") is not module:  # JAX's lowering not as expected
+            raise _Unsupported("the lowering does not compile the module it is given")
         return _Compiled(lowered.compile())
 
 
@@ -352,10 +354,15 @@ def _lowering(closed, key, options, y_tree, args_tree) -> _Lowering:
     """The template ``closed`` lowered once per ``key`` and options (`_Lowering`)."""
     found = _LOWERINGS.get((key, options))
     if found is None:
-        found = _Lowering(closed, options, y_tree, args_tree)
+        try:
+            found = _Lowering(closed, options, y_tree, args_tree)
+        except Exception as error:  # noqa: BLE001 - kept, so the next objective is not tried again
+            found = _Unsupported(f"the template could not be lowered for splicing: {error!r}")
         _LOWERINGS[(key, options)] = found
         while len(_LOWERINGS) > _TEMPLATES_MAX:
             _LOWERINGS.popitem(last=False)
+    if isinstance(found, _Unsupported):
+        raise found
     return found
 
 
