@@ -116,7 +116,7 @@ def _objective_eqn(fn, y_tree, args_tree, eqn, singles):
     for _ in range(depth):
         batched = jax.vmap(batched, in_axes=(0,) * num_y + (None,) * (len(avals) - num_y))
     batched.__name__ = _SLOT  # the name of its function in the lowered program
-    spec = [jax.ShapeDtypeStruct(a.shape, a.dtype, weak_type=a.weak_type) for a in avals]
+    spec = _spec(eqn.invars)
     closed = jax.make_jaxpr(lambda *v: jax.jit(batched, keep_unused=True)(*v))(*spec)
     if closed.consts or len(closed.jaxpr.eqns) != 1 or closed.jaxpr.effects:
         raise _Unsupported("the objective is not one pure call")
@@ -234,19 +234,16 @@ class _Lowering:
 
         _fill(closed.jaxpr, keep)
         singles = {}
+        out_dtype = next(iter(self.stand_ins.values())).params["out_dtype"]
 
         def reads_all(y, args):  # the stand-in's stand-in: every operand used, none dropped
-            leaves = jtu.tree_leaves((y, args))
-            return sum(jnp.sum(x).astype(self.out_dtype) for x in leaves)
+            return sum(jnp.sum(x).astype(out_dtype) for x in jtu.tree_leaves((y, args)))
 
-        self.out_dtype = next(iter(self.stand_ins.values())).params["out_dtype"]
         made = {s: _objective_eqn(reads_all, y_tree, args_tree, e, singles)
                 for s, e in self.stand_ins.items()}
         filled = ClosedJaxpr(_fill(closed.jaxpr, lambda e: made[_stand_in_signature(e)].replace(
             invars=list(e.invars), outvars=list(e.outvars))), closed.consts)
-        spec = [jax.ShapeDtypeStruct(v.aval.shape, v.aval.dtype, weak_type=v.aval.weak_type)
-                for v in closed.jaxpr.invars]
-        self.lowered = _program(filled, options).lower(*spec)
+        self.lowered = _program(filled, options).lower(*_spec(closed.jaxpr.invars))
         self.text = self.lowered.as_text()
         self.slots = {n: _types(h) for n, (h, _) in _functions(self.text).items()
                       if re.fullmatch(_SLOT + r"(_\d+)?", n)}  # stand-in function -> its types
@@ -312,7 +309,7 @@ def _slot_functions(eqns):
     """The functions of one module that calls each ``jit`` equation of ``eqns`` (the
     ``k``-th named ``{_SLOT}_slot{k}``), by name, with the helpers they call."""
     calls = [_call(e, f"{_SLOT}_slot{k}") for k, e in enumerate(eqns)]
-    specs = [_spec(e) for e in eqns]
+    specs = [_spec(e.invars) for e in eqns]
 
     def slots(*operands):
         out, i = [], 0
@@ -331,9 +328,10 @@ def _stand_in_signature(eqn):
     return tuple(v.aval for v in eqn.invars), tuple(sorted(eqn.params.items()))
 
 
-def _spec(eqn):
+def _spec(variables):
+    """The abstract arguments of a jaxpr's ``variables`` (shape, dtype, weak type)."""
     return [jax.ShapeDtypeStruct(v.aval.shape, v.aval.dtype, weak_type=v.aval.weak_type)
-            for v in eqn.invars]
+            for v in variables]
 
 
 def _call(eqn, name=_SLOT):
