@@ -306,7 +306,7 @@ def test_choice_is_the_baseline_where_it_scores_lowest():
     from jaxfric.motion import NARROW_GATE, NarrowGateWarning
 
     narrow = MotionComparison({"lugre": full}, ["lugre"], [], "gated", {"lugre": 2.0}, 1.5, {"lugre": 3.9}, 4.0)
-    assert narrow.gate_margin == pytest.approx(0.025) and narrow.gate_margin < NARROW_GATE
+    assert narrow.gate_margin == pytest.approx(0.025) and narrow.gate_margin < NARROW_GATE and narrow.passes_narrowly
     with pytest.warns(NarrowGateWarning, match=r"\(3.9 mm\) beats least squares' \(4 mm\) by 2.5 %"):
         assert narrow.choice is full
     assert "passes narrowly: blocked 2.5 % under least squares'" in narrow.table()

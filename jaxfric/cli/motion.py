@@ -245,7 +245,6 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
     """``motion.md``, ``results.json`` and ``motion_free_run.png`` of the ranked fits; the
     ranking table printed."""
     from jaxfric.files import atomic_write_text, jsonable
-    from jaxfric.motion import NARROW_GATE
     from jaxfric.report import save_figure
 
     table = ranked.table()
@@ -275,8 +274,7 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
                      f"block's ({held}) free run. Both share the record's excitation: neither is new motion")
     margin = ranked.gate_margin
     narrow = ([f"(passes the gate narrowly: blocked {100 * margin:.1f} % under least squares'; "
-               "compare it with the baseline on motion it was not fitted on)"]
-              if margin is not None and margin < NARROW_GATE else [])
+               "compare it with the baseline on motion it was not fitted on)"] if ranked.passes_narrowly else [])
     md = ["# jaxfric identify-motion", "", f"Command: `jaxfric {' '.join(argv)}`", "",
           f"{ranked_by} (score a separate recording with "
           "`jaxfric.load_motion_fit(path).score(record, init_window=20)`). The last row is the "

@@ -102,8 +102,8 @@ class MotionComparison:
         the baseline as a [`MotionFit`][jaxfric.motion.MotionFit] of its own (`baseline_fit`),
         with a ``BaselineWarning`` giving both scores."""
         if self.choice_name != BASELINE_LABEL:
-            margin = self.gate_margin
-            if margin is not None and margin < NARROW_GATE:
+            if self.passes_narrowly:
+                margin = self.gate_margin
                 (n, worse), (m, worse_wide) = NARROW_COUNTS["narrow"], NARROW_COUNTS["wide"]
                 warnings.warn(
                     f"{self.choice_name} passes the gate narrowly: its blocked cross-validation "
@@ -131,6 +131,14 @@ class MotionComparison:
         if self.judge != "gated" or not self.baseline_blocked or self.choice_name == BASELINE_LABEL:
             return None
         return 1.0 - self.blocked[self.choice_name] / self.baseline_blocked
+
+    @property
+    def passes_narrowly(self) -> bool:
+        """The chosen model passes the gated judge's gate by less than `NARROW_GATE`
+        ([`gate_margin`][jaxfric.motion.MotionComparison.gate_margin]): ``choice`` warns, the
+        table and the command line say so."""
+        margin = self.gate_margin
+        return margin is not None and margin < NARROW_GATE
 
     def _score(self, name) -> float:
         return self.scores.get(name, self.fits[name].metrics["valid"]["rmse_mm"])
@@ -194,7 +202,7 @@ class MotionComparison:
                              f"{self.baseline_blocked:.4g}")
             elif r["beats_baseline"] is False:
                 flags.append("not better than the baseline")
-            elif r["model"] == self.choice_name and (self.gate_margin or 1.0) < NARROW_GATE:
+            elif r["model"] == self.choice_name and self.passes_narrowly:
                 flags.append(f"passes narrowly: blocked {100 * self.gate_margin:.1f} % under least squares'")
             name = r["model"] + (f" ({'; '.join(flags)})" if flags else "")
             lines.append(f"| {'' if r['rank'] is None else r['rank']} | {name} | {r['parameters']} | "
