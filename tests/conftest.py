@@ -170,8 +170,8 @@ SLOW_TESTS = {
 # out first and the short ones fill in at the end, so the two workers finish together (the
 # longest-first rule). Files not listed follow in their usual order; a stale list only
 # costs balance, never a test. test_notebooks goes first: its kernels hold the exclusive
-# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol and
-# test_parallel_scan, which start no subprocess, instead of stalling that worker's
+# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol,
+# which starts no subprocess, instead of stalling that worker's
 # subprocess tests (test_cli's waited 10-20 s for the lock when it came second).
 # Added later, placed by each file's CPU seconds run alone (`-n 0`, children included):
 # test_progress_cache 35, test_models_greybox 27, test_motion_judge 26, test_pipeline_stages
@@ -186,7 +186,7 @@ SLOW_TESTS = {
 # test_identify_baseline 8, test_search_box 8, test_models_elman 6, test_verdicts 6,
 # test_functions 5; the files left unlisted take under 5 s each.
 LONGEST_FIRST = [
-    "test_notebooks.py", "test_optim_protocol.py", "test_parallel_scan.py", "test_cli.py",
+    "test_notebooks.py", "test_optim_protocol.py", "test_cli.py",
     "test_reproducibility.py", "test_motion_api.py", "test_motion_dependable.py", "test_evosax_adapter.py",
     "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",

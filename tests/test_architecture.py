@@ -7,11 +7,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1] / "jaxfric"
 
 #: docs/architecture.md's order: cli → report, plot, sweeps → identification, motion,
-#: compensation, parallel_scan, uncertainty → fit, pipeline → export, datasets, covariance, problem → optim,
+#: compensation, uncertainty → fit, pipeline → export, datasets, covariance, problem → optim,
 #: models, rig, metrics, functions → records, files, plausibility, styles → compiler helpers and
 #: the warning categories.
 LAYER = {"cli": 8, "report": 7, "plot": 7, "sweeps": 7, "identification": 6, "motion": 6, "compensation": 6,
-         "parallel_scan": 6, "uncertainty": 6,
+         "uncertainty": 6,
          "fit": 5, "pipeline": 5, "export": 4, "datasets": 4, "covariance": 4, "problem": 4, "optim": 3, "models": 3, "rig": 3, "metrics": 3, "functions": 3,
          "records": 2, "files": 2, "plausibility": 2, "styles": 2, "_xla": 1, "_timing": 1, "_warnings": 1}
 

@@ -42,8 +42,8 @@ def elman_hidden(u, c, w, r, b):
     """The diagonal-context Elman network's hidden layer, §2.2: ``h = tanh(w u + r c + b)``,
     elementwise over any broadcastable shapes (neurons, candidates, time). The one home of
     the recurrence: the rollouts and the adjoint here, the batched cost gradient of
-    ``jaxfric.identification``, the motion step, the grey-box network and the
-    parallel-in-time rollout call it; the context then moves as ``c' = α c + h``.
+    ``jaxfric.identification``, the motion step and the grey-box network call it; the
+    context then moves as ``c' = α c + h``.
     ``jaxfric.export`` replays it in NumPy and C, outside JAX by design."""
     return jnp.tanh(w * u + r * c + b)
 
