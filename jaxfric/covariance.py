@@ -266,7 +266,7 @@ class ParameterUncertainty:
         return np.clip(c / d[:, None] / d[None, :], -1.0, 1.0)
 
     def t_quantile(self, level: float) -> float:
-        _check_level(level)
+        check_level(level)
         return float(stats.t.ppf(0.5 + 0.5 * level, max(self.dof, 1)))
 
     def theta_intervals(self, level: float = DEFAULT_LEVEL, method=None) -> tuple[np.ndarray, np.ndarray]:
@@ -404,7 +404,8 @@ class ParameterUncertainty:
                    lag1=float(d.get("lag1", 0.0)), segments=tuple(d.get("segments", ())))
 
 
-def _check_level(level) -> None:
+def check_level(level) -> None:
+    """``ValueError`` unless ``level`` is a probability in (0, 1) (an interval's level)."""
     if not (isinstance(level, (int, float)) and 0.0 < float(level) < 1.0):
         raise ValueError(f"level must be a probability in (0, 1), e.g. 0.95, got {level!r}")
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from . import models as _models
 from ._warnings import ExtrapolationWarning, ResamplingWarning
-from .covariance import DEFAULT_LEVEL, ParameterUncertainty, _check_level
+from .covariance import DEFAULT_LEVEL, ParameterUncertainty, check_level
 from .export import c_header, numpy_step
 from .files import atomic_write, jsonable
 from .models import AbstractFrictionModel, Scaler
@@ -453,7 +453,7 @@ class Fit:
         variance (left out with ``noise=False``: then the band is the confidence band of
         the mean prediction only). The band of a new *measurement* assumes the training
         residual variance holds on the new record (docs/uncertainty.md)."""
-        _check_level(level)
+        check_level(level)
         u = self._need_uncertainty()
         method = u._method(method)
         theta = jnp.asarray(self.theta)

@@ -33,7 +33,7 @@ import numpy as np
 
 from ._warnings import ExtrapolationWarning
 from .covariance import (DEFAULT_LEVEL, DEFAULT_METHODS, DEFAULT_RCOND, DEFAULT_REPLICATES, METHODS,
-                         MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, _check_level,
+                         MAX_REPORT_CORRELATION, NOT_IDENTIFIABLE, ParameterUncertainty, check_level,
                          _check_methods, andrews_bandwidth, block_bootstrap_covariance, correlation_text,
                          hac_covariance, interval_text, jacobian_covariance, number_text)
 from .fit import NOT_IDENTIFIABLE_MEANING, Fit, diagnostic_flags, grouped_reasons, parameter_verdicts
@@ -116,7 +116,7 @@ def parameter_uncertainty(fit, data, *, method=DEFAULT_METHODS, level: float = D
     method, or a bootstrap without a key.
     """
     methods = _check_methods(method)
-    _check_level(level)
+    check_level(level)
     problem = _problem(fit)
     if fit.model.needs_scaling:
         raise ValueError(f"{type(fit.model).__name__} is a black-box network: its weights have no "

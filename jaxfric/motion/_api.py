@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._warnings import ExtrapolationWarning
+from ..covariance import DEFAULT_LEVEL, check_level
 from ..fit import Fit, FitKindError, model_config, model_name, predict, uncertainty_lines
 from .._timing import Stopwatch
 from ..identification import from_box, resolve_model, search_dtype
@@ -39,6 +40,7 @@ from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, che
                        same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import assess_fit
+from ._band import FreeRunPositions, position_band
 from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start, slow_attraction_grid
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
@@ -46,7 +48,7 @@ from ._mechanics import Mechanics
 from ._lm import _res_jit
 from ._pipeline import GLOBAL_SAMPLES, MotionBudget, MotionSearch, default_search, run_search, start_costs
 from ._residuals import (SumOfSquares, motion_coordinates, motion_residual, motion_residuals, motion_train_velocity,
-                         training_lengths)
+                         search_layout, training_lengths)
 from ._shooting import schedule, shoot
 from ._step import friction_step
 
@@ -300,10 +302,29 @@ class MotionFit(Fit):
         out["settings"] = {**out["settings"], "motion": self.mechanics.to_json()}
         return out
 
-    def prediction_interval(self, *args, **kwargs):
-        """Not for a motion fit: its uncertainty is about position (``ValueError``)."""
-        raise ValueError("prediction_interval gives friction bands of a force-balance fit; a motion "
-                         "fit's uncertainty is about position")
+    def prediction_interval(self, data, level: float = DEFAULT_LEVEL, *, init_window: int = DEFAULT_INIT_WINDOW,
+                            method=None, noise: bool = True):
+        """``(x̂, low, high)`` [m]: the position band of a free run of a record (the
+        ``simulate(data, init_window=N)`` run, whose positions ``x̂`` it returns):
+        x̂ ± t √(j Σ jᵀ + s²), j = ∂x̂/∂θ along the run (``jax.jacfwd``, θ the fit's search
+        coordinates, mass and offset included where identified), Σ the fit's box-capped
+        covariance (``method``, default the fit's Newey–West), s² the variance of its
+        training position residuals (left out with ``noise=False``). docs/uncertainty.md;
+        its coverage on new motion is measured in ``benchmarks/results/motion_band.md``
+        (below the nominal level where the force offset drifts between records).
+        ``ValueError`` for a fit without parameter uncertainty (a network)."""
+        check_level(level)
+        u = self._need_uncertainty()
+        data, n = self._checked_record(data, init_window)
+        st = self.initial_state(data.position[:n], n)
+        layout, _ = search_layout(self)
+        y = jnp.asarray(self.mechanics.y, jnp.asarray(self.theta).dtype)
+        positions = FreeRunPositions(step=self.friction_step(), layout=layout, mass=np.asarray(self.mass, np.float64),
+                                     dt=np.asarray(self.dt, np.float64), force=np.asarray(data.net_force[n - 1:]),
+                                     x_window=st["x_window"], v_window=st["v_window"])
+        centre, half = position_band(positions, y, u.box_capped(method, level), u.t_quantile(level),
+                                    u.s2 if noise else 0.0)
+        return centre, centre - half, centre + half
 
     def predict(self, velocity, dt=None):
         """Friction [N] for a velocity record, the fitted constant offset included."""
@@ -388,7 +409,9 @@ class MotionFit(Fit):
         s0 = jax.tree_util.tree_map(lambda a: a[n - 1], states)
         return {"x0": float(x_win[-1]), "v0": float(v_win[-1]), "state0": s0, "x_window": x_win, "v_window": v_win}
 
-    def _simulate_record(self, data, init_window) -> dict:
+    def _checked_record(self, data, init_window) -> tuple:
+        """``(record, N)`` for a free run from the first ``N`` samples, or a ``ValueError``;
+        warns where the record leaves the training velocity range."""
         data = _as_motion_data(data)
         if not same_sample_time(data.dt, self.dt):
             raise ValueError(f"the record's sample time {data.dt} s differs from the fit's {self.dt} s "
@@ -397,6 +420,10 @@ class MotionFit(Fit):
         if data.n_samples <= n:
             raise ValueError(f"init_window={n} leaves nothing to simulate in a record of {data.n_samples} samples")
         self._warn_new_motion(data.velocity)
+        return data, n
+
+    def _simulate_record(self, data, init_window) -> dict:
+        data, n = self._checked_record(data, init_window)
         st = self.initial_state(data.position[:n], n)
         out = self.simulate(data.net_force[n - 1:], st["x0"], st["v0"], state0=st["state0"])
         head = n - 1

@@ -52,7 +52,7 @@ class SumOfSquares(eqx.Module):
         return jnp.sum(r * r)
 
 
-def _layout(fit) -> tuple[Layout, list]:
+def search_layout(fit) -> tuple[Layout, list]:
     """Where the fit's search vector puts its mechanics, and their search names."""
     mech = fit.mechanics
     names = list(mech.search_names)
@@ -69,7 +69,7 @@ def motion_coordinates(fit) -> SearchCoordinates:
     identified) with their names, kinds and box (the mechanics' box as searched; unbounded
     when the fit did not record it)."""
     mech = fit.mechanics
-    _, extra = _layout(fit)
+    _, extra = search_layout(fit)
     coords = tuple(fit.model._coords)
     lower, upper = (np.asarray(b, np.float64) for b in fit.model.bounds(fit.box))
     if extra:
@@ -93,7 +93,7 @@ def motion_residuals(fit, data) -> Residuals:
     each training record run from its own start for a fit on whole records."""
     mech = fit.mechanics
     n = fit.n_train
-    layout, _ = _layout(fit)
+    layout, _ = search_layout(fit)
     # a fit on whole records (identify_motion(train=[...])) attaches them concatenated
     records = training_lengths(fit)
     error, horizon = mech.error or "position", mech.horizon
