@@ -92,6 +92,7 @@ def main(argv=None) -> int:
     if "emps-blocked" in proxies and emps is None:
         if proxies == ["emps-blocked"]:
             return skipped("motion_band", "DATA_EMPS.mat not found")
+        print("motion_band: DATA_EMPS.mat not found; the emps-blocked proxy is left out", file=sys.stderr)
         proxies.remove("emps-blocked")
     keys = [0] if a.quick else [int(k) for k in a.keys.split(",")]
     models = ["coulomb"] if a.quick else a.models.split(",")
