@@ -3,9 +3,8 @@
 # CPU cores (JAX_PLATFORMS=cpu), in this order of importance:
 #   1. the EMPS default identification, identify("elman", EMPS) -- first call and second call
 #   2. an ensemble of K = 64 members (identify(..., keys=64)) beside one fit, LuGre and ENN
-#   3. parallel-in-time rollouts against the sequential scan (benchmarks/parallel_scan.py)
-#   4. the speed table (benchmarks/speed_optim.py, 30-D Rastrigin, 100 agents)
-#   5. Table 1 wall times (benchmarks/table1.py, 30-D, 30 runs, MAPSO-NMDS rows and PSO)
+#   3. the speed table (benchmarks/speed_optim.py, 30-D Rastrigin, 100 agents)
+#   4. Table 1 wall times (benchmarks/table1.py, 30-D, 30 runs, MAPSO-NMDS rows and PSO)
 # Results: benchmarks/results/<name>_gpu.* (GPU) and <name>_gpu_host_cpu.* (the GPU machine's
 # CPU), every file naming its device; gpu_check_gpu.md lists the steps, their wall times and
 # the device. With $OUT set (the device tool), everything is also packed into
@@ -77,7 +76,7 @@ fi
 } > "$SUMMARY"
 
 # step NAME PLATFORM(gpu|cpu) TIMEOUT_S COMMAND...
-STEPS=${GPU_CHECK_STEPS:-emps_identify,parallel_scan,speed_optim,table1,ensemble}
+STEPS=${GPU_CHECK_STEPS:-emps_identify,speed_optim,table1,ensemble}
 step() {
   local name=$1 platform=$2 limit=$3; shift 3
   case ",$STEPS," in *",$name,"*) ;; *) return ;; esac
@@ -167,18 +166,13 @@ EOF2
 if [ $DRY = 1 ]; then KE=4; else KE=64; fi
 step ensemble gpu 170 $PY "$TMP/ensemble.py" gpu "$RES" $DRY $KE
 
-# 3. parallel-in-time against the sequential scan
-if [ $DRY = 1 ]; then PS=(--quick --out "$RES"); else PS=(--elman 2000x64,24741x1,24741x16 --motion 24741 --chunks 250,1000 --rounds 3); fi
-step parallel_scan gpu 90 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu
-step parallel_scan cpu 60 $PY benchmarks/parallel_scan.py "${PS[@]}" --tag gpu_host_cpu
-
-# 4. the speed table (30-D Rastrigin, 100 agents, 200 generations)
+# 3. the speed table (30-D Rastrigin, 100 agents, 200 generations)
 if [ $DRY = 1 ]; then SP=(--dim 5 --agents 16 --generations 10 --nm-evals 200 --repeats 1 --seeds 2); else
   SP=(--function rastrigin --agents 100 --generations 200 --repeats 3); fi
 step speed_optim gpu 60 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu
 step speed_optim cpu 50 $PY benchmarks/speed_optim.py "${SP[@]}" --out "$RES" --tag gpu_host_cpu
 
-# 5. Table 1 wall times (the swarm rows of one function; each platform into its own folder)
+# 4. Table 1 wall times (the swarm rows of one function; each platform into its own folder)
 if [ $DRY = 1 ]; then T1=(--quick --functions sphere --rows swarm --no-maga); else
   T1=(--dim 30 --runs 30 --functions rastrigin --rows swarm --no-maga); fi
 for plat in gpu cpu; do
