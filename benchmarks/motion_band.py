@@ -69,7 +69,7 @@ def summary(rows) -> list[dict]:
             for label in BANDS:
                 held = np.array([r[f"held_{label}"] for r in sel])
                 row[f"held_{label}"] = f"{np.median(held):.2f} ({held.min():.2f}–{held.max():.2f})"
-            ratio = np.array([r["rmse_mm"] / (r["half_hac_mm"] / 1.96) for r in sel])
+            ratio = np.array([r["rmse_mm"] / max(r["half_hac_mm"] / 1.96, 1e-300) for r in sel])
             row["rmse_over_sigma"] = f"{np.median(ratio):.2f} ({ratio.min():.2f}–{ratio.max():.2f})"
             rho = spearmanr([r["half_hac_mm"] for r in sel], [r["rmse_mm"] for r in sel])[0] if len(sel) > 2 else np.nan
             row["rank_corr"] = f"{rho:.2f}"

@@ -314,7 +314,8 @@ class ParameterUncertainty:
         half = np.where(np.isfinite(half) & (half > 0), half, np.maximum(10.0 * t * se, 1e-300))
         z = c / half[:, None] / half[None, :]
         lam, q = np.linalg.eigh(0.5 * (z + z.T))
-        reach = t * np.sqrt(np.clip(lam, 0.0, None)) * np.max(np.abs(q), axis=0)
+        lam = np.clip(lam, 0.0, None)  # a negative eigenvalue is rounding: no variance, not a negative one
+        reach = t * np.sqrt(lam) * np.max(np.abs(q), axis=0)
         lam = np.where(reach > 1.0, lam / np.maximum(reach, 1.0) ** 2, lam)
         return (q * lam) @ q.T * half[:, None] * half[None, :]
 

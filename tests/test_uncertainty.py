@@ -382,6 +382,23 @@ def test_box_capping_keeps_a_determined_combination():
     np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-3)
 
 
+def test_box_capping_never_gives_a_negative_variance():
+    """A sandwich covariance rounded to an indefinite matrix (eigenvalues 1e-4, -1e-6 in
+    box units): the capped covariance is positive semi-definite, the negative direction
+    given no variance, so no band variance j Σ jᵀ is negative."""
+    q, _ = np.linalg.qr(np.random.default_rng(12).standard_normal((2, 2)))
+    cov = (q * np.array([1e-4, -1e-6])) @ q.T
+    u = ParameterUncertainty(names=("a", "b"), kinds=("linear",) * 2, estimate=np.zeros(2),
+                             theta=np.zeros(2), lower=-np.ones(2), upper=np.ones(2),
+                             cov_theta={"hac": cov}, cov={"hac": cov}, n=400, dof=398,
+                             s2=0.01, rank=2, bandwidth=3.0, default="hac")
+    capped = u.box_capped()
+    lam = np.linalg.eigvalsh(capped)
+    assert lam.min() >= -1e-18 and lam.max() == pytest.approx(1e-4, rel=1e-9)
+    j = q[:, 1]  # along the negative direction: the uncapped variance would be -1e-6
+    assert j @ cov @ j < 0 and j @ capped @ j >= -1e-18
+
+
 def test_several_training_records_pool_their_residuals():
     """A list of records: residuals of each, no Newey–West lag across the boundary, and
     the independent-residual covariance is the OLS one of the stacked samples."""
