@@ -182,6 +182,16 @@ def _coulomb_drive(n: int, dt: float = 1e-3):
     return MotionData.from_arrays(u, np.asarray(out["x"]), dt)
 
 
+#: The GMS fit of test_identify_motion_passes_the_grid_to_gms_only: its record length, search
+#: and mechanics, which the attraction-rate test below reuses so that its two GMS fits run the
+#: programs this one compiled (its checks are on the box, which depends on the training
+#: velocity and net force only, not on the search or the mechanics identified).
+GMS_DRIVE_SAMPLES = 800
+GRID_SEARCH = MotionSearch(particles=4, generations=2, horizons=(200, None), steps=(3, 3), starts=1,
+                           least_squares_start=True, slow_starts=2)
+GRID_MECHANICS = dict(mass=(1.0, 5.0), fit_offset=True)
+
+
 def test_identify_motion_passes_the_grid_to_gms_only():
     """identify_motion: a GMS fit with slow_starts=2 ranks the grid and runs 2 more starts on
     the free run only; a LuGre fit with the same search gets no grid (its search unchanged:
@@ -190,15 +200,14 @@ def test_identify_motion_passes_the_grid_to_gms_only():
 
     from jaxfric.motion import identify_motion
 
-    rec = _coulomb_drive(800)
-    search = MotionSearch(particles=4, generations=2, horizons=(200, None), steps=(3, 3), starts=1,
-                          least_squares_start=True, slow_starts=2)
+    rec = _coulomb_drive(GMS_DRIVE_SAMPLES)
+    search = GRID_SEARCH
     fits = {}
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, s in (("gms", search), ("lugre", search), ("lugre0", dataclasses.replace(search, slow_starts=0))):
-            fits[name] = identify_motion(name.rstrip("0"), rec, key=0, mass=(1.0, 5.0), fit_offset=True, train=1.0,
-                                         search=s, dtype=jnp.float64)
+            fits[name] = identify_motion(name.rstrip("0"), rec, key=0, train=1.0, search=s, dtype=jnp.float64,
+                                         **GRID_MECHANICS)
     gms = [(s["stage"], s["start"]) for s in fits["gms"].stages]
     assert ("rank_slow", None) in gms
     assert [st for st, i in gms if i in (2, 3)] == ["free_run", "free_run"]
@@ -231,13 +240,13 @@ def test_a_motion_fits_attraction_rate_starts_at_the_friction_scale_per_second()
     from jaxfric.models import friction_scales
     from jaxfric.motion import ATTRACTION_TIME_S, identify_motion
 
-    rec = _coulomb_drive(600)
+    rec = _coulomb_drive(GMS_DRIVE_SAMPLES)  # the grid test's GMS fit: its programs, compiled once
     f = float(friction_scales(rec.velocity, rec.net_force)[0])
-    search = MotionSearch(particles=3, generations=1, horizons=(None,), steps=(1,), starts=1)
+    search = GRID_SEARCH
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fit = identify_motion("gms", rec, key=0, mass=2.5, train=1.0, search=search, dtype=jnp.float64)
-        given = identify_motion("gms", rec, key=0, mass=2.5, train=1.0, search=search, dtype=jnp.float64,
+        fit = identify_motion("gms", rec, key=0, train=1.0, search=search, dtype=jnp.float64, **GRID_MECHANICS)
+        given = identify_motion("gms", rec, key=0, train=1.0, search=search, dtype=jnp.float64, **GRID_MECHANICS,
                                 box={"C": (2.0, 3e3)})
     assert fit.box["C"] == (f / ATTRACTION_TIME_S, 1e4 * f)
     assert 10.0 ** fit.mechanics.search_bounds[0][models.GMS().param_names.index("log10_C")] \
