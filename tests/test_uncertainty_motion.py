@@ -133,6 +133,12 @@ def test_motion_position_band_rejects_what_it_cannot_do():
             fit.prediction_interval(MotionData.from_arrays(data.force, data.position, 2 * DT))
         with pytest.raises(ValueError, match="init_window"):
             fit.prediction_interval(data.window(0, 10))
+        vfit = fit.replace(mechanics=fit.mechanics.replace(error="velocity"), uncertainty=None)
+        vfit = vfit.replace(uncertainty=functools.partial(parameter_uncertainty, vfit, data))
+        with pytest.raises(ValueError, match="velocity"):  # s² in (m/s)² is no position variance
+            vfit.prediction_interval(data)
+        x, lo, hi = vfit.prediction_interval(data, noise=False)
+        assert np.all(lo <= x) and np.all(x <= hi) and np.all(np.isfinite(hi))
 
 
 def test_motion_position_band_covers_new_emps_motion_only_with_the_newey_west_covariance():

@@ -312,9 +312,13 @@ class MotionFit(Fit):
         training position residuals (left out with ``noise=False``). docs/uncertainty.md;
         its coverage on new motion is measured in ``benchmarks/results/motion_band.md``
         (below the nominal level where the force offset drifts between records).
-        ``ValueError`` for a fit without parameter uncertainty (a network)."""
+        ``ValueError`` for a fit without parameter uncertainty (a network), and with
+        ``noise=True`` for one whose cost was not the free-run position (velocity, k-step)."""
         check_level(level)
         u = self._need_uncertainty()
+        if noise and u.residual != "position [m]":
+            raise ValueError(f"this fit's residuals are {u.residual}, not free-run positions, so their variance "
+                             "is not a position's: pass noise=False for the parameters' band alone")
         data, n = self._checked_record(data, init_window)
         st = self.initial_state(data.position[:n], n)
         layout, _ = search_layout(self)
