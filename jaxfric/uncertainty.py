@@ -156,7 +156,11 @@ def prediction_interval(fit, velocity, level: float = DEFAULT_LEVEL, *, dt=None,
                         method=None, noise: bool = True):
     """``(prediction, low, high)`` [N] for a velocity record: [`jaxfric.Fit.prediction_interval`][jaxfric.fit.Fit.prediction_interval]
     (ŷ ± t sqrt(j Σ jᵀ + s²) with the box-capped covariance); a ``ValueError`` names why a
-    fit has none (a network, a motion fit, a file saved without it)."""
+    fit has none (a network, a file saved without it) or another kind of band (a motion
+    fit's is about position: ``fit.prediction_interval(record)``)."""
+    if not isinstance(fit.problem(), ForceBalanceProblem):
+        raise ValueError("a friction band over velocity is a force-balance fit's; a motion fit's band is about "
+                         "position: fit.prediction_interval(record)")
     if fit.uncertainty is None:
         raise ValueError("this fit has no parameter uncertainty (a network, or a fit loaded from an "
                          "older file): jaxfric.uncertainty.parameter_uncertainty(fit, data) makes one")

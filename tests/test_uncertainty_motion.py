@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxfric.uncertainty
 from jaxfric import models
 from jaxfric.motion import MotionData, MotionFit, friction_step, simulate_motion
 from jaxfric.uncertainty import parameter_uncertainty
@@ -133,6 +134,8 @@ def test_motion_position_band_rejects_what_it_cannot_do():
             fit.prediction_interval(MotionData.from_arrays(data.force, data.position, 2 * DT))
         with pytest.raises(ValueError, match="init_window"):
             fit.prediction_interval(data.window(0, 10))
+        with pytest.raises(ValueError, match="about position"):
+            jaxfric.uncertainty.prediction_interval(fit, data.velocity)
         vfit = fit.replace(mechanics=fit.mechanics.replace(error="velocity"), uncertainty=None)
         vfit = vfit.replace(uncertainty=functools.partial(parameter_uncertainty, vfit, data))
         with pytest.raises(ValueError, match="velocity"):  # s² in (m/s)² is no position variance
