@@ -189,7 +189,7 @@ def _coulomb_drive(n: int, dt: float = 1e-3):
 GMS_DRIVE_SAMPLES = 800
 GRID_SEARCH = MotionSearch(particles=4, generations=2, horizons=(200, None), steps=(3, 3), starts=1,
                            least_squares_start=True, slow_starts=2)
-GRID_MECHANICS = dict(mass=(1.0, 5.0), fit_offset=True)
+GRID_MECHANICS = {"mass": (1.0, 5.0), "fit_offset": True}
 
 
 def test_identify_motion_passes_the_grid_to_gms_only():
