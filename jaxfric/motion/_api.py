@@ -40,7 +40,7 @@ from ..records import (DEFAULT_TRAIN_FRACTION, SAMPLE_TIME_RTOL, as_channel, che
                        same_sample_time, split_count)
 from ..rig.pipeline import differentiate, lowpass
 from ..uncertainty import assess_fit
-from ._band import FreeRunPositions, position_band
+from ._band import FreeRunPositions, position_band, window_maps
 from ._baseline import BASELINE_LABEL, baseline_model, least_squares, least_squares_start, slow_attraction_grid
 from ._forward import k_step_positions, motion_prediction, simulate_motion, track_states
 from ._layout import Layout
@@ -306,10 +306,12 @@ class MotionFit(Fit):
                             method=None, noise: bool = True):
         """``(x̂, low, high)`` [m]: the position band of a free run of a record (the
         ``simulate(data, init_window=N)`` run, whose positions ``x̂`` it returns):
-        x̂ ± t √(j Σ jᵀ + s²), j = ∂x̂/∂θ along the run (``jax.jacfwd``, θ the fit's search
-        coordinates, mass and offset included where identified), Σ the fit's box-capped
-        covariance (``method``, default the fit's Newey–West), s² the variance of its
-        training position residuals (left out with ``noise=False``). docs/uncertainty.md;
+        x̂ ± t √(j Σ jᵀ + σ_w² h hᵀ + s²), j = ∂x̂/∂θ along the run (``jax.jacfwd``, θ the
+        fit's search coordinates, mass and offset included where identified), Σ the fit's
+        box-capped covariance (``method``, default the fit's Newey–West), h = ∂x̂/∂x̃ the
+        run's sensitivity to the ``init_window`` positions its initial state comes from and
+        σ_w² their noise (the residual variance of the rule's polynomial), s² the variance of
+        the fit's training position residuals (left out with ``noise=False``). docs/uncertainty.md;
         its coverage on new motion is measured in ``benchmarks/results/motion_band.md``
         (below the nominal level where the force offset drifts between records).
         ``ValueError`` for a fit without parameter uncertainty (a network), and with
@@ -323,11 +325,15 @@ class MotionFit(Fit):
         st = self.initial_state(data.position[:n], n)
         layout, _ = search_layout(self)
         y = jnp.asarray(self.mechanics.y, jnp.asarray(self.theta).dtype)
+        degree = min(INIT_DEGREE, n - 1)
+        x_map, v_map = window_maps(n, self.dt, degree)
+        window_dof = n - degree - 1
+        window_var = float(np.sum((data.position[:n] - st["x_window"]) ** 2) / window_dof) if window_dof else 0.0
         positions = FreeRunPositions(step=self.friction_step(), layout=layout, mass=np.asarray(self.mass, np.float64),
                                      dt=np.asarray(self.dt, np.float64), force=np.asarray(data.net_force[n - 1:]),
-                                     x_window=st["x_window"], v_window=st["v_window"])
-        centre, half = position_band(positions, y, u.box_capped(method, level), u.t_quantile(level),
-                                    u.s2 if noise else 0.0)
+                                     x_window=st["x_window"], v_window=st["v_window"], x_map=x_map, v_map=v_map)
+        centre, half = position_band(positions, y, u.box_capped(method, level), window_var, u.t_quantile(level),
+                                     u.s2 if noise else 0.0)
         return centre, centre - half, centre + half
 
     def predict(self, velocity, dt=None):
