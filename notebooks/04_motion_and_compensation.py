@@ -309,7 +309,12 @@ say("Least-squares baseline: Fc = {fc:.3f} N, viscous {s2:.2f} N·s/m, mass {m:.
 # measured there), and **a new recording**: another force signal (0.9 and 2.3 Hz instead of 1.3
 # and 3.1 Hz) with fresh noise, scored as a benchmark scores a test file —
 # `fit.score(record, init_window=20)` estimates the state from its first 20 samples only. The
-# figures draw the measurement as dots under the models and each model's error below.
+# figures draw the measurement as dots under the models and each model's error below; the
+# last one draws the motion fit's error on the new recording inside its position band (grey):
+# where the error stays inside it, the fit's parameters and the sensor noise explain the
+# miss. It does not hold a wrong model form, a force offset that drifts on a real drive, nor
+# a start the initial-state rule gets wrong (docs/uncertainty.md, "Position band of a motion
+# fit"); the cell below measures the last on this recording.
 
 # %%
 def rmse_mm(x, x_hat):
@@ -337,6 +342,20 @@ say("Held-back tail: RMSE {a:.4f} mm (motion fit) and {b:.4f} mm (least-squares 
     c=err["new recording"]["motion fit (Coulomb)"], d=err["new recording"]["LS baseline"],
     s=score["rmse_mm"], f=score["fit_percent"])
 
+_, band_lo, band_hi = fit.prediction_interval(new, 0.95, init_window=20)
+held = np.mean(((new.position >= band_lo) & (new.position <= band_hi))[20:])
+start = fit.initial_state(new.position[:20], 20)
+true_v = np.asarray(simulate_motion(friction_step(true), theta_true, 2.5, new_force - 3.0, dt, 0.01, 0.0)["v"])
+settled = t >= 0.1
+say("The motion fit's {lvl:.0f} % position band on the new recording (fit.prediction_interval: its parameters' "
+    "Newey–West spread, the noise of the 20 positions its start is fitted to, its training residuals) is "
+    "{w:.4f} mm wide on average and holds {h:.1f} % of the samples. The start rule's velocity is {v0:.3f} mm/s "
+    "where the true axis moves at {vt:.3f} mm/s: a quadratic through 20 positions of an axis breaking away. "
+    "From {k} s on the run sits {off:.4f} mm off, a constant the viscous friction left of that start, "
+    "which the band does not hold.", lvl=95, w=1e3 * np.mean((band_hi - band_lo)[20:]), h=100 * held,
+    v0=1e3 * start["v0"], vt=1e3 * true_v[19], k=0.1,
+    off=1e3 * np.mean((new.position - motion_x["new recording"]["motion fit (Coulomb)"])[settled]))
+
 fig, ax = plt.subplots(2, 2, figsize=(12, 5.5), sharex="col", height_ratios=[1.5, 1], layout="constrained")
 for j, (where, xs) in enumerate(motion_x.items()):
     tt = t[fit.n_train:] if where == "held-back tail" else t
@@ -354,6 +373,18 @@ for j, (where, xs) in enumerate(motion_x.items()):
         a.grid(alpha=0.3)
 ax[0, 1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
 show(fig, comparison="motion, held-back tail")
+
+fig, ax = plt.subplots(figsize=(8, 2.6), layout="constrained")
+fit_new = motion_x["new recording"]["motion fit (Coulomb)"]
+ax.fill_between(t, 1e3 * (band_lo - fit_new), 1e3 * (band_hi - fit_new), color="0.85", label="95 % band")
+ax.plot(t, 1e3 * (new.position - fit_new), lw=0.8, color=plot.style("motion fit (Coulomb)")["color"],
+        label="measured − motion fit (Coulomb)")
+ax.set_xlabel("time [s]")
+ax.set_ylabel("error [mm]")
+ax.set_title("new recording: the motion fit's error and its position band")
+ax.grid(alpha=0.3)
+ax.legend(fontsize=8, loc="lower right")
+show(fig)
 
 # %% [markdown]
 # ### Choosing a model by validation
