@@ -26,7 +26,9 @@ D = ∂p/∂θ). Directions the data do not determine (singular values of the sc
 below ``rcond`` times the largest) are *regularised*, not dropped: their variance is
 set as if the singular value were ``rcond`` times the largest, so the parameters that
 load on them get huge standard errors and correlations near ±1 instead of the
-confident zero variance a pseudo-inverse would give.
+confident zero variance a pseudo-inverse would give. The sandwich and the bootstrap see
+almost no variance there (their scores vanish with J's column), so each adds the
+Jacobian covariance's variance along those directions.
 
 Intervals at level 1 − α use Student's t with n − p degrees of freedom: θ̂ ± t se
 in search coordinates, mapped to physical units (so a log10 coordinate gives a
@@ -92,18 +94,22 @@ def correlation_text(a: str, b: str, r: float) -> str:
 # ----------------------------------------------------------------------- estimators
 # NumPy float64: J is (n, p) with p a handful, so the linear algebra costs microseconds
 # and, unlike eager jnp, compiles nothing for each new record length.
-def _scaled_inverse(jac: np.ndarray, rcond: float) -> tuple[np.ndarray, int]:
+def _scaled_inverse(jac: np.ndarray, rcond: float) -> tuple[np.ndarray, int, np.ndarray]:
     """(JᵀJ)⁻¹ by the SVD of J with unit-norm columns; singular values below ``rcond``
     times the largest are raised to it (the regularisation of the module docstring).
-    Returns ``(inverse, rank)``."""
+    Returns ``(inverse, rank, free)``, ``free`` the inverse's part along those raised
+    directions (zero when every direction is determined)."""
     norms = np.linalg.norm(jac, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
     _, s, vt = np.linalg.svd(jac / norms, full_matrices=False)
     floor = rcond * s[0] if s[0] > 0 else 1.0
-    rank = int(np.sum(s > floor))
+    determined = s > floor
+    rank = int(np.sum(determined))
     s = np.maximum(s, floor)
     inv = (vt.T / s**2) @ vt
-    return inv / norms[:, None] / norms[None, :], rank
+    free = (vt[~determined].T / floor**2) @ vt[~determined]
+    scale = norms[:, None] * norms[None, :]
+    return inv / scale, rank, free / scale
 
 
 #: Default relative singular-value floor: a combination of (unit-norm) columns this much
@@ -125,7 +131,7 @@ def jacobian_covariance(jac, resid, rcond: float = DEFAULT_RCOND):
     ``jac``: ``(n, p)``; ``resid``: ``(n,)``. Returns ``(cov, s2, rank)``."""
     jac, resid = _as64(jac, resid)
     n, p = jac.shape
-    inv, rank = _scaled_inverse(jac, rcond)
+    inv, rank, _ = _scaled_inverse(jac, rcond)
     s2 = float(np.sum(resid**2) / max(n - p, 1))
     return s2 * inv, s2, rank
 
@@ -152,11 +158,19 @@ def hac_covariance(jac, resid, bandwidth: float, rcond: float = DEFAULT_RCOND, s
     (no lag crosses a boundary); default one record."""
     jac, resid = _as64(jac, resid)
     n, p = jac.shape
-    inv, _ = _scaled_inverse(jac, rcond)
+    inv, _, free = _scaled_inverse(jac, rcond)
     g = jac * resid[:, None]
     cuts = np.cumsum((0,) + tuple(segments or (n,)))
     omega = sum(_long_run(g[a:b], float(bandwidth)) for a, b in zip(cuts[:-1], cuts[1:]))
-    return inv @ omega @ inv * (n / max(n - p, 1))
+    return inv @ omega @ inv * (n / max(n - p, 1)) + _undetermined(free, resid, p)
+
+
+def _undetermined(free: np.ndarray, resid: np.ndarray, p: int) -> np.ndarray:
+    """The variance of the directions the data do not determine, s² times the raised
+    inverse ``free`` (as the Jacobian covariance gives them). A sandwich's or a bootstrap's
+    own variance there is near zero, since J's column vanishes with its scores: it would
+    read an undetermined parameter as exactly known."""
+    return float(np.sum(resid**2) / max(resid.size - p, 1)) * free
 
 
 def andrews_bandwidth(jac, resid, segments=None) -> float:
@@ -200,9 +214,9 @@ def block_bootstrap_covariance(jac, resid, key, block: int, replicates: int = DE
     deltas = np.empty((replicates, p))
     for b in range(replicates):
         j, r = jac[idx[b]], resid[idx[b]]
-        inv, _ = _scaled_inverse(j, rcond)
+        inv, _, _ = _scaled_inverse(j, rcond)
         deltas[b] = -inv @ (j.T @ r)
-    return np.atleast_2d(np.cov(deltas, rowvar=False))
+    return np.atleast_2d(np.cov(deltas, rowvar=False)) + _undetermined(_scaled_inverse(jac, rcond)[2], resid, p)
 
 
 # ----------------------------------------------------------------------- result

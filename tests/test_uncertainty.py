@@ -382,6 +382,29 @@ def test_box_capping_keeps_a_determined_combination():
     np.testing.assert_allclose(capped[2, 2], cov[2, 2], rtol=1e-3)
 
 
+def test_a_parameter_the_data_do_not_touch_is_undetermined_by_every_method():
+    """A Jacobian whose third column is zero (a stiffness the record never excites) and
+    AR(1) residuals: the Newey–West and block-bootstrap standard errors of that parameter
+    are the Jacobian covariance's regularised one (huge), not the ~0 their vanishing
+    scores alone give, and the two determined parameters keep their sandwich values."""
+    rng = np.random.default_rng(13)
+    n = 2000
+    jac = np.stack([rng.standard_normal(n), np.sin(np.arange(n) * 0.01), np.zeros(n)], axis=1)
+    e = rng.standard_normal(n)
+    r = np.empty(n)
+    r[0] = e[0]
+    for i in range(1, n):
+        r[i] = 0.8 * r[i - 1] + e[i]
+    cov_j = jacobian_covariance(jac, r)[0]
+    cov_h = hac_covariance(jac, r, 20.0)
+    cov_b = block_bootstrap_covariance(jac, r, 0, 21, replicates=100)
+    assert cov_j[2, 2] > 1e9
+    for cov in (cov_h, cov_b):
+        assert cov[2, 2] == pytest.approx(cov_j[2, 2], rel=1e-6)
+    ref = hac_covariance(jac[:, :2], r, 20.0) * (n - 2) / (n - 3)  # the determined pair alone (p = 2)
+    np.testing.assert_allclose(cov_h[:2, :2], ref, rtol=1e-6)
+
+
 def test_box_capping_never_gives_a_negative_variance():
     """A sandwich covariance rounded to an indefinite matrix (eigenvalues 1e-4, -1e-6 in
     box units): the capped covariance is positive semi-definite, the negative direction
