@@ -16,9 +16,9 @@ that polynomial's residuals (the position noise, ``N − degree − 1`` degrees 
 when ``N`` leaves none), and ``s²`` the variance of the fit's own training position
 residuals (``noise=False`` leaves it out: the band of the simulated position alone). The
 spread grows along the run as a wrong friction level integrates into position; a noisy
-initial velocity adds a drift the friction then damps. What it misses (a drifting force offset, a
-model that cannot represent the friction) is measured, not promised:
-``benchmarks/results/motion_band.md``.
+initial velocity adds a drift the friction then damps. What it misses (a drifting force
+offset, a model that cannot represent the friction, a start the rule's polynomial does not
+follow) is measured, not promised: ``benchmarks/results/motion_band.md`` and notebook 04.
 """
 
 from __future__ import annotations
