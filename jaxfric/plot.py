@@ -30,13 +30,14 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .fit import ExtrapolationWarning, Fit
+from .motion import DEFAULT_INIT_WINDOW, MotionData, MotionFit
 from .optim import History, Solution
 from .records import FrictionData
 from .styles import STYLES, style
 
 __all__ = ["fit_label", "plot_band", "plot_convergence", "plot_data", "plot_error", "plot_fit",
-           "plot_friction_velocity", "plot_models", "plot_table1", "predict_on", "STYLES", "style",
-           "velocity_unit"]
+           "plot_friction_velocity", "plot_models", "plot_position_band", "plot_table1", "predict_on", "STYLES",
+           "style", "velocity_unit"]
 
 _MEASURED = dict(color="0.15", lw=1.1)
 _VALID_SHADE = dict(color="tab:orange", alpha=0.08, lw=0)
@@ -426,6 +427,38 @@ def plot_band(fit, data, *, label: str | None = None, title: str | None = None) 
     ax.plot(t, y_hat, color=colour, lw=1.0, label=f"best member: {label}")
     _mark_split(ax, data)
     _finish(ax, "time [s]", "friction force [N]", title or f"Ensemble prediction band: {label}")
+    return fig
+
+
+def plot_position_band(fit, record, *, level: float = 0.95, init_window: int = DEFAULT_INIT_WINDOW,
+                       label: str | None = None, title: str | None = None) -> Figure:
+    """A motion fit's free run of ``record`` (a [`MotionData`][jaxfric.motion.MotionData]) from its
+    first ``init_window`` samples inside its position band
+    ([`MotionFit.prediction_interval`][jaxfric.motion.MotionFit.prediction_interval]): top, the
+    measured and the simulated position [mm]; bottom, the error ``x − x̂`` [mm] with the band
+    around zero, and in the legend the share of samples the band holds (docs/uncertainty.md
+    says what the band leaves out)."""
+    if not isinstance(fit, MotionFit):
+        raise TypeError(f"plot_position_band needs a jaxfric.motion.MotionFit, got {type(fit).__name__}")
+    if not isinstance(record, MotionData):
+        raise TypeError(f"plot_position_band needs a jaxfric.motion.MotionData record, got {type(record).__name__}")
+    x_hat, lo, hi = fit.prediction_interval(record, level, init_window=init_window)
+    x = _np(record.position)
+    t = np.arange(x.size) * record.dt
+    held = float(np.mean(((x >= lo) & (x <= hi))[init_window:]))
+    label = label or fit_label(fit)
+    colour = style(label)["color"]
+    fig = Figure(figsize=(10, 5.6), layout="constrained")
+    ax_x, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[1.4, 1])
+    ax_x.fill_between(t, 1e3 * lo, 1e3 * hi, color=colour, alpha=0.25, lw=0, label=f"{level:.0%} band")
+    ax_x.plot(t, 1e3 * x, label="measured", **_MEASURED)
+    ax_x.plot(t, 1e3 * x_hat, color=colour, lw=1.0, label=f"free run: {label}")
+    ax_e.fill_between(t, 1e3 * (lo - x_hat), 1e3 * (hi - x_hat), color=colour, alpha=0.25, lw=0,
+                      label=f"{level:.0%} band: holds {held:.1%} of the samples")
+    ax_e.plot(t, 1e3 * (x - x_hat), color=colour, lw=0.9, label="measured − free run")
+    ax_e.axhline(0.0, color="0.4", lw=0.6)
+    _finish(ax_x, "", "position [mm]", title or f"Free run from the first {init_window} samples: {label}")
+    _finish(ax_e, "time [s]", "error [mm]", "Error inside the position band")
     return fig
 
 

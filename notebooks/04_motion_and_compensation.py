@@ -310,9 +310,9 @@ say("Least-squares baseline: Fc = {fc:.3f} N, viscous {s2:.2f} N·s/m, mass {m:.
 # and 3.1 Hz) with fresh noise, scored as a benchmark scores a test file —
 # `fit.score(record, init_window=20)` estimates the state from its first 20 samples only. The
 # figures draw the measurement as dots under the models and each model's error below; the
-# last one draws the motion fit's error on the new recording inside its position band (grey):
-# where the error stays inside it, the fit's parameters and the sensor noise explain the
-# miss. It does not hold a wrong model form, a force offset that drifts on a real drive, nor
+# last one (`jaxfric.plot.plot_position_band`) draws the motion fit's run of the new recording
+# and its error inside its position band: where the error stays inside it, the fit's
+# parameters and the sensor noise explain the miss. It does not hold a wrong model form, a force offset that drifts on a real drive, nor
 # a start the initial-state rule gets wrong (docs/uncertainty.md, "Position band of a motion
 # fit"); the cell below measures the last on this recording.
 
@@ -374,17 +374,7 @@ for j, (where, xs) in enumerate(motion_x.items()):
 ax[0, 1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
 show(fig, comparison="motion, held-back tail")
 
-fig, ax = plt.subplots(figsize=(8, 2.6), layout="constrained")
-fit_new = motion_x["new recording"]["motion fit (Coulomb)"]
-ax.fill_between(t, 1e3 * (band_lo - fit_new), 1e3 * (band_hi - fit_new), color="0.85", label="95 % band")
-ax.plot(t, 1e3 * (new.position - fit_new), lw=0.8, color=plot.style("motion fit (Coulomb)")["color"],
-        label="measured − motion fit (Coulomb)")
-ax.set_xlabel("time [s]")
-ax.set_ylabel("error [mm]")
-ax.set_title("new recording: the motion fit's error and its position band")
-ax.grid(alpha=0.3)
-ax.legend(fontsize=8, loc="lower right")
-show(fig)
+show(plot.plot_position_band(fit, new, label="motion fit (Coulomb)"))
 
 # %% [markdown]
 # ### Choosing a model by validation

@@ -203,3 +203,26 @@ def test_motion_position_band_covers_new_emps_motion_only_with_the_newey_west_co
                 held[method] = (np.mean((b.position >= lo) & (b.position <= hi)), np.mean(hi - lo))
             assert held["hac"][0] >= 0.8 and held["hac"][1] > 2 * held["jacobian"][1], (name, held)
         assert held["jacobian"][0] < 0.5, held
+
+
+def test_plot_position_band_draws_the_band_and_says_what_it_holds():
+    """jaxfric.plot.plot_position_band: the run and the band in the top axes, the error
+    inside the band below, whose legend quotes the share of samples held, recomputed here
+    from prediction_interval; a force-balance fit or a bare array is refused."""
+    from jaxfric.plot import plot_position_band
+
+    with jax.enable_x64(True):
+        model, fit, data, _ = _motion_fit()
+        fit = fit.replace(uncertainty=functools.partial(parameter_uncertainty, fit, data))
+        new = _chirp_record(model, fit.theta, noise=2e-6)
+        fig = plot_position_band(fit, new, level=0.9)
+        _, lo, hi = fit.prediction_interval(new, 0.9)
+        with pytest.raises(TypeError, match="MotionData"):
+            plot_position_band(fit, new.position)
+    held = np.mean(((new.position >= lo) & (new.position <= hi))[20:])
+    top, bottom = fig.axes[:2]
+    texts = [t.get_text() for t in bottom.get_legend().get_texts()]
+    assert f"90% band: holds {held:.1%} of the samples" in texts, texts
+    assert np.allclose(top.lines[0].get_ydata(), 1e3 * new.position)
+    with pytest.raises(TypeError, match="MotionFit"):
+        plot_position_band(jaxfric.Fit.__new__(jaxfric.Fit), new)
