@@ -130,10 +130,15 @@ def jacobian_covariance(jac, resid, rcond: float = DEFAULT_RCOND):
 
     ``jac``: ``(n, p)``; ``resid``: ``(n,)``. Returns ``(cov, s2, rank)``."""
     jac, resid = _as64(jac, resid)
-    n, p = jac.shape
+    _, p = jac.shape
     inv, rank, _ = _scaled_inverse(jac, rcond)
-    s2 = float(np.sum(resid**2) / max(n - p, 1))
+    s2 = _residual_variance(resid, p)
     return s2 * inv, s2, rank
+
+
+def _residual_variance(resid: np.ndarray, p: int) -> float:
+    """s² = Σ r² / (n − p)."""
+    return float(np.sum(resid**2) / max(resid.size - p, 1))
 
 
 def _long_run(g: np.ndarray, bandwidth: float) -> np.ndarray:
@@ -170,7 +175,7 @@ def _undetermined(free: np.ndarray, resid: np.ndarray, p: int) -> np.ndarray:
     inverse ``free`` (as the Jacobian covariance gives them). A sandwich's or a bootstrap's
     own variance there is near zero, since J's column vanishes with its scores: it would
     read an undetermined parameter as exactly known."""
-    return float(np.sum(resid**2) / max(resid.size - p, 1)) * free
+    return _residual_variance(resid, p) * free
 
 
 def andrews_bandwidth(jac, resid, segments=None) -> float:

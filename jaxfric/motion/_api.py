@@ -318,7 +318,7 @@ class MotionFit(Fit):
         ``noise=True`` for one whose cost was not the free-run position (velocity, k-step)."""
         check_level(level)
         u = self._need_uncertainty()
-        if noise and u.residual != "position [m]":
+        if noise and (self.mechanics.error not in (None, "position") or self.mechanics.horizon is not None):
             raise ValueError(f"this fit's residuals are {u.residual}, not free-run positions, so their variance "
                              "is not a position's: pass noise=False for the parameters' band alone")
         data, n = self._checked_record(data, init_window)
