@@ -5,29 +5,20 @@ instead is compile its *own* jitted calls ([`jaxfric.minimise`][jaxfric.optim.mi
 [`jaxfric.minimise_many`][jaxfric.optim.minimise_many], [`jaxfric.identify`][jaxfric.identification.identify]'s stages, the models' eager
 ``simulate_batch``) with ``jax.jit(..., compiler_options=...)``: options that hold
 for that one executable and nothing else. On CPU three options are used, chosen by
-measurement on the development machine (2-core AMD EPYC with AVX-512; the
-measurements are summarised in docs/solvers.md):
+measurement on the development machine (docs/solvers.md, "What measurements decided"):
 
 ``xla_cpu_prefer_vector_width = 512``
-    XLA's CPU default is 256-bit vectors. On a CPU with AVX-512 the batched Elman
-    rollout (64 candidates × 30 neurons × 1600 samples) ran 1.2–1.5× faster in
-    float32 and float64 with outputs bit-identical; where the CPU has no 512-bit
-    registers LLVM uses the widest it has, so the option is harmless there.
+    XLA's CPU default is 256-bit vectors. On a CPU with AVX-512 the batched rollouts ran
+    faster, with outputs bit-identical; where the CPU has no 512-bit registers LLVM uses
+    the widest it has, so the option is harmless there.
 ``xla_cpu_use_fusion_emitters = False``  (optimiser runs only)
-    XLA's newer fusion code generator emits slower code for the many tiny
-    fusions of MAPSO's 3×3 self-learning loop: MAPSO on 30-D Rosenbrock and
-    Ackley ran 1.4–1.8× faster with the older one and compiled faster; PSO and
-    Nelder–Mead were unchanged, and Table 1's 450 runs gave identical values. It
-    made the rollout alone 20–30 % slower, so the models' eager rollouts keep the
-    default.
+    XLA's newer fusion code generator emits slower code for the many tiny fusions of
+    MAPSO's 3×3 self-learning loop; turning it off made the rollouts slower, so the
+    models' eager rollouts keep the default.
 ``xla_cpu_parallel_codegen_split_count = 1``  (optimiser runs only)
-    XLA:CPU splits a program's machine code into several LLVM modules to compile
-    them on parallel threads. An optimiser's program is many small loops, and one
-    module compiled with 10–25 % less CPU time and less wall time on the 2-core
-    machine: a PSO→NM run's program on 5-D test functions 1.03–1.13 s → 0.82–0.88 s of
-    CPU (1.6–1.8 s wall instead of 2.1–2.2 s at a load of 8), MAPSO–NMDS 1.92 → 1.72 s
-    at 5-D and 2.16 → 1.93 s at 30-D (medians of three new objectives). Run times
-    did not change, and every run gave the same values to the bit.
+    XLA:CPU splits a program's machine code into several LLVM modules to compile them on
+    parallel threads; an optimiser's program (many small loops) compiles faster as one,
+    runs as fast and gives the same values to the bit.
 
 On other platforms (GPU, TPU) nothing is passed. Every entry point takes
 ``compiler_options=``: ``"auto"`` (the default, the above and the rule below),
@@ -45,18 +36,10 @@ a ``while_loop``, whose trips are unknown, makes the work unknown). A run whose 
 under `CHEAP_WORK` (2·10⁶) compiles at level 0, any other at full optimisation; off
 the CPU, and on a process with several local CPU devices (where level 0 would round a run laid out
 over them apart from the same run on one, which full optimisation does not), nothing
-changes. The line lies between a new objective's 2-D to 10-D runs in
-benchmarks/compile_time.py (200-generation PSO→NM or 100-generation MAPSO–NMDS: at most
-1.7·10⁶), whose first call is mostly compilation, and the 30-D Rosenbrock runs of the
-speed tables (benchmarks/speed_optim.py, 100 agents: PSO over 100 and 300 generations
-3.2·10⁶ and 9.7·10⁶, MAPSO over 100 4.0·10⁶, the 500-generation runs 1.6·10⁷ and more),
-a program compiled once and called many times, which stays at full optimisation; models'
-rollouts (``identify``) are long scans, far over it. Below the line level 0 costs at most
-about 0.1 s of run time per call (30-D Rosenbrock: 0.07–0.45 s at 3·10⁶–10⁷) for about
-0.7 s of compilation saved; a single first call would gain up to about 10⁷, but the
-repeated calls of the short-runs table would lose (the 300-generation PSO runs about 7×
-slower at level 0), so the line is drawn for both. ``"fast-compile"`` takes level 0 and
-``"full"`` full optimisation whatever the run. Level 0
+changes. The line keeps a new objective's short runs, whose first call is mostly
+compilation, at level 0, and programs compiled once and called many times (the speed
+tables' 30-D runs, models' rollouts) at full optimisation (where the line was drawn and
+why: docs/solvers.md, "A cheap run compiles at level 0 by default"). Level 0
 rounds differently from full optimisation (fewer fused multiply-adds), so a cheap run's
 result agrees with ``"full"``'s to rounding, not to the bit; ask/tell compiles with the
 same rule (its program has no objective), so it visits the points ``minimise`` visits
@@ -106,9 +89,7 @@ def compiler_options(kind: str = "solver", platform: str | None = None) -> dict[
 
 
 #: ``"auto"`` compiles a solver's run with LLVM at level 0 on CPU where its estimated work
-#: (`auto_level`) is below this: the 2-D to 10-D runs of benchmarks/compile_time.py (at most
-#: 1.7·10⁶) are under it, the speed tables' 30-D, 100-agent runs (benchmarks/speed_optim.py,
-#: 3.2·10⁶ and more) over it
+#: (`auto_level`) is below this (see the module docstring)
 CHEAP_WORK = 2e6
 
 
