@@ -1,9 +1,8 @@
 """A solver's program traced once per solver and problem shape, the objective filled in
 for each new objective (issue 47).
 
-Tracing ``_chunk`` (the solver's loop, start and report) took about a sixth of a new
-objective's first ``minimise`` of a 2-D to 10-D MAPSO–NMDS run, and all of it but the
-objective's own operations is the same for every objective of the same shapes. So the
+Tracing ``_chunk`` (the solver's loop, start and report) is the same for every objective of
+the same solver, shapes and dtypes but for the objective's own operations. So the
 driver traces it once per solver, shapes and dtypes with a stand-in objective, a
 primitive (``jaxfric_objective``) that only knows the output type, and keeps that jaxpr
 (the *template*). For a new objective it traces the objective alone, vmapped as each
@@ -12,15 +11,15 @@ the result: the same program as tracing ``_chunk`` with the objective (the objec
 operations are those of the ``vmap`` the solver applies; XLA inlines the call), without
 tracing the solver again.
 
-Lowering the filled program to StableHLO cost about as much again (0.2–0.26 s of a
-5-D MAPSO–NMDS run's 1.05 s). So the template is also lowered once, with a stand-in
-objective that reads every operand, and kept as text; for a new objective only the
-objective is lowered (one small module, a function per stand-in batch shape) and its
-functions take the stand-ins' place in that text (`_Lowering`). The program is the same text JAX would
-lower from the filled jaxpr but for function names, and compiles to the same
-executable: the tests check the results to the bit. Whatever the splice cannot serve
-(JAX's internals not as expected, an objective whose lowering adds operands, a
-sharding) falls back to lowering the filled program.
+The template is also lowered once, with a stand-in objective that reads every operand,
+and kept as text; for a new objective only the objective is lowered (one small module, a
+function per stand-in batch shape) and its functions take the stand-ins' place in that
+text (`_Lowering`). The program is the same text JAX would lower from the filled jaxpr
+but for function names, and compiles to the same executable: the tests check the results
+to the bit. Whatever the splice cannot serve (JAX's internals not as expected, an
+objective whose lowering adds operands, a sharding) falls back to lowering the filled
+program. What each saves: docs/solvers.md, "The solver traced once per shape" and "The
+lowered template".
 
 Only where nothing else depends on the objective: a jaxfric solver (an optimistix
 minimiser may call it in other ways), one run (`minimise`; ``minimise_many`` vmaps the
