@@ -60,8 +60,8 @@ population). A generation is stagnant, by pycma's default termination criteria, 
 * or the strategy's state turned non-finite.
 
 pycma's ``tolstagnation``, ``tolxstagnation``, ``tolupsigma`` and per-run ``maxiter`` are
-not checked (pycma's runs on Griewank and Schwefel 2.26 in benchmarks/cmaes_restarts.py
-ended by ``tolfun``, ``tolfunhist``, ``tolflatfitness`` or the budget only). After
+not checked (pycma's runs on Griewank and Schwefel 2.26 in benchmarks/cmaes_restarts.py never
+ended by them). After
 each generation the CMA-ES state is rescaled, the same distribution ``N(m, σ²·C)`` with
 ``C``'s largest variance 1 (``_rescaled``): evosax adds ``1e-8·I`` to ``C`` at every ask,
 which otherwise stalls the shrinking of ``C`` with large populations (docs/benchmarks.md).
@@ -272,10 +272,9 @@ def _rescaled(inner):
     and root eigenvalues ``D`` divided by ``√c`` (``p_σ`` is whitened, unchanged). CMA-ES's
     update is equivariant under this rescaling, but evosax adds ``1e-8·I`` to ``C`` at
     every ask and floors ``D`` at ``1e-4``: with a large population ``C`` shrinks to that
-    floor within a few generations and from then on only ``σ`` can shrink (on a 2-D
-    sphere with λ = 96 evosax took 95–101 generations to its values' 1e-11 spread,
-    pycma 28–32; rescaled, evosax took 28–30). A state without ``std`` and ``C`` is
-    returned as it is."""
+    floor within a few generations and from then on only ``σ`` can shrink (measured:
+    docs/benchmarks.md, "CMA-ES restarts against pycma"). A state without ``std`` and
+    ``C`` is returned as it is."""
     C, std = getattr(inner, "C", None), getattr(inner, "std", None)
     if C is None or std is None:
         return inner
@@ -399,10 +398,8 @@ class Evosax(AbstractGenerational):
             (restarted only when its state breaks down). Distribution-based strategies
             whose state does not depend on the population size only (CMA-ES,
             Sep-CMA-ES, SNES, …). Default (``None``): ``RESTARTS`` (9) for CMA-ES and
-            Sep-CMA-ES (on 14 test functions at 2–10 parameters CMA-ES then solved
-            91 % of 126 runs instead of 73 %, pycma's IPOP 90 %,
-            benchmarks/results/cmaes_restarts.md), 0 for
-            the others. Memory: a buffer of ``P·2^R`` points.
+            Sep-CMA-ES (benchmarks/results/cmaes_restarts.md), 0 for the others.
+            Memory: a buffer of ``P·2^R`` points.
         restart_tolfun: the stagnation tolerance on values (pycma's ``tolfun``).
         restart_tolx: the stagnation tolerance on the spread, in box widths (pycma's
             ``tolx``).
