@@ -61,10 +61,9 @@ population). A generation is stagnant, by pycma's default termination criteria, 
 
 pycma's ``tolstagnation``, ``tolxstagnation``, ``tolupsigma`` and per-run ``maxiter`` are
 not checked (pycma's runs on Griewank and Schwefel 2.26 in benchmarks/cmaes_restarts.py never
-ended by them). After
-each generation the CMA-ES state is rescaled, the same distribution ``N(m, σ²·C)`` with
-``C``'s largest variance 1 (``_rescaled``): evosax adds ``1e-8·I`` to ``C`` at every ask,
-which otherwise stalls the shrinking of ``C`` with large populations (docs/benchmarks.md).
+ended by them). After each generation the CMA-ES state is rescaled, the same distribution
+``N(m, σ²·C)`` with ``C``'s largest variance 1 (``_rescaled``): evosax adds ``1e-8·I`` to
+``C`` at every ask, which otherwise stalls the shrinking of ``C`` with large populations (docs/benchmarks.md).
 
 Everything stays inside the compiled run, with fixed shapes: each step evaluates one
 batch of ``P`` points, so a generation of population ``λ = P·2^j`` takes ``2^j`` steps
