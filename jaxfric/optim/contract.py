@@ -20,7 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ._base import History, Solution, result_from_f
+from ._base import RESULTS, History, Solution, result_from_f
 from .rounds import Rounds
 
 
@@ -265,3 +265,12 @@ def continued(solver: AbstractSolver, state):
     if isinstance(solver, (AbstractGenerational, AbstractStaged)):
         return solver.continued(state)
     return state
+
+
+def optx_finished(done, result, capped):
+    """optimistix's stopping rule for ``finished``: ``(stop, result)`` after a step whose
+    ``terminate`` gave ``(done, result)``, the step cap reached where ``capped``
+    (``nonlinear_max_steps_reached`` if the run stops there unconverged)."""
+    stop = done | (result != RESULTS.successful) | capped
+    return stop, RESULTS.where((result == RESULTS.successful) & ~done,
+                               RESULTS.nonlinear_max_steps_reached, result)

@@ -54,10 +54,12 @@ from ._base import (
     uniform_flat,
     uniform_in_box,
 )
-from .contract import AbstractLocal, AbstractStartDraws, Capabilities
+from .contract import AbstractLocal, AbstractStartDraws, Capabilities, optx_finished
 from .rounds import Batch, drive, relay, skipped
 
 _ZERO_STEP = 0.00025  # fminsearch's step for a coordinate that is exactly zero
+#: The move counters of a ``NelderMeadState``, reported in ``stats``.
+_MOVES = ("num_reflections", "num_expansions", "num_contractions", "num_shrinks", "num_restarts")
 
 
 class NelderMeadState(eqx.Module):
@@ -273,9 +275,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
             restarts_left=jnp.array(self.restarts, jnp.int32),
             f_start=jnp.asarray(jnp.inf, f.dtype),
             num_evals=num_evals,
-            **dict.fromkeys(("num_reflections", "num_expansions", "num_contractions",
-                             "num_shrinks", "num_restarts", "num_steps"),
-                          jnp.array(0, jnp.int32)),
+            **dict.fromkeys((*_MOVES, "num_steps"), jnp.array(0, jnp.int32)),
         )
 
     def step(self, fn, y, args, options, state, tags):
@@ -388,31 +388,16 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
     def terminate(self, fn, y, args, options, state, tags):
         converged = self._converged(state) & ~self._restart_due(state)
         nonfinite = ~jnp.isfinite(state.f_simplex[0])
-        over_budget = (
-            state.num_evals >= self.max_evals if self.max_evals is not None else False
-        )
+        over_budget = state.num_evals >= self.max_evals if self.max_evals is not None else False
         done = converged | nonfinite | over_budget
-        result = RESULTS.where(
-            nonfinite,
-            RESULTS.nonfinite,
-            RESULTS.where(
-                over_budget & ~converged,
-                RESULTS.nonlinear_max_steps_reached,
-                RESULTS.successful,
-            ),
-        )
+        result = RESULTS.where(nonfinite, RESULTS.nonfinite,
+                               RESULTS.where(over_budget & ~converged,
+                                             RESULTS.nonlinear_max_steps_reached, RESULTS.successful))
         return done, result
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         _, unravel = ravel_pytree(y)
-        stats = {
-            "num_evals": state.num_evals,
-            "num_reflections": state.num_reflections,
-            "num_expansions": state.num_expansions,
-            "num_contractions": state.num_contractions,
-            "num_shrinks": state.num_shrinks,
-            "num_restarts": state.num_restarts,
-        }
+        stats = {name: getattr(state, name) for name in ("num_evals", *_MOVES)}
         # The best vertex and its aux (``aux`` from the loop is the same unless the
         # loop never stepped, when it is optimistix's zeros).
         return unravel(state.simplex[0]), state.aux, stats
@@ -445,11 +430,7 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         """optimistix's rule: [`terminate`][jaxfric.optim.NelderMead.terminate]'s test, or the step cap reached
         (``nonlinear_max_steps_reached``)."""
         done, result = self.terminate(None, None, None, None, state, None)
-        capped = state.num_steps >= self._step_cap(state.simplex.shape[-1])
-        stop = done | (result != RESULTS.successful) | capped
-        result = RESULTS.where((result == RESULTS.successful) & ~done,
-                               RESULTS.nonlinear_max_steps_reached, result)
-        return stop, result
+        return optx_finished(done, result, state.num_steps >= self._step_cap(state.simplex.shape[-1]))
 
     def best(self, state):
         return state.simplex[0], state.f_simplex[0]
@@ -458,15 +439,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         return state.num_evals.astype(count_dtype())
 
     def solution(self, fn, lower, upper, args, state, result) -> Solution:
-        stats = {
-            "num_evals": self.num_evals(state),
-            "num_reflections": state.num_reflections,
-            "num_expansions": state.num_expansions,
-            "num_contractions": state.num_contractions,
-            "num_shrinks": state.num_shrinks,
-            "num_restarts": state.num_restarts,
-            "num_steps": state.num_steps,
-        }
+        stats = {"num_evals": self.num_evals(state), **{name: getattr(state, name) for name in _MOVES},
+                 "num_steps": state.num_steps}
         x, f = self.best(state)
         return Solution(value=x, f=f, result=result, stats=stats,
                         history=History.empty(1, f.dtype), state=state)

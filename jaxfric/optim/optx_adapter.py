@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ._base import RESULTS, History, Solution, count_dtype, safe_value, uniform_in_box
-from .contract import AbstractLocal, AbstractSolver, Capabilities
+from .contract import AbstractLocal, AbstractSolver, Capabilities, optx_finished
 
 _TAGS = frozenset()
 
@@ -124,13 +124,7 @@ class OptxMinimiser(AbstractLocal):
         yield  # a generator with no batches: the minimiser evaluates by itself
 
     def finished(self, state):
-        capped = state.num_steps >= self._step_cap()
-        stop = state.done | (state.result != RESULTS.successful) | capped
-        result = RESULTS.where(
-            (state.result == RESULTS.successful) & ~state.done,
-            RESULTS.nonlinear_max_steps_reached, state.result,
-        )
-        return stop, result
+        return optx_finished(state.done, state.result, state.num_steps >= self._step_cap())
 
     def solution(self, fn, lower, upper, args, state, result) -> Solution:
         opts = self._options(lower, upper)
