@@ -180,11 +180,9 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         for x0 in starts:
             runs.append((yield from only_if(done, local.init_rounds(
                 lower, upper, state.local_key(), x0, objective, **extra))))
-        if len(runs) == 1:  # one start: its state itself, no batch of one to index
-            second, second_done = runs[0], local.finished(runs[0])[0]
-        else:
-            second = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
-            second_done = jax.vmap(lambda s: local.finished(s)[0])(second)
+        # one start: its state itself, no batch of one to index
+        second = runs[0] if len(runs) == 1 else jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
+        second_done = self._each(lambda s: local.finished(s)[0], second)
         if state.second is None:  # the placeholders' shapes (see init_rounds)
             return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
                               state.key_impl)
@@ -277,23 +275,24 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
     def finished(self, state):
         return self.done(state), self._result(state)
 
+    def _each(self, fn, second):
+        """``fn`` of each local run's state in ``second``: of that run itself for one
+        start, vmapped over the stacked runs otherwise."""
+        return fn(second) if self.num_starts == 1 else jax.vmap(fn)(second)
+
     def _local_best(self, state):
         """``(i, x, f)``: the best of the local runs (``i`` a static 0 for one start: that
         run itself, no argmin and gather in the program)."""
+        xs, fs = self._each(self._local.best, state.second)
         if self.num_starts == 1:
-            x, f = self._local.best(state.second)
-            return 0, x, f
-        xs, fs = jax.vmap(self._local.best)(state.second)
+            return 0, xs, fs
         i = jnp.argmin(fs)
         return i, xs[i], fs[i]
 
     def _result(self, state):
         i, _, _ = self._local_best(state)
-        if self.num_starts == 1:
-            local = self._local.finished(state.second)[1]
-        else:
-            _, results = jax.vmap(self._local.finished)(state.second)
-            local = _index(results, i)
+        _, results = self._each(self._local.finished, state.second)
+        local = results if self.num_starts == 1 else _index(results, i)
         _, gf = self._global.best(state.first)
         return RESULTS.where(state.stage == 1, local,
                              RESULTS.where(jnp.isfinite(gf), RESULTS.successful, RESULTS.nonfinite))
@@ -305,10 +304,9 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         return jnp.where(use_local, lx, gx), jnp.where(use_local, lf, gf)
 
     def num_evals(self, state):
-        if self.num_starts == 1:
-            local = self._local.num_evals(state.second)
-        else:
-            local = jnp.sum(jax.vmap(self._local.num_evals)(state.second))
+        local = self._each(self._local.num_evals, state.second)
+        if self.num_starts > 1:
+            local = jnp.sum(local)
         g = self._global.num_evals(state.first)
         return g + jnp.where(state.stage == 1, local, 0).astype(g.dtype)
 
