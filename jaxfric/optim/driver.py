@@ -71,14 +71,16 @@ def _options(compiler_options, proto, flat, lower, args, layout):
 
 # ---------------------------------------------------------------------- progress
 def _display(progress, proto, n: int):
-    """The host display for ``progress=`` (``None``: no display) of a run on ``n`` parameters."""
+    """``(sink, display)`` for ``progress=`` of a run on ``n`` parameters: the host display
+    (``None``: no display) and `_chunked`'s ``display`` (``(sink, Chunks)``, or ``None``)."""
     if progress is None or progress is False:
-        return None
+        return None, None
     total, local_total = capabilities_of(proto, n).progress_totals
     if progress is True:
-        return TqdmProgress(total, local_total)
+        sink = TqdmProgress(total, local_total)
+        return sink, (sink, Chunks(total))
     if callable(progress):
-        return progress
+        return progress, (progress, Chunks(total))
     raise ValueError(
         "progress must be None, True (a tqdm bar) or a callable "
         f"sink(phase, step, evals, f_best), got {type(progress).__name__}"
@@ -478,10 +480,9 @@ def minimise(
     warm = None
     if warm_start is not None:
         warm = _warm_state(warm_start, proto, flat, lower, upper, args, key, x0)
-    if checkpoint is not None:
-        check_positive_int("checkpoint_every", checkpoint_every)
     resume = None
     if checkpoint is not None:
+        check_positive_int("checkpoint_every", checkpoint_every)
         resume = _resume(proto, flat, lower, upper, args, key, x0, warm, Path(checkpoint),
                          checkpoint_every)
     program = _xla.filter_jit(_chunk, options)
@@ -493,10 +494,8 @@ def minimise(
     def call(carry, fresh, stop_at):
         return chunk(proto, flat, lower, upper, args, drawn, x0, warm, carry, fresh, stop_at)
 
-    sink = _display(progress, proto, lower.shape[0])
+    sink, display = _display(progress, proto, lower.shape[0])
     with _closing(sink):
-        display = None if sink is None else (sink, Chunks(
-            capabilities_of(proto, lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, key, x0, warm)
         finish = _finisher(proto, flat, lower, upper, args, options, batched=False)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display, resume))
@@ -552,10 +551,8 @@ def minimise_many(
     def call(carries, fresh, stop_at):
         return program(proto, flat, lower, upper, args, drawn, x0, carries, fresh, stop_at, mode)
 
-    sink = _display(progress, proto, lower.shape[0])
+    sink, display = _display(progress, proto, lower.shape[0])
     with _closing(sink):
-        display = None if sink is None else (sink, Chunks(
-            capabilities_of(proto, lower.shape[0]).progress_totals[0]))
         blank = _blank(proto, flat, lower, upper, args, keys[0], x0, None, keys.shape[0])
         finish = _finisher(proto, flat, lower, upper, args, options, batched=True)
         sol = jax.block_until_ready(_chunked(call, finish, blank, display))
