@@ -14,14 +14,9 @@ arrive as one flat set of keywords (the CLI, ``identify``'s budgets), as
 [`MAPSONMDS`][jaxfric.optim.MAPSONMDS], never another type, so neither is deprecated.
 
 Like every chain it can be driven from Python by ask/tell (an objective outside JAX,
-see [`jaxfric.optim.asktell`][jaxfric.optim.asktell])::
-
-    solver = mapso_nmds(num_generations=100)
-    st = jf.ask_init(solver, lower, upper, jax.random.key(0))
-    while not jf.ask_done(st):
-        X, st = jf.ask(st)                # the lattice, self-learning, then simplex points
-        st = jf.tell(st, X, simulate_rows(X))
-    best = jf.ask_result(st)              # = minimise(...) for the same key
+[`jaxfric.optim.asktell`][jaxfric.optim.asktell]; the recipe in [`chain`][jaxfric.optim.chain]'s
+module): ``ask`` returns the lattice, self-learning's points, then simplex points, and
+``ask_result`` equals ``minimise(...)`` for the same key.
 """
 
 from __future__ import annotations
