@@ -535,9 +535,8 @@ def minimise_many(
     one device); ``"auto"`` (default) picks ``"map"`` for an optimistix minimiser
     ([`NelderMead`][jaxfric.optim.NelderMead]) on a single CPU device and ``"vmap"`` otherwise. Under
     ``vmap`` Nelder–Mead's conditionals become selects: ``stats["num_evals"]`` still
-    counts the evaluations the algorithm asked for, but XLA computes both branches,
-    which made 8 vmapped runs on 30-D Rosenbrock about 1.5× slower than the same runs
-    mapped (docs/solvers.md, "What measurements decided").
+    counts the evaluations the algorithm asked for, but XLA computes both branches
+    (slower than mapped: docs/solvers.md, "What measurements decided").
     """
     proto, flat, lower, upper, x0 = _prepare(fn, solver, bounds, args, y0, dtype)
     keys = check_key(keys, "keys", batch=True)

@@ -45,10 +45,8 @@ def lattice_neighbours(values, side: int):
 
 
 def best_neighbour(x, f, side: int):
-    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``).
-
-    (Gathering ``x`` through a constant neighbour-index table instead of rolling four
-    copies traced and compiled less but ran 30-D, 100-agent MAPSO 5–10 % slower.)"""
+    """Position and fitness of each agent's best von Neumann neighbour (``M_ij``), from
+    four rolled copies (a gather through an index table ran slower: docs/solvers.md)."""
     nx = lattice_neighbours(x, side)  # (4, P, D)
     nf = lattice_neighbours(f, side)  # (4, P)
     j = jnp.argmin(nf, axis=0)

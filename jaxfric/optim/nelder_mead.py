@@ -130,9 +130,8 @@ class NelderMead(optx.AbstractMinimiser, AbstractLocal, AbstractStartDraws):
         norm: kept for optimistix compatibility (the test above is per coordinate).
         adaptive: Gao–Han coefficients (True), the standard ones (False, fminsearch's),
             or ``None`` (default): Gao–Han from n = 2 (at n = 2 both sets are equal; at
-            n = 1 Gao–Han's σ = 0). Measured on 30 random starts of shifted Rosenbrock
-            (``benchmarks/results/nm_vs_scipy.md``): Gao–Han solves 25/30 at n = 4 and 19/30
-            at n = 8 against 21/30 and 16/30 for the standard set; at n = 10, 9/10 against 7/10.
+            n = 1 Gao–Han's σ = 0; measured: docs/algorithms.md §5,
+            ``benchmarks/results/nm_vs_scipy.md``).
         initial_simplex: ``"bounds"`` — vertex ``i`` steps ``initial_step·(upper_i −
             lower_i)`` along coordinate ``i`` (away from the nearer bound); or
             ``"fminsearch"`` — steps of ``initial_step·|x_i|`` (0.00025 where

@@ -28,9 +28,8 @@ def pso_move(r, x, v, pbest, social, w, c1, c2, vmax, lower, upper, zero_at_boun
 
     ``clip(x, lo, hi)`` bounds both; it gives the same numbers either way. [`PSO`][jaxfric.optim.PSO]
     keeps ``jnp.clip``; [`MAPSO`][jaxfric.optim.MAPSO] passes the select form
-    (`jaxfric.optim._base.clip`), with which its generation runs 1.2-2.2x faster,
-    while the select form made PSO's vmapped Ackley runs 1.5x slower (docs/solvers.md,
-    "What measurements decided").
+    (`jaxfric.optim._base.clip`), faster for MAPSO and slower for PSO (measured:
+    docs/solvers.md, "What measurements decided").
     """
     v = w * v + c1 * r[0] * (pbest - x) + c2 * r[1] * (social - x)
     v = clip(v, -vmax, vmax)
