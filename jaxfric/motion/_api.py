@@ -937,10 +937,7 @@ def _motion_box(model, box, vt, ut, data_bounds: bool) -> SearchBox:
     """``model.search_box`` of the training data (``data_bounds``), with the attraction rate
     ``C`` (GMS) bounded below by ``F / ATTRACTION_TIME_S`` unless the caller's ``box`` gives
     ``C``. In a free run an attraction of seconds is a slow memory that follows one record's
-    drift: on the judge proxies GMS then predicted excitation it never saw worse (rig 7.22 ->
-    6.97 mm, EMPS blocks 4.58 -> 3.86 mm mean over keys 0-4 with this floor), and on the whole
-    EMPS file its training free run varied 37 % over keys 0-4 without it, 2.5 % with it
-    (docs/motion.md, "Deeper on training, worse on new motion")."""
+    drift (measured: docs/motion.md, "Deeper on training, worse on new motion")."""
     full = model.search_box(box, *((vt, ut) if data_bounds else ()))
     if not data_bounds or not isinstance(full, SearchBox) or "C" not in full or (box is not None and "C" in box):
         return full  # a network has no box (None); no attraction rate; or the caller's C

@@ -11,15 +11,11 @@ from its own first 20 samples (`short_runs_score`), for the models whose blocked
 cross-validation of the training part beats the least-squares baseline's (`gated_scores`);
 the others are not chosen over the baseline. The gate alone decides between the models and
 the baseline (both sides of it are out of sample); the short runs rank the models that pass.
-On the three proxies of
-``benchmarks/motion_judge.py`` (the simulated rig trained on one excitation family and scored
-on the three others, the EMPS estimation file in blocks, the pneumatic seals at a held-out
-pressure) its choice was within 10 % of the best on the unseen excitation more often than
-every other criterion's, 57 of 90 keys against the short runs' 45, though not in every group of
-keys (docs/motion.md; ``benchmarks/results/motion_judge*.md``, ``judge_emps*.md``,
-``judge_pneumatic.md``): the tail of one record shares its excitation, one long free run
-measures drift more than dynamics, and short windows alone do not see where least squares
-predicts new motion best.
+On the proxies of ``benchmarks/motion_judge.py`` its choice was within 10 % of the best on the
+unseen excitation more often than every other criterion's (measured: docs/motion.md,
+"Choosing a model"; ``benchmarks/results/motion_judge*.md``): the tail of one record shares
+its excitation, one long free run measures drift more than dynamics, and short windows alone
+do not see where least squares predicts new motion best.
 """
 
 from __future__ import annotations
@@ -50,11 +46,9 @@ class OverfitWarning(UserWarning):
 
 #: Under the gated judge a chosen model whose blocked cross-validation beats least squares'
 #: by less than this share (1 − blocked / least squares' blocked) passes *narrowly*, and
-#: ``choice`` says so (`NarrowGateWarning`). Set on the committed rows of the judge's first
-#: 70 proxy keys, then measured on 20 more; counted on all 90 (tests/test_motion_judge.py
-#: recounts them): the gate passed a model in 78; of the 16 picks that passed by less than
-#: 5 %, 7 predicted the unseen excitation worse than least squares (6 trained on EMPS block
-#: 2, margins 0.3–3.4 %, and a rig key trained on the slow reversals), of the 62 others 8.
+#: ``choice`` says so (`NarrowGateWarning`). ``NARROW_COUNTS``: the judge's proxy picks that
+#: passed narrowly / widely, and how many of them predicted the unseen excitation worse than
+#: least squares (the warning quotes them; measured: docs/motion.md, "A narrow pass is said").
 NARROW_GATE = 0.05
 NARROW_COUNTS = {"narrow": (16, 7), "wide": (62, 8)}  # (picks, worse than least squares)
 
@@ -256,10 +250,8 @@ def rank_fits(fits: dict, *, stacklevel: int = 2, scores: dict | None = None, ju
 
 
 JUDGES = ("tail", "blocked", "short", "gated")
-#: Seconds per window of the ``"short"`` judge (`short_runs_score`): measured as 256 samples
-#: at the rig proxy's 128 Hz (benchmarks/results/motion_judge.md); on the EMPS estimation
-#: file (1 kHz) 256-sample windows ranked the least-squares baseline first and 2 s windows
-#: ranked LuGre, GMS, Coulomb, then the baseline (docs/motion.md).
+#: Seconds per window of the ``"short"`` judge (`short_runs_score`): 256 samples at the rig
+#: proxy's 128 Hz (benchmarks/results/motion_judge.md; on EMPS: docs/motion.md).
 SHORT_WINDOW_S = 2.0
 
 
@@ -448,8 +440,9 @@ def compare_motion(models, data=None, *, key, mass, judge: str = "gated", folds:
     stay one fit each, as measured (docs/motion.md, "Ensembles in the comparison").
 
     ``window``: samples per window of the short judge (default ``None``: `SHORT_WINDOW_S`
-    = 2 s of samples, 256 at 128 Hz, 2 000 at 1 kHz); a shorter rest at the end of a record is not scored. The table shows the judge's score beside the validation RMSE, and the baseline's under
-    the same judge. benchmarks/results/motion_judge.md measures how often each judge's
+    = 2 s of samples, 256 at 128 Hz, 2 000 at 1 kHz); a shorter rest at the end of a record is
+    not scored. The table shows the judge's score beside the validation RMSE, and the
+    baseline's under the same judge. benchmarks/results/motion_judge.md measures how often each judge's
     choice predicts new excitation.
     """
     if judge not in JUDGES:

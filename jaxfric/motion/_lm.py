@@ -3,9 +3,8 @@
 The residuals of a motion fit are the ``T`` weighted position errors of one
 ``lax.scan`` (`jaxfric.motion._shooting.shoot`); its Jacobian with respect to the
 ``n`` search parameters costs about ``n`` forward passes by forward mode (``jax.jacfwd``)
-and, unlike reverse mode through a 20 000-step scan, stores no tape: on the EMPS
-estimation record one LuGre Jacobian took 0.09 s against 0.42 s for one reverse-mode
-gradient. ``n`` is small for the physical models (a dozen), so each step solves the
+and, unlike reverse mode through a 20 000-step scan, stores no tape (timings:
+docs/motion.md). ``n`` is small for the physical models (a dozen), so each step solves the
 damped normal equations ``(JᵀJ + μ D) δ = −Jᵀr`` (Marquardt's scaling, ``D = diag JᵀJ``)
 in NumPy and adapts μ by Nielsen's rule (gain ratio ρ: accept if ρ > 0, then
 ``μ ← μ·max(1/3, 1 − (2ρ − 1)³)``; else ``μ ← μ·ν``, ``ν ← 2ν``).

@@ -111,13 +111,10 @@ class MotionSearch(eqx.Module):
             the least-squares start with soft elements and a slow attraction
             (`._baseline.slow_attraction_grid`), distinct from each other; each runs only the
             free-run stages of ``horizons`` (the shooting segments pull a point out of that
-            basin; docs/motion.md). 0 (the default, also `default_search`'s): none. With 3,
-            GMS's training free run on the EMPS file fell (mean over keys 0-4 2.07 -> 1.79 mm)
-            and its error on excitation it never saw rose (keys 0-4, mean: rig proxy 7.22 ->
-            9.46 mm, EMPS blocks 4.58 -> 5.97 mm; no key lower on EMPS, one on the rig;
-            docs/motion.md, "Deeper on training, worse on new motion"): a slow attraction
-            fits the training record's drift. The grid is empty
-            for a model without an attraction rate.
+            basin). 0 (the default, also `default_search`'s): none; they lower GMS's training
+            free run and raise its error on excitation it never saw (measured: docs/motion.md,
+            "Deeper on training, worse on new motion"). The grid is empty for a model without
+            an attraction rate.
     """
 
     particles: int = eqx.field(default=25, static=True)
@@ -140,40 +137,38 @@ class MotionSearch(eqx.Module):
 
     def check(self) -> None:
         for name, least in (("particles", 2), ("generations", 1), ("global_window", 2), ("starts", 1)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise ValueError(f"MotionSearch.{name} must be an integer >= {least}, got {value!r}")
-        if isinstance(self.lead, bool) or not isinstance(self.lead, int) or self.lead < 0:
+            if not _is_count(getattr(self, name), least):
+                raise ValueError(f"MotionSearch.{name} must be an integer >= {least}, got {getattr(self, name)!r}")
+        if not _is_count(self.lead, 0):
             raise ValueError(f"MotionSearch.lead must be a non-negative integer, got {self.lead!r}")
         if not isinstance(self.horizons, tuple) or not isinstance(self.steps, tuple) \
                 or len(self.horizons) != len(self.steps):
             raise ValueError(f"MotionSearch.horizons and .steps must be tuples of one length, got "
                              f"{self.horizons!r} and {self.steps!r}")
         for h in self.horizons:
-            if h is not None and (isinstance(h, bool) or not isinstance(h, int) or h < 2):
+            if h is not None and not _is_count(h, 2):
                 raise ValueError(f"MotionSearch.horizons entries must be None or integers >= 2, got {h!r}")
         for name, least in (("screen_size", 2), ("screen_steps", 1)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise ValueError(f"MotionSearch.{name} must be an integer >= {least}, got {value!r}")
+            if not _is_count(getattr(self, name), least):
+                raise ValueError(f"MotionSearch.{name} must be an integer >= {least}, got {getattr(self, name)!r}")
         if not (isinstance(self.screen_spread, (int, float)) and not isinstance(self.screen_spread, bool)
                 and math.isfinite(self.screen_spread) and self.screen_spread > 0):
             raise ValueError(f"MotionSearch.screen_spread must be a positive number, got {self.screen_spread!r}")
         for k in (*self.steps, self.polish, self.screen):
-            if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+            if not _is_count(k, 0):
                 raise ValueError(f"MotionSearch.steps, .polish and .screen must be non-negative integers, got {k!r}")
         if not (isinstance(self.rtol, (int, float)) and self.rtol >= 0):
             raise ValueError(f"MotionSearch.rtol must be >= 0, got {self.rtol!r}")
-        if isinstance(self.free_run_starts, bool) or not isinstance(self.free_run_starts, int) \
-                or self.free_run_starts < 0:
-            raise ValueError(f"MotionSearch.free_run_starts must be a non-negative integer, got "
-                             f"{self.free_run_starts!r}")
-        if isinstance(self.screen_cycle, bool) or not isinstance(self.screen_cycle, int) or self.screen_cycle < 0:
-            raise ValueError(f"MotionSearch.screen_cycle must be a non-negative integer, got {self.screen_cycle!r}")
-        if isinstance(self.slow_starts, bool) or not isinstance(self.slow_starts, int) or self.slow_starts < 0:
-            raise ValueError(f"MotionSearch.slow_starts must be a non-negative integer, got {self.slow_starts!r}")
+        for name in ("free_run_starts", "screen_cycle", "slow_starts"):
+            if not _is_count(getattr(self, name), 0):
+                raise ValueError(f"MotionSearch.{name} must be a non-negative integer, got {getattr(self, name)!r}")
         if self.starts > self.particles:
             raise ValueError(f"MotionSearch.starts ({self.starts}) cannot exceed particles ({self.particles})")
+
+
+def _is_count(value, least: int) -> bool:
+    """Whether ``value`` is an ``int`` (not a ``bool``) of at least ``least``."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= least
 
 
 #: Above this many search parameters (the networks) `default_search` grows the
@@ -188,14 +183,13 @@ def default_search(model) -> MotionSearch:
     segments (at most 60 steps), then on the free run of each whole training record (at
     most 100 steps), from 3 of the swarm's personal bests, 2 more of its points ranked by
     their whole free-run cost (`free_run_ranked`) and the least-squares start (no
-    slow-attraction starts: `MotionSearch.slow_starts`); the lowest
-    training free-run cost wins, up to 200 more free-run steps polish it, and 16 rounds of
-    screening (`screen_free_run`, its spread back to the first after 4 fruitless widenings) follow (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
+    slow-attraction starts: `MotionSearch.slow_starts`); the lowest training free-run cost
+    wins, up to 200 more free-run steps polish it, and 16 rounds of screening
+    (`screen_free_run`, its spread back to the first after 4 fruitless widenings) follow
+    (``benchmarks/results/motion_keys.md``). Networks (more than `NETWORK_PARAMS`
     parameters, e.g. ``Elman(neurons=10)``, 60): the swarm cannot place 60 weights, so the
     gradient stages do the work, coarse to fine: 60 steps on 1 000-sample segments, then 150
-    on 5 000. On the EMPS estimation split this took the Elman(10) network's held-back error
-    from 15.3 mm (the physical models' schedule, converged at a poor point) to 3.1 mm
-    (``benchmarks/results/motion.md``). A [`jaxfric.models.GreyBox`][jaxfric.models.GreyBox] is
+    on 5 000 (measured: docs/motion.md). A [`jaxfric.models.GreyBox`][jaxfric.models.GreyBox] is
     not searched from a swarm: [`jaxfric.identify_motion`][jaxfric.motion.identify_motion] fits its
     physical model first and starts from that fit with the correction off; then 60 steps on
     5 000-sample segments, 100 on the free run and a 100-step polish.
@@ -247,18 +241,20 @@ class _Clock:
         return self.deadline is not None and time.perf_counter() >= self.deadline
 
 
-def distinct_starts(points, values, count: int, lower, upper, *, tol: float = 1e-3) -> list:
+def distinct_starts(points, values, count: int, lower, upper, *, tol: float = 1e-3, taken=()) -> list:
     """Up to ``count`` rows of ``points`` in order of ``values`` (lowest first, non-finite
-    values never), each farther than ``tol`` of the box width (max-norm) from those kept."""
+    values never), each farther than ``tol`` of the box width (max-norm) from those kept
+    and from the points ``taken``."""
     points = np.asarray(points, np.float64)
     values = np.asarray(values, np.float64)
     width = np.maximum(np.asarray(upper, np.float64) - np.asarray(lower, np.float64), 1e-300)
-    kept = []
+    kept, seen = [], [np.asarray(y, np.float64) for y in taken]
     for i in np.argsort(np.where(np.isfinite(values), values, np.inf), kind="stable"):
         if len(kept) == count or not np.isfinite(values[i]):
             break
-        if all(np.max(np.abs(points[i] - k) / width) > tol for k in kept):
+        if all(np.max(np.abs(points[i] - k) / width) > tol for k in seen):
             kept.append(points[i])
+            seen.append(points[i])
     return kept
 
 
@@ -272,6 +268,17 @@ def _jacobian(residuals, y, data):
 
 _sumsq_batch_jit = eqx.filter_jit(_sumsq_batch)
 _jacobian_jit = eqx.filter_jit(_jacobian)
+
+
+def _lm_stage(label, residuals, y, lo, hi, data, steps, rtol, clock, left, progress):
+    """`levenberg_marquardt` from ``y`` for at most ``steps`` steps within the clock's
+    deadline and ``left`` evaluations, with a progress bar ``label``."""
+    on_step, close = step_progress(progress, label, steps)
+    try:
+        return levenberg_marquardt(residuals, y, lo, hi, data, max_steps=steps, rtol=rtol,
+                                   deadline=clock.deadline, max_evals=left, on_step=on_step)
+    finally:
+        close()
 
 
 def screen_free_run(search: MotionSearch, clock, residuals, y, f, lower, upper, data, key, dtype, stages,
@@ -315,15 +322,9 @@ def screen_free_run(search: MotionSearch, clock, residuals, y, f, lower, upper, 
         i = int(np.argmin(J))
         out = None
         if np.isfinite(J[i]):
-            left = clock.left()
-            on_step, close = step_progress(progress, f"screen {rnd + 1}/{search.screen}, free run "
-                                           "(Levenberg-Marquardt)", search.screen_steps)
-            try:
-                out = levenberg_marquardt(residuals, jnp.asarray(Y[i], dtype), lo, hi, data,
-                                          max_steps=search.screen_steps, rtol=search.rtol,
-                                          deadline=clock.deadline, max_evals=left, on_step=on_step)
-            finally:
-                close()
+            out = _lm_stage(f"screen {rnd + 1}/{search.screen}, free run (Levenberg-Marquardt)", residuals,
+                            jnp.asarray(Y[i], dtype), lo, hi, data, search.screen_steps, search.rtol, clock,
+                            clock.left(), progress)
             clock.evals += out.evals
             evals += out.evals
         end = J[i] if out is None else out.f
@@ -358,14 +359,7 @@ def free_run_ranked(search: MotionSearch, clock, solver, sol, residuals, data, t
     J = np.asarray(_sumsq_batch_jit(residuals, jnp.asarray(pool, dtype), data), np.float64)
     clock.evals += pool.shape[0]
     J = np.where(np.isfinite(J), J, np.inf)
-    width = np.maximum(np.asarray(upper, np.float64) - np.asarray(lower, np.float64), 1e-300)
-    kept, seen = [], [np.asarray(y, np.float64) for y in taken]
-    for i in np.argsort(J, kind="stable"):
-        if len(kept) == search.free_run_starts or not np.isfinite(J[i]):
-            break
-        if all(np.max(np.abs(pool[i] - k) / width) > 1e-3 for k in seen):
-            kept.append(pool[i])
-            seen.append(pool[i])
+    kept = distinct_starts(pool, J, search.free_run_starts, lower, upper, taken=taken)
     stages.append({"stage": "rank", "start": None, "J": float(np.min(J)), "num_evals": pool.shape[0],
                    "num_steps": 0, "seconds": time.perf_counter() - t, "reason": "done"})
     return kept
@@ -447,6 +441,7 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
     if y0 is None and search.slow_starts and len(grid_starts) and not clock.out_of_time() \
             and (left is None or left >= len(grid_starts)):
         starts += grid_ranked(search, clock, residuals, stage_data(None), grid_starts, lower, upper, dtype, stages)
+    lo, hi = jnp.asarray(lower, dtype), jnp.asarray(upper, dtype)
     plan = [(("free_run" if h is None else f"shooting_{h}"), stage_data(h), k)
             for h, k in zip(search.horizons, search.steps) if k > 0]
     y_best, f_best = starts[0], np.inf
@@ -461,14 +456,9 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
                 clock.stopped = "max_evals"
                 break
             label = name if len(starts) == 1 else f"{name} (start {index + 1}/{len(starts)})"
-            on_step, close = step_progress(progress, f"{label} (Levenberg-Marquardt)", steps)
             t = time.perf_counter()
-            try:
-                out = levenberg_marquardt(residuals, jnp.asarray(y, dtype), jnp.asarray(lower, dtype),
-                                          jnp.asarray(upper, dtype), data, max_steps=steps, rtol=search.rtol,
-                                          deadline=clock.deadline, max_evals=left, on_step=on_step)
-            finally:
-                close()
+            out = _lm_stage(f"{label} (Levenberg-Marquardt)", residuals, jnp.asarray(y, dtype), lo, hi, data,
+                            steps, search.rtol, clock, left, progress)
             clock.evals += out.evals
             f_end = out.f
             if np.isfinite(out.f):
@@ -488,15 +478,9 @@ def run_search(search: MotionSearch, budget: MotionBudget, residuals, total_cost
     if search.polish and clock.stopped is None and not clock.out_of_time():
         left = clock.left()
         if left is None or left >= 2 + y_best.size:
-            on_step, close = step_progress(progress, "polish, free run (Levenberg-Marquardt)", search.polish)
             t = time.perf_counter()
-            try:
-                out = levenberg_marquardt(residuals, jnp.asarray(y_best, dtype), jnp.asarray(lower, dtype),
-                                          jnp.asarray(upper, dtype), stage_data(None), max_steps=search.polish,
-                                          rtol=search.rtol, deadline=clock.deadline, max_evals=left,
-                                          on_step=on_step)
-            finally:
-                close()
+            out = _lm_stage("polish, free run (Levenberg-Marquardt)", residuals, jnp.asarray(y_best, dtype), lo, hi,
+                            stage_data(None), search.polish, search.rtol, clock, left, progress)
             clock.evals += out.evals
             if np.isfinite(out.f) and out.f <= f_best:
                 y_best, f_best = out.theta, out.f
