@@ -291,9 +291,7 @@ def blocked_score(model, records, folds: int, *, key, mass, init_window=DEFAULT_
             warnings.simplefilter("ignore", ExtrapolationWarning)
             fit = identify_motion(model, train=train, valid=valid, key=key, mass=mass, init_window=init_window,
                                   **kwargs)
-        for i, m in enumerate(fit.metrics["records"]["valid"]):
-            n = valid[i].n_samples - init_window
-            model_m.append({**m, "n": n})
+        model_m += [{**m, "n": v.n_samples - init_window} for m, v in zip(fit.metrics["records"]["valid"], valid)]
         base_m.append({"rmse_mm": fit.metrics["baseline"]["valid"]["rmse_mm"],
                        "n": sum(v.n_samples - init_window for v in valid)})
     return _pooled_rmse(model_m), _pooled_rmse(base_m)

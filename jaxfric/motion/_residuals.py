@@ -75,8 +75,7 @@ def motion_coordinates(fit) -> SearchCoordinates:
     if extra:
         sb = mech.search_bounds
         if sb is not None:
-            lower = np.asarray(sb[0], np.float64)
-            upper = np.asarray(sb[1], np.float64)
+            lower, upper = (np.asarray(b, np.float64) for b in sb[:2])
         else:  # bounds of the mechanics were not recorded: treat them as unbounded
             lower = np.concatenate([lower, np.full(len(extra), -np.inf)])
             upper = np.concatenate([upper, np.full(len(extra), np.inf)])

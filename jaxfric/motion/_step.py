@@ -72,6 +72,16 @@ class StaticStep(FrictionStep):
         return self.model.simulate(theta, jnp.reshape(v, (1,)), dt)[0]
 
 
+def _stribeck(model, p, v):
+    """The Stribeck curve g(v) of LuGre or GMS at ``v``; with ``asymmetric=True`` (§13.1) by
+    the ``_pos`` values for v > 0 and the ``_neg`` ones otherwise."""
+    delta = model.stribeck_exponent
+    if model.asymmetric:
+        return jnp.where(v > 0, stribeck_curve(v, p["Fc_pos"], p["Fs_pos"], p["vs"], delta),
+                         stribeck_curve(v, p["Fc_neg"], p["Fs_neg"], p["vs"], delta))
+    return stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], delta)
+
+
 class BristleStep(FrictionStep):
     """LuGre / Dahl bristle state z, §8.1-8.3:
 
@@ -87,13 +97,7 @@ class BristleStep(FrictionStep):
         p = self.model.to_physical(theta)
         zero = jnp.zeros_like(p["sigma0"])
         if isinstance(self.model, LuGre):
-            delta = self.model.stribeck_exponent
-            if self.model.asymmetric:
-                g = jnp.where(v > 0, stribeck_curve(v, p["Fc_pos"], p["Fs_pos"], p["vs"], delta),
-                              stribeck_curve(v, p["Fc_neg"], p["Fs_neg"], p["vs"], delta))
-            else:
-                g = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], delta)
-            return p, p["sigma0"], p["sigma1"], by_direction(p, "sigma2", v), g
+            return p, p["sigma0"], p["sigma1"], by_direction(p, "sigma2", v), _stribeck(self.model, p, v)
         s2 = by_direction(p, "sigma2", v) if self.model.viscous else zero
         return p, p["sigma0"], zero, s2, by_direction(p, "Fc", v)
 
@@ -128,13 +132,7 @@ class GMSStep(FrictionStep):
         n = m.num_elements
         k = jnp.stack([p[f"k{i}"] for i in range(1, n + 1)], axis=-1)
         alpha = jnp.stack([p[f"alpha{i}"] for i in range(1, n + 1)], axis=-1)
-        delta = m.stribeck_exponent
-        if m.asymmetric:
-            s = jnp.where(v > 0, stribeck_curve(v, p["Fc_pos"], p["Fs_pos"], p["vs"], delta),
-                          stribeck_curve(v, p["Fc_neg"], p["Fs_neg"], p["vs"], delta))
-        else:
-            s = stribeck_curve(v, p["Fc"], p["Fs"], p["vs"], delta)
-        return p, k, alpha, s
+        return p, k, alpha, _stribeck(m, p, v)
 
     def init(self, theta, v0, dt):
         _, _, alpha, s = self._params(theta, v0)
