@@ -156,11 +156,10 @@ def parameter_verdicts(fit, level: float = DEFAULT_LEVEL) -> dict[str, dict[str,
         return {}
     flags = diagnostic_flags(fit)
     u = fit.uncertainty
-    if u is not None:
-        flags = u.not_identifiable(level, flags)
     values = {k: float(v) for k, v in fit.params.items() if np.ndim(v) == 0}
     intervals = {}
     if u is not None:
+        flags = u.not_identifiable(level, flags)
         intervals = u.intervals(level)
         for name, est in zip(u.names, u.estimate):
             values.setdefault(name, float(est))
