@@ -47,8 +47,7 @@ OFFSET_FRACTION = 0.1
 #: Standstill: |v| below this fraction of max |v| (as `jaxfric.models` LOW_SPEED).
 STANDSTILL = 0.02
 #: Fewer standstill samples than this fraction, and an offset is not separated from
-#: asymmetric Coulomb levels [D]: EMPS holds 1.5 % such samples and its fits moved
-#: 3-13 N between the offset and the levels with correlations of ±0.99.
+#: asymmetric Coulomb levels [D] (measured on EMPS: docs/uncertainty.md, "Plausibility").
 MIN_STANDSTILL_FRACTION = 0.05
 
 
