@@ -5,10 +5,9 @@ cost J (step 4), run the optimiser (steps 5–7), then report metrics on the
 training, validation and whole record (step 8).
 
 Two pipelines (``method=``, [`default_solver`][jaxfric.identification.default_solver]): ``"paper"`` is MAPSO–NMDS as
-the paper describes (steps 5–6); ``"jaxfric"`` (default) is the best measured: on EMPS at
-1 kHz the paper's pipeline spent 172–374 s, 70 % of it in Nelder–Mead evaluating one
-20 000-step rollout at a time (``benchmarks/pipelines.py`` measures both). ``identify`` is
-the sequence of [`jaxfric.identification.stages`][jaxfric.identification.stages] (docs/identify.md).
+the paper describes (steps 5–6); ``"jaxfric"`` (default) is the best measured (docs/identify.md,
+"The defaults, measured"). ``identify`` is the sequence of
+[`jaxfric.identification.stages`][jaxfric.identification.stages] (docs/identify.md).
 """
 
 from __future__ import annotations
@@ -60,16 +59,11 @@ LARGE_MODEL_PARAMS = 20
 #: ``identify``'s pipelines: ``"jaxfric"`` (default, the best measured) and ``"paper"``.
 METHODS = ("jaxfric", "paper")
 #: Default pipeline for the networks: MAPSO generations of the global stage. With
-#: the gradient stage after it, the swarm only has to find a basin. Simulated rig,
-#: 5 keys, validation MSE mean (max): G = 50 then 500 BFGS steps 0.233 (0.371) %;
-#: G = 300 then 2000 steps 0.234 (0.361) % at about 5× the run time; G = 100 then
-#: 500 steps 0.263 (0.431) %. EMPS at 1 kHz, 3 keys: G = 50 then 500 steps
-#: 0.142–0.194 % against 0.251 % for least squares (benchmarks/pipelines.py).
+#: the gradient stage after it, the swarm only has to find a basin (measured:
+#: docs/identify.md, "The defaults, measured").
 FAST_GENERATIONS_BLACK_BOX = 50
 #: Default pipeline for the networks: the global stage sees at most this many
-#: training samples (the first ones; coarse-to-fine). A swarm generation rolls out
-#: 162 candidates; on the 19 800-sample EMPS training window that cost 0.14 s, on
-#: its first 2000 samples a tenth of it, and the start it gave BFGS was as good.
+#: training samples (the first ones; coarse-to-fine; docs/identify.md, "The defaults, measured").
 GLOBAL_STAGE_SAMPLES = 2000
 #: Default pipeline for the networks: BFGS steps of the gradient stage on the whole
 #: training window (exact gradient by the network's hand-written adjoint).
@@ -86,9 +80,8 @@ def paper_solver(model: AbstractFrictionModel) -> MAPSONMDS:
 
     Nelder–Mead gets fminsearch's budget, MaxIter = MaxFunEvals = 200·n (§5), and
     starts from a simplex sized by the swarm's final spread
-    (``MAPSONMDS.simplex_from_swarm``). The evaluation cap matters in 180-D: a
-    shrink costs n evaluations, and an iteration cap alone once let one run spend
-    600 000 evaluations (86 s).
+    (``MAPSONMDS.simplex_from_swarm``). The evaluation cap matters in 180-D, where a
+    shrink costs n evaluations.
     """
     n = model.num_params
     if n > LARGE_MODEL_PARAMS:

@@ -94,9 +94,9 @@ def _elman_value_and_grad(model):
 
     Under ``vmap`` over θ (an ensemble's gradient stage runs its members' BFGS side by
     side) the batching rule runs `_elman_value_and_grad_batch` on the CPU, one loop
-    for all members, instead of JAX's default batching of the single-network loops, which
-    was 60× slower than one network for 8 members on EMPS's 19 800 samples there; other
-    platforms take JAX's batching (the comment in the rule says why).
+    for all members, instead of JAX's far slower default batching of the single-network
+    loops (docs/algorithms.md §2.2, "measured"); other platforms take JAX's batching
+    (the comment in the rule says why).
     """
 
     def single(theta, data):
@@ -215,8 +215,7 @@ def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int
 
 def _time_loop(model, step, init, xs, reverse=False):
     """``(final carry, outputs)`` of ``step`` over time (`jaxfric.models.time_loop`),
-    unrolled as the model says, else not on the CPU: with ``(T, N·K)`` arrays scanned
-    over, an unroll of 2 made the reverse loop 20× slower for 8 networks."""
+    unrolled as the model says, else not on the CPU (docs/algorithms.md §2.2, "measured")."""
     return time_loop(step, init, xs, 1, model.unroll, reverse)
 
 

@@ -167,10 +167,8 @@ def objective_stage(model: AbstractFrictionModel, records: RecordSet, dtype,
 
 # ------------------------------------------------------------- global stage
 #: On a CPU an ensemble's members share one batched evaluation only while a member's
-#: population is smaller than this: the networks' rollout then costs less per candidate
-#: in a larger batch (ENN, 1600 samples: 680 µs for 1 candidate, 68 µs each for 25, 41
-#: µs for 64, 45 µs for 200; ``python benchmarks/ensembles.py --rollouts``). From about
-#: 64 candidates up it is bound by arithmetic, and batching the members buys nothing.
+#: population is smaller than this: from a few tens of candidates up the rollout is bound
+#: by arithmetic, and batching the members buys nothing (measured: docs/identify.md, "Ensembles").
 CPU_BATCH_SATURATION = 32
 
 
@@ -182,13 +180,10 @@ def ensemble_batching(model: AbstractFrictionModel, solver: AbstractSolver) -> s
     off the CPU, and on the CPU for a one-stage population solver on a network whose
     population is smaller than [`CPU_BATCH_SATURATION`][jaxfric.identification.stages.CPU_BATCH_SATURATION] agents. ``"map"``
     otherwise on the CPU, which runs member i as the single run with key i, to the
-    bit: a physical model's rollout costs the same per candidate at any batch size
-    (LuGre on EMPS's 19 800 training samples: 126–136 µs per candidate for batches of
-    8 to 25, 309 µs at 64 and 802 µs at 200, where the batch leaves the cache), the
-    default ENN swarm (8×8 agents, 162 evaluations a generation) is already past the
-    batch size where the network's rollout stops getting cheaper (8 members took the
-    same CPU time mapped or vmapped), and a vmapped Nelder–Mead stage computes every
-    conditional batch (a shrink's n points) on every step.
+    bit: a physical model's rollout costs no less per candidate in a larger batch, the
+    default ENN swarm is already past the batch size where the network's rollout stops
+    getting cheaper (docs/identify.md, "Ensembles"), and a vmapped Nelder–Mead stage
+    computes every conditional batch (a shrink's n points) on every step.
     """
     if jax.default_backend() != "cpu":
         return "vmap"

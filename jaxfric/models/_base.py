@@ -261,10 +261,8 @@ class AbstractFrictionModel(eqx.Module):
         Pure JAX: jittable, differentiable (any order, forward and reverse), and
         vmappable. ``vmap`` over ``theta`` alone is routed to
         [`simulate_batch`][jaxfric.models.AbstractFrictionModel.simulate_batch] by a custom batching rule, so an optimiser that
-        vmaps a per-candidate objective gets the fast batched rollout (2.3x
-        faster for the Elman network than JAX's default batching of the
-        single-candidate scan); other vmaps (over data, or nested) fall back to
-        ordinary batching. ``velocity`` and the returned friction are in the
+        vmaps a per-candidate objective gets the fast batched rollout (docs/algorithms.md
+        §2.2, "measured"); other vmaps (over data, or nested) fall back to ordinary batching. ``velocity`` and the returned friction are in the
         model's working units (see ``needs_scaling``); ``dt`` is the sample time
         in s (ignored by static maps and the Elman networks). ``inputs``: the
         ``(C, T)`` measured channels named by [`input_names`][jaxfric.models.AbstractFrictionModel.input_names] (ignored by

@@ -18,11 +18,8 @@ primitive; [`simulate`][jaxfric.models.AbstractFrictionModel.simulate] calls it 
 theta is routed back to it by a custom batching rule (see
 [`AbstractFrictionModel.simulate`][jaxfric.models.AbstractFrictionModel.simulate]).
 
-Dynamics note: with |r| up to 5 (the §2.4 box) about 98 % of random networks
-are chaotic over 1600 samples -- a 1e-15 relative change of theta changes the
-output by O(1) -- while with |r| <= 1 none were. Two correct implementations
-(XLA vs libm tanh, float32 vs float64) therefore agree only over the first
-~100 samples for such candidates. ``context_weight_bound`` narrows the r box.
+Dynamics: with |r| up to 5 (the §2.4 box) most random networks are chaotic
+(docs/algorithms.md §2.4); ``context_weight_bound`` narrows the r box.
 """
 
 from __future__ import annotations
@@ -192,9 +189,8 @@ class Elman(AbstractFrictionModel):
         del dt
         thetas, u = self._prepare(thetas, velocity)
         p = self.to_physical(thetas)
-        # (N, P): candidates on the fast axis vectorise best on CPU (module docstring);
-        # flattened, because XLA's code for a (30, 9) state ran 2-3x slower per element
-        # than for (30, 64), and self-learning evaluates 8-9 candidates at a time.
+        # (N, P): candidates on the fast axis vectorise best on CPU (module docstring); flattened,
+        # because small 2-D states ran slower per element (benchmarks/results/peers.md, "Small ENN batches").
         shape = (self.neurons, thetas.shape[0])
         w, r, b, v, alpha, c0 = (p[k].T.reshape(-1) for k in self._BLOCKS)
 
@@ -221,9 +217,9 @@ class Elman(AbstractFrictionModel):
         and the gradient is a set of sums over time: ∂w = Σ δ_k u_k, ∂r = Σ δ_k c_k,
         ∂b = Σ δ_k, ∂v = Σ g_k h_k, ∂α = Σ λ_{k+1} c_k, ∂c0 = λ_0, ∂b_o = Σ g_k.
 
-        Why: JAX's reverse mode of the forward scan (linearise, then transpose) took
-        31 ms for a 19 800-sample record against 3.3 ms for the rollout; this loop
-        carries only λ and leaves the sums to vectorised reductions. The λ recurrence is
+        Why: this loop carries only λ and leaves the sums to vectorised reductions, where
+        JAX's reverse mode of the forward scan is several times slower (docs/algorithms.md
+        §2.2, "measured"). The λ recurrence is
         affine, ``λ_k = (α + r s_k) λ_{k+1} + r v g_k s_k`` with ``s_k = 1 − h_k²``, so off
         the CPU it runs as a parallel prefix scan (`reverse_affine_scan`).
         """
