@@ -54,13 +54,12 @@ class GradientRefinement(eqx.Module):
         edge: fraction of the box a start on a bound is pulled inside (0 < edge < 0.5).
         batching: how an ensemble's members run (`refine_many`): ``"vmap"``
             side by side, every step one batched evaluation of all members (for the
-            Elman networks one time loop over all of them: 8 members' J and gradient
-            cost about 3 times one member's on a CPU); ``"map"`` one after another
+            Elman networks one time loop over all of them); ``"map"`` one after another
             inside the same compiled call, each member the single run's program, so
             member i equals the single run from the same start to the bit; ``"auto"``
             (default): ``"vmap"`` for the networks and off the CPU, ``"map"`` for
-            physical models on the CPU, whose rollouts cost the same per candidate at
-            any batch size (``stages.refine_batching``).
+            physical models on the CPU (``stages.refine_batching``; measured:
+            docs/identify.md, "Ensembles").
     """
 
     method: str = eqx.field(default="bfgs", static=True)
@@ -89,12 +88,8 @@ class GradientRefinement(eqx.Module):
         return self.method in _LEAST_SQUARES
 
     def solver(self):
-        cls = {
-            "bfgs": optx.BFGS,
-            "lbfgs": optx.LBFGS,
-            "lm": optx.LevenbergMarquardt,
-            "gauss_newton": optx.GaussNewton,
-        }[self.method]
+        cls = {"bfgs": optx.BFGS, "lbfgs": optx.LBFGS, "lm": optx.LevenbergMarquardt,
+               "gauss_newton": optx.GaussNewton}[self.method]
         return cls(rtol=self.rtol, atol=self.atol)
 
 
@@ -220,11 +215,6 @@ def _finish(cost, theta0, f_old, z, steps, done, result, lower, upper, data, max
                          f_refined=f_new, improved=improved, result=result, num_steps=steps)
 
 
-def _progress_sink(progress, settings: GradientRefinement):
-    """``(update(steps, f), close(steps))`` for ``progress`` (None, True or a callable)."""
-    return step_progress(progress, f"gradient ({settings.method})", settings.max_steps)
-
-
 def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, lower, upper,
                 data: CostData, *, progress=None, compiler_options=()) -> RefineOutcome:
     """Polish ``theta0`` with ``settings`` inside the box ``[lower, upper]``.
@@ -240,7 +230,7 @@ def refine_impl(settings: GradientRefinement, cost: OutputErrorCost, theta0, low
     """
     from .. import _xla
 
-    update, close = _progress_sink(progress, settings)
+    update, close = step_progress(progress, f"gradient ({settings.method})", settings.max_steps)
     start = _xla.filter_jit(_start, compiler_options)
     advance = _xla.filter_jit(_advance, compiler_options)
     finish = _xla.filter_jit(_finish, compiler_options)
@@ -299,21 +289,18 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
     """`refine_impl` for a batch of starts ``thetas`` (``(K, n)``), side by side.
 
     One compiled program advances every member. With ``settings.batching == "vmap"``
-    (``"auto"`` here) each step rolls out all K members in one batched evaluation, which for
-    the Elman network costs far less than K single ones (one network's loop is bound by
-    its length, not its arithmetic: 8 members' J and gradient cost about 3 times one
-    member's on a 2-core CPU). A member that has stopped is carried unchanged until the
-    last one stops, so member ``i`` takes the steps of ``refine_impl(..., thetas[i],
-    ...)`` with numbers that equal that run up to floating-point reassociation in the
-    batched sums, which a long float32 run can amplify into a different nearby optimum.
-    With ``"map"`` each member runs the single run's program, one after another in the
-    same compiled call: member ``i`` is that run, to the bit, at K times its cost.
+    (``"auto"`` here) each step rolls out all K members in one batched evaluation; a member
+    that has stopped is carried unchanged until the last one stops, so member ``i`` takes the
+    steps of ``refine_impl(..., thetas[i], ...)`` up to floating-point reassociation in the
+    batched sums. With ``"map"`` each member runs the single run's program, one after another
+    in the same compiled call: member ``i`` is that run, to the bit, at K times its cost
+    (docs/identify.md, "Ensembles").
     ``progress`` is told the furthest member's step count after each chunk.
     Returns a `RefineOutcome` whose fields have a leading axis of length K.
     """
     from .. import _xla
 
-    update, close = _progress_sink(progress, settings)
+    update, close = step_progress(progress, f"gradient ({settings.method})", settings.max_steps)
     start = _xla.filter_jit(_start_many, compiler_options)
     advance = _xla.filter_jit(_advance_many, compiler_options)
     finish = _xla.filter_jit(_finish_many, compiler_options)
@@ -335,18 +322,8 @@ def refine_many(settings: GradientRefinement, cost: OutputErrorCost, thetas, low
     return finish(settings, cost, thetas, f_old, z, steps, done, result, lower, upper, data, settings.max_steps)
 
 
-_RESULT_NAMES = (
-    "successful",
-    "nonlinear_max_steps_reached",
-    "max_steps_reached",
-    "nonlinear_divergence",
-    "nonfinite",
-    "nonfinite_input",
-    "singular",
-    "breakdown",
-    "stagnation",
-    "conlim",
-)
+_RESULT_NAMES = ("successful", "nonlinear_max_steps_reached", "max_steps_reached", "nonlinear_divergence",
+                 "nonfinite", "nonfinite_input", "singular", "breakdown", "stagnation", "conlim")
 
 
 def result_name(result) -> str:
