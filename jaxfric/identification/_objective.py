@@ -144,14 +144,9 @@ TIME_BLOCK = 128
 def _elman_value_and_grad_batch(model: Elman, thetas, data: CostData, block: int = TIME_BLOCK):
     """``(J, ∇_θJ, ∂J/∂y)`` of ``K`` networks on one record, each with a leading ``K`` axis.
 
-    The equations of [`jaxfric.models.Elman.simulate_vjp`][jaxfric.models.Elman.simulate_vjp] (docs/algorithms.md
-    §2.2) for K networks at once, their contexts carried as one flat ``(K·N,)`` vector:
-
-        forward  c_{k+1} = α c_k + h_k,   h_k = tanh(w u_k + r c_k + b),   ŷ_k = v·h_k
-        reverse  δ_k = (v g_k + λ_{k+1})(1 − h_k²),   λ_k = α λ_{k+1} + r δ_k
-
-    with ∂w = Σ δ_k u_k, ∂r = Σ δ_k c_k, ∂b = Σ δ_k, ∂v = Σ g_k h_k, ∂α = Σ λ_{k+1} c_k,
-    ∂c0 = λ_0. Time runs in blocks of ``block`` samples. The forward pass keeps only
+    The forward and reverse equations of [`jaxfric.models.Elman.simulate_vjp`][jaxfric.models.Elman.simulate_vjp]
+    (docs/algorithms.md §2.2) for K networks at once, their contexts carried as one flat
+    ``(K·N,)`` vector. Time runs in blocks of ``block`` samples. The forward pass keeps only
     each block's first context and the outputs; the reverse pass recomputes a block's
     contexts from its first one, then h_k, δ_k and the block's share of the sums
     vectorised around a loop that carries λ alone. Nothing of size ``T × K·N`` is
