@@ -97,8 +97,6 @@ def add_parser(sub, *, common, formatter, positive_float, positive_int, fraction
     f.add_argument("--quick", action="store_true", help="tiny budget: a smoke test, not a real fit")
     f.add_argument("--out", default="jaxfric-motion", metavar="DIR", help="report folder")
     common(p, x64_help="compute in float64 (the default of this command; see --float32)")
-    # a free run integrates the force twice: float32 rounding moved the EMPS ranking
-    # (LuGre 3.87 mm in float64, 8.09 mm in float32), so motion defaults to float64
     p.set_defaults(x64=True)
     f.add_argument("--float32", dest="x64", action="store_false", default=argparse.SUPPRESS,
                    help="compute in float32 (faster; float64 is the default here, since a free run "
@@ -159,8 +157,7 @@ def _judge(args, fits, data, window, say, blocked=None):
     (``blocked()``'s scores), ``"scores"`` then being `gated_scores`'."""
     if window is None:
         return None
-    from jaxfric.motion import DEFAULT_INIT_WINDOW, short_judge
-    from jaxfric.motion import gated_scores
+    from jaxfric.motion import DEFAULT_INIT_WINDOW, gated_scores, short_judge
 
     say(f"judging by short free runs: {data.n_samples // window} windows of {window} samples")
     scores, base = short_judge(fits, [data], window)
@@ -176,10 +173,11 @@ def _judge(args, fits, data, window, say, blocked=None):
 
 def cmd_identify_motion(args, argv) -> int:
     """Identify each model inside the mechanics and write the report folder."""
-    import jax.numpy as jnp
-
     import warnings
 
+    import jax.numpy as jnp
+
+    from jaxfric import models as _models
     from jaxfric._warnings import BaselineWarning
     from jaxfric.motion import MotionSearch, OverfitWarning, blocked_scores, identify_motion, rank_fits
 
@@ -194,8 +192,6 @@ def cmd_identify_motion(args, argv) -> int:
     options = dict(key=args.seed, mass=mass, search=search, horizon=args.horizon, fit_offset=args.offset,
                    dtype=jnp.float64 if args.x64 else None, max_time=args.max_time, max_evals=args.max_evals)
     for name in args.models:
-        from jaxfric import models as _models
-
         opts = {"neurons": args.neurons} if name.startswith("elman") else {}
         model = models[name] = _models.get(name, **opts)
         say(f"identifying {name} inside the mechanics ({data.n_samples} samples)")
@@ -295,7 +291,7 @@ def _write_report(args, argv, out, data, fits, ranked, judge, window) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(9, 4))
-    n_train = next(iter(fits.values())).n_train
+    n_train = first.n_train
     t = np.arange(data.n_samples) * data.dt
     ax.plot(t[n_train:], 1e3 * data.position[n_train:], "k", lw=2, label="measured")
     for name, fit in fits.items():
