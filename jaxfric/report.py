@@ -142,12 +142,8 @@ def fit_dict(fit) -> dict:
 # ------------------------------------------------------------------ tables
 def comparison_rows(fits: Mapping[str, Any], data) -> list[dict]:
     """One row per fit: label, #params, metrics per window, time."""
-    rows = []
-    for name, fit in fits.items():
-        m = fit_metrics(fit, data)
-        rows.append({"name": name, "label": _plot.fit_label(fit, name), "params": fit_num_params(fit),
-                     "metrics": m, "seconds": fit_seconds(fit)})
-    return rows
+    return [{"name": name, "label": _plot.fit_label(fit, name), "params": fit_num_params(fit),
+             "metrics": fit_metrics(fit, data), "seconds": fit_seconds(fit)} for name, fit in fits.items()]
 
 
 def _cell(rows, key, window, fmt):
@@ -179,8 +175,7 @@ def format_table(rows: list[dict]) -> str:
     line = lambda cells: "  ".join(  # noqa: E731
         c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
     out = [line([h for h, _ in cols]), line(["-" * w for w in widths])]
-    for i in range(len(rows)):
-        out.append(line([cells[i] for _, cells in cols]))
+    out += [line([cells[i] for _, cells in cols]) for i in range(len(rows))]
     return "\n".join(out)
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import numbers
 import re
@@ -98,13 +99,13 @@ def _models(models) -> dict[str, tuple[Any, dict]]:
     from .fit import model_name
     from .models import AbstractFrictionModel
 
-    def entry(label, m):
+    def entry(m):
         if isinstance(m, tuple) and len(m) == 2 and isinstance(m[1], Mapping):
             return m[0], dict(m[1])
         return m, {}
 
     if isinstance(models, Mapping):
-        items = [(label, *entry(label, m)) for label, m in models.items()]
+        items = [(label, *entry(m)) for label, m in models.items()]
     else:
         if isinstance(models, (str, AbstractFrictionModel)):
             models = [models]
@@ -357,8 +358,7 @@ def sweep(models, records, keys, out_dir, *, progress: bool = True, on_run: Call
     if index == 0:
         write_json(out / "sweep.json", _merged_manifest(out, manifest))
 
-    runs = [Run(m, r, s, i) for i, (m, r, s) in enumerate(
-        (m, r, s) for m in model_map for r in record_map for s in seeds)]
+    runs = [Run(m, r, s, i) for i, (m, r, s) in enumerate(itertools.product(model_map, record_map, seeds))]
     mine = [run for run in runs if run.index % count == index]
     rows = _rows_on_disk(out, mine, motion, skip_unreadable=True)
     done = [run for run in mine if run.index in rows]
