@@ -290,7 +290,7 @@ def cmd_predict(args, argv) -> int:
             fit = load_motion_fit(args.model_file)
     except (ValueError, KeyError, TypeError, OSError) as e:
         raise UserError(f"cannot load the fit {args.model_file}: {e}") from None
-    t, v, dt, measured, notes = prediction_input(args)
+    t, v, dt, measured = prediction_input(args)
     v = _velocity_as_trained(args, fit, v, dt)
     # Resampling and extrapolation change what the numbers mean: said even with --quiet.
     with warnings.catch_warnings(record=True) as caught:

@@ -278,7 +278,7 @@ def prediction_columns(args) -> Columns:
 
 
 def prediction_input(args):
-    """``(t, velocity, dt, friction_or_None, notes)`` for ``jaxfric predict`` (SI units), one
+    """``(t, velocity, dt, friction_or_None)`` for ``jaxfric predict`` (SI units), one
     entry per data row of the file: irregular stamps are checked by the loader but not
     resampled here (``Fit.predict_at`` resamples onto the fit's grid and back)."""
     from jaxfric import rig
@@ -291,7 +291,7 @@ def prediction_input(args):
         scale["friction"] = 1.0
     data, _ = _load_quietly(rig.load_friction_pairs, cols, scale=scale, train_fraction=1.0)
     friction = cols["friction"] * scale["friction"] if measured else None
-    return cols["t"], cols["velocity"] * scale["velocity"], float(data.dt), friction, []
+    return cols["t"], cols["velocity"] * scale["velocity"], float(data.dt), friction
 
 
 def simulated_rig(key):
