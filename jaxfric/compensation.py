@@ -99,14 +99,12 @@ def feedforward(fit, ref: Reference) -> np.ndarray:
     """
     if fit is None:
         return np.zeros_like(ref.v)
-    t = np.arange(ref.v.size) * ref.dt
     fit_dt = float(fit.dt)
     if same_sample_time(fit_dt, ref.dt):
-        f = np.asarray(fit.predict(ref.v, ref.dt), np.float64)
-    else:
-        tf = np.arange(int(np.floor(t[-1] / fit_dt)) + 1) * fit_dt
-        f = np.interp(t, tf, np.asarray(fit.predict(np.interp(tf, t, ref.v), fit_dt), np.float64))
-    return f
+        return np.asarray(fit.predict(ref.v, ref.dt), np.float64)
+    t = np.arange(ref.v.size) * ref.dt
+    tf = np.arange(int(np.floor(t[-1] / fit_dt)) + 1) * fit_dt
+    return np.interp(t, tf, np.asarray(fit.predict(np.interp(tf, t, ref.v), fit_dt), np.float64))
 
 
 def track(rig: Rig, ref: Reference, friction_ff=None, *, gains: Gains = Gains(), substeps: int = 4,
