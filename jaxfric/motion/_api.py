@@ -836,94 +836,169 @@ def identify_motion(model, data=None, *, key=None, mass, train=0.8, valid=None,
     # a grey-box's physical fit: the same call, on the physical model (an instance: no model_options)
     physical_options = dict(options, data=data, key=key, model_options=None)
     with Stopwatch() as total:
-        tr_records, va_records, data, n_train = _records(data, train, valid)
-        legacy_cost, metric_horizon, init_window = _checked_windows(
-            data, n_train, va_records, error, horizon, metric_horizon, init_window)
-        budget = MotionBudget(max_evals, max_time)
-        budget.check()
-        if search is not None and not isinstance(search, MotionSearch):
-            raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
-        mass0, mass_range = _mass_setting(mass)
-        model = resolve_model(model, model_options)
-        search = default_search(model) if search is None else search
-        search.check()
-        vt = np.concatenate([r.velocity for r in tr_records])
-        ut = np.concatenate([r.net_force for r in tr_records])
-        f_level = float(np.percentile(np.abs(ut), 95.0))
-        if f_level <= 0 or max(np.ptp(r.position) for r in tr_records) <= 0:
-            raise ValueError("the training data have no force or no motion: nothing to identify")
-        box = _motion_box(model, box, vt, ut, data_bounds)
-        scalers = ((Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
-                   if model.needs_scaling else (None, None))
-        if solver is not None:
-            check_solver(solver)
-        run_keys = resolve_keys(key)
-        key, seed = run_keys.key, run_keys.seed
-        dtype = search_dtype(dtype)
-
-        layout, lower, upper = _search_vector(model, box, mass_range, fit_offset, offset_range, fit_v0,
-                                              f_level, vt)
-        residuals, cost, free, glob, stage_data, search = _costs(
-            model, layout, search, tr_records, scalers, mass0, dtype, error, horizon, legacy_cost)
-        sol, stopped = None, None
-        est = least_squares(tr_records, mass0 if mass_range is None else None)
-        with Stopwatch() as sw:
-            if solver is not None:
-                sol, _ = global_search(cost, free, lower, upper, solver, run_keys, dtype=dtype, progress=progress)
-                y = np.asarray(sol.value)
-                stages = solver_stages(sol, solver)
-            else:
-                extra, y0, before, grid = [], None, [], []
-                if search.least_squares_start and not legacy_cost:
-                    start = least_squares_start(model, est, vt, box, layout, lower, upper)
-                    extra = [] if start is None else [start]
-                    if search.slow_starts:
-                        grid = slow_attraction_grid(model, start, lower, upper)
-                if isinstance(model, GreyBox):  # from its physical model's fit, correction off
-                    y0, before = _greybox_start(model, box, lower, upper, physical_options)
-                y, stages, stopped = run_search(search, budget, residuals, cost, lower, upper,
-                                                global_data=glob, stage_data=stage_data,
-                                                key=key, dtype=dtype, progress=progress,
-                                                y0=y0, extra_starts=extra, grid_starts=grid)
-                stages = before + stages
-        y = np.asarray(y, np.float64)
-        j_final = _training_cost(residuals, cost, y, lower, upper, free, dtype, legacy_cost or solver is not None)
-        theta, m_hat, off, dv0 = (np.asarray(a) for a in layout.unpack(jnp.asarray(y, dtype), free))
-        key_data, key_impl = key_record(key)
-        n_tr_total = sum(r.n_samples for r in tr_records)
-        n_all = data.n_samples if data is not None else n_tr_total + sum(r.n_samples for r in va_records)
-        fit = MotionFit(
-            model=model, theta=theta, velocity_scaler=scalers[0], friction_scaler=scalers[1],
-            dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
-            velocity_range=(float(vt.min()), float(vt.max())),
-            history=history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=seed,
-            timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=box,
-            settings={
-                "model_name": model_name(model), "model_config": model_config(model),
-                "solver": repr(solver) if solver is not None else repr(search),
-                "dtype": str(np.dtype(dtype)), "data_bounds": bool(data_bounds),
-            },
-            mechanics=Mechanics(
-                mass=m_hat, mass_range=mass_range, offset=off, v0=dv0, error=error, horizon=horizon,
-                cutoff=tr_records[0].cutoff, search_names=list(model.param_names) + list(layout.names()),
-                search_bounds=[lower.tolist(), upper.tolist()], y=[float(a) for a in y], stopped=stopped,
-                starts=start_costs(stages) if solver is None else [],
-                records=None if data is not None else
-                {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in va_records]},
-                init_window=init_window),
-        )
-        scoring = (data, n_train, metric_horizon, tr_records, va_records, init_window)
-        metrics = _scored(fit, *scoring)
-        base = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=tr_records[0].dt, n_train=n_tr_total)
-        base = base.replace(metrics=_scored(base, *scoring))
-        # the fit above only simulates for its metrics; the one returned carries them
-        fit = fit.replace(
-            metrics={**metrics, "num_params": int(y.size), "cost": j_final},
-            mechanics=fit.mechanics.replace(baseline={"M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}))
-        fit = baseline_stage(fit, base.metrics, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=2)
-        data = data if data is not None else _concatenated(tr_records)
+        # Every check first, so bad input fails before any long computation.
+        plan = _plan_stage(model, data, train=train, valid=valid, error=error, horizon=horizon,
+                           metric_horizon=metric_horizon, init_window=init_window, max_evals=max_evals,
+                           max_time=max_time, search=search, mass=mass, model_options=model_options, box=box,
+                           data_bounds=data_bounds, solver=solver, key=key, dtype=dtype, fit_offset=fit_offset,
+                           offset_range=offset_range, fit_v0=fit_v0)
+        objective = _costs(plan.model, plan.layout, plan.search, plan.tr_records, plan.scalers, plan.mass0,
+                           plan.dtype, error, horizon, plan.legacy_cost)
+        est = least_squares(plan.tr_records, plan.mass0 if plan.mass_range is None else None)
+        found = _search_stage(plan, objective, est, solver, progress, physical_options)
+        fit = _fit_stage(plan, objective, found, solver)
+        fit = _baseline_row(fit, plan, est)
+        data = plan.data if plan.data is not None else _concatenated(plan.tr_records)
     fit = assess_fit(fit, data)  # plausibility now, parameter uncertainty on first use
     return fit.replace(timings={**fit.timings, "total_s": total.wall_s})
+
+
+@dataclasses.dataclass(frozen=True)
+class _MotionPlan:
+    """What [`identify_motion`][jaxfric.motion.identify_motion] checked and set up before any optimisation:
+    the records and their split, the model and its search settings, the box, the scalers,
+    the keys, and the search vector's ``layout`` in ``[lower, upper]`` (`_search_vector`)."""
+
+    model: object
+    search: MotionSearch
+    tr_records: list
+    va_records: list
+    data: MotionData | None
+    n_train: int | None
+    legacy_cost: bool
+    metric_horizon: int
+    init_window: int
+    budget: MotionBudget
+    mass0: float
+    mass_range: tuple | None
+    vt: np.ndarray
+    box: object
+    scalers: tuple
+    run_keys: object
+    dtype: object
+    layout: Layout
+    lower: np.ndarray
+    upper: np.ndarray
+    error: str
+    horizon: int | None
+    data_bounds: bool
+
+
+def _plan_stage(model, data, *, train, valid, error, horizon, metric_horizon, init_window, max_evals, max_time,
+                search, mass, model_options, box, data_bounds, solver, key, dtype, fit_offset, offset_range,
+                fit_v0) -> _MotionPlan:
+    """The records, options and search vector of [`identify_motion`][jaxfric.motion.identify_motion], checked
+    in this order (a ``ValueError`` names the first problem, before any optimisation)."""
+    tr_records, va_records, data, n_train = _records(data, train, valid)
+    legacy_cost, metric_horizon, init_window = _checked_windows(
+        data, n_train, va_records, error, horizon, metric_horizon, init_window)
+    budget = MotionBudget(max_evals, max_time)
+    budget.check()
+    if search is not None and not isinstance(search, MotionSearch):
+        raise ValueError(f"search must be a jaxfric.motion.MotionSearch, got {type(search).__name__}")
+    mass0, mass_range = _mass_setting(mass)
+    model = resolve_model(model, model_options)
+    search = default_search(model) if search is None else search
+    search.check()
+    vt = np.concatenate([r.velocity for r in tr_records])
+    ut = np.concatenate([r.net_force for r in tr_records])
+    f_level = float(np.percentile(np.abs(ut), 95.0))
+    if f_level <= 0 or max(np.ptp(r.position) for r in tr_records) <= 0:
+        raise ValueError("the training data have no force or no motion: nothing to identify")
+    box = _motion_box(model, box, vt, ut, data_bounds)
+    scalers = ((Scaler.fit(vt), Scaler(lo=np.float64(-f_level), hi=np.float64(f_level)))
+               if model.needs_scaling else (None, None))
+    if solver is not None:
+        check_solver(solver)
+    run_keys = resolve_keys(key)
+    dtype = search_dtype(dtype)
+    layout, lower, upper = _search_vector(model, box, mass_range, fit_offset, offset_range, fit_v0, f_level, vt)
+    return _MotionPlan(model, search, tr_records, va_records, data, n_train, legacy_cost, metric_horizon,
+                       init_window, budget, mass0, mass_range, vt, box, scalers, run_keys, dtype, layout, lower,
+                       upper, error, horizon, bool(data_bounds))
+
+
+def _search_stage(plan: _MotionPlan, objective, est, solver, progress, physical_options) -> tuple:
+    """``(y, stages, stopped, solution, stopwatch)``: the user's ``solver`` on the final cost,
+    else the default search (`run_search`) from the swarm's starts, the least-squares start
+    (with the slow-attraction grid, `MotionSearch.slow_starts`) and, for a grey-box, its
+    physical model's fit."""
+    residuals, cost, free, glob, stage_data, search = objective
+    lower, upper, dtype = plan.lower, plan.upper, plan.dtype
+    sol, stopped = None, None
+    with Stopwatch() as sw:
+        if solver is not None:
+            sol, _ = global_search(cost, free, lower, upper, solver, plan.run_keys, dtype=dtype, progress=progress)
+            y = np.asarray(sol.value)
+            stages = solver_stages(sol, solver)
+        else:
+            extra, y0, before, grid = [], None, [], []
+            if search.least_squares_start and not plan.legacy_cost:
+                start = least_squares_start(plan.model, est, plan.vt, plan.box, plan.layout, lower, upper)
+                extra = [] if start is None else [start]
+                if search.slow_starts:
+                    grid = slow_attraction_grid(plan.model, start, lower, upper)
+            if isinstance(plan.model, GreyBox):  # from its physical model's fit, correction off
+                y0, before = _greybox_start(plan.model, plan.box, lower, upper, physical_options)
+            y, stages, stopped = run_search(search, plan.budget, residuals, cost, lower, upper,
+                                            global_data=glob, stage_data=stage_data,
+                                            key=plan.run_keys.key, dtype=dtype, progress=progress,
+                                            y0=y0, extra_starts=extra, grid_starts=grid)
+            stages = before + stages
+    return np.asarray(y, np.float64), stages, stopped, sol, sw
+
+
+def _fit_stage(plan: _MotionPlan, objective, found, solver) -> MotionFit:
+    """The [`MotionFit`][jaxfric.motion.MotionFit] at the search's end ``found``, with its metrics
+    (`_scored`) and training cost."""
+    residuals, cost, free = objective[:3]
+    y, stages, stopped, sol, sw = found
+    model, tr_records, dtype = plan.model, plan.tr_records, plan.dtype
+    j_final = _training_cost(residuals, cost, y, plan.lower, plan.upper, free, dtype,
+                             plan.legacy_cost or solver is not None)
+    theta, m_hat, off, dv0 = (np.asarray(a) for a in plan.layout.unpack(jnp.asarray(y, dtype), free))
+    key_data, key_impl = key_record(plan.run_keys.key)
+    n_tr_total = sum(r.n_samples for r in tr_records)
+    n_all = (plan.data.n_samples if plan.data is not None
+             else n_tr_total + sum(r.n_samples for r in plan.va_records))
+    fit = MotionFit(
+        model=model, theta=theta, velocity_scaler=plan.scalers[0], friction_scaler=plan.scalers[1],
+        dt=tr_records[0].dt, n_train=n_tr_total, n_samples=n_all, metrics={}, stages=stages,
+        velocity_range=(float(plan.vt.min()), float(plan.vt.max())),
+        history=history(sol), solution=sol, key_data=key_data, key_impl=key_impl, seed=plan.run_keys.seed,
+        timings={"compile_s": sw.compile_s, "run_s": sw.run_s}, box=plan.box,
+        settings={
+            "model_name": model_name(model), "model_config": model_config(model),
+            "solver": repr(solver) if solver is not None else repr(plan.search),
+            "dtype": str(np.dtype(dtype)), "data_bounds": plan.data_bounds,
+        },
+        mechanics=Mechanics(
+            mass=m_hat, mass_range=plan.mass_range, offset=off, v0=dv0, error=plan.error, horizon=plan.horizon,
+            cutoff=tr_records[0].cutoff, search_names=list(model.param_names) + list(plan.layout.names()),
+            search_bounds=[plan.lower.tolist(), plan.upper.tolist()], y=[float(a) for a in y], stopped=stopped,
+            starts=start_costs(stages) if solver is None else [],
+            records=None if plan.data is not None else
+            {"train": [r.n_samples for r in tr_records], "valid": [r.n_samples for r in plan.va_records]},
+            init_window=plan.init_window),
+    )
+    # the fit above only simulates for its metrics; the one returned carries them
+    return fit.replace(metrics={**_scored(fit, *_scoring(plan)), "num_params": int(y.size), "cost": j_final})
+
+
+def _scoring(plan: _MotionPlan) -> tuple:
+    """`_scored`'s arguments after the fit, from ``plan``."""
+    return plan.data, plan.n_train, plan.metric_horizon, plan.tr_records, plan.va_records, plan.init_window
+
+
+def _baseline_row(fit: MotionFit, plan: _MotionPlan, est) -> MotionFit:
+    """``fit`` with the least-squares baseline ``est`` (`baseline_motion_fit`) scored the same
+    way beside it, and its warning where the fit is worse on training
+    ([`jaxfric.pipeline.baseline_stage`][jaxfric.pipeline.baseline_stage])."""
+    base = baseline_motion_fit(est.M, est.Fc, est.Fv, est.offset, dt=plan.tr_records[0].dt, n_train=fit.n_train)
+    base = base.replace(metrics=_scored(base, *_scoring(plan)))
+    fit = fit.replace(mechanics=fit.mechanics.replace(
+        baseline={"M": est.M, "Fc": est.Fc, "Fv": est.Fv, "offset": est.offset}))
+    return baseline_stage(fit, base.metrics, label=BASELINE_LABEL, advice=BASELINE_ADVICE, stacklevel=3)
 
 
 #: The slowest attraction a motion fit's data-centred box allows [s]: GMS's attraction rate
