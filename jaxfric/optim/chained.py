@@ -180,8 +180,8 @@ class AbstractChain(AbstractStaged, AbstractStartDraws):
         for x0 in starts:
             runs.append((yield from only_if(done, local.init_rounds(
                 lower, upper, state.local_key(), x0, objective, **extra))))
-        # one start: its state itself, no batch of one to index
-        second = runs[0] if len(runs) == 1 else jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
+        # one start: its state itself, no batch of one to index (the rule `_each` reads)
+        second = runs[0] if self.num_starts == 1 else jax.tree_util.tree_map(lambda *a: jnp.stack(a), *runs)
         second_done = self._each(lambda s: local.finished(s)[0], second)
         if state.second is None:  # the placeholders' shapes (see init_rounds)
             return ChainState(jnp.array(1, jnp.int32), g, second, second_done, state.key,
