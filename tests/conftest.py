@@ -170,9 +170,10 @@ SLOW_TESTS = {
 # out first and the short ones fill in at the end, so the two workers finish together (the
 # longest-first rule). Files not listed follow in their usual order; a stale list only
 # costs balance, never a test. test_notebooks goes first: its kernels hold the exclusive
-# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol,
-# which starts no subprocess, instead of stalling that worker's
-# subprocess tests (test_cli's waited 10-20 s for the lock when it came second).
+# subprocess lock (tests/processes.py) while the other worker runs test_optim_protocol
+# and test_identify_stages, which start no subprocess, instead of stalling that worker's
+# subprocess tests (test_cli's waited 10-20 s for the lock when it came second, and when
+# it came third, after test_optim_protocol's 47 s alone: 64 s of waits in all).
 # Added later, placed by each file's CPU seconds run alone (`-n 0`, children included):
 # test_progress_cache 35, test_models_greybox 27, test_motion_judge 26, test_pipeline_stages
 # 23, test_docs 19, test_export 11, test_verdicts 10 (test_sharding 34 and
@@ -186,9 +187,9 @@ SLOW_TESTS = {
 # test_identify_baseline 8, test_search_box 8, test_models_elman 6, test_verdicts 6,
 # test_functions 5; the files left unlisted take under 5 s each.
 LONGEST_FIRST = [
-    "test_notebooks.py", "test_optim_protocol.py", "test_cli.py",
+    "test_notebooks.py", "test_optim_protocol.py", "test_identify_stages.py", "test_cli.py",
     "test_reproducibility.py", "test_motion_api.py", "test_motion_dependable.py", "test_evosax_adapter.py",
-    "test_compiler_options.py", "test_readme.py", "test_multihost.py", "test_identify_stages.py",
+    "test_compiler_options.py", "test_readme.py", "test_multihost.py",
     "test_optim_api.py", "test_nelder_mead_optimistix.py", "test_optim_properties.py",
     "test_identify.py", "test_sharding.py", "test_progress_cache.py", "test_reliability.py", "test_motion.py",
     "test_records.py", "test_rig_simulator.py", "test_identify_pipeline.py", "test_models_greybox.py",

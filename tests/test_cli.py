@@ -10,6 +10,7 @@ command pays for compiling the ENN and LuGre.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -34,8 +35,10 @@ def cli_env():
     return dict(os.environ, PYTHONPATH=str(ROOT), JAXFRIC_DEBUG="")
 
 
-def jaxfric(env, *args, cwd=None, timeout=600):
-    with jax_subprocess():
+def jaxfric(env, *args, cwd=None, timeout=600, slot=True):
+    """``jaxfric ARGS`` in a subprocess; ``slot=False`` for a command that ends before it
+    imports JAX (about 60 MB), which need not wait while a notebook kernel runs."""
+    with jax_subprocess() if slot else contextlib.nullcontext():
         return subprocess.run([sys.executable, "-m", "jaxfric", *map(str, args)], env=env, cwd=cwd,
                               capture_output=True, text=True, timeout=timeout)
 
@@ -305,10 +308,28 @@ def _assert_one_line(stderr, message):
 
 @pytest.mark.parametrize("args, message", SUBPROCESS_ERRORS)
 def test_user_errors_are_one_line_without_traceback(cli_env, small_csv, tmp_path, args, message):
-    proc = jaxfric(cli_env, *_fill(args, small_csv), cwd=tmp_path)
+    # each error is found before JAX is imported (test_user_errors_come_before_jax), so the
+    # subprocess needs no slot: it waited 13-19 s while a notebook kernel held the lock
+    proc = jaxfric(cli_env, *_fill(args, small_csv), cwd=tmp_path, slot=False)
     assert proc.returncode == 2
     _assert_one_line(proc.stderr, message)
     assert proc.stdout == "" and not list(tmp_path.iterdir())  # nothing written
+
+
+def test_user_errors_come_before_jax(small_csv, tmp_path):
+    """The subprocess errors above are found before JAX is imported: in a fresh
+    interpreter, each ``main(args)`` returns 2 and ``jax`` is still not in ``sys.modules``."""
+    cases = [_fill(args, small_csv) for args, _ in SUBPROCESS_ERRORS]
+    code = ("import sys\n"
+            "from jaxfric.cli import main\n"
+            f"for args in {cases!r}:\n"
+            "    assert main(args) == 2, args\n"
+            "    assert 'jax' not in sys.modules, args\n"
+            "print('NO_JAX')\n")
+    proc = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(ROOT)), cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "NO_JAX"
 
 
 @pytest.mark.parametrize("args, message", IN_PROCESS_ERRORS)
