@@ -221,24 +221,34 @@ def test_identify_accepts_an_evosax_chain():
 
 
 # ------------------------------------------------------------------ IPOP restarts
-def _steps(solver, fn, lower, upper, key, n):
+def _steps(solver, fn, args, lower, upper, key, n):
     """The state after each of ``n`` steps, the steps taken one by one from Python
-    (jaxfric.optim.rounds' compiled start and step, as the driver's loop takes them)."""
+    (jaxfric.optim.rounds' compiled start and step, as the driver's loop takes them).
+    ``args`` is an operand of the programs, not a constant in them: the two tests below
+    minimise one function (`_scaled_sphere`) with the same strategy settings but for
+    ``num_generations`` (which the step does not read), so they run the same compiled
+    start and step."""
     from jaxfric.optim.driver import _prepare
     from jaxfric.optim.problem import check_key
     from jaxfric.optim.rounds import compiled_start, compiled_step
 
-    proto, flat, lo, hi, _ = _prepare(fn, solver, (lower, upper), None, None, None)
-    state = jax.jit(lambda k: compiled_start(proto, flat, lo, hi, None, k))(check_key(key))
+    args = jnp.asarray(args, lower.dtype)
+    proto, flat, lo, hi, _ = _prepare(fn, solver, (lower, upper), args, None, None)
+    state = jax.jit(lambda k, a: compiled_start(proto, flat, lo, hi, a, k))(check_key(key), args)
     # strongly typed, as the driver's loop carries it (the start leaves some leaves weak and
     # the step returns them strong: the step would compile twice); the same bits every step
     state = jax.tree_util.tree_map(lambda a: jnp.asarray(a, a.dtype), state)
-    step = jax.jit(lambda s: compiled_step(proto, flat, lo, hi, None, s))
+    step = jax.jit(lambda s, a: compiled_step(proto, flat, lo, hi, a, s))
     states = []
     for _ in range(n):
-        state = step(state)
+        state = step(state, args)
         states.append(jax.device_get(state))
     return states
+
+
+def _scaled_sphere(y, a):
+    """``a·Σ(y − 0.3)²``: the sphere for ``a = 1``, a constant (0) for ``a = 0``."""
+    return a * jnp.sum((y - 0.3) ** 2)
 
 
 def test_ipop_doubles_the_population_after_stagnation():
@@ -250,8 +260,7 @@ def test_ipop_doubles_the_population_after_stagnation():
     solver = Evosax("CMA_ES", num_generations=2000, restarts=R)
     assert solver.population(2) == P
     with jax.enable_x64(True):
-        states = _steps(solver, lambda y, a: jnp.sum((y - 0.3) ** 2), -np.ones(2), np.ones(2),
-                        key=3, n=1500)
+        states = _steps(solver, _scaled_sphere, 1.0, -np.ones(2), np.ones(2), key=3, n=1500)
     level = np.array([int(s.ipop.level) for s in states])
     batch = np.array([int(s.ipop.batch) for s in states])
     restarts = np.array([int(s.restarts) for s in states])
@@ -354,7 +363,9 @@ def test_padded_generation_equals_the_smaller_strategy():
             X, state = small.ask(jax.random.key(1), state, p_small)
             F = jnp.sum((X - 0.5) ** 2 * jnp.arange(1, n + 1), axis=1)
             ref, _ = small.tell(jax.random.key(2), X, F, state, p_small)
-            Xp = jnp.concatenate([X, jax.random.uniform(jax.random.key(3), (big - lam, n))])
+            # the padding rows are arbitrary points (valued +inf below), drawn in NumPy
+            pad = np.random.default_rng(3).uniform(0.0, 1.0, (big - lam, n))
+            Xp = jnp.concatenate([X, jnp.asarray(pad)])
             Fp = jnp.concatenate([F, jnp.full(big - lam, jnp.inf)])
             got, _ = large.tell(jax.random.key(2), Xp, Fp, state, p_pad)
             for name in ("mean", "std", "p_std", "p_c", "C"):
@@ -385,17 +396,18 @@ def test_ipop_with_a_strategy_object_per_population_size(counter):
 def test_flat_values_restart_on_the_second_flat_generation():
     """pycma's ``tolflatfitness`` (1): a generation whose best value equals its
     ⌊0.75·λ⌋-th best is flat, and the second flat generation in a row restarts. On a
-    constant function every generation is flat, so with P = 6 and R = 3 the restarts end
+    constant function every generation is flat, so with P = 6 and R = 2 the restarts end
     steps 2 (two generations of one batch), 6 (two of two), 14 (two of four), then every
-    16 steps (population P·2^R, two generations of eight batches)."""
-    solver = Evosax("CMA_ES", num_generations=100, restarts=3)
+    8 steps (population P·2^R, two generations of four batches). R = 2 as in
+    test_ipop_doubles_the_population_after_stagnation, and the same function (times 0):
+    the same compiled start and step."""
+    solver = Evosax("CMA_ES", num_generations=100, restarts=2)
     with jax.enable_x64(True):
-        states = _steps(solver, lambda y, a: jnp.zeros(()) * jnp.sum(y), -np.ones(2), np.ones(2),
-                        key=0, n=70)
+        states = _steps(solver, _scaled_sphere, 0.0, -np.ones(2), np.ones(2), key=0, n=70)
     restarts = np.array([int(s.restarts) for s in states])
     ends = np.flatnonzero(np.diff(np.concatenate([[0], restarts]))) + 1  # 1-based steps
-    np.testing.assert_array_equal(ends, [2, 6, 14, 30, 46, 62])
-    np.testing.assert_array_equal([int(s.ipop.level) for s in states], np.minimum(restarts, 3))
+    np.testing.assert_array_equal(ends, [2, 6, 14, 22, 30, 38, 46, 54, 62, 70])
+    np.testing.assert_array_equal([int(s.ipop.level) for s in states], np.minimum(restarts, 2))
 
 
 def _schwefel_2_26(y, a):
