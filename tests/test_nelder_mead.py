@@ -70,10 +70,11 @@ def test_first_simplex_is_full_rank_and_inside_bounds():
     lo, hi = -np.ones(n), 2 * np.ones(n)
     solver = jf.NelderMead()
     y0 = jnp.asarray(np.linspace(-1, 2, n), jnp.float32)  # touches both bounds
-    st = solver.init(
-        lambda y, a: (jnp.sum(y**2), None), y0, None, {"lower": lo, "upper": hi},
+    # under one jit: one program instead of each of init's operations compiled on its own
+    st = jax.jit(lambda y: solver.init(
+        lambda y, a: (jnp.sum(y**2), None), y, None, {"lower": lo, "upper": hi},
         jax.ShapeDtypeStruct((), jnp.float32), None, frozenset(),
-    )
+    ))(y0)
     S = np.asarray(st.simplex)
     assert S.shape == (n + 1, n)
     assert np.linalg.matrix_rank(S[1:] - S[0]) == n
