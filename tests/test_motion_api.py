@@ -145,8 +145,9 @@ def test_whole_record_trains_with_train_one():
     fit = _fit(data=rec, train=1.0)
     assert fit.n_train == 1200 and "valid" not in fit.metrics
     assert fit.metrics["train"]["fit_percent"] > 99.0
-    # a held-back block shorter than the k-step horizon gets a shorter k, not an error
-    short = _fit(data=rec, train=1197)
+    # a held-back block shorter than the k-step horizon gets a shorter k, not an error (3
+    # samples held back after the same 1200 training samples: the compiled search is reused)
+    short = _fit(data=_record(1203), train=1200)
     assert short.metrics["horizon"] == 2 and np.isfinite(short.metrics["valid_kstep"]["rmse_mm"])
 
 
