@@ -43,7 +43,9 @@ def velocity_profile(n: int = N) -> np.ndarray:
 def lugre_friction(v, **params) -> np.ndarray:
     model = LuGre()
     theta = model.from_physical(**params)
-    return np.asarray(model.simulate(theta, jnp.asarray(v), DT))
+    # dt as identify passes it (a float64 scalar, not a weakly typed Python float): in
+    # float64 the data's rollout is the program identify's metrics compile
+    return np.asarray(model.simulate(theta, jnp.asarray(v), np.float64(DT)))
 
 
 def hysteretic_friction(v) -> np.ndarray:

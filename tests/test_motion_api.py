@@ -28,6 +28,11 @@ QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
 #: Their sample time: binary, so the command's median of the CSV stamps' differences is
 #: exactly it (with 1e-3 it is 1 ulp off, and the programs, which compile dt in, differ).
 CLI_DT = 2.0**-10
+#: Their record length: the training block (80 %, 648 samples) cuts into three equal blocks,
+#: so the gated judge's three blocked folds of a model train on records of one shape and
+#: share one compiled fit (800 samples gave folds of 426 and 427 samples: two fits compiled
+#: per model). tests/test_motion_dependable.py's command-line record has the same length.
+CLI_N = 810
 
 
 def _record(n=1500, dt=1e-3, phase=0.0, seed=0, model=None, theta=None, velocity=False):
@@ -140,8 +145,9 @@ def test_whole_record_trains_with_train_one():
     fit = _fit(data=rec, train=1.0)
     assert fit.n_train == 1200 and "valid" not in fit.metrics
     assert fit.metrics["train"]["fit_percent"] > 99.0
-    # a held-back block shorter than the k-step horizon gets a shorter k, not an error
-    short = _fit(data=rec, train=1197)
+    # a held-back block shorter than the k-step horizon gets a shorter k, not an error (3
+    # samples held back after the same 1200 training samples: the compiled search is reused)
+    short = _fit(data=_record(1203), train=1200)
     assert short.metrics["horizon"] == 2 and np.isfinite(short.metrics["valid_kstep"]["rmse_mm"])
 
 
@@ -160,18 +166,19 @@ def test_records_form_refuses_mixed_and_missing_input():
 
 
 def test_budget_stops_the_run_with_the_best_so_far():
-    rec = _record(1200)
-    fit = _fit(data=rec, max_evals=150)
+    # the module fixture's record and split: its compiled stages are reused
+    rec = _record()
+    fit = _fit(data=rec, train=0.8, max_evals=150)
     assert fit.mechanics.stopped == "max_evals"
     assert sum(s["num_evals"] for s in fit.stages) <= 150
     assert np.isfinite(fit.metrics["cost"])
     # the stages never make it worse: the final J is at most the global stage's on the same cost
-    timed = _fit(data=rec, max_time=1e-6)
+    timed = _fit(data=rec, train=0.8, max_time=1e-6)
     assert timed.mechanics.stopped == "max_time"
     assert [s["stage"] for s in timed.stages] == ["pso"]
     assert np.isfinite(timed.metrics["valid"]["rmse_mm"])
     with pytest.raises(ValueError, match="no room"):
-        _fit(data=rec, max_evals=5)
+        _fit(data=rec, train=0.8, max_evals=5)
 
 
 @pytest.mark.slow
@@ -317,7 +324,7 @@ def test_choice_is_the_baseline_where_it_scores_lowest():
 
 @pytest.mark.slow
 def test_compare_motion_ranks_and_needs_validation():
-    rec = _record(800, dt=CLI_DT)
+    rec = _record(CLI_N, dt=CLI_DT)
     with pytest.raises(ValueError, match="validation"):
         compare_motion(["coulomb"], rec, key=0, mass=2.5, train=1.0)
     with jax.enable_x64(True), warnings.catch_warnings():
@@ -333,9 +340,9 @@ def test_compare_motion_ranks_and_needs_validation():
 def test_cli_ranks_models_by_validation_and_takes_a_budget(tmp_path, capsys):
     from jaxfric.cli import main
 
-    rec = _record(800, dt=CLI_DT)
+    rec = _record(CLI_N, dt=CLI_DT)
     path = tmp_path / "m.csv"
-    np.savetxt(path, np.c_[np.arange(800) * CLI_DT, rec.force, rec.position], delimiter=",", header="t,F,x",
+    np.savetxt(path, np.c_[np.arange(CLI_N) * CLI_DT, rec.force, rec.position], delimiter=",", header="t,F,x",
                comments="")
     rc = main(["identify-motion", str(path), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb,stribeck", "--quick", "--quiet",

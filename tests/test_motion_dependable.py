@@ -119,7 +119,8 @@ def test_every_fit_carries_the_least_squares_baseline_and_beats_it_here(small_fi
 def test_a_fit_worse_than_the_baseline_on_its_training_data_warns_with_both_numbers():
     """A search with no gradient stage and a box that excludes the truth (Fc in [30, 40] N
     where it is 12 N) ends worse than least squares: it must say so."""
-    crippled = MotionSearch(particles=4, generations=1, horizons=(None,), steps=(0,))
+    # the swarm and window of SMALL (the module fixture's search): its compiled global stage is reused
+    crippled = MotionSearch(particles=10, generations=1, global_window=150, horizons=(None,), steps=(0,))
     with jax.enable_x64(True), pytest.warns(BaselineWarning, match=r"free-run RMSE .* mm against .* mm"):
         fit = identify_motion(models.Coulomb(v_eps=1e-3), _record(), key=0, mass=(0.5, 10.0), fit_offset=True,
                               box={"Fc": (30.0, 40.0), "sigma2": (300.0, 500.0)}, data_bounds=False,
@@ -179,7 +180,10 @@ def test_a_record_faster_than_the_training_motion_is_warned(small_fit, tmp_path)
     assert load_motion_fit(tmp_path / "fit.npz").velocity_range == fit.velocity_range
 
 
-def _csv(tmp_path, n=800):
+def _csv(tmp_path, n=810):
+    """The record as the command reads it, at 1 024 Hz. 810 samples: the training block (648)
+    cuts into three equal blocks, so the gated judge's folds share one compiled fit, and
+    tests/test_motion_api.py's command-line record is the same."""
     rec = _record(n, dt=2.0**-10)
     path = tmp_path / "m.csv"
     np.savetxt(path, np.c_[np.arange(n) * rec.dt, rec.force, rec.position], delimiter=",", header="t,F,x",
@@ -228,7 +232,7 @@ def test_cli_prints_the_ranking_with_the_baseline_and_writes_results_json(tmp_pa
     out = tmp_path / "r"
     rc = main(["identify-motion", str(_csv(tmp_path)), "--force-col", "F", "--x-col", "x", "--time-col", "t",
                "--mass-range", "0.5,10", "--offset", "--model", "coulomb", "--quick", "--quiet", "--no-cache",
-               "--window", "0.25", "--keys", "2", "--out", str(out)])  # 800 samples at 1024 Hz: 3 windows of 256
+               "--window", "0.25", "--keys", "2", "--out", str(out)])  # 810 samples at 1024 Hz: 3 windows of 256
     printed = capsys.readouterr().out
     assert rc == 0
     assert "| rank | model |" in printed and BASELINE_LABEL in printed
@@ -351,7 +355,8 @@ QUICK = MotionSearch(particles=4, generations=2, horizons=(None,), steps=(2,))
 def test_ensemble_members_are_the_fits_of_their_keys_and_predict_together(tmp_path):
     from jaxfric.motion import load_motion_fit
 
-    rec = _record(800)
+    # the record length of the blocked-judge test below: the fits' programs are compiled once
+    rec = _record(1200)
     batch = jnp.stack([jax.random.key(i) for i in range(3)])
     opts = dict(mass=(0.5, 10.0), fit_offset=True, search=QUICK, dtype=jnp.float64)
     with jax.enable_x64(True), warnings.catch_warnings():
@@ -363,8 +368,8 @@ def test_ensemble_members_are_the_fits_of_their_keys_and_predict_together(tmp_pa
         assert e["mass"][1] == one.mass and e["train_rmse_mm"][1] == one.metrics["train"]["rmse_mm"]
         assert e["best"] == int(np.argmin(e["train_rmse_mm"]))
         np.testing.assert_array_equal(fit.theta, e["theta"][e["best"]])
-        band = fit.simulate_ensemble(_record(800, seed=1), init_window=20)
-        members = np.stack([fit.member(i).simulate(_record(800, seed=1), init_window=20)["x"] for i in e["kept"]])
+        band = fit.simulate_ensemble(_record(1200, seed=1), init_window=20)
+        members = np.stack([fit.member(i).simulate(_record(1200, seed=1), init_window=20)["x"] for i in e["kept"]])
         np.testing.assert_allclose(band["x"], members.mean(axis=0))
         assert np.all(band["lower"] <= band["x"]) and np.all(band["x"] <= band["upper"])
         assert fit.metrics["ensemble"]["valid"]["rmse_mm"] >= 0

@@ -94,14 +94,16 @@ def test_identify_a_pressure_model_on_several_records():
         assert float(fit.params[name]) == pytest.approx(value, rel=0.02), name
     recs = fit.metrics["records"]
     assert [r["name"] for r in recs] == ["a", "b", "c"]
-    for r, rec in zip(recs, [*train.values(), held_out]):
-        own = fit.predict(rec.velocity, inputs=np.stack([rec.p1, rec.p2]))
-        expect = friction_metrics(rec.friction, np.asarray(own, np.float64))
-        assert r["all"]["mse_percent"] == pytest.approx(expect["mse_percent"], rel=1e-6, abs=1e-9)
-    # figures and reports predict with the record's own pressures too
-    np.testing.assert_allclose(predict_on(fit, held_out),
-                               np.asarray(fit.predict(held_out.velocity,
-                                                      inputs=np.stack([held_out.p1, held_out.p2]))))
+    # predicted in float64, as the fit's metrics were: the rollouts identify compiled are reused
+    with jax.enable_x64(True):
+        for r, rec in zip(recs, [*train.values(), held_out]):
+            own = fit.predict(rec.velocity, inputs=np.stack([rec.p1, rec.p2]))
+            expect = friction_metrics(rec.friction, np.asarray(own, np.float64))
+            assert r["all"]["mse_percent"] == pytest.approx(expect["mse_percent"], rel=1e-6, abs=1e-9)
+        # figures and reports predict with the record's own pressures too
+        np.testing.assert_allclose(predict_on(fit, held_out),
+                                   np.asarray(fit.predict(held_out.velocity,
+                                                          inputs=np.stack([held_out.p1, held_out.p2]))))
     no_pressure = jf.FrictionData.from_arrays(held_out.velocity, held_out.friction, DT)
     with pytest.raises(ValueError, match=r"Cylinder needs the measured channel\(s\) p1, p2"):
         predict_on(fit, no_pressure)
@@ -120,7 +122,9 @@ def test_pooled_cost_rolls_each_record_out_from_its_own_state():
                                                 Fs=55.0, vs=2e-3))
         cost = PooledOutputErrorCost(model)
         got = float(cost(theta, pooled_cost_data(model, rs, (None, None), jnp.float64)))
-        errs = [f - np.asarray(model.simulate(theta, jnp.asarray(v), DT)) for v, f, _ in recs]
+        # dt as the cost holds it (a float64 scalar, not a weakly typed Python float): the
+        # rollouts the cost compiled are reused
+        errs = [f - np.asarray(model.simulate(theta, jnp.asarray(v), np.float64(DT))) for v, f, _ in recs]
         f_all = np.concatenate([r[1] for r in recs])
         expect = np.sum(np.concatenate(errs) ** 2) / f_all.size / np.var(f_all)
         # the same records glued together would carry the bristle state across the seam
@@ -145,10 +149,12 @@ def test_identify_on_several_records_reports_metrics_per_record():
     assert [r["name"] for r in recs] == ["train[0]", "train[1]", "held-out"]
     assert [r["role"] for r in recs] == ["train", "train", "valid"]
     all_records = [*train, valid["held-out"]]
-    for r, (v, f, _) in zip(recs, all_records):
-        expect = friction_metrics(f, np.asarray(fit.predict(v), np.float64))
-        assert r["all"]["mse_percent"] == pytest.approx(expect["mse_percent"], rel=1e-6, abs=1e-9)
-    pooled_valid = friction_metrics(valid["held-out"][1], np.asarray(fit.predict(valid["held-out"][0])))
+    # predicted in float64, as the fit's metrics were: the rollouts identify compiled are reused
+    with jax.enable_x64(True):
+        for r, (v, f, _) in zip(recs, all_records):
+            expect = friction_metrics(f, np.asarray(fit.predict(v), np.float64))
+            assert r["all"]["mse_percent"] == pytest.approx(expect["mse_percent"], rel=1e-6, abs=1e-9)
+        pooled_valid = friction_metrics(valid["held-out"][1], np.asarray(fit.predict(valid["held-out"][0])))
     assert fit.metrics["valid"]["mse_percent"] == pytest.approx(pooled_valid["mse_percent"], rel=1e-6, abs=1e-9)
     assert fit.n_train == 550 and fit.n_samples == 750
     assert "held-out" in fit.summary() and "train[1]" in fit.summary()

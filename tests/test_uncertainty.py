@@ -208,7 +208,9 @@ def test_stiffness_without_presliding_is_not_a_confident_number():
     """LuGre on a record that never slows down (|v| >= 5 mm/s except at sharp reversals):
     σ0 is not determined; its interval must cover the box (or be strongly correlated)."""
     with jax.enable_x64(True):
-        dt = 1e-3
+        # a float64 scalar (as a fit holds dt), not a weakly typed Python float: the reference
+        # Jacobian below reuses the rollout the prediction band compiled
+        dt = np.float64(1e-3)
         t = np.arange(4000) * dt
         v = 0.05 * np.sign(np.sin(2 * np.pi * 1.0 * t)) * (1 + 0.5 * np.abs(np.sin(2 * np.pi * 0.3 * t)))
         model = models.LuGre()
