@@ -5,6 +5,8 @@ Checked against scipy's distribution tests, not against stored values: uniform o
 full float64 resolution, and vmap-consistent.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,13 +15,20 @@ import scipy.stats
 
 from jaxfric.optim.rng import counter_seed, counter_uniform
 
-# Every draw is N numbers (or N laid out as (N // 5, 5)): the eager hash compiles each of
-# its operations once per length, so one length compiles them once per dtype.
+# Every draw is N numbers (or N laid out as (N // 5, 5)). ``draw`` is one compiled program
+# per dtype and number of words (key and words are its arguments), as the hash runs in the
+# swarms' programs; the eager, op-by-op hash is checked against it in
+# test_same_inputs_same_numbers_and_vmap_agrees.
 N = 200_000
 
 
+@functools.partial(jax.jit, static_argnames=("n", "dtype"))
+def _draw(key, words, n, dtype):
+    return counter_uniform(counter_seed(jax.random.key(key), *words), (n,), dtype)
+
+
 def draw(key=0, *words, n=N, dtype=jnp.float32):
-    return np.asarray(counter_uniform(counter_seed(jax.random.key(key), *words), (n,), dtype))
+    return np.asarray(_draw(key, words, n=n, dtype=jnp.dtype(dtype)))
 
 
 @pytest.mark.parametrize("dtype", ["float32", "float64"])
@@ -63,11 +72,15 @@ def test_no_correlation_between_neighbours_generations_streams_and_keys():
 
 
 def test_same_inputs_same_numbers_and_vmap_agrees():
-    np.testing.assert_array_equal(draw(5, 2, 1), draw(5, 2, 1))
+    # the compiled draw and the eager, op-by-op hash (which runs the Python again)
+    eager = counter_uniform(counter_seed(jax.random.key(5), 2, 1), (N,), jnp.float32)
+    np.testing.assert_array_equal(draw(5, 2, 1), eager)
     assert not np.array_equal(draw(5, 2, 1)[:64], draw(5, 3, 1)[:64])
     keys = jax.random.split(jax.random.key(9), 4)
     shape = (N // 5, 5)
-    batched = jax.vmap(lambda k: counter_uniform(counter_seed(k, 4), shape, jnp.float32))(keys)
+    # vmapped as in the swarms' programs, against each key's eager numbers
+    batched = jax.jit(jax.vmap(
+        lambda k: counter_uniform(counter_seed(k, 4), shape, jnp.float32)))(keys)
     for b, k in zip(batched, keys):
         np.testing.assert_array_equal(b, counter_uniform(counter_seed(k, 4), shape, jnp.float32))
 
@@ -76,11 +89,13 @@ def test_generation_words_are_traceable():
     """The generation index is a traced integer inside the swarm's scan."""
     key = jax.random.key(0)
     f = jax.jit(lambda i: counter_uniform(counter_seed(key, i, 2), (N,), jnp.float32))
-    np.testing.assert_array_equal(f(jnp.int32(6)), draw(0, 6, 2))
+    # against the words as Python integers (constants of the program, not arguments)
+    concrete = jax.jit(lambda: counter_uniform(counter_seed(key, 6, 2), (N,), jnp.float32))
+    np.testing.assert_array_equal(f(jnp.int32(6)), concrete())
 
 
 # every shape once and the swarm's (16, 6) in both precisions (each case compiles
-# threefry for its shape four times: about 4 s)
+# threefry three times: the flat one jitted and eager, the shaped one eager)
 @pytest.mark.parametrize("shape, x64", [((16, 6), False), ((16, 6), True), ((9, 30), True),
                                         ((2, 3, 4), False), ((5,), True)])
 def test_uniform_in_box_draws_what_jax_random_draws_for_the_shape(shape, x64):
@@ -93,13 +108,16 @@ def test_uniform_in_box_draws_what_jax_random_draws_for_the_shape(shape, x64):
         dt = jnp.float64 if x64 else jnp.float32
         lo, hi = jnp.full(shape[-1], -2.0, dt), jnp.full(shape[-1], 3.0, dt)
         keys = jax.random.split(jax.random.key(7), 3)
-        def plain(k):
-            return lo + jax.random.uniform(k, shape, dt) * (hi - lo)
+        def scale(u):
+            return lo + u * (hi - lo)
 
+        # jax.random's numbers for the shape, key by key (eager)
+        drawn = [jax.random.uniform(k, shape, dt) for k in keys]
         # compared program against program (a fused multiply-add rounds the scaling
-        # differently from eager, op-by-op arithmetic)
+        # differently from eager, op-by-op arithmetic): jax.random's numbers are scaled
+        # by a program of their own
         got = jax.jit(jax.vmap(lambda k: uniform_in_box(k, shape, lo, hi)))(keys)
         assert got.shape == (3,) + shape and got.dtype == dt
-        np.testing.assert_array_equal(got, jax.jit(jax.vmap(plain))(keys))
-        for k in keys:
-            np.testing.assert_array_equal(uniform_in_box(k, shape, lo, hi), plain(k))
+        np.testing.assert_array_equal(got, jax.jit(scale)(jnp.stack(drawn)))
+        for k, u in zip(keys, drawn):
+            np.testing.assert_array_equal(uniform_in_box(k, shape, lo, hi), scale(u))
