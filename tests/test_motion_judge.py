@@ -3,6 +3,7 @@ a NumPy free run written here from §13.2, its checks, and the default judge bei
 benchmarks/results/motion_judge.md measured best on new excitation."""
 
 import csv
+import functools
 import inspect
 import re
 import warnings
@@ -58,16 +59,24 @@ def _numpy_short_score(rec, window, **params):
     return 1e3 * np.sqrt(np.mean(errs))
 
 
+@functools.lru_cache(maxsize=None)
+def _short_comparison():
+    """``(record, comparison)``: compare_motion's short judge on 1300 samples of ``_record``,
+    run once; the next test checks its scores and the baseline case of
+    test_short_runs_score_equals_a_loop_of_score_calls scores its fit's baseline."""
+    rec = _record(1300)
+    with jax.enable_x64(True), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return rec, compare_motion(["coulomb"], rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=QUICK,
+                                   dtype=jnp.float64, model_options={"v_eps": EPS}, judge="short", window=300)
+
+
 @pytest.mark.slow
 def test_short_judge_pools_windows_each_simulated_from_its_own_first_samples():
     """The short-runs scores of the fit and of the baseline equal a NumPy free run of every
     300-sample window from a quadratic through its own first 20 positions (the last 100
     samples of 1200 + 100 make no whole window and are dropped)."""
-    rec = _record(1300)
-    with jax.enable_x64(True), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        cmp = compare_motion(["coulomb"], rec, key=0, mass=(0.5, 10.0), fit_offset=True, search=QUICK,
-                             dtype=jnp.float64, model_options={"v_eps": EPS}, judge="short", window=300)
+    rec, cmp = _short_comparison()
     fit = cmp.fits["coulomb"]
     p = fit.params
     ref = _numpy_short_score(rec, 300, Fc=float(p["Fc"]), Fv=float(p["sigma2"]), eps=EPS, mass=fit.mass,
@@ -193,8 +202,8 @@ def test_short_runs_score_equals_a_loop_of_score_calls(name):
     with jax.enable_x64(True), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         recs = [_record(700), _record(950).window(50)]  # 2 + 3 windows of 300, rests of 100 and 0
-        fit = baseline_fit(compare_motion(["coulomb"], recs[0], key=0, mass=2.5, search=QUICK, judge="tail",
-                                          dtype=jnp.float64).best) if name == "baseline" else _given(name)
+        # the baseline of a fitted comparison (the short-judge test's, run once for both)
+        fit = baseline_fit(_short_comparison()[1].best) if name == "baseline" else _given(name)
         got = window_scores(fit, recs, 300)
         ref = _loop_window_scores(fit, recs, 300)
         assert len(got) == len(ref) == 5
