@@ -132,7 +132,8 @@ def test_lugre_starts_from_steady_state():
     p = LUGRE_CASES[0]
     model = LuGre()
     with jax.enable_x64(True):
-        F = model.simulate(model.from_physical(**p), jnp.full(5, 0.004), DT)
+        # 64 samples: the steady-sliding test's rollout program
+        F = model.simulate(model.from_physical(**p), jnp.full(64, 0.004), DT)
         np.testing.assert_allclose(F, F[0], rtol=1e-12)
 
 
@@ -179,7 +180,7 @@ def test_vmapped_rollout_equals_per_candidate():
     model = LuGre()
     lower, upper = model.bounds()
     thetas = np.random.default_rng(1).uniform(lower, upper, (5, model.num_params))
-    v = reversal_profile(128)
+    v = reversal_profile()  # the exact-update tests' length: their rollout program per candidate
     with jax.enable_x64(True):
         per = np.stack([model.simulate(th, v, DT) for th in thetas])
         vm = jax.vmap(model.simulate, in_axes=(0, None, None))(thetas, v, DT)
