@@ -67,7 +67,8 @@ def test_correction_never_exceeds_its_bound():
     reach = []
     with jax.enable_x64(True):
         for seed in range(12):
-            v = rng.normal(0.0, 0.2, 2000) * rng.choice([0.01, 1.0, 10.0])
+            # 3000 samples, as _velocity's: the physical LuGre's rollout program of the test above
+            v = rng.normal(0.0, 0.2, 3000) * rng.choice([0.01, 1.0, 10.0])
             theta = _random_theta(model, rng, np.abs(v) + 1e-3)
             delta = np.asarray(model.simulate(theta, v, DT)) - np.asarray(
                 model.physical.simulate(theta[:model.n_physical], v, DT))
